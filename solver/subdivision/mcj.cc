@@ -1,0 +1,472 @@
+#include "solver/subdivision/mcj.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Geometry>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+
+namespace dynsolid::subdivision {
+namespace {
+
+using mesh::CellComplex;
+using mesh::Csr;
+
+// Accumulates one sparse row as (column, weight) pairs, then merges
+// duplicates in column order (deterministic).
+class RowBuilder {
+ public:
+  void Add(int32_t col, double w) { terms_.push_back({col, w}); }
+  // Adds w times the average of the vertices in `cols`.
+  void AddAverage(std::span<const int32_t> cols, double w) {
+    const double s = w / static_cast<double>(cols.size());
+    for (int32_t c : cols) terms_.push_back({c, s});
+  }
+  void Flush(std::vector<int32_t>& outer, std::vector<int32_t>& inner,
+             std::vector<double>& values) {
+    std::sort(terms_.begin(), terms_.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (size_t i = 0; i < terms_.size();) {
+      const int32_t col = terms_[i].first;
+      double w = 0.0;
+      for (; i < terms_.size() && terms_[i].first == col; ++i) w += terms_[i].second;
+      inner.push_back(col);
+      values.push_back(w);
+    }
+    outer.push_back(static_cast<int32_t>(inner.size()));
+    terms_.clear();
+  }
+
+ private:
+  std::vector<std::pair<int32_t, double>> terms_;
+};
+
+SparseMatrix FromCsr(int32_t rows, int32_t cols, const std::vector<int32_t>& outer,
+                     const std::vector<int32_t>& inner, const std::vector<double>& values) {
+  Eigen::Map<const SparseMatrix> map(rows, cols, static_cast<int32_t>(inner.size()),
+                                     outer.data(), inner.data(), values.data());
+  return SparseMatrix(map);
+}
+
+// Newell normal of a face loop (not normalised).
+Eigen::Vector3d FaceNormal(const CellComplex& m, int32_t f) {
+  Eigen::Vector3d n = Eigen::Vector3d::Zero();
+  const auto loop = m.face_vertices(f);
+  const size_t k = loop.size();
+  for (size_t i = 0; i < k; ++i) {
+    const Eigen::Vector3d a = m.positions().row(loop[i]).transpose();
+    const Eigen::Vector3d b = m.positions().row(loop[(i + 1) % k]).transpose();
+    n += a.cross(b);
+  }
+  return n;
+}
+
+}  // namespace
+
+absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {
+  const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
+                nc = m.num_cells();
+  const bool has_sharp = !options.sharp_edges.empty();
+  if (has_sharp && static_cast<int32_t>(options.sharp_edges.size()) != ne) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "sharp edge tags: got ", options.sharp_edges.size(), " for ", ne, " edges"));
+  }
+  auto sharp = [&](int32_t e) { return has_sharp && options.sharp_edges[e] != 0; };
+
+  // Which cells are refined (all, unless a subset is given).
+  std::vector<uint8_t> refined(nc, options.cells.empty() ? 1 : 0);
+  for (int32_t c : options.cells) {
+    if (c < 0 || c >= nc) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("local subdivision: cell ", c, " is out of range [0, ", nc, ")"));
+    }
+    refined[c] = 1;
+  }
+  const bool local = !options.cells.empty() &&
+                     std::find(refined.begin(), refined.end(), 0) != refined.end();
+
+  // Split faces and edges belong to a refined cell; "frozen" ones also touch
+  // an unrefined cell and are split linearly so that cell keeps its shape.
+  std::vector<int32_t> edge_point(ne, -1), face_point(nf, -1), cell_point(nc, -1);
+  std::vector<uint8_t> edge_frozen(ne, 0), face_frozen(nf, 0), vertex_frozen(nv, 0);
+  int32_t next = nv;
+  for (int32_t e = 0; e < ne; ++e) {
+    bool any = false, all = true;
+    for (int32_t c : m.edge_cells(e)) {
+      any |= refined[c] != 0;
+      all &= refined[c] != 0;
+    }
+    if (any) edge_point[e] = next++;
+    edge_frozen[e] = any && !all;
+  }
+  for (int32_t f = 0; f < nf; ++f) {
+    const auto& fc = m.face_cells(f);
+    const bool r0 = refined[fc[0]] != 0, r1 = fc[1] >= 0 && refined[fc[1]] != 0;
+    if (r0 || r1) face_point[f] = next++;
+    face_frozen[f] = (r0 || r1) && (!r0 || (fc[1] >= 0 && !r1));
+  }
+  for (int32_t c = 0; c < nc; ++c) {
+    if (refined[c]) cell_point[c] = next++;
+  }
+  const int32_t nv_fine = next;
+  for (int32_t v = 0; v < nv; ++v) {
+    for (int32_t c : m.vertex_cells(v)) vertex_frozen[v] |= refined[c] == 0;
+  }
+
+  // ---- The subdivision matrix, row by row. ----
+  std::vector<int32_t> outer{0}, inner;
+  std::vector<double> values;
+  outer.reserve(nv_fine + 1);
+  inner.reserve(static_cast<size_t>(nv_fine) * 27);
+  values.reserve(static_cast<size_t>(nv_fine) * 27);
+  RowBuilder row;
+  std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
+
+  // Old vertices -> vertex points.
+  for (int32_t v = 0; v < nv; ++v) {
+    sharp_nbrs.clear();
+    for (int32_t e : m.vertex_edges(v)) {
+      if (!sharp(e)) continue;
+      const auto& ev = m.edge_vertices(e);
+      sharp_nbrs.push_back(ev[0] == v ? ev[1] : ev[0]);
+    }
+    boundary_faces.clear();
+    boundary_edges.clear();
+    if (m.vertex_is_boundary(v)) {
+      for (int32_t f : m.vertex_faces(v)) {
+        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+      }
+      for (int32_t e : m.vertex_edges(v)) {
+        if (m.edge_is_boundary(e)) boundary_edges.push_back(e);
+      }
+    }
+    if (vertex_frozen[v] || sharp_nbrs.size() >= 3 ||
+        (m.vertex_is_boundary(v) && sharp_nbrs.size() < 2 &&
+         boundary_faces.size() != boundary_edges.size())) {
+      // Unrefined neighbour, sharp corner, or a non-manifold boundary vertex.
+      row.Add(v, 1.0);
+    } else if (sharp_nbrs.size() == 2) {
+      // Crease: cubic B-spline curve rule (a + 6 V + b) / 8.
+      row.Add(sharp_nbrs[0], 1.0 / 8.0);
+      row.Add(v, 6.0 / 8.0);
+      row.Add(sharp_nbrs[1], 1.0 / 8.0);
+    } else if (m.vertex_is_boundary(v)) {
+      // Catmull-Clark on the boundary surface: (Fbar + 2 Rbar + (n - 3) V) / n
+      // with face points = face centroids and R = boundary edge midpoints.
+      const double n = static_cast<double>(boundary_faces.size());
+      for (int32_t f : boundary_faces) row.AddAverage(m.face_vertices(f), 1.0 / (n * n));
+      for (int32_t e : boundary_edges) {
+        const auto& ev = m.edge_vertices(e);
+        row.Add(ev[0], 1.0 / (n * n));
+        row.Add(ev[1], 1.0 / (n * n));
+      }
+      row.Add(v, (n - 3.0) / n);
+    } else {
+      // Interior: (Cbar + 3 Abar + 3 Ebar + (n - 7) V) / n, n cells around v.
+      const auto cells = m.vertex_cells(v);
+      const auto faces = m.vertex_faces(v);
+      const auto edges = m.vertex_edges(v);
+      const double n = static_cast<double>(cells.size());
+      for (int32_t c : cells) {
+        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+      }
+      for (int32_t f : faces) {
+        row.AddAverage(m.face_vertices(f), 3.0 / (n * static_cast<double>(faces.size())));
+      }
+      for (int32_t e : edges) {
+        const auto& ev = m.edge_vertices(e);
+        const double w = 3.0 / (n * static_cast<double>(edges.size()) * 2.0);
+        row.Add(ev[0], w);
+        row.Add(ev[1], w);
+      }
+      row.Add(v, (n - 7.0) / n);
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Edge points.
+  for (int32_t e = 0; e < ne; ++e) {
+    if (edge_point[e] < 0) continue;
+    const auto& ev = m.edge_vertices(e);
+    boundary_faces.clear();
+    if (m.edge_is_boundary(e)) {
+      for (int32_t f : m.edge_faces(e)) {
+        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+      }
+    }
+    if (edge_frozen[e] || sharp(e) ||
+        (m.edge_is_boundary(e) && boundary_faces.size() != 2)) {
+      row.Add(ev[0], 0.5);
+      row.Add(ev[1], 0.5);
+    } else if (m.edge_is_boundary(e)) {
+      // (v0 + v1 + F0 + F1) / 4 with the boundary face points (centroids).
+      row.Add(ev[0], 0.25);
+      row.Add(ev[1], 0.25);
+      row.AddAverage(m.face_vertices(boundary_faces[0]), 0.25);
+      row.AddAverage(m.face_vertices(boundary_faces[1]), 0.25);
+    } else {
+      // (Cbar + 2 Abar + (n - 3) Mid) / n, n cells around the edge.
+      const auto cells = m.edge_cells(e);
+      const auto faces = m.edge_faces(e);
+      const double n = static_cast<double>(cells.size());
+      for (int32_t c : cells) {
+        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+      }
+      for (int32_t f : faces) {
+        row.AddAverage(m.face_vertices(f), 2.0 / (n * static_cast<double>(faces.size())));
+      }
+      row.Add(ev[0], (n - 3.0) / (2.0 * n));
+      row.Add(ev[1], (n - 3.0) / (2.0 * n));
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Face points.
+  for (int32_t f = 0; f < nf; ++f) {
+    if (face_point[f] < 0) continue;
+    if (face_frozen[f] || m.face_is_boundary(f)) {
+      row.AddAverage(m.face_vertices(f), 1.0);
+    } else {
+      // (C0 + 2 A + C1) / 4.
+      const auto& fc = m.face_cells(f);
+      row.AddAverage(m.cell_vertices(fc[0]), 0.25);
+      row.AddAverage(m.face_vertices(f), 0.5);
+      row.AddAverage(m.cell_vertices(fc[1]), 0.25);
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Cell points: the centroid of the cell's vertices.
+  for (int32_t c = 0; c < nc; ++c) {
+    if (cell_point[c] < 0) continue;
+    row.AddAverage(m.cell_vertices(c), 1.0);
+    row.Flush(outer, inner, values);
+  }
+
+  Level level;
+  level.a = FromCsr(nv_fine, nv, outer, inner, values);
+  Points fine_positions = level.a * m.positions();
+
+  // ---- Topology of the fine complex. ----
+  // Face ids: children of split faces (one quad per corner, in the parent's
+  // stored orientation), then interior quads (one per refined cell and
+  // edge of that cell), then unsplit faces with split edges' points inserted.
+  Csr loops;
+  std::vector<int32_t> face_child(nf, -1), unsplit_face(nf, -1);
+  loops.items.reserve(static_cast<size_t>(nf) * 16 + static_cast<size_t>(nc) * 48);
+  for (int32_t f = 0; f < nf; ++f) {
+    if (face_point[f] < 0) continue;
+    face_child[f] = loops.rows();
+    const auto loop = m.face_vertices(f);
+    const auto edges = m.face_edges(f);
+    const size_t k = loop.size();
+    for (size_t i = 0; i < k; ++i) {
+      const int32_t e_next = edges[i];
+      const int32_t e_prev = edges[(i + k - 1) % k];
+      loops.items.insert(loops.items.end(), {loop[i], edge_point[e_next], face_point[f],
+                                             edge_point[e_prev]});
+      loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
+    }
+  }
+  std::vector<int32_t> interior_base(nc, -1);
+  std::vector<int32_t> fwd_face, bwd_face;  // per local edge of a cell
+  for (int32_t c = 0; c < nc; ++c) {
+    if (!refined[c]) continue;
+    interior_base[c] = loops.rows();
+    const auto cell_edges = m.cell_edges(c);
+    fwd_face.assign(cell_edges.size(), -1);
+    bwd_face.assign(cell_edges.size(), -1);
+    const auto faces = m.cell_faces(c);
+    const auto flip = m.cell_face_flipped(c);
+    for (size_t k = 0; k < faces.size(); ++k) {
+      const auto loop = m.face_vertices(faces[k]);
+      const auto edges = m.face_edges(faces[k]);
+      for (size_t i = 0; i < loop.size(); ++i) {
+        const int32_t e = edges[i];
+        const size_t j = static_cast<size_t>(
+            std::lower_bound(cell_edges.begin(), cell_edges.end(), e) - cell_edges.begin());
+        // Does the cell see this side going from edge_vertices[0] to [1]?
+        const bool stored_fwd = loop[i] == m.edge_vertices(e)[0];
+        const bool fwd = stored_fwd != (flip[k] != 0);
+        (fwd ? fwd_face : bwd_face)[j] = faces[k];
+      }
+    }
+    for (size_t j = 0; j < cell_edges.size(); ++j) {
+      // Outward from the sub-cell at edge_vertices[0]: [F_fwd, E, F_bwd, C].
+      loops.items.insert(loops.items.end(),
+                         {face_point[fwd_face[j]], edge_point[cell_edges[j]],
+                          face_point[bwd_face[j]], cell_point[c]});
+      loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
+    }
+  }
+  if (local) {
+    for (int32_t f = 0; f < nf; ++f) {
+      if (face_point[f] >= 0) continue;
+      unsplit_face[f] = loops.rows();
+      const auto loop = m.face_vertices(f);
+      const auto edges = m.face_edges(f);
+      for (size_t i = 0; i < loop.size(); ++i) {
+        loops.items.push_back(loop[i]);
+        if (edge_point[edges[i]] >= 0) loops.items.push_back(edge_point[edges[i]]);
+      }
+      loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
+    }
+  }
+
+  // Cells: each refined cell gives one sub-cell per vertex (faces of the
+  // parent at that corner, interior quads of the parent's edges at it);
+  // each unrefined cell stays one cell with its split faces' children.
+  Csr cell_faces;
+  std::vector<uint8_t> cell_flip;
+  cell_faces.items.reserve(static_cast<size_t>(nc) * 48);
+  cell_flip.reserve(static_cast<size_t>(nc) * 48);
+  std::vector<std::vector<std::pair<int32_t, uint8_t>>> corner;
+  for (int32_t c = 0; c < nc; ++c) {
+    const auto faces = m.cell_faces(c);
+    const auto flip = m.cell_face_flipped(c);
+    if (!refined[c]) {
+      for (size_t k = 0; k < faces.size(); ++k) {
+        const int32_t f = faces[k];
+        if (face_child[f] >= 0) {
+          for (int32_t i = 0; i < static_cast<int32_t>(m.face_edges(f).size()); ++i) {
+            cell_faces.items.push_back(face_child[f] + i);
+            cell_flip.push_back(flip[k]);
+          }
+        } else {
+          cell_faces.items.push_back(unsplit_face[f]);
+          cell_flip.push_back(flip[k]);
+        }
+      }
+      cell_faces.offsets.push_back(static_cast<int32_t>(cell_faces.items.size()));
+      level.parent_cell.push_back(c);
+      continue;
+    }
+    const auto verts = m.cell_vertices(c);
+    if (corner.size() < verts.size()) corner.resize(verts.size());
+    for (size_t i = 0; i < verts.size(); ++i) corner[i].clear();
+    auto local_vertex = [&](int32_t v) {
+      return static_cast<size_t>(std::lower_bound(verts.begin(), verts.end(), v) -
+                                 verts.begin());
+    };
+    for (size_t k = 0; k < faces.size(); ++k) {
+      const auto loop = m.face_vertices(faces[k]);
+      for (size_t i = 0; i < loop.size(); ++i) {
+        corner[local_vertex(loop[i])].push_back(
+            {face_child[faces[k]] + static_cast<int32_t>(i), flip[k]});
+      }
+    }
+    const auto cell_edges = m.cell_edges(c);
+    for (size_t j = 0; j < cell_edges.size(); ++j) {
+      const auto& ev = m.edge_vertices(cell_edges[j]);
+      const int32_t q = interior_base[c] + static_cast<int32_t>(j);
+      corner[local_vertex(ev[0])].push_back({q, 0});
+      corner[local_vertex(ev[1])].push_back({q, 1});
+    }
+    for (size_t i = 0; i < verts.size(); ++i) {
+      for (const auto& [f, fl] : corner[i]) {
+        cell_faces.items.push_back(f);
+        cell_flip.push_back(fl);
+      }
+      cell_faces.offsets.push_back(static_cast<int32_t>(cell_faces.items.size()));
+      level.parent_cell.push_back(c);
+    }
+  }
+
+  ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(std::move(fine_positions),
+                                                      std::move(loops), std::move(cell_faces),
+                                                      std::move(cell_flip),
+                                                      options.validate_geometry));
+
+  // Sharp tags pass to both children of a split edge, or stay on an
+  // unsplit one.
+  level.sharp_edges.assign(level.fine.num_edges(), 0);
+  if (has_sharp) {
+    for (int32_t e = 0; e < ne; ++e) {
+      if (!sharp(e)) continue;
+      const auto& ev = m.edge_vertices(e);
+      if (edge_point[e] < 0) {
+        level.sharp_edges[level.fine.FindEdge(ev[0], ev[1])] = 1;
+      } else {
+        level.sharp_edges[level.fine.FindEdge(ev[0], edge_point[e])] = 1;
+        level.sharp_edges[level.fine.FindEdge(edge_point[e], ev[1])] = 1;
+      }
+    }
+  }
+  return level;
+}
+
+absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const CellComplex> control, int levels,
+                                    std::vector<uint8_t> control_sharp_edges) {
+  if (levels < 0 || levels > 6) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("subdivision levels must be in [0, 6], got ", levels));
+  }
+  Hierarchy h;
+  h.control = control;
+  h.fine = control;
+  h.levels = levels;
+  const int32_t n = control->num_vertices();
+  h.a.resize(n, n);
+  h.a.setIdentity();
+  h.control_cell.resize(control->num_cells());
+  for (int32_t c = 0; c < control->num_cells(); ++c) h.control_cell[c] = c;
+  h.sharp_edges = control_sharp_edges.empty()
+                      ? std::vector<uint8_t>(control->num_edges(), 0)
+                      : std::move(control_sharp_edges);
+  for (int l = 0; l < levels; ++l) {
+    SubdivisionOptions options;
+    options.sharp_edges = std::move(h.sharp_edges);
+    ASSIGN_OR_RETURN(Level level, SubdivideOnce(*h.fine, options));
+    h.a = (l == 0) ? level.a : SparseMatrix(level.a * h.a);
+    for (int32_t& c : level.parent_cell) c = h.control_cell[c];
+    h.control_cell = std::move(level.parent_cell);
+    h.sharp_edges = std::move(level.sharp_edges);
+    h.fine = std::make_shared<const CellComplex>(std::move(level.fine));
+  }
+  return h;
+}
+
+absl::StatusOr<std::vector<uint8_t>> SharpEdgesFromPairs(
+    const CellComplex& complex, const std::vector<std::array<int32_t, 2>>& pairs) {
+  std::vector<uint8_t> tags(complex.num_edges(), 0);
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    const auto& [a, b] = pairs[i];
+    const int32_t nv = complex.num_vertices();
+    if (a < 0 || a >= nv || b < 0 || b >= nv) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "sharp edge ", i, " (", a, " ", b, "): vertex index out of range [0, ", nv, ")"));
+    }
+    const int32_t e = complex.FindEdge(a, b);
+    if (e < 0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "sharp edge ", i, " (", a, " ", b, ") is not an edge of the control mesh"));
+    }
+    tags[e] = 1;
+  }
+  return tags;
+}
+
+void TagCreases(const CellComplex& complex, double degrees, std::vector<uint8_t>& tags) {
+  tags.resize(complex.num_edges(), 0);
+  if (degrees <= 0.0) return;
+  const double cos_limit = std::cos(degrees * M_PI / 180.0);
+  for (int32_t e = 0; e < complex.num_edges(); ++e) {
+    if (!complex.edge_is_boundary(e)) continue;
+    int32_t f[2];
+    int k = 0;
+    for (int32_t g : complex.edge_faces(e)) {
+      if (complex.face_is_boundary(g)) {
+        if (k < 2) f[k] = g;
+        ++k;
+      }
+    }
+    if (k != 2) continue;
+    const Eigen::Vector3d n0 = FaceNormal(complex, f[0]).normalized();
+    const Eigen::Vector3d n1 = FaceNormal(complex, f[1]).normalized();
+    if (n0.dot(n1) < cos_limit) tags[e] = 1;
+  }
+}
+
+}  // namespace dynsolid::subdivision

@@ -1,0 +1,68 @@
+// MacCracken-Joy subdivision of cell complexes (MODEL.md section 2).
+//
+// One level maps a complex to a finer one and returns the subdivision
+// matrix A_l (rows: new vertices, columns: old vertices; every row sums to
+// 1). L levels compose A = A_L ... A_1. Build once per topology change;
+// never re-subdivide per time step: positions follow as d = A p.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/SparseCore>
+
+#include "absl/status/statusor.h"
+#include "solver/mesh/cell_complex.h"
+
+namespace dynsolid::subdivision {
+
+using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>;
+
+struct SubdivisionOptions {
+  // Per-edge sharp tags of the input complex (empty: none sharp).
+  std::vector<uint8_t> sharp_edges;
+  // Cells to refine (empty: all). With a subset this is local subdivision:
+  // unrefined cells keep their vertices, and faces and edges they share
+  // with refined cells are split at their centroid and midpoint, so their
+  // shape does not change (reading of MODEL.md section 2).
+  std::vector<int32_t> cells;
+  // Also check cell volumes of the result (tests; off on hot paths).
+  bool validate_geometry = false;
+};
+
+// The result of one level. New vertex numbering for uniform subdivision:
+// [old vertices | edge points | face points | cell points].
+struct Level {
+  mesh::CellComplex fine;
+  SparseMatrix a;                       // fine vertices x coarse vertices
+  std::vector<int32_t> parent_cell;     // fine cell -> coarse cell
+  std::vector<uint8_t> sharp_edges;     // per fine edge
+};
+
+absl::StatusOr<Level> SubdivideOnce(const mesh::CellComplex& coarse,
+                                    const SubdivisionOptions& options);
+
+// L uniform levels on top of a control complex.
+struct Hierarchy {
+  std::shared_ptr<const mesh::CellComplex> control;
+  std::shared_ptr<const mesh::CellComplex> fine;  // == control when levels = 0
+  int levels = 0;
+  SparseMatrix a;                       // fine vertices x control vertices
+  std::vector<int32_t> control_cell;    // fine cell -> control cell
+  std::vector<uint8_t> sharp_edges;     // per fine edge
+};
+
+absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const mesh::CellComplex> control,
+                                    int levels, std::vector<uint8_t> control_sharp_edges);
+
+// Tags of edges given by vertex pairs; InvalidArgument names a pair that is
+// not an edge of `complex`.
+absl::StatusOr<std::vector<uint8_t>> SharpEdgesFromPairs(
+    const mesh::CellComplex& complex, const std::vector<std::array<int32_t, 2>>& pairs);
+
+// Boundary edges whose two boundary faces meet at a dihedral angle sharper
+// than `degrees` (deviation from flat) are tagged in `tags` (sized to edges).
+void TagCreases(const mesh::CellComplex& complex, double degrees, std::vector<uint8_t>& tags);
+
+}  // namespace dynsolid::subdivision

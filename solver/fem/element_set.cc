@@ -44,62 +44,59 @@ std::array<int32_t, 8> HexCorners(const CellComplex& m, int32_t c) {
   return h;
 }
 
-// The cubic B-spline element conditions of MODEL.md section 3.
-bool IsRegularHex(const CellComplex& m, int32_t c) {
-  for (int32_t f : m.cell_faces(c)) {
-    if (m.face_is_boundary(f)) return false;
-  }
-  std::array<int32_t, 27> nbrs{};
-  int count = 0;
-  for (int32_t v : m.cell_vertices(c)) {
+// A vertex around which a cubic element may sit: interior, 6 edges and 8
+// hexahedral cells (the regular grid's vertex star).
+std::vector<uint8_t> RegularVertices(const CellComplex& m, const std::vector<uint8_t>& is_hex) {
+  std::vector<uint8_t> regular(m.num_vertices(), 0);
+  for (int32_t v = 0; v < m.num_vertices(); ++v) {
     if (m.vertex_is_boundary(v) || m.vertex_edges(v).size() != 6 ||
         m.vertex_cells(v).size() != 8) {
-      return false;
+      continue;
     }
-    for (int32_t n : m.vertex_cells(v)) {
-      if (std::find(nbrs.begin(), nbrs.begin() + count, n) != nbrs.begin() + count) continue;
-      if (count == 27 || !m.CellIsHexahedron(n)) return false;
-      nbrs[count++] = n;
-    }
+    bool all_hex = true;
+    for (int32_t c : m.vertex_cells(v)) all_hex &= is_hex[c] != 0;
+    regular[v] = all_hex;
   }
-  return count == 27;
+  return regular;
 }
 
-// At a regular vertex x (6 edges, 8 hexahedra), the edge that shares no face
-// with edge e0.
-int32_t OppositeEdge(const CellComplex& m, int32_t x, int32_t e0) {
-  const auto& ev0 = m.edge_vertices(e0);
-  for (int32_t e : m.vertex_edges(x)) {
-    if (e == e0) continue;
-    bool shares = false;
-    for (int32_t f : m.edge_faces(e0)) {
-      const auto edges = m.face_edges(f);
-      if (std::find(edges.begin(), edges.end(), e) != edges.end()) {
-        shares = true;
-        break;
-      }
+// The star of a regular vertex x: for each of its 12 quad faces, the loop
+// neighbours of x (prev, next) and the vertex across the face from x.
+struct Star {
+  std::array<std::array<int32_t, 3>, 12> faces;  // {prev, next, diagonal}
+  int count = 0;
+
+  Star(const CellComplex& m, int32_t x) {
+    for (int32_t f : m.vertex_faces(x)) {
+      const auto loop = m.face_vertices(f);
+      if (loop.size() != 4 || count == 12) continue;
+      const size_t i = static_cast<size_t>(std::find(loop.begin(), loop.end(), x) - loop.begin());
+      faces[count++] = {loop[(i + 3) % 4], loop[(i + 1) % 4], loop[(i + 2) % 4]};
     }
-    if (!shares) return e;
   }
-  (void)ev0;
-  return -1;
-}
-
-// The quad face containing x, a and b (a and b neighbours of x): its
-// vertex opposite x.
-int32_t QuadOpposite(const CellComplex& m, int32_t x, int32_t a, int32_t b) {
-  for (int32_t f : m.vertex_faces(x)) {
-    const auto loop = m.face_vertices(f);
-    if (loop.size() != 4 || !LoopContains(loop, a) || !LoopContains(loop, b)) continue;
-    const size_t i = static_cast<size_t>(std::find(loop.begin(), loop.end(), x) - loop.begin());
-    return loop[(i + 2) % 4];
+  bool ShareFace(int32_t a, int32_t b) const { return Diagonal(a, b) >= 0; }
+  // The vertex across the face containing x, a and b, or -1.
+  int32_t Diagonal(int32_t a, int32_t b) const {
+    for (int k = 0; k < count; ++k) {
+      const auto& t = faces[k];
+      if ((t[0] == a && t[1] == b) || (t[0] == b && t[1] == a)) return t[2];
+    }
+    return -1;
   }
-  return -1;
-}
+  // The edge neighbour of x opposite y: on no face with x and y.
+  int32_t Opposite(const CellComplex& m, int32_t x, int32_t y) const {
+    for (int32_t e : m.vertex_edges(x)) {
+      const int32_t n = OtherEnd(m, e, x);
+      if (n != y && !ShareFace(n, y)) return n;
+    }
+    return -1;
+  }
+};
 
-// The hexahedron around x containing a, b and d: its vertex opposite x
-// (the one on no face through x).
-int32_t HexOpposite(const CellComplex& m, int32_t x, int32_t a, int32_t b, int32_t d) {
+// The hexahedron around x containing a, b and d: its eighth vertex, the one
+// not in `known` (x, a, b, d and the three face diagonals).
+int32_t HexOpposite(const CellComplex& m, int32_t x, int32_t a, int32_t b, int32_t d,
+                    const std::array<int32_t, 7>& known) {
   for (int32_t c : m.vertex_cells(x)) {
     const auto verts = m.cell_vertices(c);
     if (!std::binary_search(verts.begin(), verts.end(), a) ||
@@ -108,15 +105,7 @@ int32_t HexOpposite(const CellComplex& m, int32_t x, int32_t a, int32_t b, int32
       continue;
     }
     for (int32_t v : verts) {
-      bool on_face_through_x = false;
-      for (int32_t f : m.cell_faces(c)) {
-        const auto loop = m.face_vertices(f);
-        if (LoopContains(loop, x) && LoopContains(loop, v)) {
-          on_face_through_x = true;
-          break;
-        }
-      }
-      if (!on_face_through_x) return v;
+      if (std::find(known.begin(), known.end(), v) == known.end()) return v;
     }
   }
   return -1;
@@ -130,6 +119,7 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
   for (int n = 0; n < 8; ++n) {
     const int u = kHexCorner[n][0], v = kHexCorner[n][1], w = kHexCorner[n][2];
     const int32_t x = h[n];
+    const Star star(m, x);
     // Outward step along each axis: across the edge opposite the in-cell one.
     std::array<int32_t, 3> out{};
     for (int axis = 0; axis < 3; ++axis) {
@@ -141,8 +131,7 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
           inside = h[q];
         }
       }
-      const int32_t e_in = m.FindEdge(x, inside);
-      out[axis] = OtherEnd(m, OppositeEdge(m, x, e_in), x);
+      out[axis] = star.Opposite(m, x, inside);
     }
     const int I = 1 + u, J = 1 + v, K = 1 + w;
     const int Io = u ? 3 : 0, Jo = v ? 3 : 0, Ko = w ? 3 : 0;
@@ -150,10 +139,12 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
     at(Io, J, K) = out[0];
     at(I, Jo, K) = out[1];
     at(I, J, Ko) = out[2];
-    at(Io, Jo, K) = QuadOpposite(m, x, out[0], out[1]);
-    at(Io, J, Ko) = QuadOpposite(m, x, out[0], out[2]);
-    at(I, Jo, Ko) = QuadOpposite(m, x, out[1], out[2]);
-    at(Io, Jo, Ko) = HexOpposite(m, x, out[0], out[1], out[2]);
+    at(Io, Jo, K) = star.Diagonal(out[0], out[1]);
+    at(Io, J, Ko) = star.Diagonal(out[0], out[2]);
+    at(I, Jo, Ko) = star.Diagonal(out[1], out[2]);
+    at(Io, Jo, Ko) = HexOpposite(m, x, out[0], out[1], out[2],
+                                 {x, out[0], out[1], out[2], at(Io, Jo, K), at(Io, J, Ko),
+                                  at(I, Jo, Ko)});
   }
   return nodes;
 }
@@ -163,11 +154,24 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
 ElementSet ClassifyElements(const CellComplex& m) {
   ElementSet s;
   s.num_mesh_vertices = m.num_vertices();
+  std::vector<uint8_t> is_hex(m.num_cells());
+  int32_t hexes = 0;
+  for (int32_t c = 0; c < m.num_cells(); ++c) {
+    is_hex[c] = m.CellIsHexahedron(c);
+    hexes += is_hex[c];
+  }
+  // Interior faces, 26 hexahedral neighbours and valence-6 corners all
+  // follow from the 8 corners being regular vertices.
+  const std::vector<uint8_t> regular = RegularVertices(m, is_hex);
+  s.cubic_nodes.reserve(static_cast<size_t>(hexes) * 64);
+  s.cubic_cell.reserve(hexes);
   std::vector<int32_t> loop;
   for (int32_t c = 0; c < m.num_cells(); ++c) {
-    if (m.CellIsHexahedron(c)) {
+    if (is_hex[c]) {
       const std::array<int32_t, 8> h = HexCorners(m, c);
-      if (IsRegularHex(m, c)) {
+      bool cubic = true;
+      for (int32_t v : h) cubic &= regular[v] != 0;
+      if (cubic) {
         const std::array<int32_t, 64> nodes = CubicNodes(m, h);
         if (std::find(nodes.begin(), nodes.end(), -1) == nodes.end()) {
           s.cubic_nodes.insert(s.cubic_nodes.end(), nodes.begin(), nodes.end());

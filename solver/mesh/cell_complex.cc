@@ -63,6 +63,28 @@ Csr Invert(const Csr& rel, int32_t num_targets) {
 
 }  // namespace
 
+int32_t DropUnusedVertices(MeshInput& input) {
+  const int32_t nv = static_cast<int32_t>(input.vertices.rows());
+  std::vector<int32_t> remap(nv, -1);
+  for (const auto& cell : input.cells)
+    for (const auto& loop : cell)
+      for (int32_t v : loop)
+        if (v >= 0 && v < nv) remap[v] = 0;
+  int32_t used = 0;
+  for (int32_t v = 0; v < nv; ++v) {
+    if (remap[v] < 0) continue;
+    if (used != v) input.vertices.row(used) = input.vertices.row(v);
+    remap[v] = used++;
+  }
+  if (used == nv) return 0;
+  input.vertices.conservativeResize(used, 3);
+  for (auto& cell : input.cells)
+    for (auto& loop : cell)
+      for (int32_t& v : loop)
+        if (v >= 0 && v < nv) v = remap[v];
+  return nv - used;
+}
+
 absl::StatusOr<CellComplex> CellComplex::FromInput(const MeshInput& input) {
   const std::string pre = Prefix(input.origin);
   const int32_t nv = static_cast<int32_t>(input.vertices.rows());
@@ -154,6 +176,15 @@ absl::StatusOr<CellComplex> CellComplex::FromInput(const MeshInput& input) {
       flipped.push_back(1);
     }
     cell_faces.offsets.push_back(static_cast<int32_t>(cell_faces.items.size()));
+  }
+
+  std::vector<uint8_t> used(nv, 0);
+  for (int32_t v : face_loops.items) used[v] = 1;
+  for (int32_t v = 0; v < nv; ++v) {
+    if (!used[v]) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          pre, "vertex ", v, " belongs to no cell; remove unused vertices"));
+    }
   }
 
   absl::StatusOr<CellComplex> result = FromFaces(

@@ -36,6 +36,11 @@ struct MeshInput {
   std::string origin;
 };
 
+// Removes vertices that no cell uses and renumbers the rest in their old
+// order (file readers call this: mesh files often carry geometry points).
+// Returns how many were removed.
+int32_t DropUnusedVertices(MeshInput& input);
+
 // Compressed rows: row r is items[offsets[r] .. offsets[r+1]).
 struct Csr {
   std::vector<int32_t> offsets{0};
@@ -65,6 +70,7 @@ class CellComplex {
 
   // Validates `input` (MODEL.md section 1) and builds the complex. Errors are
   // InvalidArgument and name the cell, face or vertex and the rule broken.
+  // Every vertex must belong to a cell (see DropUnusedVertices).
   static absl::StatusOr<CellComplex> FromInput(const MeshInput& input);
 
   // Builds a complex whose faces are already identified: `face_loops` holds

@@ -45,9 +45,12 @@ class RowBuilder {
 
 SparseMatrix FromCsr(int32_t rows, int32_t cols, const std::vector<int32_t>& outer,
                      const std::vector<int32_t>& inner, const std::vector<double>& values) {
-  Eigen::Map<const SparseMatrix> map(rows, cols, static_cast<int32_t>(inner.size()),
-                                     outer.data(), inner.data(), values.data());
-  return SparseMatrix(map);
+  SparseMatrix m(rows, cols);
+  m.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), m.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), m.innerIndexPtr());
+  std::copy(values.begin(), values.end(), m.valuePtr());
+  return m;
 }
 
 // Newell normal of a face loop (not normalised).
@@ -64,6 +67,42 @@ Eigen::Vector3d FaceNormal(const CellComplex& m, int32_t f) {
 }
 
 }  // namespace
+
+SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
+  const int32_t rows = static_cast<int32_t>(a.rows()), cols = static_cast<int32_t>(b.cols());
+  std::vector<double> acc(cols, 0.0);
+  std::vector<int32_t> mark(cols, -1), touched;
+  std::vector<int32_t> outer{0}, inner;
+  std::vector<double> values;
+  outer.reserve(rows + 1);
+  const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
+  const size_t guess = static_cast<size_t>(static_cast<double>(a.nonZeros()) * per_row / 4.0);
+  inner.reserve(guess);
+  values.reserve(guess);
+  for (int32_t i = 0; i < rows; ++i) {
+    touched.clear();
+    for (SparseMatrix::InnerIterator ia(a, i); ia; ++ia) {
+      const double w = ia.value();
+      for (SparseMatrix::InnerIterator ib(b, ia.col()); ib; ++ib) {
+        const int32_t c = static_cast<int32_t>(ib.col());
+        if (mark[c] != i) {
+          mark[c] = i;
+          acc[c] = w * ib.value();
+          touched.push_back(c);
+        } else {
+          acc[c] += w * ib.value();
+        }
+      }
+    }
+    std::sort(touched.begin(), touched.end());
+    for (int32_t c : touched) {
+      inner.push_back(c);
+      values.push_back(acc[c]);
+    }
+    outer.push_back(static_cast<int32_t>(inner.size()));
+  }
+  return FromCsr(rows, cols, outer, inner, values);
+}
 
 absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {
   const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
@@ -419,7 +458,7 @@ absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const CellComplex> control, 
     SubdivisionOptions options;
     options.sharp_edges = std::move(h.sharp_edges);
     ASSIGN_OR_RETURN(Level level, SubdivideOnce(*h.fine, options));
-    h.a = (l == 0) ? level.a : SparseMatrix(level.a * h.a);
+    h.a = (l == 0) ? std::move(level.a) : MultiplyRowMajor(level.a, h.a);
     for (int32_t& c : level.parent_cell) c = h.control_cell[c];
     h.control_cell = std::move(level.parent_cell);
     h.sharp_edges = std::move(level.sharp_edges);

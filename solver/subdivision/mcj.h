@@ -43,6 +43,10 @@ struct Level {
 absl::StatusOr<Level> SubdivideOnce(const mesh::CellComplex& coarse,
                                     const SubdivisionOptions& options);
 
+// a * b for row-major sparse matrices, row by row with a dense accumulator
+// (deterministic summation order; no storage-order conversions).
+SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b);
+
 // L uniform levels on top of a control complex.
 struct Hierarchy {
   std::shared_ptr<const mesh::CellComplex> control;

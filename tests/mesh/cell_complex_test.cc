@@ -187,6 +187,34 @@ TEST(CellComplexValidationTest, TooFewFacesOrVertices) {
                        HasSubstr("cell 0 face 0 has 2 vertices")));
 }
 
+TEST(CellComplexValidationTest, UnusedVertex) {
+  MeshInput in = Grid(1, 1, 1);
+  in.vertices.conservativeResize(9, 3);
+  in.vertices.row(8) << 5, 5, 5;
+  EXPECT_THAT(CellComplex::FromInput(in),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("vertex 8 belongs to no cell")));
+  // Dropping it renumbers nothing that is used here, and the mesh builds.
+  EXPECT_EQ(DropUnusedVertices(in), 1);
+  EXPECT_OK(CellComplex::FromInput(in));
+}
+
+TEST(CellComplexValidationTest, DropUnusedVerticesRenumbers) {
+  MeshInput in = Grid(1, 1, 1);
+  // Put an unused vertex first: every used index shifts down by one.
+  Points v(9, 3);
+  v.row(0) << -7, -7, -7;
+  v.bottomRows(8) = in.vertices;
+  in.vertices = v;
+  for (auto& face : in.cells[0])
+    for (int32_t& x : face) ++x;
+  EXPECT_EQ(DropUnusedVertices(in), 1);
+  auto m = CellComplex::FromInput(in);
+  ASSERT_OK(m);
+  EXPECT_NEAR(m->CellVolume(0), 1.0, 1e-12);
+  EXPECT_EQ(in.vertices(0, 0), 0.0);
+}
+
 TEST(CellComplexValidationTest, OriginPrefixesMessages) {
   MeshInput in = Grid(1, 1, 1);
   in.origin = "scenes/broken.vtk";

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 
+#include "solver/common/parallel.h"
+
 namespace dynsolid::fem {
 namespace {
 
@@ -151,22 +153,15 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
 
 }  // namespace
 
-ElementSet ClassifyElements(const CellComplex& m) {
-  ElementSet s;
-  s.num_mesh_vertices = m.num_vertices();
-  std::vector<uint8_t> is_hex(m.num_cells());
-  int32_t hexes = 0;
-  for (int32_t c = 0; c < m.num_cells(); ++c) {
-    is_hex[c] = m.CellIsHexahedron(c);
-    hexes += is_hex[c];
-  }
-  // Interior faces, 26 hexahedral neighbours and valence-6 corners all
-  // follow from the 8 corners being regular vertices.
-  const std::vector<uint8_t> regular = RegularVertices(m, is_hex);
-  s.cubic_nodes.reserve(static_cast<size_t>(hexes) * 64);
-  s.cubic_cell.reserve(hexes);
+namespace {
+
+// Classifies cells [begin, end). Virtual nodes are numbered from 0 within
+// the chunk; ClassifyElements offsets them when joining chunks.
+void ClassifyRange(const CellComplex& m, const std::vector<uint8_t>& is_hex,
+                   const std::vector<uint8_t>& regular, int32_t begin, int32_t end,
+                   ElementSet& s) {
   std::vector<int32_t> loop;
-  for (int32_t c = 0; c < m.num_cells(); ++c) {
+  for (int32_t c = begin; c < end; ++c) {
     if (is_hex[c]) {
       const std::array<int32_t, 8> h = HexCorners(m, c);
       bool cubic = true;
@@ -184,7 +179,7 @@ ElementSet ClassifyElements(const CellComplex& m) {
       continue;
     }
     // Irregular cell: a virtual centre node and one pyramid per face.
-    const int32_t apex = s.num_mesh_vertices + s.num_virtual_nodes++;
+    const int32_t apex = s.num_virtual_nodes++;
     s.virtual_node_cell.push_back(c);
     const int32_t nfaces = static_cast<int32_t>(m.cell_faces(c).size());
     for (int32_t k = 0; k < nfaces; ++k) {
@@ -201,6 +196,56 @@ ElementSet ClassifyElements(const CellComplex& m) {
         }
       }
     }
+  }
+}
+
+template <typename T>
+void Append(std::vector<T>& to, const std::vector<T>& from) {
+  to.insert(to.end(), from.begin(), from.end());
+}
+
+}  // namespace
+
+ElementSet ClassifyElements(const CellComplex& m) {
+  const int32_t nc = m.num_cells();
+  std::vector<uint8_t> is_hex(nc);
+  for (int32_t c = 0; c < nc; ++c) is_hex[c] = m.CellIsHexahedron(c);
+  // Interior faces, 26 hexahedral neighbours and valence-6 corners all
+  // follow from the 8 corners being regular vertices.
+  const std::vector<uint8_t> regular = RegularVertices(m, is_hex);
+
+  // Cells in contiguous chunks on a few threads, joined in chunk order: the
+  // result does not depend on the number of threads.
+  std::vector<ElementSet> parts(BuildThreads());
+  const int chunks = ParallelChunks(nc, static_cast<int>(parts.size()), 4096,
+                                    [&](int k, int64_t b, int64_t e) {
+                                      ClassifyRange(m, is_hex, regular, static_cast<int32_t>(b),
+                                                    static_cast<int32_t>(e), parts[k]);
+                                    });
+  ElementSet s;
+  s.num_mesh_vertices = m.num_vertices();
+  size_t cubic = 0, linear = 0, pyramid = 0;
+  for (int k = 0; k < chunks; ++k) {
+    cubic += parts[k].cubic_nodes.size();
+    linear += parts[k].linear_nodes.size();
+    pyramid += parts[k].pyramid_nodes.size();
+  }
+  s.cubic_nodes.reserve(cubic);
+  s.linear_nodes.reserve(linear);
+  s.pyramid_nodes.reserve(pyramid);
+  for (int k = 0; k < chunks; ++k) {
+    ElementSet& p = parts[k];
+    const int32_t first_virtual = s.num_mesh_vertices + s.num_virtual_nodes;
+    for (size_t i = 4; i < p.pyramid_nodes.size(); i += 5) p.pyramid_nodes[i] += first_virtual;
+    Append(s.cubic_nodes, p.cubic_nodes);
+    Append(s.cubic_cell, p.cubic_cell);
+    Append(s.linear_nodes, p.linear_nodes);
+    Append(s.linear_cell, p.linear_cell);
+    Append(s.pyramid_nodes, p.pyramid_nodes);
+    Append(s.pyramid_cell, p.pyramid_cell);
+    Append(s.virtual_node_cell, p.virtual_node_cell);
+    s.num_virtual_nodes += p.num_virtual_nodes;
+    p = ElementSet();
   }
   return s;
 }

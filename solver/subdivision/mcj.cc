@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 
 #include "absl/strings/str_cat.h"
+#include "solver/common/parallel.h"
 #include "solver/common/status_macros.h"
 
 namespace dynsolid::subdivision {
@@ -70,38 +71,66 @@ Eigen::Vector3d FaceNormal(const CellComplex& m, int32_t f) {
 
 SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
   const int32_t rows = static_cast<int32_t>(a.rows()), cols = static_cast<int32_t>(b.cols());
-  std::vector<double> acc(cols, 0.0);
-  std::vector<int32_t> mark(cols, -1), touched;
-  std::vector<int32_t> outer{0}, inner;
-  std::vector<double> values;
-  outer.reserve(rows + 1);
-  const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
-  const size_t guess = static_cast<size_t>(static_cast<double>(a.nonZeros()) * per_row / 4.0);
-  inner.reserve(guess);
-  values.reserve(guess);
-  for (int32_t i = 0; i < rows; ++i) {
-    touched.clear();
-    for (SparseMatrix::InnerIterator ia(a, i); ia; ++ia) {
-      const double w = ia.value();
-      for (SparseMatrix::InnerIterator ib(b, ia.col()); ib; ++ib) {
-        const int32_t c = static_cast<int32_t>(ib.col());
-        if (mark[c] != i) {
-          mark[c] = i;
-          acc[c] = w * ib.value();
-          touched.push_back(c);
-        } else {
-          acc[c] += w * ib.value();
+  struct Part {
+    std::vector<int32_t> row_nnz, inner;
+    std::vector<double> values;
+  };
+  std::vector<Part> parts(BuildThreads());
+  // Rows in contiguous chunks, each with its own dense accumulator; joined
+  // in order, so the result does not depend on the thread count.
+  const int chunks = ParallelChunks(rows, static_cast<int>(parts.size()), 8192,
+                                    [&](int k, int64_t begin, int64_t end) {
+    Part& p = parts[k];
+    std::vector<double> acc(cols, 0.0);
+    std::vector<int32_t> mark(cols, -1), touched;
+    const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
+    const double a_nnz = static_cast<double>(a.outerIndexPtr()[end] - a.outerIndexPtr()[begin]);
+    p.inner.reserve(static_cast<size_t>(a_nnz * per_row / 4.0));
+    p.values.reserve(p.inner.capacity());
+    p.row_nnz.reserve(end - begin);
+    for (int32_t i = static_cast<int32_t>(begin); i < end; ++i) {
+      touched.clear();
+      for (SparseMatrix::InnerIterator ia(a, i); ia; ++ia) {
+        const double w = ia.value();
+        for (SparseMatrix::InnerIterator ib(b, ia.col()); ib; ++ib) {
+          const int32_t c = static_cast<int32_t>(ib.col());
+          if (mark[c] != i) {
+            mark[c] = i;
+            acc[c] = w * ib.value();
+            touched.push_back(c);
+          } else {
+            acc[c] += w * ib.value();
+          }
         }
       }
+      std::sort(touched.begin(), touched.end());
+      for (int32_t c : touched) {
+        p.inner.push_back(c);
+        p.values.push_back(acc[c]);
+      }
+      p.row_nnz.push_back(static_cast<int32_t>(touched.size()));
     }
-    std::sort(touched.begin(), touched.end());
-    for (int32_t c : touched) {
-      inner.push_back(c);
-      values.push_back(acc[c]);
+  });
+  size_t nnz = 0;
+  for (int k = 0; k < chunks; ++k) nnz += parts[k].inner.size();
+  SparseMatrix m(rows, cols);
+  m.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  int32_t* outer = m.outerIndexPtr();
+  outer[0] = 0;
+  int32_t r = 0;
+  size_t at = 0;
+  for (int k = 0; k < chunks; ++k) {
+    Part& p = parts[k];
+    for (int32_t n : p.row_nnz) {
+      outer[r + 1] = outer[r] + n;
+      ++r;
     }
-    outer.push_back(static_cast<int32_t>(inner.size()));
+    std::copy(p.inner.begin(), p.inner.end(), m.innerIndexPtr() + at);
+    std::copy(p.values.begin(), p.values.end(), m.valuePtr() + at);
+    at += p.inner.size();
+    p = Part();
   }
-  return FromCsr(rows, cols, outer, inner, values);
+  return m;
 }
 
 absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {

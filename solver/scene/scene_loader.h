@@ -1,0 +1,85 @@
+// Scene loading: text-format scene files (proto/dynsolid/scene.proto), the
+// built-in scenes, and the level-0 control mesh a scene names.
+//
+// A scene file is a dynsolid.Scene in protobuf text format (docs/scene.md).
+// Every error is an absl::Status whose message says where: parse errors and
+// invalid fields read "origin:line:col: message" (1-based line and column;
+// for an invalid field, the position of that field, or of its closest
+// enclosing field present in the text), e.g.
+//   scenes/nozzle.textproto:9:5: mesh.tube.inner_radius (2) must be less
+//   than tube.outer_radius (1)
+// Field errors name the field by its path from the Scene message.
+//
+// Nothing here keeps state: every call parses or builds afresh.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "dynsolid/scene.pb.h"
+#include "solver/mesh/cell_complex.h"
+
+namespace dynsolid::scene {
+
+// Checks every field that can be checked without reading a mesh file or
+// building the mesh: a mesh source is set, generator parameters,
+// mesh.scale / translate, mesh.refine_cells >= 0, subdivision.levels in
+// 0..4, sharp.crease_angle_degrees in [0, 180], sharp.edges indices >= 0
+// and distinct. InvalidArgument, message starting with the field path
+// ("subdivision.levels must be in 0..4, got 7").
+absl::Status ValidateScene(const Scene& scene);
+
+// Parses `text` (protobuf text format) and validates it (ValidateScene).
+// `origin` names the text in messages ("scenes/chair.textproto",
+// "builtin:chair"). Errors: InvalidArgument "origin:line:col: message".
+absl::StatusOr<Scene> ParseScene(std::string_view text, std::string_view origin);
+
+// Reads and parses a scene file. NotFound when `path` does not exist.
+absl::StatusOr<Scene> LoadSceneFile(const std::string& path);
+
+// Names of the compiled-in scenes, in a fixed order: block3 (the default
+// scene), block4, chair, bridge, nozzle, torus, mixed, beam.
+std::vector<std::string> BuiltinSceneNames();
+
+// The compiled-in scene `name`: the text of scenes/<name>.textproto as it
+// was at build time (so the two never differ). NotFound for an unknown name;
+// the message lists the known ones.
+absl::StatusOr<Scene> BuiltinScene(std::string_view name);
+
+// The text of that scene (for tools that print or export it).
+absl::StatusOr<std::string_view> BuiltinSceneText(std::string_view name);
+
+// The folder that relative mesh files of built-in scenes resolve against:
+// the source tree's scenes/ folder, fixed at build time (only "mixed" reads
+// a file).
+std::string BuiltinSceneDir();
+
+// A scene together with the folder its relative mesh paths resolve against.
+struct LoadedScene {
+  Scene scene;
+  std::string base_dir;  // "" means the working directory
+  std::string origin;    // "builtin:block3", "scenes/chair.textproto", "part.msh"
+};
+
+// Loads what a user names on a command line:
+//  - a path ending in .textproto (or .txtpb, .pbtxt): a scene file;
+//  - a path ending in .msh or .vtk: that mesh alone, wrapped in a default
+//    scene (name = the file stem, subdivision.levels 2, no sharp features);
+//  - otherwise a built-in scene name.
+// NotFound when the file does not exist or the name is not a built-in
+// (the message lists the built-in names).
+absl::StatusOr<LoadedScene> LoadSceneOrMesh(std::string_view arg);
+
+// The level-0 control mesh of `scene`: generated, or read from mesh.file
+// (relative paths resolve against `base_dir`; "" = working directory), then
+// transformed p' = scale * p + translate. Validates the scene first and
+// then the indices it holds against the mesh (mesh.refine_cells below the
+// number of cells, sharp.edges below the number of vertices). The result's
+// `origin` names the scene and the source. Does not build the CellComplex:
+// call mesh::CellComplex::FromInput on the result.
+absl::StatusOr<mesh::MeshInput> ControlMeshInput(const Scene& scene, std::string_view base_dir);
+
+}  // namespace dynsolid::scene

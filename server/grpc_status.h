@@ -1,0 +1,16 @@
+// The one place an absl::Status becomes a grpc::Status: the server edge.
+// Everything below server/ (the solver, the session registry) reports
+// absl::Status; reactors convert with ToGrpcStatus just before Finish.
+#pragma once
+
+#include <grpcpp/support/status.h>
+
+#include "absl/status/status.h"
+
+namespace dynsolid::server {
+
+// Same canonical code (absl and gRPC share the numbering), same message.
+// Payloads are dropped. An unknown code becomes UNKNOWN.
+grpc::Status ToGrpcStatus(const absl::Status& status);
+
+}  // namespace dynsolid::server

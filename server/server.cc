@@ -1,0 +1,103 @@
+#include "server/server.h"
+
+#include <chrono>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include "absl/strings/str_cat.h"
+#include "server/log.h"
+
+namespace dynsolid::server {
+namespace {
+
+// The HOST part of "HOST:PORT" ("[::1]:0" -> "[::1]").
+std::string HostOf(const std::string& listen) {
+  const size_t colon = listen.rfind(':');
+  return colon == std::string::npos ? listen : listen.substr(0, colon);
+}
+
+absl::Status CheckOptions(const ServerOptions& o) {
+  if (o.listen.empty() || o.listen.rfind(':') == std::string::npos) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("listen must be HOST:PORT, got \"", o.listen, "\""));
+  }
+  if (o.max_sessions < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_sessions must be >= 1, got ", o.max_sessions));
+  }
+  if (o.max_message_bytes < 1024) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_message_bytes must be >= 1024, got ", o.max_message_bytes));
+  }
+  if (o.max_cells < 1) {
+    return absl::InvalidArgumentError(absl::StrCat("max_cells must be >= 1, got ", o.max_cells));
+  }
+  if (o.build_threads < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("build_threads must be >= 1, got ", o.build_threads));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+Server::Server(const ServerOptions& options)
+    : options_(options),
+      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}}),
+      builds_(options.build_threads),
+      service_(registry_, builds_) {}
+
+absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
+  if (absl::Status s = CheckOptions(options); !s.ok()) return s;
+  std::unique_ptr<Server> server(new Server(options));
+
+  // Both are process-wide switches read when a server is built.
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &server->port_);
+  // Fail to start rather than share a port with another process.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+  builder.SetMaxSendMessageSize(options.max_message_bytes);
+  builder.RegisterService(&server->service_);
+  server->server_ = builder.BuildAndStart();
+  if (server->server_ == nullptr || server->port_ == 0) {
+    server->builds_.Join();
+    if (server->server_ != nullptr) server->server_->Shutdown();
+    absl::MutexLock lock(&server->shutdown_mu_);
+    server->shut_down_ = true;
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
+  }
+  server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
+  ServerLog().info("serving dynsolid.Sessions on {} (max {} sessions, {} cells, {} bytes)",
+                   server->address_, options.max_sessions, options.max_cells,
+                   options.max_message_bytes);
+  return server;
+}
+
+Server::~Server() { Shutdown(absl::Seconds(5)); }
+
+void Server::Shutdown(absl::Duration deadline) {
+  {
+    absl::MutexLock lock(&shutdown_mu_);
+    if (shut_down_) return;
+    shut_down_ = true;
+  }
+  ServerLog().info("shutting down ({} sessions open)", registry_.size());
+  // 1. No new sessions; queued builds Finish with UNAVAILABLE.
+  registry_.StopAccepting();
+  builds_.Stop();
+  // 2. Running calls finish (or are cancelled at the deadline); a running
+  //    build Finishes when it is done.
+  server_->Shutdown(std::chrono::system_clock::now() +
+                    absl::ToChronoMilliseconds(deadline));
+  server_->Wait();
+  // 3. No call can post work any more.
+  builds_.Join();
+  ServerLog().info("stopped");
+}
+
+}  // namespace dynsolid::server

@@ -1,0 +1,89 @@
+// The server's open sessions: creation under limits, lookup by id with
+// token checks, listing and closing. Knows nothing of gRPC: every result is
+// an absl::Status that the service maps at the edge.
+//
+// Thread-safe. The lock guards only the map and counters; a solid is built
+// with no lock held (a slot is reserved first so concurrent creations never
+// overshoot max_sessions).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/synchronization/mutex.h"
+#include "dynsolid/service.pb.h"
+#include "server/session.h"
+#include "server/solid_builder.h"
+#include "server/tokens.h"
+
+namespace dynsolid::server {
+
+struct RegistryOptions {
+  // Open sessions plus creations in progress, at most.
+  int max_sessions = 16;
+  BuildLimits build;
+};
+
+class SessionRegistry {
+ public:
+  explicit SessionRegistry(RegistryOptions options) : options_(options) {}
+  SessionRegistry(const SessionRegistry&) = delete;
+  SessionRegistry& operator=(const SessionRegistry&) = delete;
+
+  // Resolves the request's scene, reserves a slot, builds the solid (no lock
+  // held; may take seconds) and opens a session with a fresh id and token.
+  // Errors: those of ResolveSceneRequest and BuildSolid; ResourceExhausted
+  // when max_sessions are open or being created; Unavailable after
+  // StopAccepting; Cancelled when `cancelled` (if given) returns true before
+  // the build starts or once it is done: a solid nobody waits for is never
+  // opened. A failed creation changes nothing.
+  absl::StatusOr<std::shared_ptr<const SolidSession>> Create(
+      const CreateSessionRequest& request, const std::function<bool()>& cancelled = nullptr);
+
+  // The session `id` if `token` is its token. InvalidArgument for an empty
+  // id, NotFound for an unknown one, PermissionDenied for a missing or wrong
+  // token.
+  absl::StatusOr<std::shared_ptr<const SolidSession>> Get(absl::string_view id,
+                                                          absl::string_view token) const;
+
+  // Removes the session (same errors as Get). Holders of the session keep
+  // it alive until they let go.
+  absl::Status Close(absl::string_view id, absl::string_view token);
+
+  // Every open session, oldest first.
+  std::vector<std::shared_ptr<const SolidSession>> List() const;
+
+  int size() const;
+
+  // From now on Create fails with Unavailable (server shutdown). Sessions
+  // being built finish, but are not opened.
+  void StopAccepting();
+
+ private:
+  absl::StatusOr<std::shared_ptr<const SolidSession>> Find(absl::string_view id,
+                                                           absl::string_view token) const
+      ABSL_SHARED_LOCKS_REQUIRED(mu_);
+
+  struct Entry {
+    uint64_t serial;  // creation order
+    std::shared_ptr<const SolidSession> session;
+  };
+
+  const RegistryOptions options_;
+  mutable absl::Mutex mu_;
+  absl::flat_hash_map<std::string, Entry> sessions_ ABSL_GUARDED_BY(mu_);
+  int pending_ ABSL_GUARDED_BY(mu_) = 0;  // creations holding a reserved slot
+  uint64_t next_serial_ ABSL_GUARDED_BY(mu_) = 0;
+  bool accepting_ ABSL_GUARDED_BY(mu_) = true;
+  RandomHex random_ ABSL_GUARDED_BY(mu_);
+};
+
+}  // namespace dynsolid::server

@@ -1,0 +1,71 @@
+#include "server/sessions_service.h"
+
+#include "server/grpc_status.h"
+#include "server/log.h"
+
+namespace dynsolid::server {
+
+grpc::ServerUnaryReactor* SessionsService::CreateSession(grpc::CallbackServerContext* context,
+                                                         const CreateSessionRequest* request,
+                                                         Session* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  // context, request and response stay valid until Finish.
+  builds_.Post([this, context, request, response, reactor](bool run) {
+    if (!run) {
+      reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+      return;
+    }
+    absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+        registry_.Create(*request, [context] { return context->IsCancelled(); });
+    if (!session.ok()) {
+      ServerLog().info("CreateSession from {} failed: {}", context->peer(),
+                       session.status().ToString());
+      reactor->Finish(ToGrpcStatus(session.status()));
+      return;
+    }
+    const SolidSession& s = **session;
+    *response = s.ToProto();
+    ServerLog().info(
+        "session {} created for {}: scene {}, {} cells at level {} ({} cubic, {} linear, {} "
+        "pyramid elements) in {:.1f} ms",
+        s.id(), context->peer(), s.scene_name(), s.stats().cells(), s.stats().levels(),
+        s.stats().cubic_elements(), s.stats().linear_elements(), s.stats().pyramid_elements(),
+        s.stats().build_milliseconds());
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::GetSession(grpc::CallbackServerContext* context,
+                                                      const SessionRef* request,
+                                                      Session* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+      registry_.Get(request->id(), request->token());
+  if (session.ok()) *response = (*session)->ToProto();
+  reactor->Finish(ToGrpcStatus(session.status()));
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::ListSessions(grpc::CallbackServerContext* context,
+                                                        const ListSessionsRequest* request,
+                                                        ListSessionsResponse* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  for (const auto& session : registry_.List()) {
+    *response->add_sessions() = session->ToListEntry();
+  }
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::CloseSession(grpc::CallbackServerContext* context,
+                                                        const SessionRef* request,
+                                                        google::protobuf::Empty* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const absl::Status closed = registry_.Close(request->id(), request->token());
+  if (closed.ok()) ServerLog().info("session {} closed by {}", request->id(), context->peer());
+  reactor->Finish(ToGrpcStatus(closed));
+  return reactor;
+}
+
+}  // namespace dynsolid::server

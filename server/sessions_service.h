@@ -1,0 +1,41 @@
+// The dynsolid.Sessions gRPC service (proto/dynsolid/service.proto) on the
+// callback API. Reactors never block on a build: CreateSession hands the
+// build to a WorkQueue and Finishes from there; the other calls only look
+// up the registry (a short lock) and Finish at once. Every reactor calls
+// Finish exactly once, also when the server shuts down.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include "dynsolid/service.grpc.pb.h"
+#include "server/session_registry.h"
+#include "server/work_queue.h"
+
+namespace dynsolid::server {
+
+class SessionsService final : public Sessions::CallbackService {
+ public:
+  // `registry` and `builds` outlive the service and the gRPC server.
+  SessionsService(SessionRegistry& registry, WorkQueue& builds)
+      : registry_(registry), builds_(builds) {}
+  SessionsService(const SessionsService&) = delete;
+  SessionsService& operator=(const SessionsService&) = delete;
+
+  grpc::ServerUnaryReactor* CreateSession(grpc::CallbackServerContext* context,
+                                          const CreateSessionRequest* request,
+                                          Session* response) override;
+  grpc::ServerUnaryReactor* GetSession(grpc::CallbackServerContext* context,
+                                       const SessionRef* request, Session* response) override;
+  grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context,
+                                         const ListSessionsRequest* request,
+                                         ListSessionsResponse* response) override;
+  grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context,
+                                         const SessionRef* request,
+                                         google::protobuf::Empty* response) override;
+
+ private:
+  SessionRegistry& registry_;
+  WorkQueue& builds_;
+};
+
+}  // namespace dynsolid::server

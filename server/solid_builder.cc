@@ -1,0 +1,193 @@
+#include "server/solid_builder.h"
+
+#include <algorithm>
+#include <chrono>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/scene/scene_loader.h"
+
+namespace dynsolid::server {
+namespace {
+
+constexpr int kMaxLevels = 4;
+
+// "origin: message", unless the message already starts with the origin
+// (the scene parser's "origin:line:col: ..." messages do).
+absl::Status WithOrigin(const absl::Status& status, absl::string_view origin) {
+  if (status.ok() || absl::StartsWith(status.message(), origin)) return status;
+  return absl::Status(status.code(), absl::StrCat(origin, ": ", status.message()));
+}
+
+// Clients never make the server read its files: a scene they send must
+// generate its mesh.
+absl::Status RejectMeshFile(const Scene& scene, absl::string_view origin) {
+  if (scene.mesh().source_case() != ControlMesh::kFile) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      origin, ": mesh.file (\"", scene.mesh().file(),
+      "\") is not accepted in a scene sent to the server, which never reads its own files "
+      "for a client; describe the mesh with a generator (mesh.block, mesh.beam, mesh.tube, "
+      "mesh.torus, mesh.voxels) or use a builtin_scene"));
+}
+
+// Each vertex's valence within one level-0 cell (faces as vertex loops):
+// the number of the cell's edges that meet there.
+std::vector<int64_t> CellVertexValences(const std::vector<std::vector<int32_t>>& faces) {
+  std::vector<std::pair<int32_t, int32_t>> edges;
+  for (const auto& loop : faces) {
+    for (size_t i = 0; i < loop.size(); ++i) {
+      const int32_t a = loop[i], b = loop[(i + 1) % loop.size()];
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  std::vector<int32_t> ends;
+  for (const auto& [a, b] : edges) {
+    ends.push_back(a);
+    ends.push_back(b);
+  }
+  std::sort(ends.begin(), ends.end());
+  std::vector<int64_t> valences;
+  for (size_t i = 0; i < ends.size();) {
+    size_t j = i;
+    while (j < ends.size() && ends[j] == ends[i]) ++j;
+    valences.push_back(static_cast<int64_t>(j - i));
+    i = j;
+  }
+  return valences;
+}
+
+// Level-`levels` descendants (levels >= 1) of the level-1 child that
+// MacCracken-Joy makes at a cell vertex of valence k. That child has 2k + 2
+// vertices: two of valence k (the old vertex and the cell point) and 2k of
+// valence 3, so it splits into 2 children of its own kind and 2k
+// hexahedra, and a hexahedron into 8 hexahedra.
+int64_t DescendantsOfVertexChild(int64_t k, int levels) {
+  int64_t own_kind = 1, hexahedra = 0;
+  for (int l = 1; l < levels; ++l) {
+    hexahedra = 8 * hexahedra + 2 * k * own_kind;
+    own_kind *= 2;
+  }
+  return own_kind + hexahedra;
+}
+
+}  // namespace
+
+absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& request) {
+  SceneRequest out;
+  switch (request.scene_source_case()) {
+    case CreateSessionRequest::kBuiltinScene: {
+      out.origin = absl::StrCat("builtin:", request.builtin_scene());
+      ASSIGN_OR_RETURN(out.scene, scene::BuiltinScene(request.builtin_scene()));
+      out.base_dir = scene::BuiltinSceneDir();
+      break;
+    }
+    case CreateSessionRequest::kSceneText: {
+      out.origin = "scene_text";
+      ASSIGN_OR_RETURN(out.scene, scene::ParseScene(request.scene_text(), out.origin));
+      RETURN_IF_ERROR(RejectMeshFile(out.scene, out.origin));
+      break;
+    }
+    case CreateSessionRequest::kScene: {
+      out.origin = "scene";
+      out.scene = request.scene();
+      RETURN_IF_ERROR(WithOrigin(scene::ValidateScene(out.scene), out.origin));
+      RETURN_IF_ERROR(RejectMeshFile(out.scene, out.origin));
+      break;
+    }
+    case CreateSessionRequest::SCENE_SOURCE_NOT_SET:
+      return absl::InvalidArgumentError(
+          "CreateSessionRequest.scene_source: set one of builtin_scene, scene_text or scene");
+  }
+  if (request.has_levels_override() && request.levels_override() != -1) {
+    const int levels = request.levels_override();
+    if (levels < 0 || levels > kMaxLevels) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "CreateSessionRequest.levels_override must be in 0..", kMaxLevels,
+          " (or -1 to keep the scene's subdivision.levels), got ", levels));
+    }
+    out.levels = levels;
+  }
+  return out;
+}
+
+int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, int levels) {
+  const int64_t num_cells = static_cast<int64_t>(control.cells.size());
+  std::vector<uint8_t> refined(num_cells, 0);
+  for (int32_t c : scene.mesh().refine_cells()) {
+    if (c >= 0 && c < num_cells) refined[c] = 1;
+  }
+  int64_t cells = 0;
+  for (int64_t c = 0; c < num_cells; ++c) {
+    // A locally refined cell is one level ahead of the others.
+    const int l = levels + refined[c];
+    if (l == 0) {
+      ++cells;
+      continue;
+    }
+    for (int64_t k : CellVertexValences(control.cells[c])) cells += DescendantsOfVertexChild(k, l);
+  }
+  return cells;
+}
+
+absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLimits& limits) {
+  const auto start = std::chrono::steady_clock::now();
+  absl::StatusOr<mesh::MeshInput> control =
+      scene::ControlMeshInput(request.scene, request.base_dir);
+  if (!control.ok()) return WithOrigin(control.status(), request.origin);
+
+  const int levels = request.levels.value_or(request.scene.subdivision().levels());
+  const int64_t estimate = EstimateFineCells(*control, request.scene, levels);
+  if (estimate > limits.max_cells) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        request.origin, ": the solid would have about ", estimate, " cells (",
+        control->cells.size(), " control cells, ", levels,
+        " subdivision levels), more than this server's limit of ", limits.max_cells,
+        "; use fewer levels or a coarser control mesh"));
+  }
+
+  absl::StatusOr<scene::Discretization> d =
+      scene::Discretize(request.scene, *control, request.levels);
+  if (!d.ok()) return WithOrigin(d.status(), request.origin);
+  const double ms = std::chrono::duration<double, std::milli>(
+                        std::chrono::steady_clock::now() - start).count();
+  BuiltSolid out;
+  out.stats = ComputeStats(*d, ms);
+  out.discretization = std::make_shared<const scene::Discretization>(*std::move(d));
+  return out;
+}
+
+SolidStats ComputeStats(const scene::Discretization& d, double build_milliseconds) {
+  const auto& e = d.elements;
+  const int32_t cells = d.fine().num_cells();
+  const mesh::CellComplex::BoundaryCounts boundary = d.fine().CountBoundary();
+  const auto share = [cells](int32_t n) {
+    return cells > 0 ? static_cast<double>(n) / cells : 0.0;
+  };
+  SolidStats s;
+  s.set_control_cells(d.control().num_cells());
+  s.set_control_vertices(d.control().num_vertices());
+  s.set_levels(d.hierarchy.levels);
+  s.set_cells(cells);
+  s.set_vertices(d.fine().num_vertices());
+  s.set_nodes(e.num_nodes());
+  s.set_cubic_elements(e.num_cubic());
+  s.set_linear_elements(e.num_linear());
+  s.set_pyramid_elements(e.num_pyramid());
+  s.set_pyramid_cells(e.num_pyramid_cells());
+  s.set_cubic_fraction(share(e.num_cubic()));
+  s.set_linear_fraction(share(e.num_linear()));
+  s.set_pyramid_fraction(share(e.num_pyramid_cells()));
+  s.set_boundary_vertices(static_cast<int32_t>(boundary.vertices));
+  s.set_boundary_edges(static_cast<int32_t>(boundary.edges));
+  s.set_boundary_faces(static_cast<int32_t>(boundary.faces));
+  s.set_boundary_euler(static_cast<int32_t>(boundary.euler()));
+  s.set_build_milliseconds(build_milliseconds);
+  return s;
+}
+
+}  // namespace dynsolid::server

@@ -1,0 +1,70 @@
+// From a CreateSession request to a built solid: which scene, checked for
+// what a network client may ask (no server files, a bounded size), then the
+// discretization and its statistics. Stateless and thread-safe; no gRPC.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "dynsolid/scene.pb.h"
+#include "dynsolid/service.pb.h"
+#include "solver/mesh/cell_complex.h"
+#include "solver/scene/build.h"
+
+namespace dynsolid::server {
+
+// What a CreateSession request asks to build, parsed and validated.
+struct SceneRequest {
+  Scene scene;
+  // Folder that relative mesh files resolve against: the built-in scenes'
+  // folder for a built-in scene; empty (and unused: mesh.file is rejected)
+  // for scenes sent by the client.
+  std::string base_dir;
+  // Prefix of error messages: "builtin:block3", "scene_text" or "scene".
+  std::string origin;
+  // Subdivision levels to build; nullopt keeps scene.subdivision.levels.
+  std::optional<int> levels;
+};
+
+// Resolves the request's scene source and levels_override. Errors:
+//  - InvalidArgument naming the field: no scene source set, a scene_text
+//    that does not parse or validate ("scene_text:LINE:COL: mesh.block.nx
+//    ..."), mesh.file in a client's scene, levels_override outside -1..4;
+//  - NotFound for an unknown builtin_scene (the message lists the names).
+absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& request);
+
+struct BuildLimits {
+  // Largest number of level-L cells a solid may have (estimated before
+  // subdividing, see EstimateFineCells).
+  int64_t max_cells = 1'000'000;
+};
+
+// A built solid: shared read-only by the session and, later, the sim loop.
+struct BuiltSolid {
+  std::shared_ptr<const scene::Discretization> discretization;
+  SolidStats stats;
+};
+
+// Loads the control mesh, checks the size limit and discretizes. Errors:
+// the solver's (InvalidArgument naming the field or mesh item, prefixed
+// with request.origin), ResourceExhausted when the solid would exceed
+// limits.max_cells. Can take seconds for large solids: call it off the
+// RPC threads and without holding locks.
+absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLimits& limits);
+
+// The number of level-`levels` cells MacCracken-Joy makes from `control`
+// (after locally refining scene.mesh.refine_cells): a cell splits into one
+// child per vertex, the child at a vertex of valence k has two vertices of
+// valence k and 2k of valence 3 and splits likewise, and a hexahedron
+// splits into 8. Exact without local refinement; with it, ignores the extra
+// vertices refinement adds to the refined cells' neighbours (an estimate for
+// the limit check, not a count). Cheap: no mesh is built.
+int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, int levels);
+
+// The statistics of a built discretization.
+SolidStats ComputeStats(const scene::Discretization& d, double build_milliseconds);
+
+}  // namespace dynsolid::server

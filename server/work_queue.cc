@@ -1,0 +1,58 @@
+#include "server/work_queue.h"
+
+#include <algorithm>
+#include <utility>
+
+namespace dynsolid::server {
+
+WorkQueue::WorkQueue(int threads) {
+  for (int i = 0; i < std::max(threads, 1); ++i) workers_.emplace_back([this] { Work(); });
+}
+
+WorkQueue::~WorkQueue() { Join(); }
+
+void WorkQueue::Post(Task task) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (!stopped_) {
+      queue_.push_back(std::move(task));
+      return;
+    }
+  }
+  task(false);
+}
+
+void WorkQueue::Stop() {
+  std::deque<Task> cancelled;
+  {
+    absl::MutexLock lock(&mu_);
+    stopped_ = true;
+    cancelled.swap(queue_);
+  }
+  for (Task& task : cancelled) task(false);
+}
+
+void WorkQueue::Join() {
+  Stop();
+  for (std::thread& t : workers_) {
+    if (t.joinable()) t.join();
+  }
+}
+
+bool WorkQueue::HasWorkOrStopped() const { return stopped_ || !queue_.empty(); }
+
+void WorkQueue::Work() {
+  for (;;) {
+    Task task;
+    {
+      absl::MutexLock lock(&mu_);
+      mu_.Await(absl::Condition(this, &WorkQueue::HasWorkOrStopped));
+      if (queue_.empty()) return;  // stopped and drained
+      task = std::move(queue_.front());
+      queue_.pop_front();
+    }
+    task(true);
+  }
+}
+
+}  // namespace dynsolid::server

@@ -1,0 +1,204 @@
+// Server pieces without a network: status mapping, tokens, the cell
+// estimate behind max_cells, request resolution, the registry and the
+// build work queue.
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "absl/synchronization/notification.h"
+#include "server/grpc_status.h"
+#include "server/session_registry.h"
+#include "server/solid_builder.h"
+#include "server/tokens.h"
+#include "server/work_queue.h"
+#include "solver/scene/scene_loader.h"
+#include "tests/testing/status_matchers.h"
+
+namespace dynsolid::server {
+namespace {
+
+using ::dynsolid::testing::StatusIs;
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using ::testing::MatchesRegex;
+using ::testing::StartsWith;
+
+TEST(ToGrpcStatusTest, KeepsCodeAndMessage) {
+  EXPECT_TRUE(ToGrpcStatus(absl::OkStatus()).ok());
+  // absl and gRPC share the canonical numbering 1..16.
+  for (int code = 1; code <= 16; ++code) {
+    const absl::Status in(static_cast<absl::StatusCode>(code), "what and where");
+    const grpc::Status out = ToGrpcStatus(in);
+    EXPECT_EQ(static_cast<int>(out.error_code()), code) << in;
+    EXPECT_EQ(out.error_message(), "what and where");
+  }
+  EXPECT_EQ(ToGrpcStatus(absl::Status(static_cast<absl::StatusCode>(99), "odd")).error_code(),
+            grpc::StatusCode::UNKNOWN);
+}
+
+TEST(TokensTest, RandomHexHasTheRequestedBitsAndDoesNotRepeat) {
+  RandomHex random;
+  std::set<std::string> seen;
+  for (int i = 0; i < 1000; ++i) {
+    const std::string token = random.Next(kTokenBits);
+    ASSERT_THAT(token, MatchesRegex("[0-9a-f]{32}"));
+    EXPECT_TRUE(seen.insert(token).second) << "repeated token " << token;
+  }
+  EXPECT_THAT(random.Next(kSessionIdBits), MatchesRegex("[0-9a-f]{16}"));
+}
+
+TEST(TokensTest, TokensEqualComparesWholeStrings) {
+  EXPECT_TRUE(TokensEqual("00ff", "00ff"));
+  EXPECT_FALSE(TokensEqual("00fe", "00ff"));
+  EXPECT_FALSE(TokensEqual("00f", "00ff"));
+  EXPECT_FALSE(TokensEqual("", "00ff"));
+  EXPECT_FALSE(TokensEqual("00ff0", "00ff"));
+}
+
+// The estimate against the built count on every built-in scene: exact
+// without local refinement, also for cells that are not hexahedra (mixed
+// has a pyramid whose apex has valence 4, a prism and a tetrahedron).
+TEST(EstimateFineCellsTest, MatchesTheBuiltCellCountOfEveryBuiltinScene) {
+  for (const std::string& name : scene::BuiltinSceneNames()) {
+    absl::StatusOr<Scene> scene = scene::BuiltinScene(name);
+    ASSERT_OK(scene);
+    absl::StatusOr<mesh::MeshInput> control =
+        scene::ControlMeshInput(*scene, scene::BuiltinSceneDir());
+    ASSERT_OK(control);
+    for (int levels = 0; levels <= 2; ++levels) {
+      absl::StatusOr<scene::Discretization> d = scene::Discretize(*scene, *control, levels);
+      ASSERT_OK(d);
+      const int64_t estimate = EstimateFineCells(*control, *scene, levels);
+      if (scene->mesh().refine_cells_size() == 0) {
+        EXPECT_EQ(estimate, d->fine().num_cells()) << name << " at " << levels << " levels";
+      } else {
+        // Refinement adds vertices to the neighbours' faces, which the
+        // estimate ignores: it may fall short, by at most a quarter here.
+        EXPECT_LE(estimate, d->fine().num_cells()) << name << " at " << levels << " levels";
+        EXPECT_GE(estimate, 0.75 * d->fine().num_cells())
+            << name << " at " << levels << " levels";
+      }
+    }
+  }
+}
+
+// With local refinement the estimate ignores the vertices refinement adds
+// to the neighbours' faces, so it may fall a little short.
+TEST(EstimateFineCellsTest, StaysCloseWithLocalRefinement) {
+  absl::StatusOr<Scene> scene = scene::ParseScene(
+      "mesh { block { nx: 3 ny: 3 nz: 3 } refine_cells: [0, 13] }", "refined");
+  ASSERT_OK(scene);
+  absl::StatusOr<mesh::MeshInput> control = scene::ControlMeshInput(*scene, "");
+  ASSERT_OK(control);
+  for (int levels = 0; levels <= 2; ++levels) {
+    absl::StatusOr<scene::Discretization> d = scene::Discretize(*scene, *control, levels);
+    ASSERT_OK(d);
+    const double cells = d->fine().num_cells();
+    const int64_t estimate = EstimateFineCells(*control, *scene, levels);
+    EXPECT_LE(estimate, cells) << "at " << levels << " levels";
+    EXPECT_GE(estimate, 0.8 * cells) << "at " << levels << " levels";
+  }
+}
+
+TEST(ResolveSceneRequestTest, ChecksSourceLevelsAndFiles) {
+  CreateSessionRequest request;
+  EXPECT_THAT(ResolveSceneRequest(request),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("scene_source")));
+
+  request.set_builtin_scene("mixed");  // a built-in scene may read its own mesh file
+  absl::StatusOr<SceneRequest> resolved = ResolveSceneRequest(request);
+  ASSERT_OK(resolved);
+  EXPECT_EQ(resolved->origin, "builtin:mixed");
+  EXPECT_EQ(resolved->base_dir, scene::BuiltinSceneDir());
+  EXPECT_FALSE(resolved->levels.has_value());
+
+  request.set_levels_override(-1);
+  ASSERT_OK(ResolveSceneRequest(request));
+  EXPECT_FALSE(ResolveSceneRequest(request)->levels.has_value());
+  request.set_levels_override(3);
+  EXPECT_EQ(ResolveSceneRequest(request)->levels, 3);
+  request.set_levels_override(-2);
+  EXPECT_THAT(ResolveSceneRequest(request),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       AllOf(HasSubstr("levels_override"), HasSubstr("got -2"))));
+
+  // The text of the same built-in scene is refused: it names a file.
+  absl::StatusOr<std::string_view> text = scene::BuiltinSceneText("mixed");
+  ASSERT_OK(text);
+  request.clear_levels_override();
+  request.set_scene_text(std::string(*text));
+  EXPECT_THAT(ResolveSceneRequest(request),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       AllOf(StartsWith("scene_text: mesh.file"), HasSubstr("generator"))));
+}
+
+TEST(BuildSolidTest, RefusesSolidsOverTheCellLimit) {
+  CreateSessionRequest request;
+  request.set_builtin_scene("block3");
+  absl::StatusOr<SceneRequest> resolved = ResolveSceneRequest(request);
+  ASSERT_OK(resolved);
+  EXPECT_THAT(BuildSolid(*resolved, BuildLimits{1727}),
+              StatusIs(absl::StatusCode::kResourceExhausted,
+                       AllOf(StartsWith("builtin:block3: "), HasSubstr("1728 cells"))));
+  absl::StatusOr<BuiltSolid> built = BuildSolid(*resolved, BuildLimits{1728});
+  ASSERT_OK(built);
+  EXPECT_EQ(built->stats.cells(), 1728);
+  EXPECT_EQ(built->discretization->fine().num_cells(), 1728);
+}
+
+TEST(SessionRegistryTest, CreateGetCloseWithoutANetwork) {
+  SessionRegistry registry(RegistryOptions{2, BuildLimits{}});
+  CreateSessionRequest request;
+  request.set_builtin_scene("block3");
+  request.set_levels_override(0);
+  absl::StatusOr<std::shared_ptr<const SolidSession>> a = registry.Create(request);
+  ASSERT_OK(a);
+  EXPECT_EQ((*a)->stats().cells(), 27);
+  const Session proto = (*a)->ToProto();
+  ASSERT_OK(registry.Get((*a)->id(), proto.token()));
+  EXPECT_THAT(registry.Get((*a)->id(), "x"),
+              StatusIs(absl::StatusCode::kPermissionDenied, HasSubstr((*a)->id())));
+  EXPECT_EQ(registry.size(), 1);
+
+  // A creation whose client went away is never opened.
+  EXPECT_THAT(registry.Create(request, [] { return true; }),
+              StatusIs(absl::StatusCode::kCancelled, HasSubstr("cancelled")));
+  EXPECT_EQ(registry.size(), 1);
+
+  ASSERT_OK(registry.Close((*a)->id(), proto.token()));
+  EXPECT_EQ(registry.size(), 0);
+  // The caller's reference keeps the closed session's solid alive.
+  EXPECT_EQ((*a)->discretization()->fine().num_cells(), 27);
+
+  registry.StopAccepting();
+  EXPECT_THAT(registry.Create(request), StatusIs(absl::StatusCode::kUnavailable, HasSubstr("shutting down")));
+}
+
+TEST(WorkQueueTest, RunsEveryTaskOnceAndCancelsQueuedOnesOnStop) {
+  WorkQueue queue(1);
+  absl::Notification release;
+  absl::Notification started;
+  std::atomic<int> ran{0}, cancelled{0};
+  // Occupy the only worker, then queue three more.
+  queue.Post([&](bool run) {
+    started.Notify();
+    release.WaitForNotification();
+    ran += run;
+  });
+  started.WaitForNotification();
+  for (int i = 0; i < 3; ++i) queue.Post([&](bool run) { (run ? ran : cancelled) += 1; });
+  queue.Stop();
+  EXPECT_EQ(cancelled.load(), 3);
+  queue.Post([&](bool run) { (run ? ran : cancelled) += 1; });  // after Stop: cancelled at once
+  EXPECT_EQ(cancelled.load(), 4);
+  release.Notify();
+  queue.Join();
+  EXPECT_EQ(ran.load(), 1);
+}
+
+}  // namespace
+}  // namespace dynsolid::server

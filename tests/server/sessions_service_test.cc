@@ -1,0 +1,473 @@
+// dynsolid.Sessions over loopback gRPC against an in-process server
+// listening on 127.0.0.1:0.
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "dynsolid/service.grpc.pb.h"
+#include "health.grpc.pb.h"
+#include "server/server.h"
+
+namespace dynsolid::server {
+namespace {
+
+using ::testing::_;
+using ::testing::AllOf;
+using ::testing::ElementsAre;
+using ::testing::HasSubstr;
+using ::testing::IsEmpty;
+using ::testing::MatchesRegex;
+using ::testing::Not;
+using ::testing::StartsWith;
+
+MATCHER_P2(GrpcStatusIs, code, message_matcher,
+           "has gRPC code " + ::testing::PrintToString(static_cast<int>(code))) {
+  *result_listener << "status is " << static_cast<int>(arg.error_code()) << ": "
+                   << arg.error_message();
+  return arg.error_code() == code &&
+         ::testing::Value(arg.error_message(), message_matcher);
+}
+
+MATCHER(GrpcOk, "is OK") {
+  *result_listener << "status is " << static_cast<int>(arg.error_code()) << ": "
+                   << arg.error_message();
+  return arg.ok();
+}
+
+class SessionsServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override { Start(DefaultOptions()); }
+
+  static ServerOptions DefaultOptions() {
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    o.max_sessions = 4;
+    return o;
+  }
+
+  void Start(const ServerOptions& options) {
+    stub_.reset();
+    server_.reset();
+    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = *std::move(server);
+    ASSERT_GT(server_->port(), 0);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    stub_ = Sessions::NewStub(channel_);
+  }
+
+  grpc::Status Create(const CreateSessionRequest& request, Session* reply) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    return stub_->CreateSession(&context, request, reply);
+  }
+  grpc::Status CreateBuiltin(const std::string& name, Session* reply, int levels = -1) {
+    CreateSessionRequest request;
+    request.set_builtin_scene(name);
+    if (levels >= 0) request.set_levels_override(levels);
+    return Create(request, reply);
+  }
+  grpc::Status CreateFromText(const std::string& text, Session* reply) {
+    CreateSessionRequest request;
+    request.set_scene_text(text);
+    return Create(request, reply);
+  }
+  grpc::Status Get(const std::string& id, const std::string& token, Session* reply) {
+    grpc::ClientContext context;
+    SessionRef ref;
+    ref.set_id(id);
+    ref.set_token(token);
+    return stub_->GetSession(&context, ref, reply);
+  }
+  grpc::Status Close(const std::string& id, const std::string& token) {
+    grpc::ClientContext context;
+    SessionRef ref;
+    ref.set_id(id);
+    ref.set_token(token);
+    google::protobuf::Empty reply;
+    return stub_->CloseSession(&context, ref, &reply);
+  }
+  std::vector<std::string> ListedIds() {
+    grpc::ClientContext context;
+    ListSessionsResponse reply;
+    const grpc::Status status = stub_->ListSessions(&context, ListSessionsRequest(), &reply);
+    EXPECT_THAT(status, GrpcOk());
+    std::vector<std::string> ids;
+    for (const auto& e : reply.sessions()) ids.push_back(e.id());
+    return ids;
+  }
+
+  std::unique_ptr<Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<Sessions::Stub> stub_;
+};
+
+// block3: 27 unit hexahedra, two MacCracken-Joy levels: 27 * 8^2 = 1728
+// cells, (12 + 1)^3 = 2197 vertices (all hexahedral, so no virtual nodes),
+// and the interior (12 - 2)^3 = 1000 cells are cubic B-spline elements.
+TEST_F(SessionsServiceTest, CreateBlock3AtTwoLevelsReturnsItsDiscretization) {
+  Session s;
+  ASSERT_THAT(CreateBuiltin("block3", &s, 2), GrpcOk());
+  EXPECT_THAT(s.id(), MatchesRegex("[0-9a-f]{16}"));
+  EXPECT_THAT(s.token(), MatchesRegex("[0-9a-f]{32}"));
+  EXPECT_EQ(s.scene_name(), "block3");
+  EXPECT_GT(s.created().seconds(), 0);
+  const SolidStats& st = s.stats();
+  EXPECT_EQ(st.control_cells(), 27);
+  EXPECT_EQ(st.control_vertices(), 64);
+  EXPECT_EQ(st.levels(), 2);
+  EXPECT_EQ(st.cells(), 1728);
+  EXPECT_EQ(st.vertices(), 2197);
+  EXPECT_EQ(st.nodes(), 2197);
+  EXPECT_EQ(st.cubic_elements(), 1000);
+  EXPECT_EQ(st.linear_elements(), 1728 - 1000);
+  EXPECT_EQ(st.pyramid_elements(), 0);
+  EXPECT_EQ(st.pyramid_cells(), 0);
+  EXPECT_DOUBLE_EQ(st.cubic_fraction(), 1000.0 / 1728.0);
+  EXPECT_DOUBLE_EQ(st.linear_fraction(), 728.0 / 1728.0);
+  EXPECT_DOUBLE_EQ(st.pyramid_fraction(), 0.0);
+  // The boundary of a 12 x 12 x 12 grid of cells: a sphere.
+  EXPECT_EQ(st.boundary_faces(), 6 * 12 * 12);
+  EXPECT_EQ(st.boundary_vertices(), 6 * 12 * 12 + 2);
+  EXPECT_EQ(st.boundary_euler(), 2);
+}
+
+TEST_F(SessionsServiceTest, LevelsOverrideAbsentOrMinusOneKeepsTheScenesLevels) {
+  Session absent, keep, one;
+  ASSERT_THAT(CreateBuiltin("block3", &absent), GrpcOk());
+  EXPECT_EQ(absent.stats().levels(), 2);  // scenes/block3.textproto
+  ASSERT_THAT(CreateBuiltin("block3", &one, 1), GrpcOk());
+  EXPECT_EQ(one.stats().levels(), 1);
+  EXPECT_EQ(one.stats().cells(), 27 * 8);
+  CreateSessionRequest request;
+  request.set_builtin_scene("block3");
+  request.set_levels_override(-1);
+  ASSERT_THAT(Create(request, &keep), GrpcOk());
+  EXPECT_EQ(keep.stats().levels(), 2);
+  EXPECT_NE(keep.id(), absent.id());
+  EXPECT_NE(keep.token(), absent.token());
+}
+
+TEST_F(SessionsServiceTest, LevelsOverrideOutOfRangeIsInvalidArgumentNamingTheField) {
+  Session s;
+  EXPECT_THAT(CreateBuiltin("block3", &s, 7),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(HasSubstr("levels_override"), HasSubstr("got 7"))));
+  EXPECT_THAT(ListedIds(), IsEmpty());
+}
+
+TEST_F(SessionsServiceTest, GetWithItsTokenReturnsTheSession) {
+  Session created, got;
+  ASSERT_THAT(CreateBuiltin("block3", &created, 1), GrpcOk());
+  ASSERT_THAT(Get(created.id(), created.token(), &got), GrpcOk());
+  EXPECT_EQ(got.id(), created.id());
+  EXPECT_EQ(got.scene_name(), "block3");
+  EXPECT_EQ(got.stats().cells(), created.stats().cells());
+  EXPECT_EQ(got.created().seconds(), created.created().seconds());
+}
+
+TEST_F(SessionsServiceTest, WrongOrMissingTokenIsPermissionDenied) {
+  Session created, got;
+  ASSERT_THAT(CreateBuiltin("block3", &created, 1), GrpcOk());
+  std::string wrong = created.token();
+  wrong[0] = wrong[0] == '0' ? '1' : '0';
+  EXPECT_THAT(Get(created.id(), wrong, &got),
+              GrpcStatusIs(grpc::StatusCode::PERMISSION_DENIED, HasSubstr("does not match")));
+  EXPECT_THAT(Get(created.id(), "", &got),
+              GrpcStatusIs(grpc::StatusCode::PERMISSION_DENIED, HasSubstr("missing")));
+  EXPECT_THAT(Get(created.id(), created.token() + "0", &got),
+              GrpcStatusIs(grpc::StatusCode::PERMISSION_DENIED, HasSubstr("does not match")));
+  // The denied response carries no token.
+  EXPECT_THAT(got.token(), IsEmpty());
+  // Closing needs the token too, and a denied close changes nothing.
+  EXPECT_THAT(Close(created.id(), wrong), GrpcStatusIs(grpc::StatusCode::PERMISSION_DENIED,
+                                                       HasSubstr(created.id())));
+  EXPECT_THAT(ListedIds(), ElementsAre(created.id()));
+}
+
+TEST_F(SessionsServiceTest, UnknownIdIsNotFound) {
+  Session got;
+  EXPECT_THAT(Get("0123456789abcdef", "00000000000000000000000000000000", &got),
+              GrpcStatusIs(grpc::StatusCode::NOT_FOUND, HasSubstr("0123456789abcdef")));
+  EXPECT_THAT(Close("0123456789abcdef", "00000000000000000000000000000000"),
+              GrpcStatusIs(grpc::StatusCode::NOT_FOUND, HasSubstr("0123456789abcdef")));
+  EXPECT_THAT(Get("", "", &got),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("id")));
+}
+
+TEST_F(SessionsServiceTest, InvalidSceneTextIsInvalidArgumentNamingTheField) {
+  Session s;
+  EXPECT_THAT(CreateFromText("name: \"bad\"\nmesh {\n  block { nx: 0 ny: 3 nz: 3 }\n}\n", &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(StartsWith("scene_text:"), HasSubstr("mesh.block.nx"))));
+  EXPECT_THAT(CreateFromText("mesh { block { nx: 2 ny: 2 nz: 2 } }\nsubdivision { levels: 9 }\n",
+                             &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(StartsWith("scene_text:2:"), HasSubstr("subdivision.levels"))));
+  // Not text format at all: the parser's position.
+  EXPECT_THAT(CreateFromText("mesh { blok { } }", &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(StartsWith("scene_text:1:"), HasSubstr("blok"))));
+  // No source at all.
+  EXPECT_THAT(Create(CreateSessionRequest(), &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("scene_source")));
+  EXPECT_THAT(ListedIds(), IsEmpty());
+}
+
+TEST_F(SessionsServiceTest, UnknownBuiltinSceneIsNotFoundListingTheKnownOnes) {
+  Session s;
+  EXPECT_THAT(CreateBuiltin("no_such_scene", &s),
+              GrpcStatusIs(grpc::StatusCode::NOT_FOUND,
+                           AllOf(HasSubstr("no_such_scene"), HasSubstr("block3"))));
+}
+
+TEST_F(SessionsServiceTest, SceneTextFromAClientMayNotNameAMeshFile) {
+  Session s;
+  EXPECT_THAT(CreateFromText("name: \"sneaky\"\nmesh { file: \"/etc/passwd\" }\n", &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(StartsWith("scene_text"), HasSubstr("mesh.file"))));
+  CreateSessionRequest request;
+  request.mutable_scene()->mutable_mesh()->set_file("meshes/mixed.msh");
+  EXPECT_THAT(Create(request, &s),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("mesh.file")));
+  EXPECT_THAT(ListedIds(), IsEmpty());
+}
+
+TEST_F(SessionsServiceTest, SceneTextAndSceneMessageBuildLikeTheBuiltin) {
+  Session from_text, from_message;
+  ASSERT_THAT(CreateFromText("name: \"cube\"\nmesh { block { nx: 3 ny: 3 nz: 3 } }\n"
+                             "subdivision { levels: 2 }\n",
+                             &from_text),
+              GrpcOk());
+  EXPECT_EQ(from_text.scene_name(), "cube");
+  EXPECT_EQ(from_text.stats().cells(), 1728);
+  EXPECT_EQ(from_text.stats().cubic_elements(), 1000);
+
+  CreateSessionRequest request;
+  Scene* scene = request.mutable_scene();
+  scene->set_name("cube");
+  scene->mutable_mesh()->mutable_block()->set_nx(2);
+  scene->mutable_mesh()->mutable_block()->set_ny(2);
+  scene->mutable_mesh()->mutable_block()->set_nz(2);
+  scene->mutable_subdivision()->set_levels(1);
+  ASSERT_THAT(Create(request, &from_message), GrpcOk());
+  EXPECT_EQ(from_message.stats().cells(), 8 * 8);
+
+  scene->mutable_mesh()->mutable_block()->set_nx(0);
+  EXPECT_THAT(Create(request, &from_message),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           AllOf(StartsWith("scene: "), HasSubstr("mesh.block.nx"))));
+}
+
+TEST_F(SessionsServiceTest, ListShowsOpenSessionsOldestFirstAndCloseRemovesThem) {
+  Session a, b;
+  ASSERT_THAT(CreateBuiltin("block3", &a, 0), GrpcOk());
+  ASSERT_THAT(CreateBuiltin("torus", &b, 0), GrpcOk());
+  {
+    grpc::ClientContext context;
+    ListSessionsResponse reply;
+    ASSERT_THAT(stub_->ListSessions(&context, ListSessionsRequest(), &reply), GrpcOk());
+    ASSERT_EQ(reply.sessions_size(), 2);
+    EXPECT_EQ(reply.sessions(0).id(), a.id());
+    EXPECT_EQ(reply.sessions(0).scene_name(), "block3");
+    EXPECT_EQ(reply.sessions(1).id(), b.id());
+    EXPECT_EQ(reply.sessions(1).scene_name(), "torus");
+    EXPECT_GT(reply.sessions(1).created().seconds(), 0);
+    // No token anywhere in the listing.
+    EXPECT_THAT(reply.SerializeAsString(), Not(HasSubstr(a.token())));
+    EXPECT_THAT(reply.SerializeAsString(), Not(HasSubstr(b.token())));
+  }
+  ASSERT_THAT(Close(a.id(), a.token()), GrpcOk());
+  EXPECT_THAT(ListedIds(), ElementsAre(b.id()));
+  Session got;
+  EXPECT_THAT(Get(a.id(), a.token(), &got), GrpcStatusIs(grpc::StatusCode::NOT_FOUND, _));
+  EXPECT_THAT(Close(a.id(), a.token()), GrpcStatusIs(grpc::StatusCode::NOT_FOUND, _));
+  ASSERT_THAT(Close(b.id(), b.token()), GrpcOk());
+  EXPECT_THAT(ListedIds(), IsEmpty());
+}
+
+TEST_F(SessionsServiceTest, MaxSessionsIsEnforcedAndClosingFreesASlot) {
+  ServerOptions options = DefaultOptions();
+  options.max_sessions = 2;
+  Start(options);
+  Session a, b, c;
+  ASSERT_THAT(CreateBuiltin("block3", &a, 0), GrpcOk());
+  ASSERT_THAT(CreateBuiltin("block3", &b, 0), GrpcOk());
+  EXPECT_THAT(CreateBuiltin("block3", &c, 0),
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED, HasSubstr("maximum of 2")));
+  ASSERT_THAT(Close(a.id(), a.token()), GrpcOk());
+  EXPECT_THAT(CreateBuiltin("block3", &c, 0), GrpcOk());
+}
+
+TEST_F(SessionsServiceTest, ConcurrentCreatesNeverExceedMaxSessions) {
+  ServerOptions options = DefaultOptions();
+  options.max_sessions = 3;
+  options.build_threads = 2;
+  Start(options);
+  constexpr int kClients = 8;
+  std::vector<grpc::Status> results(kClients);
+  std::vector<std::thread> clients;
+  for (int i = 0; i < kClients; ++i) {
+    clients.emplace_back([this, i, &results] {
+      Session s;
+      results[i] = CreateBuiltin("block3", &s, 2);
+    });
+  }
+  for (std::thread& t : clients) t.join();
+  int ok = 0, exhausted = 0;
+  for (const grpc::Status& s : results) {
+    ok += s.ok();
+    exhausted += s.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED;
+  }
+  EXPECT_EQ(ok, 3);
+  EXPECT_EQ(exhausted, kClients - 3);
+  EXPECT_EQ(ListedIds().size(), 3u);
+}
+
+TEST_F(SessionsServiceTest, SolidsLargerThanMaxCellsAreRefusedBeforeBuilding) {
+  ServerOptions options = DefaultOptions();
+  options.max_cells = 1000;
+  Start(options);
+  Session s;
+  EXPECT_THAT(CreateBuiltin("block3", &s, 2),  // 1728 cells
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           AllOf(HasSubstr("1728 cells"), HasSubstr("limit of 1000"))));
+  EXPECT_THAT(CreateBuiltin("block3", &s, 1), GrpcOk());  // 216 cells
+}
+
+TEST_F(SessionsServiceTest, MessagesOverMaxMessageBytesAreRejected) {
+  ServerOptions options = DefaultOptions();
+  options.max_message_bytes = 4096;
+  Start(options);
+  Session s;
+  const std::string big_comment = "# " + std::string(8000, 'x') + "\n";
+  EXPECT_THAT(CreateFromText(big_comment + "mesh { block { nx: 1 ny: 1 nz: 1 } }\n", &s),
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED, _));
+  EXPECT_THAT(CreateFromText("mesh { block { nx: 1 ny: 1 nz: 1 } }\n", &s), GrpcOk());
+}
+
+TEST_F(SessionsServiceTest, HealthCheckReportsServing) {
+  auto health = grpc::health::v1::Health::NewStub(channel_);
+  grpc::ClientContext context;
+  grpc::health::v1::HealthCheckRequest request;  // "" = the whole server
+  grpc::health::v1::HealthCheckResponse reply;
+  ASSERT_THAT(health->Check(&context, request, &reply), GrpcOk());
+  EXPECT_EQ(reply.status(), grpc::health::v1::HealthCheckResponse::SERVING);
+}
+
+// Server reflection (grpc.reflection.v1alpha), spoken as raw bytes through
+// a generic stub: the reflection protos are not installed, and defining
+// them here would clash with the copy inside libgrpc++_reflection.
+TEST_F(SessionsServiceTest, ReflectionListsTheServices) {
+  grpc::GenericStub stub(channel_);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call = stub.PrepareCall(
+      &context, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &cq);
+  // Waits for the operation tagged `n`; its ok flag.
+  const auto await = [&cq](intptr_t n) {
+    void* tag = nullptr;
+    bool ok = false;
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    EXPECT_EQ(reinterpret_cast<intptr_t>(tag), n);
+    return ok;
+  };
+  call->StartCall(reinterpret_cast<void*>(1));
+  EXPECT_TRUE(await(1));
+  // ServerReflectionRequest { list_services: "*" }: field 7, length 1.
+  grpc::Slice request(std::string("\x3a\x01*", 3));
+  call->Write(grpc::ByteBuffer(&request, 1), reinterpret_cast<void*>(2));
+  EXPECT_TRUE(await(2));
+  call->WritesDone(reinterpret_cast<void*>(3));
+  EXPECT_TRUE(await(3));
+  grpc::ByteBuffer reply;
+  call->Read(&reply, reinterpret_cast<void*>(4));
+  EXPECT_TRUE(await(4));
+  grpc::Status status;
+  call->Finish(&status, reinterpret_cast<void*>(5));
+  EXPECT_TRUE(await(5));
+  EXPECT_THAT(status, GrpcOk());
+  cq.Shutdown();
+  void* tag;
+  bool ok;
+  while (cq.Next(&tag, &ok)) {
+  }
+
+  std::vector<grpc::Slice> slices;
+  ASSERT_TRUE(reply.Dump(&slices).ok());
+  std::string bytes;
+  for (const grpc::Slice& slice : slices) {
+    bytes.append(reinterpret_cast<const char*>(slice.begin()), slice.size());
+  }
+  EXPECT_THAT(bytes, AllOf(HasSubstr("dynsolid.Sessions"), HasSubstr("grpc.health.v1.Health")));
+}
+
+TEST_F(SessionsServiceTest, ShutdownWithOpenSessionsCompletesAndRefusesNewCalls) {
+  Session s;
+  ASSERT_THAT(CreateBuiltin("block3", &s, 1), GrpcOk());
+  server_->Shutdown(absl::Seconds(5));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  Session got;
+  SessionRef ref;
+  ref.set_id(s.id());
+  ref.set_token(s.token());
+  EXPECT_THAT(stub_->GetSession(&context, ref, &got),
+              GrpcStatusIs(grpc::StatusCode::UNAVAILABLE, _));
+}
+
+// Shutdown while one solid is being built and another waits for the build
+// thread: every call still ends (no reactor is left unfinished), either
+// with its session or UNAVAILABLE, and no session is opened after shutdown
+// began.
+TEST_F(SessionsServiceTest, ShutdownDuringCreatesFinishesEveryCall) {
+  ServerOptions options = DefaultOptions();
+  options.build_threads = 1;
+  Start(options);
+  std::vector<grpc::Status> results(3);
+  std::vector<std::thread> clients;
+  for (int i = 0; i < 3; ++i) {
+    clients.emplace_back([this, i, &results] {
+      Session s;
+      results[i] = CreateBuiltin(i == 0 ? "block4" : "block3", &s, 3);
+    });
+  }
+  // Give the calls time to reach the server (not needed for correctness:
+  // any interleaving must end every call).
+  absl::SleepFor(absl::Milliseconds(100));
+  server_->Shutdown(absl::Seconds(30));
+  for (std::thread& t : clients) t.join();
+  for (const grpc::Status& status : results) {
+    EXPECT_TRUE(status.ok() || status.error_code() == grpc::StatusCode::UNAVAILABLE)
+        << static_cast<int>(status.error_code()) << ": " << status.error_message();
+  }
+}
+
+TEST(ServerStartTest, BadOptionsAndUnbindableAddressesAreErrors) {
+  ServerOptions options;
+  options.listen = "no-port";
+  EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.listen = "127.0.0.1:0";
+  options.max_sessions = 0;
+  EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+
+  // A port already taken by another server.
+  ServerOptions first;
+  first.listen = "127.0.0.1:0";
+  absl::StatusOr<std::unique_ptr<Server>> a = Server::Start(first);
+  ASSERT_TRUE(a.ok()) << a.status();
+  ServerOptions second;
+  second.listen = (*a)->address();
+  absl::StatusOr<std::unique_ptr<Server>> b = Server::Start(second);
+  EXPECT_EQ(b.status().code(), absl::StatusCode::kUnavailable) << b.status();
+}
+
+}  // namespace
+}  // namespace dynsolid::server

@@ -61,6 +61,26 @@ Csr Invert(const Csr& rel, int32_t num_targets) {
   return inv;
 }
 
+// Row r of the result: the sorted distinct items of inner's rows listed in
+// outer's row r (e.g. cell -> faces composed with face -> vertices).
+Csr ComposeUnique(const Csr& outer, const Csr& inner) {
+  Csr out;
+  out.offsets.reserve(outer.offsets.size());
+  std::vector<int32_t> scratch;
+  for (int32_t r = 0; r < outer.rows(); ++r) {
+    scratch.clear();
+    for (int32_t x : outer.row(r)) {
+      const auto items = inner.row(x);
+      scratch.insert(scratch.end(), items.begin(), items.end());
+    }
+    std::sort(scratch.begin(), scratch.end());
+    scratch.erase(std::unique(scratch.begin(), scratch.end()), scratch.end());
+    out.items.insert(out.items.end(), scratch.begin(), scratch.end());
+    out.offsets.push_back(static_cast<int32_t>(out.items.size()));
+  }
+  return out;
+}
+
 }  // namespace
 
 int32_t DropUnusedVertices(MeshInput& input) {
@@ -366,31 +386,8 @@ absl::Status CellComplex::BuildAdjacency() {
   }
 
   // Cells -> vertices and edges (sorted, unique).
-  cell_vertices_.offsets.assign(1, 0);
-  cell_edges_.offsets.assign(1, 0);
-  cell_vertices_.items.clear();
-  cell_edges_.items.clear();
-  std::vector<int32_t> scratch;
-  for (int32_t c = 0; c < nc; ++c) {
-    scratch.clear();
-    for (int32_t f : cell_faces_.row(c)) {
-      const auto loop = face_vertices_.row(f);
-      scratch.insert(scratch.end(), loop.begin(), loop.end());
-    }
-    std::sort(scratch.begin(), scratch.end());
-    scratch.erase(std::unique(scratch.begin(), scratch.end()), scratch.end());
-    cell_vertices_.items.insert(cell_vertices_.items.end(), scratch.begin(), scratch.end());
-    cell_vertices_.offsets.push_back(static_cast<int32_t>(cell_vertices_.items.size()));
-    scratch.clear();
-    for (int32_t f : cell_faces_.row(c)) {
-      const auto edges = face_edges_.row(f);
-      scratch.insert(scratch.end(), edges.begin(), edges.end());
-    }
-    std::sort(scratch.begin(), scratch.end());
-    scratch.erase(std::unique(scratch.begin(), scratch.end()), scratch.end());
-    cell_edges_.items.insert(cell_edges_.items.end(), scratch.begin(), scratch.end());
-    cell_edges_.offsets.push_back(static_cast<int32_t>(cell_edges_.items.size()));
-  }
+  cell_vertices_ = ComposeUnique(cell_faces_, face_vertices_);
+  cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
 
   // Vertex -> edges, faces, cells.
   Csr edge_rows;

@@ -7,13 +7,17 @@
 #include <iterator>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <utility>
+#include <vector>
 
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 
+#include "absl/container/flat_hash_map.h"
 #include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
@@ -156,15 +160,219 @@ void Transform(const ControlMesh& m, Points& p) {
   if (!t.isZero()) p.rowwise() += t;
 }
 
+// Every double (and float) in `message` and its sub-messages is finite, and
+// every enum holds a value its type declares. `path` names `message`
+// ("" for the Scene). Fields are visited in field-number order, so the first
+// failure is the same every time.
+absl::Status CheckValues(const google::protobuf::Message& message, const std::string& path) {
+  const google::protobuf::Reflection* reflection = message.GetReflection();
+  std::vector<const FieldDescriptor*> fields;
+  reflection->ListFields(message, &fields);  // set fields only: zeros are fine
+  for (const FieldDescriptor* field : fields) {
+    const std::string name = path.empty() ? field->name() : absl::StrCat(path, ".", field->name());
+    const bool repeated = field->is_repeated();
+    const int count = repeated ? reflection->FieldSize(message, field) : 1;
+    for (int i = 0; i < count; ++i) {
+      const std::string item = repeated ? absl::StrCat(name, "[", i, "]") : name;
+      switch (field->cpp_type()) {
+        case FieldDescriptor::CPPTYPE_DOUBLE:
+          RETURN_IF_ERROR(CheckFinite(item, repeated
+                                                ? reflection->GetRepeatedDouble(message, field, i)
+                                                : reflection->GetDouble(message, field)));
+          break;
+        case FieldDescriptor::CPPTYPE_FLOAT:
+          RETURN_IF_ERROR(CheckFinite(item, repeated
+                                                ? reflection->GetRepeatedFloat(message, field, i)
+                                                : reflection->GetFloat(message, field)));
+          break;
+        case FieldDescriptor::CPPTYPE_ENUM: {
+          const int value = repeated ? reflection->GetRepeatedEnumValue(message, field, i)
+                                     : reflection->GetEnumValue(message, field);
+          const google::protobuf::EnumDescriptor* type = field->enum_type();
+          if (type->FindValueByNumber(value) == nullptr) {
+            std::vector<std::string> known;
+            for (int v = 0; v < type->value_count(); ++v) {
+              known.push_back(
+                  absl::StrCat(type->value(v)->name(), " (", type->value(v)->number(), ")"));
+            }
+            return absl::InvalidArgumentError(absl::StrCat(
+                item, " has the unknown value ", value, "; ", type->name(), " is one of ",
+                absl::StrJoin(known, ", ")));
+          }
+          break;
+        }
+        case FieldDescriptor::CPPTYPE_MESSAGE:
+          RETURN_IF_ERROR(CheckValues(repeated ? reflection->GetRepeatedMessage(message, field, i)
+                                               : reflection->GetMessage(message, field),
+                                      item));
+          break;
+        default:
+          break;
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateRegion(const Region& region, const std::string& field) {
+  switch (region.shape_case()) {
+    case Region::kBox: {
+      const Vec3& lo = region.box().min();
+      const Vec3& hi = region.box().max();
+      for (const auto& [axis, a, b] : {std::tuple{"x", lo.x(), hi.x()},
+                                       std::tuple{"y", lo.y(), hi.y()},
+                                       std::tuple{"z", lo.z(), hi.z()}}) {
+        if (!(a <= b)) {
+          return absl::InvalidArgumentError(absl::StrCat(field, ".box.min.", axis, " (", a,
+                                                         ") must be <= box.max.", axis, " (", b,
+                                                         ")"));
+        }
+      }
+      break;
+    }
+    case Region::kSphere:
+      if (!(region.sphere().radius() > 0)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            field, ".sphere.radius must be > 0 metres, got ", region.sphere().radius()));
+      }
+      break;
+    case Region::SHAPE_NOT_SET:
+      break;
+  }
+  for (int i = 0; i < region.control_cells_size(); ++i) {
+    if (region.control_cells(i) < 0) {
+      return absl::InvalidArgumentError(absl::StrCat(field, ".control_cells[", i,
+                                                     "] must be a cell index >= 0, got ",
+                                                     region.control_cells(i)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateSolverSettings(const SolverSettings& s) {
+  if (!(s.time_step() >= 0 && s.time_step() <= 1)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.time_step must be in (0, 1] seconds, or 0 for the default ", kDefaultTimeStep,
+        ", got ", s.time_step()));
+  }
+  if (!(s.cg_tolerance() >= 0 && s.cg_tolerance() < 1)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.cg_tolerance must be in (0, 1), or 0 for the default ", kDefaultCgTolerance,
+        ", got ", s.cg_tolerance()));
+  }
+  if (s.cg_max_iterations() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.cg_max_iterations must be >= 1, or 0 for the default ", kDefaultCgMaxIterations,
+        ", got ", s.cg_max_iterations()));
+  }
+  if (s.max_substeps() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.max_substeps must be >= 1, or 0 for the default ", kDefaultMaxSubsteps, ", got ",
+        s.max_substeps()));
+  }
+  if (!(s.stability_safety() >= 0 && s.stability_safety() <= 1)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.stability_safety must be in (0, 1], or 0 for the default ",
+        kDefaultStabilitySafety, ", got ", s.stability_safety()));
+  }
+  return absl::OkStatus();
+}
+
+// A traced point's name is a column of trace.csv.
+absl::Status ValidateTraced(const Scene& scene) {
+  absl::flat_hash_map<std::string, int> first_use;
+  for (int i = 0; i < scene.traced_size(); ++i) {
+    const std::string& name = scene.traced(i).name();
+    const std::string field = absl::StrCat("traced[", i, "].name");
+    if (name.empty()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, " is empty: every traced point needs a name (its trace.csv column)"));
+    }
+    for (const char c : name) {
+      if (std::iscntrl(static_cast<unsigned char>(c)) || c == ',' || c == '"') {
+        return absl::InvalidArgumentError(absl::StrCat(
+            field, " \"", absl::CEscape(name),
+            "\" must not contain control characters, commas or double quotes (it is a "
+            "trace.csv column name)"));
+      }
+    }
+    if (const auto [it, inserted] = first_use.emplace(name, i); !inserted) {
+      return absl::InvalidArgumentError(absl::StrCat(field, " \"", name,
+                                                     "\" is already the name of traced[",
+                                                     it->second, "]: names must be unique"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
+
+absl::Status ValidateMaterial(const Material& material, std::string_view field) {
+  const absl::string_view f = A(field);
+  if (!(material.young_modulus() >= 0 && std::isfinite(material.young_modulus()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".young_modulus must be > 0 pascals and finite, or 0 for the default ",
+        kDefaultYoungModulus, ", got ", material.young_modulus()));
+  }
+  if (!(material.poisson_ratio() >= 0 && material.poisson_ratio() < 0.5)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".poisson_ratio must be in [0, 0.5) (0 means the default ", kDefaultPoissonRatio,
+        "; 0.5 is incompressible, which this model cannot represent), got ",
+        material.poisson_ratio()));
+  }
+  if (!(material.density() >= 0 && std::isfinite(material.density()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".density must be > 0 kg/m^3 and finite, or 0 for the default ", kDefaultDensity,
+        ", got ", material.density()));
+  }
+  if (!(material.damping() >= 0 && std::isfinite(material.damping()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".damping must be >= 0 kg/(m^3 s) and finite (0 = no damping), got ",
+        material.damping()));
+  }
+  return absl::OkStatus();
+}
+
+Material ResolvedMaterial(const Material& material) {
+  Material m = material;
+  if (m.young_modulus() == 0) m.set_young_modulus(kDefaultYoungModulus);
+  if (m.poisson_ratio() == 0) m.set_poisson_ratio(kDefaultPoissonRatio);
+  if (m.density() == 0) m.set_density(kDefaultDensity);
+  if (m.damping() == 0) m.set_damping(kDefaultDamping);
+  return m;
+}
+
+SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
+  SolverSettings s = settings;
+  if (s.model() == SolverSettings::MODEL_DEFAULT) s.set_model(SolverSettings::LOCAL_FRAME);
+  if (s.integrator() == SolverSettings::INTEGRATOR_DEFAULT) {
+    s.set_integrator(SolverSettings::CENTRAL_DIFFERENCE);
+  }
+  if (s.time_step() == 0) s.set_time_step(kDefaultTimeStep);
+  if (s.cg_tolerance() == 0) s.set_cg_tolerance(kDefaultCgTolerance);
+  if (s.cg_max_iterations() == 0) s.set_cg_max_iterations(kDefaultCgMaxIterations);
+  if (s.max_substeps() == 0) s.set_max_substeps(kDefaultMaxSubsteps);
+  if (s.stability_safety() == 0) s.set_stability_safety(kDefaultStabilitySafety);
+  return s;
+}
+
+SolverSettings ResolvedSolverSettings(const Scene& scene) {
+  return ResolvedSolverSettings(scene.solver());
+}
 
 absl::Status ValidateScene(const Scene& scene) {
   const ControlMesh& m = scene.mesh();
+  if (m.source_case() == ControlMesh::SOURCE_NOT_SET) {
+    return absl::InvalidArgumentError(
+        "mesh.source is not set: the scene names no control mesh; set one of mesh.file, "
+        "mesh.block, mesh.beam, mesh.tube, mesh.torus, mesh.voxels");
+  }
+  // Non-finite numbers and unknown enum values anywhere, before the rules
+  // below (which then see only finite numbers and known enum values).
+  RETURN_IF_ERROR(CheckValues(scene, ""));
   switch (m.source_case()) {
-    case ControlMesh::SOURCE_NOT_SET:
-      return absl::InvalidArgumentError(
-          "mesh.source is not set: the scene names no control mesh; set one of mesh.file, "
-          "mesh.block, mesh.beam, mesh.tube, mesh.torus, mesh.voxels");
+    case ControlMesh::SOURCE_NOT_SET:  // handled above
+      break;
     case ControlMesh::kFile:
       if (m.file().empty()) return absl::InvalidArgumentError("mesh.file is empty");
       break;
@@ -226,6 +434,32 @@ absl::Status ValidateScene(const Scene& scene) {
           absl::StrCat(name, " joins vertex ", e.v0(), " to itself: v0 and v1 must differ"));
     }
   }
+
+  // Dynamics.
+  const Materials& materials = scene.materials();
+  RETURN_IF_ERROR(ValidateMaterial(materials.base(), "materials.base"));
+  for (int i = 0; i < materials.regions_size(); ++i) {
+    const std::string name = absl::StrCat("materials.regions[", i, "]");
+    RETURN_IF_ERROR(ValidateRegion(materials.regions(i).region(), absl::StrCat(name, ".region")));
+    RETURN_IF_ERROR(
+        ValidateMaterial(materials.regions(i).material(), absl::StrCat(name, ".material")));
+  }
+  const Constraints& constraints = scene.constraints();
+  for (int i = 0; i < constraints.fixed_size(); ++i) {
+    RETURN_IF_ERROR(
+        ValidateRegion(constraints.fixed(i), absl::StrCat("constraints.fixed[", i, "]")));
+  }
+  for (int i = 0; i < constraints.springs_size(); ++i) {
+    const PenaltySpring& spring = constraints.springs(i);
+    const std::string name = absl::StrCat("constraints.springs[", i, "]");
+    RETURN_IF_ERROR(ValidateRegion(spring.region(), absl::StrCat(name, ".region")));
+    if (!(spring.stiffness() >= 0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(name, ".stiffness must be >= 0 N/m, got ", spring.stiffness()));
+    }
+  }
+  RETURN_IF_ERROR(ValidateTraced(scene));
+  RETURN_IF_ERROR(ValidateSolverSettings(scene.solver()));
   return absl::OkStatus();
 }
 

@@ -13,6 +13,7 @@
 // Nothing here keeps state: every call parses or builds afresh.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -25,12 +26,61 @@
 namespace dynsolid::scene {
 
 // Checks every field that can be checked without reading a mesh file or
-// building the mesh: a mesh source is set, generator parameters,
-// mesh.scale / translate, mesh.refine_cells >= 0, subdivision.levels in
-// 0..4, sharp.crease_angle_degrees in [0, 180], sharp.edges indices >= 0
-// and distinct. InvalidArgument, message starting with the field path
-// ("subdivision.levels must be in 0..4, got 7").
+// building the mesh. InvalidArgument, message starting with the field path
+// ("subdivision.levels must be in 0..4, got 7"); the first failure found,
+// in this order:
+//  - a mesh source is set;
+//  - every double in the scene is finite and every enum holds a known value
+//    (proto3 text format and the wire both accept unknown enum numbers);
+//  - mesh: generator parameters, mesh.scale >= 0, mesh.refine_cells >= 0;
+//  - subdivision.levels in 0..4; sharp.crease_angle_degrees in [0, 180];
+//    sharp.edges indices >= 0 and distinct;
+//  - materials (base and every region's material): ValidateMaterial;
+//  - regions (materials.regions[i].region, constraints.fixed[i],
+//    constraints.springs[i].region): box.min <= box.max componentwise,
+//    sphere.radius > 0, control_cells >= 0 (their upper bound is checked by
+//    the solver against the mesh after refinement);
+//  - constraints.springs[i].stiffness >= 0;
+//  - traced[i].name non-empty, unique, and free of control characters,
+//    commas and double quotes (it is a column name of trace.csv);
+//  - solver: time_step in [0, 1] s, cg_tolerance in [0, 1),
+//    cg_max_iterations >= 0, max_substeps >= 0, stability_safety in [0, 1]
+//    (0 in each means the default: see ResolvedSolverSettings).
+// Positions (point forces, traced points) are not checked against the
+// solid here: the solver does that when it builds.
 absl::Status ValidateScene(const Scene& scene);
+
+// A material's own rules: young_modulus >= 0, poisson_ratio in [0, 0.5),
+// density >= 0, damping >= 0, all finite (0 = the default, see
+// ResolvedMaterial). `field` names the material in messages
+// ("materials.base": "materials.base.poisson_ratio must be in [0, 0.5) ...").
+absl::Status ValidateMaterial(const Material& material, std::string_view field = "material");
+
+// ---- Defaults (proto/dynsolid/scene.proto): a field left at 0 means these.
+
+inline constexpr double kDefaultYoungModulus = 1e5;    // Pa
+inline constexpr double kDefaultPoissonRatio = 0.3;
+inline constexpr double kDefaultDensity = 1000.0;      // kg/m^3
+inline constexpr double kDefaultDamping = 0.0;         // kg/(m^3 s): no damping
+inline constexpr double kDefaultTimeStep = 1e-3;       // s
+inline constexpr double kDefaultCgTolerance = 1e-4;    // relative residual
+inline constexpr int32_t kDefaultCgMaxIterations = 500;
+inline constexpr int32_t kDefaultMaxSubsteps = 1000;
+inline constexpr double kDefaultStabilitySafety = 0.9;
+
+// `material` with every zero field replaced by its default: young_modulus
+// 1e5, poisson_ratio 0.3, density 1000 (damping stays 0: no damping). A
+// material region's material resolves on its own: a zero field there means
+// the default above, not the value of materials.base.
+Material ResolvedMaterial(const Material& material);
+
+// `settings` with every zero field replaced by its default: model
+// LOCAL_FRAME, integrator CENTRAL_DIFFERENCE (AUTO stays AUTO), time_step
+// 1e-3, cg_tolerance 1e-4, cg_max_iterations 500, max_substeps 1000,
+// stability_safety 0.9; snap_forces_to_quadrature as given.
+SolverSettings ResolvedSolverSettings(const SolverSettings& settings);
+// The same for scene.solver().
+SolverSettings ResolvedSolverSettings(const Scene& scene);
 
 // Parses `text` (protobuf text format) and validates it (ValidateScene).
 // `origin` names the text in messages ("scenes/chair.textproto",

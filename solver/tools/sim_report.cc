@@ -1,6 +1,7 @@
 #include "solver/tools/sim_report.h"
 
 #include <filesystem>
+#include <algorithm>
 #include <fstream>
 
 #include "absl/strings/str_cat.h"
@@ -12,8 +13,15 @@
 
 namespace dynsolid::tools {
 
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings& t,
-                      const std::string& origin) {
+                      const std::string& origin, const RunRecord& run) {
   const auto& e = d.elements;
   const double cells = static_cast<double>(d.fine().num_cells());
   const auto boundary = d.fine().CountBoundary();
@@ -58,13 +66,84 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
       .Add("subdivide", t.subdivide_ms)
       .Add("classify", t.classify_ms)
       .End();
-  j.Add("steps", 0);
+  const int64_t steps = static_cast<int64_t>(run.step_ms.size());
+  j.Add("steps", steps);
+  if (run.build != nullptr) {
+    const solid::BuildReport& b = *run.build;
+    j.Begin("dynamics")
+        .Add("model", run.model)
+        .Add("integrator", run.integrator)
+        .Add("time_step", run.time_step)
+        .Add("total_mass", run.total_mass)
+        .Add("rest_volume", run.rest_volume)
+        .Add("omega_max", b.omega_max)
+        .Add("stable_step", b.stable_step)
+        .Add("substeps", b.substeps)
+        .Add("damping_matrix", b.damping_matrix)
+        .Add("cubic_groups", b.cubic_groups)
+        .Add("linear_groups", b.linear_groups)
+        .Add("pyramid_groups", b.pyramid_groups)
+        .Add("material_arrays", b.material_arrays)
+        .Add("fixed_control_points", b.fixed_control_points)
+        .Add("penalty_springs", b.penalty_springs)
+        .Add("point_forces", b.point_forces)
+        .Add("gravity", b.gravity)
+        .Add("bytes_per_element", b.element_bytes)
+        .Add("shared_matrix_bytes", b.shared_matrix_bytes)
+        .Add("build_ms", b.build_ms)
+        .End();
+  }
+  if (steps > 0) {
+    const double ms = Median(run.step_ms);
+    j.Add("ms_per_step", ms);
+    j.Add("steps_per_second", ms > 0 ? 1000.0 / ms : 0.0);
+    j.Add("simulated_seconds_per_second", ms > 0 ? run.time_step / (ms / 1000.0) : 0.0);
+    // Per-phase medians; phases the scene does not use (-1) are left out.
+    j.Begin("phases_ms");
+    auto phase = [&](const char* name, double solid::PhaseTimes::*field) {
+      std::vector<double> v;
+      for (const auto& p : run.phases) {
+        if (p.*field >= 0) v.push_back(p.*field);
+      }
+      if (!v.empty()) j.Add(name, Median(v));
+    };
+    phase("nodes", &solid::PhaseTimes::nodes);
+    phase("measure", &solid::PhaseTimes::measure);
+    phase("stiffness", &solid::PhaseTimes::stiffness);
+    phase("project", &solid::PhaseTimes::project);
+    phase("loads", &solid::PhaseTimes::loads);
+    phase("damping", &solid::PhaseTimes::damping);
+    phase("solve", &solid::PhaseTimes::solve);
+    j.End();
+    double sum = 0;
+    for (int32_t c : run.cg_iterations) sum += c;
+    j.Begin("cg_iterations")
+        .Add("mean_per_step", sum / static_cast<double>(steps))
+        .Add("max_single_solve", run.cg_max)
+        .End();
+    j.Begin("energy_j")
+        .Add("kinetic", run.energies.kinetic)
+        .Add("strain", run.energies.strain)
+        .End();
+  }
   return j.Finish();
 }
 
+absl::Status WriteFrame(const scene::Discretization& d, const Points& p, const std::string& dir,
+                        const std::string& name) {
+  const Points nodes = d.node_matrix * p;
+  const Points vertices = nodes.topRows(d.fine().num_vertices());
+  const mesh::BoundarySurface surface = mesh::ExtractBoundary(d.fine(), &vertices);
+  RETURN_IF_ERROR(io::WriteObj(dir + "/" + name + ".obj", surface));
+  const io::VolumeMesh volume =
+      io::ElementsToVolumeMesh(nodes, d.elements, d.hierarchy.control_cell, d.hierarchy.levels);
+  return io::WriteVtu(dir + "/" + name + ".vtu", volume);
+}
+
 absl::Status WriteOutputs(const scene::Discretization& d, const scene::BuildTimings& t,
-                          const std::string& origin, const std::string& dir) {
-  const Points nodes = d.node_matrix * d.control().positions();
+                          const std::string& origin, const RunRecord& run,
+                          const Points& control_positions, const std::string& dir) {
+  const Points nodes = d.node_matrix * control_positions;
   const Points vertices = nodes.topRows(d.fine().num_vertices());
   mesh::BoundarySurface surface = mesh::ExtractBoundary(d.fine(), &vertices);
 
@@ -95,7 +174,7 @@ absl::Status WriteOutputs(const scene::Discretization& d, const scene::BuildTimi
   RETURN_IF_ERROR(io::WritePly(dir + "/boundary.ply", surface));
   RETURN_IF_ERROR(io::WriteVtu(dir + "/volume.vtu", volume));
   std::ofstream out(dir + "/stats.json");
-  out << StatsJson(d, t, origin);
+  out << StatsJson(d, t, origin, run);
   if (!out) return absl::InternalError(absl::StrCat("cannot write ", dir, "/stats.json"));
   return absl::OkStatus();
 }

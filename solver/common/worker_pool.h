@@ -1,0 +1,47 @@
+// A fixed set of worker threads for per-step work (the hot path): Run()
+// hands chunk k of a job to thread k (chunk 0 runs on the caller) and
+// returns when all are done. Chunk boundaries are fixed by the caller, so
+// results joined in chunk order are deterministic. No allocation per Run.
+#pragma once
+
+#include <condition_variable>
+#include <type_traits>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace dynsolid {
+
+class WorkerPool {
+ public:
+  // `threads` >= 1 chunks per Run (threads - 1 workers).
+  explicit WorkerPool(int threads);
+  ~WorkerPool();
+  WorkerPool(const WorkerPool&) = delete;
+  WorkerPool& operator=(const WorkerPool&) = delete;
+
+  int size() const { return static_cast<int>(workers_.size()) + 1; }
+
+  // Calls job(k) for k in [0, size()), concurrently; returns when all end.
+  // `job` is called through a plain pointer: no allocation.
+  template <typename Job>
+  void Run(Job&& job) {
+    RunRaw([](void* ctx, int k) { (*static_cast<std::remove_reference_t<Job>*>(ctx))(k); },
+           static_cast<void*>(&job));
+  }
+
+ private:
+  void RunRaw(void (*fn)(void*, int), void* ctx);
+  void Loop(int index);
+
+  std::vector<std::thread> workers_;
+  std::mutex mu_;
+  std::condition_variable start_cv_, done_cv_;
+  void (*fn_)(void*, int) = nullptr;
+  void* ctx_ = nullptr;
+  uint64_t generation_ = 0;
+  int pending_ = 0;
+  bool stop_ = false;
+};
+
+}  // namespace dynsolid

@@ -1,0 +1,36 @@
+#include "solver/integrators/central_difference.h"
+
+namespace dynsolid::integrators {
+
+void CentralDifference::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h,
+                              std::vector<uint8_t> fixed) {
+  mt_ = mt;
+  dt_ = dt;
+  h_ = h;
+  lhs_ = 2.0 * (*mt);
+  if (dt != nullptr) lhs_ += h * (*dt);
+  cg_.Setup(&lhs_, std::move(fixed));
+  rhs_.setZero(mt->rows(), 3);
+  tmp_.setZero(mt->rows(), 3);
+  delta_.setZero(mt->rows(), 3);
+}
+
+CgStats CentralDifference::Step(const Points& p, const Points& p_prev, const Points& force,
+                                Points& p_next, double tolerance, int max_iterations) {
+  // Warm start p~ = 2 p - p_prev and solve for the correction Delta:
+  //   (2 Mt + h Dt) Delta = 2 h^2 F - 2 h Dt (p - p_prev),
+  // so the relative tolerance applies to what the forces change, not to
+  // the (much larger) inertial part of the right-hand side.
+  rhs_ = (2.0 * h_ * h_) * force;
+  if (dt_ != nullptr) {
+    tmp_ = p - p_prev;
+    delta_.noalias() = *dt_ * tmp_;
+    rhs_ -= (2.0 * h_) * delta_;
+  }
+  delta_.setZero();
+  const CgStats stats = cg_.Solve(rhs_, delta_, tolerance, max_iterations);
+  p_next = 2.0 * p - p_prev + delta_;
+  return stats;
+}
+
+}  // namespace dynsolid::integrators

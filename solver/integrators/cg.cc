@@ -1,0 +1,138 @@
+#include "solver/integrators/cg.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/IterativeLinearSolvers>
+
+namespace dynsolid::integrators {
+
+struct ConjugateGradient::Ic {
+  Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::AMDOrdering<int>> factor;
+  Eigen::VectorXd in, out;
+};
+
+ConjugateGradient::ConjugateGradient() = default;
+ConjugateGradient::~ConjugateGradient() = default;
+ConjugateGradient::ConjugateGradient(ConjugateGradient&&) noexcept = default;
+ConjugateGradient& ConjugateGradient::operator=(ConjugateGradient&&) noexcept = default;
+
+void ConjugateGradient::Setup(const SparseMatrix* s, std::vector<uint8_t> fixed,
+                              Preconditioner preconditioner) {
+  s_ = s;
+  const int64_t n = s->rows();
+  fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
+  any_fixed_ = std::find(fixed_.begin(), fixed_.end(), 1) != fixed_.end();
+  inv_diag_ = s->diagonal();
+  for (int64_t i = 0; i < n; ++i) inv_diag_[i] = inv_diag_[i] > 0 ? 1.0 / inv_diag_[i] : 0.0;
+  for (Points* m : {&r_, &z_, &p_, &q_, &b0_}) m->setZero(n, 3);
+  ic_.reset();
+  if (preconditioner == Preconditioner::kIncompleteCholesky) {
+    // The reduced matrix: fixed rows and columns replaced by identity.
+    Eigen::SparseMatrix<double> reduced = *s;
+    if (any_fixed_) {
+      for (int k = 0; k < reduced.outerSize(); ++k) {
+        for (Eigen::SparseMatrix<double>::InnerIterator it(reduced, k); it; ++it) {
+          if (fixed_[it.row()] || fixed_[it.col()]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
+        }
+      }
+    }
+    ic_ = std::make_unique<Ic>();
+    ic_->factor.compute(reduced);
+    if (ic_->factor.info() != Eigen::Success) {
+      ic_.reset();  // fall back to Jacobi
+    } else {
+      ic_->in.resize(n);
+      ic_->out.resize(n);
+    }
+  }
+}
+
+void ConjugateGradient::Precondition() {
+  if (!ic_) {
+    z_ = inv_diag_.asDiagonal() * r_;
+    return;
+  }
+  for (int c = 0; c < 3; ++c) {
+    ic_->in = r_.col(c);
+    ic_->out = ic_->factor.solve(ic_->in);
+    z_.col(c) = ic_->out;
+  }
+  MaskFixed(z_);
+}
+
+void ConjugateGradient::MaskFixed(Points& m) const {
+  if (!any_fixed_) return;
+  for (int64_t i = 0; i < m.rows(); ++i) {
+    if (fixed_[i]) m.row(i).setZero();
+  }
+}
+
+CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
+                                 int max_iterations) {
+  CgStats stats;
+  // Right-hand side of the reduced system: b_f - S_fc x_c.
+  double bnorm2[3];
+  if (any_fixed_) {
+    b0_ = x;
+    for (int64_t i = 0; i < b0_.rows(); ++i) {
+      if (!fixed_[i]) b0_.row(i).setZero();
+    }
+    q_.noalias() = *s_ * b0_;
+    b0_ = b - q_;
+    MaskFixed(b0_);
+  } else {
+    b0_ = b;
+  }
+  for (int c = 0; c < 3; ++c) bnorm2[c] = b0_.col(c).squaredNorm();
+
+  q_.noalias() = *s_ * x;
+  r_ = b - q_;
+  MaskFixed(r_);
+  Precondition();
+  p_ = z_;
+  double rz[3], rr[3];
+  bool done[3];
+  int iters[3] = {0, 0, 0};
+  for (int c = 0; c < 3; ++c) {
+    rz[c] = r_.col(c).dot(z_.col(c));
+    rr[c] = r_.col(c).squaredNorm();
+    done[c] = rr[c] <= tolerance * tolerance * bnorm2[c] || bnorm2[c] == 0.0;
+  }
+  for (int it = 0; it < max_iterations && !(done[0] && done[1] && done[2]); ++it) {
+    q_.noalias() = *s_ * p_;
+    MaskFixed(q_);
+    for (int c = 0; c < 3; ++c) {
+      if (done[c]) continue;
+      const double pq = p_.col(c).dot(q_.col(c));
+      if (pq <= 0.0) {  // breakdown (not SPD on this column): stop it
+        done[c] = true;
+        continue;
+      }
+      const double alpha = rz[c] / pq;
+      x.col(c) += alpha * p_.col(c);
+      r_.col(c) -= alpha * q_.col(c);
+      rr[c] = r_.col(c).squaredNorm();
+      ++iters[c];
+      if (rr[c] <= tolerance * tolerance * bnorm2[c]) done[c] = true;
+    }
+    if (done[0] && done[1] && done[2]) break;
+    Precondition();
+    for (int c = 0; c < 3; ++c) {
+      if (done[c]) continue;
+      const double rz_new = r_.col(c).dot(z_.col(c));
+      p_.col(c) = z_.col(c) + (rz_new / rz[c]) * p_.col(c);
+      rz[c] = rz_new;
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    stats.iterations += iters[c];
+    stats.max_iterations = std::max(stats.max_iterations, iters[c]);
+    const double rel = bnorm2[c] > 0 ? std::sqrt(rr[c] / bnorm2[c]) : 0.0;
+    stats.relative_residual = std::max(stats.relative_residual, rel);
+    stats.converged &= rel <= tolerance || bnorm2[c] == 0.0;
+  }
+  return stats;
+}
+
+}  // namespace dynsolid::integrators

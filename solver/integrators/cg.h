@@ -1,0 +1,64 @@
+// Preconditioned conjugate gradient for S X = B with three right-hand sides
+// (x, y, z) sharing one sparse SPD matrix S, a Jacobi or incomplete
+// Cholesky preconditioner (built once in Setup: S is constant), and
+// fixed rows (dimension reduction: fixed unknowns keep their value in X and
+// leave the system). Workspace is allocated in Setup, never in Solve.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <memory>
+
+#include <Eigen/SparseCore>
+
+#include "solver/mesh/points.h"
+
+namespace dynsolid::integrators {
+
+using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>;
+
+struct CgStats {
+  int32_t iterations = 0;       // summed over the three columns
+  int32_t max_iterations = 0;   // of the slowest column
+  double relative_residual = 0; // largest over the columns at exit
+  bool converged = true;
+};
+
+enum class Preconditioner {
+  kJacobi,               // diagonal
+  kIncompleteCholesky,   // Eigen's IncompleteCholesky (threshold IC, AMD order)
+};
+
+class ConjugateGradient {
+ public:
+  ConjugateGradient();
+  ~ConjugateGradient();
+  ConjugateGradient(ConjugateGradient&&) noexcept;
+  ConjugateGradient& operator=(ConjugateGradient&&) noexcept;
+
+  // `s` must outlive the solver. fixed[i] != 0 marks row i fixed (may be empty).
+  void Setup(const SparseMatrix* s, std::vector<uint8_t> fixed,
+             Preconditioner preconditioner = Preconditioner::kIncompleteCholesky);
+
+  // X holds the initial guess (and the fixed values) on entry, the solution
+  // on exit. Stops per column at ||r|| <= tolerance ||b_free||, where b_free
+  // is the right-hand side of the reduced system.
+  CgStats Solve(const Points& b, Points& x, double tolerance, int max_iterations);
+
+  const std::vector<uint8_t>& fixed() const { return fixed_; }
+
+ private:
+  void MaskFixed(Points& m) const;
+  void Precondition();  // z_ = P^-1 r_
+  struct Ic;
+
+  const SparseMatrix* s_ = nullptr;
+  std::vector<uint8_t> fixed_;
+  bool any_fixed_ = false;
+  Eigen::VectorXd inv_diag_;
+  std::unique_ptr<Ic> ic_;
+  Points r_, z_, p_, q_, b0_;
+};
+
+}  // namespace dynsolid::integrators

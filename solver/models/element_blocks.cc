@@ -1,0 +1,108 @@
+#include "solver/models/element_blocks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+
+namespace dynsolid::models {
+namespace {
+
+const std::vector<int32_t>& NodesOfKind(const fem::ElementSet& e, int kind) {
+  return kind == 0 ? e.cubic_nodes : kind == 1 ? e.linear_nodes : e.pyramid_nodes;
+}
+const std::vector<int32_t>& CellsOfKind(const fem::ElementSet& e, int kind) {
+  return kind == 0 ? e.cubic_cell : kind == 1 ? e.linear_cell : e.pyramid_cell;
+}
+
+}  // namespace
+
+ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
+                                 const std::vector<int32_t>& cell_control_cell,
+                                 const MaterialSampler& sampler) {
+  ElementLayout layout;
+  std::map<std::vector<double>, int32_t> material_index;
+  std::vector<double> material_key;
+  std::vector<MaterialPoint> samples;
+  fem::NodeMatrixX3 x, g;
+  std::vector<int64_t> shape_key;
+  for (int kind = 0; kind < 3; ++kind) {
+    const auto k = static_cast<fem::ElementKind>(kind);
+    fem::KindTable& table = layout.tables[kind] = fem::MakeKindTable(k);
+    ElementBlock& block = layout.blocks[kind];
+    block.kind = k;
+    block.nodes = table.nodes;
+    block.node_ids = NodesOfKind(elements, kind);
+    block.cell = CellsOfKind(elements, kind);
+    const int n = block.nodes;
+    const int32_t count = block.size();
+    block.group.resize(count);
+    std::map<std::vector<int64_t>, int32_t> group_index;
+    x.resize(n, 3);
+    for (int32_t e = 0; e < count; ++e) {
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < n; ++i) x.row(i) = rest.row(ids[i]);
+      // Material samples at the quadrature points' rest positions.
+      const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]
+                                                             : cell_control_cell[block.cell[e]];
+      samples.resize(table.points);
+      material_key.clear();
+      for (int q = 0; q < table.points; ++q) {
+        const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q), n);
+        const Eigen::Vector3d xq = (nq * x).transpose();
+        samples[q] = sampler(xq, control_cell);
+        material_key.insert(material_key.end(), {samples[q].young, samples[q].poisson,
+                                                 samples[q].density, samples[q].damping});
+      }
+      auto [mit, new_material] = material_index.try_emplace(
+          material_key, static_cast<int32_t>(layout.materials.size()));
+      if (new_material) layout.materials.push_back(samples);
+      // Rest shape up to translation, quantized to 1e-9 of its size.
+      double size = 0;
+      for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
+      const double quantum = std::max(size, 1e-300) * 1e-9;
+      shape_key.assign(1, mit->second);
+      for (int i = 1; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) {
+          shape_key.push_back(std::llround((x(i, c) - x(0, c)) / quantum));
+        }
+      }
+      auto [git, new_group] =
+          group_index.try_emplace(shape_key, static_cast<int32_t>(block.groups.size()));
+      block.group[e] = git->second;
+      if (new_group) {
+        ElementGroup grp;
+        grp.representative = e;
+        grp.material = mit->second;
+        grp.rest = x;
+        fem::PhysicalGradients(table.centre_dn.data(), x, n, grp.centre_gradient);
+        block.groups.push_back(std::move(grp));
+      }
+    }
+    // Elements sorted by group (stable: by index within a group).
+    const int32_t ng = static_cast<int32_t>(block.groups.size());
+    block.group_start.assign(ng + 1, 0);
+    for (int32_t e = 0; e < count; ++e) ++block.group_start[block.group[e] + 1];
+    for (int32_t i = 0; i < ng; ++i) block.group_start[i + 1] += block.group_start[i];
+    block.by_group.resize(count);
+    std::vector<int32_t> fill(block.group_start.begin(), block.group_start.end() - 1);
+    for (int32_t e = 0; e < count; ++e) block.by_group[fill[block.group[e]]++] = e;
+    // Rest volume and inversion, once per group.
+    for (int32_t gi = 0; gi < ng; ++gi) {
+      const ElementGroup& grp = block.groups[gi];
+      double volume = 0;
+      bool inverted = false;
+      for (int q = 0; q < table.points; ++q) {
+        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+        inverted |= det <= 0;
+        volume += det * table.weight[q];
+      }
+      const int32_t members = block.group_start[gi + 1] - block.group_start[gi];
+      layout.rest_volume += volume * members;
+      if (inverted) layout.inverted_elements += members;
+    }
+  }
+  return layout;
+}
+
+}  // namespace dynsolid::models

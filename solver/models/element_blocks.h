@@ -1,0 +1,72 @@
+// The elements of a solid laid out for the models: per kind, the node lists,
+// each element's material sample array (one value per quadrature point:
+// the paper's "parametric arrays of sample values", deduplicated), and
+// groups of elements that share one rest shape (up to translation) and one
+// material array, so they share one element matrix (MODEL.md 4a: "share
+// one matrix between elements whose rest shape and material are equal").
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "solver/fem/element_data.h"
+#include "solver/fem/element_set.h"
+#include "solver/mesh/points.h"
+
+namespace dynsolid::models {
+
+// Material at one quadrature point (SI units).
+struct MaterialPoint {
+  double young = 0;    // Pa
+  double poisson = 0;  // 1
+  double density = 0;  // kg/m^3
+  double damping = 0;  // kg/(m^3 s)
+
+  double lame_lambda() const { return young * poisson / ((1 + poisson) * (1 - 2 * poisson)); }
+  double lame_mu() const { return young / (2 * (1 + poisson)); }
+  bool operator==(const MaterialPoint&) const = default;
+};
+
+// Material at a rest position x inside level-0 control cell `control_cell`.
+using MaterialSampler = std::function<MaterialPoint(const Eigen::Vector3d& x, int32_t control_cell)>;
+
+struct ElementGroup {
+  int32_t representative = 0;         // an element of the group (block index)
+  int32_t material = 0;               // material array id
+  fem::NodeMatrixX3 rest;             // n x 3 rest nodes of the representative
+  fem::NodeMatrixX3 centre_gradient;  // n x 3 physical gradients at the centre
+};
+
+struct ElementBlock {
+  fem::ElementKind kind = fem::ElementKind::kLinear;
+  int nodes = 0;                      // n per element
+  std::vector<int32_t> node_ids;      // #elements x n
+  std::vector<int32_t> cell;          // element -> level-L cell
+  std::vector<int32_t> group;         // element -> group
+  std::vector<int32_t> by_group;      // elements sorted by group, then index
+  std::vector<int32_t> group_start;   // by_group[group_start[g] .. group_start[g+1])
+  std::vector<ElementGroup> groups;
+
+  int32_t size() const { return static_cast<int32_t>(cell.size()); }
+  const int32_t* element_nodes(int32_t e) const { return node_ids.data() + static_cast<size_t>(e) * nodes; }
+};
+
+struct ElementLayout {
+  std::array<fem::KindTable, 3> tables;   // by kind
+  std::array<ElementBlock, 3> blocks;     // by kind: cubic, linear, pyramid
+  std::vector<std::vector<MaterialPoint>> materials;  // distinct sample arrays
+  double rest_volume = 0;                 // m^3, sum of element rest volumes
+  int32_t inverted_elements = 0;          // elements with det J0 <= 0 somewhere
+};
+
+// Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
+// `cell_control_cell` maps level-L cells to control cells for the sampler.
+ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
+                                 const std::vector<int32_t>& cell_control_cell,
+                                 const MaterialSampler& sampler);
+
+}  // namespace dynsolid::models

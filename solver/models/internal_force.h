@@ -1,0 +1,27 @@
+// The one interface both stiffness models share (MODEL.md section 4): the
+// integrators only ever ask for g(d), the internal forces on the FEM nodes.
+#pragma once
+
+#include <string_view>
+
+#include "solver/mesh/points.h"
+
+namespace dynsolid::models {
+
+class InternalForceModel {
+ public:
+  virtual ~InternalForceModel() = default;
+
+  // g (#nodes by 3, newtons) = internal forces at node positions d (#nodes
+  // by 3, metres); returns the strain energy (joules). Updates the model's
+  // per-element frames (warm starts), so calls must follow the motion.
+  // Allocates nothing after the first call.
+  virtual double Forces(const Points& d, Points& g) = 0;
+
+  // Forget warm-started frames (after a rollback or a jump in state).
+  virtual void ResetFrames() = 0;
+
+  virtual std::string_view name() const = 0;
+};
+
+}  // namespace dynsolid::models

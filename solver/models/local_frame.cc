@@ -1,0 +1,170 @@
+#include "solver/models/local_frame.h"
+
+
+#include "solver/models/rotation.h"
+
+namespace dynsolid::models {
+namespace {
+
+constexpr int32_t kBatch = 256;
+
+}  // namespace
+
+LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure,
+                                 int32_t num_nodes, WorkerPool& pool)
+    : layout_(layout), pool_(pool), measure_(std::move(measure)), num_nodes_(num_nodes) {
+  fem::NodeMatrixX3 g;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& block = layout.blocks[kind];
+    const fem::KindTable& table = layout.tables[kind];
+    const int n = block.nodes;
+    k_[kind].resize(block.groups.size());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      const ElementGroup& grp = block.groups[gi];
+      const auto& material = layout.materials[grp.material];
+      // K_x = sum_q dV [(l + 2m) gx gx^T + m gy gy^T + m gz gz^T] = B_x B_x^T
+      // with B_x's columns sqrt(dV (l + 2m)) gx, sqrt(dV m) gy, sqrt(dV m) gz.
+      std::array<Eigen::MatrixXd, 3> b;
+      for (auto& m : b) m.resize(n, 3 * table.points);
+      for (int q = 0; q < table.points; ++q) {
+        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+        const double dv = std::max(det, 0.0) * table.weight[q] * kStiffnessFactor;
+        const double lam = material[q].lame_lambda(), mu = material[q].lame_mu();
+        for (int axis = 0; axis < 3; ++axis) {
+          for (int c = 0; c < 3; ++c) {
+            const double coef = std::sqrt(dv * (c == axis ? lam + 2 * mu : mu));
+            b[axis].col(3 * q + c) = coef * g.col(c);
+          }
+        }
+      }
+      for (int axis = 0; axis < 3; ++axis) {
+        k_[kind][gi][axis] = b[axis] * b[axis].transpose();
+      }
+    }
+    frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
+    // Batches: consecutive elements of one group.
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += kBatch) {
+        batches_.push_back({kind, static_cast<int32_t>(gi), s,
+                            std::min(kBatch, block.group_start[gi + 1] - s)});
+      }
+    }
+  }
+  work_.resize(pool.size());
+  // Balance chunks by cost: an element of n nodes costs about n^2.
+  double total = 0;
+  for (const Batch& b : batches_) {
+    const double n = layout.blocks[b.kind].nodes;
+    total += n * n * b.count;
+  }
+  chunk_start_.assign(1, 0);
+  double acc = 0;
+  for (size_t i = 0; i < batches_.size(); ++i) {
+    const double n = layout.blocks[batches_[i].kind].nodes;
+    acc += n * n * batches_[i].count;
+    while (chunk_start_.size() < work_.size() &&
+           acc >= total * static_cast<double>(chunk_start_.size()) / work_.size()) {
+      chunk_start_.push_back(i + 1);
+    }
+  }
+  while (chunk_start_.size() <= work_.size()) chunk_start_.push_back(batches_.size());
+  for (Workspace& w : work_) {
+    w.g.setZero(num_nodes_, 3);
+    for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
+      m->resize(fem::kCubicNodes, kBatch);
+    }
+  }
+  delta_.setZero(num_nodes_, 3);
+}
+
+void LocalFrameModel::ResetFrames() {
+  for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
+}
+
+void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Workspace& w) {
+  w.g.setZero();
+  w.energy = 0;
+  for (size_t bi = begin; bi < end; ++bi) {
+    const Batch& batch = batches_[bi];
+    const ElementBlock& block = layout_.blocks[batch.kind];
+    const ElementGroup& grp = block.groups[batch.group];
+    const int n = block.nodes;
+    auto dx = w.dx.topLeftCorner(n, batch.count);
+    auto dy = w.dy.topLeftCorner(n, batch.count);
+    auto dz = w.dz.topLeftCorner(n, batch.count);
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      // Deformation gradient at the centre, then its rotation.
+      Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        f += d.row(ids[i]).transpose() * grp.centre_gradient.row(i);
+      }
+      Eigen::Quaterniond& q = frames_[batch.kind][e];
+      ExtractRotation(f, q);
+      const Eigen::Matrix3d r = q.toRotationMatrix();
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector3d local = r.transpose() * delta_.row(ids[i]).transpose();
+        dx(i, b) = local.x();
+        dy(i, b) = local.y();
+        dz(i, b) = local.z();
+      }
+    }
+    const auto& k = k_[batch.kind][batch.group];
+    auto yx = w.yx.topLeftCorner(n, batch.count);
+    auto yy = w.yy.topLeftCorner(n, batch.count);
+    auto yz = w.yz.topLeftCorner(n, batch.count);
+    yx.noalias() = k[0] * dx;
+    yy.noalias() = k[1] * dy;
+    yz.noalias() = k[2] * dz;
+    w.energy += 0.5 * (dx.cwiseProduct(yx).sum() + dy.cwiseProduct(yy).sum() +
+                       dz.cwiseProduct(yz).sum());
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      const Eigen::Matrix3d r = frames_[batch.kind][e].toRotationMatrix();
+      for (int i = 0; i < n; ++i) {
+        w.g.row(ids[i]) += (r * Eigen::Vector3d(yx(i, b), yy(i, b), yz(i, b))).transpose();
+      }
+    }
+  }
+}
+
+double LocalFrameModel::Forces(const Points& d, Points& g) {
+  // The measure in parts per thread, summed in chunk order.
+  const int chunks = static_cast<int>(work_.size());
+  pool_.Run([&](int k) { measure_.ApplyPart(d, k, chunks, work_[k].delta); });
+  delta_ = work_[0].delta;
+  for (int k = 1; k < chunks; ++k) delta_ += work_[k].delta;
+  // Batches in contiguous chunks per thread, each with its own force
+  // buffer, summed in chunk order: the same bits whatever the timing.
+  pool_.Run([&](int k) { RunBatches(chunk_start_[k], chunk_start_[k + 1], d, work_[k]); });
+  g = work_[0].g;
+  double energy = work_[0].energy;
+  for (size_t k = 1; k < chunks; ++k) {
+    g += work_[k].g;
+    energy += work_[k].energy;
+  }
+  return energy;
+}
+
+int64_t LocalFrameModel::shared_matrix_bytes() const {
+  int64_t bytes = 0;
+  for (const auto& kind : k_)
+    for (const auto& grp : kind)
+      for (const auto& m : grp) bytes += static_cast<int64_t>(m.size()) * 8;
+  return bytes;
+}
+
+int64_t LocalFrameModel::per_element_bytes() const {
+  // node ids, group id, warm-started frame.
+  int64_t bytes = 0, count = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& b = layout_.blocks[kind];
+    bytes += static_cast<int64_t>(b.size()) * (b.nodes * 4 + 4 + 4 + sizeof(Eigen::Quaterniond));
+    count += b.size();
+  }
+  return count > 0 ? bytes / count : 0;
+}
+
+}  // namespace dynsolid::models

@@ -1,0 +1,174 @@
+// Dynamics of the local-frame model with the central-difference scheme:
+// invariants (rigid motion, mass, momentum), element matrices, and what a
+// scene builds.
+#include "solver/solid/solid.h"
+
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "solver/scene/build.h"
+#include "solver/scene/scene_loader.h"
+#include "tests/testing/status_matchers.h"
+
+namespace dynsolid::solid {
+namespace {
+
+using ::dynsolid::testing::StatusIs;
+using ::testing::HasSubstr;
+
+std::unique_ptr<Solid> Make(const std::string& text) {
+  auto scene = scene::ParseScene(text, "test");
+  EXPECT_OK(scene);
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
+  EXPECT_OK(d);
+  auto s = Solid::Create(*scene, *std::move(d));
+  EXPECT_OK(s);
+  return s.ok() ? *std::move(s) : nullptr;
+}
+
+const char* kBlock = R"pb(
+  name: "block"
+  mesh { block { nx: 3 ny: 3 nz: 3 } }
+  subdivision { levels: 2 }
+  materials { base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 } }
+  solver { time_step: 1e-3 }
+)pb";
+
+TEST(SolidTest, RigidMotionHasZeroInternalForce) {
+  auto s = Make(kBlock);
+  ASSERT_NE(s, nullptr);
+  const Points rest = s->control_positions();
+  // A strained state for scale.
+  Points strained = rest;
+  strained.col(0) *= 1.01;
+  const double scale = s->InternalControlForces(strained).norm();
+  ASSERT_GT(scale, 0);
+  const Eigen::Matrix3d r =
+      Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  Points moved = (rest * r.transpose()).rowwise() + Eigen::RowVector3d(3, -2, 5);
+  EXPECT_LT(s->InternalControlForces(moved).norm(), 1e-10 * scale)
+      << "rotated and translated solid";
+  EXPECT_LT(s->InternalControlForces(rest).norm(), 1e-10 * scale) << "rest";
+}
+
+TEST(SolidTest, TotalMassIsDensityTimesVolume) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 3 nz: 1 } }
+    subdivision { levels: 0 }
+    materials { base { density: 750 } }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  EXPECT_NEAR(s->rest_volume(), 6.0, 1e-12) << "level-0 hexahedra are exact";
+  EXPECT_NEAR(s->total_mass(), 750.0 * 6.0, 1e-9);
+  auto t = Make(kBlock);
+  ASSERT_NE(t, nullptr);
+  EXPECT_NEAR(t->total_mass(), 1000.0 * t->rest_volume(), 1e-9 * t->total_mass());
+  EXPECT_GT(t->rest_volume(), 0.8 * 27.0);
+  EXPECT_LE(t->rest_volume(), 27.0 + 1e-9);
+}
+
+TEST(SolidTest, FreeSolidUnderConstantForceAcceleratesAtFOverM) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e4 density: 100 } }
+    loads { point_forces { position { x: 0.7 y: 1.2 z: 1.0 } force { x: 40 y: 0 z: -10 } } }
+    solver { time_step: 1e-3 cg_tolerance: 1e-13 }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  const double m = s->total_mass();
+  const Points p0 = s->control_positions();
+  // Row sums of Mt weight the control points into the centre of mass.
+  const Points ones = Points::Ones(p0.rows(), 3);
+  auto centre = [&](const Points& p) -> Eigen::Vector3d {
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    const Points w = s->ApplyMass(ones);
+    for (int64_t i = 0; i < p.rows(); ++i) c += w(i, 0) * p.row(i).transpose();
+    return c / m;
+  };
+  const Eigen::Vector3d c0 = centre(p0);
+  const int n = 200;
+  for (int i = 0; i < n; ++i) ASSERT_OK(s->Step());
+  // Central differences from rest: x_n = x_0 + a h^2 n (n + 1) / 2.
+  const double h = s->time_step();
+  const Eigen::Vector3d a = Eigen::Vector3d(40, 0, -10) / m;
+  const Eigen::Vector3d want = a * h * h * n * (n + 1) / 2.0;
+  const Eigen::Vector3d got = centre(s->control_positions()) - c0;
+  EXPECT_NEAR((got - want).norm(), 0.0, 1e-8 * want.norm())
+      << "centre of mass moved " << got.transpose() << ", F/m predicts " << want.transpose();
+}
+
+TEST(SolidTest, SpinningFreeSolidKeepsItsShape) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e6 density: 1000 } }
+    initial { angular_velocity { x: 0 y: 0 z: 2 } }
+    solver { time_step: 1e-3 }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  const Points p0 = s->control_positions();
+  for (int i = 0; i < 750; ++i) ASSERT_OK(s->Step());  // 1.5 rad
+  const Points& p = s->control_positions();
+  double worst = 0;
+  for (int64_t i = 0; i < p.rows(); ++i) {
+    for (int64_t j = i + 1; j < p.rows(); ++j) {
+      const double d0 = (p0.row(i) - p0.row(j)).norm();
+      worst = std::max(worst, std::abs((p.row(i) - p.row(j)).norm() - d0) / d0);
+    }
+  }
+  // Centrifugal strain rho w^2 L^2 / E is about 0.4 %; allow for vibration.
+  EXPECT_LT(worst, 0.02) << "largest relative change of a control-point distance";
+  // And it did rotate: the first point moved by about 1.5 rad about z.
+  const Eigen::Vector3d c = p0.colwise().mean().transpose();
+  const Eigen::Vector3d r0 = p0.row(0).transpose() - c;
+  const Eigen::Vector3d r1 = p.row(0).transpose() - p.colwise().mean().transpose();
+  const double angle = std::atan2(r0.head<2>().x() * r1.head<2>().y() - r0.head<2>().y() * r1.head<2>().x(),
+                                  r0.head<2>().dot(r1.head<2>()));
+  EXPECT_NEAR(angle, 1.5, 0.05);
+}
+
+TEST(SolidTest, ConjugateGradientIterationsOnBlock3) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 2 }
+    materials { base { young_modulus: 1e5 density: 1000 } }
+    loads { gravity { z: -9.81 } point_forces { position { x: 1.5 y: 1.5 z: 2.9 } force { x: 5 } } }
+    solver { time_step: 1e-3 }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  int worst = 0, total = 0;
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_OK(s->Step());
+    worst = std::max(worst, s->last_step().cg_max_iterations);
+    total += s->last_step().cg_iterations;
+    EXPECT_LE(s->last_step().cg_relative_residual, 1e-4);
+  }
+  // The paper reports a few iterations per solve at 1e-4; record ours.
+  RecordProperty("cg_max_iterations_per_solve", worst);
+  RecordProperty("cg_mean_iterations_per_step", total / 100);
+  std::printf("block3: CG at 1e-4 takes at most %d iterations per solve, %.1f per step (3 solves)\n",
+              worst, total / 100.0);
+  EXPECT_LE(worst, 10);
+}
+
+TEST(SolidTest, SceneWithoutDampingLoadsOrConstraintsBuildsNoneOfThem) {
+  auto s = Make(kBlock);
+  ASSERT_NE(s, nullptr);
+  const BuildReport& r = s->build_report();
+  EXPECT_FALSE(r.damping_matrix);
+  EXPECT_EQ(r.pyramid_groups, 0);
+  EXPECT_EQ(r.fixed_control_points, 0);
+  EXPECT_EQ(r.penalty_springs, 0);
+  EXPECT_EQ(r.point_forces, 0);
+  ASSERT_OK(s->Step());
+  EXPECT_EQ(s->last_phases().loads, -1) << "no load phase";
+  EXPECT_EQ(s->last_phases().damping, -1) << "no damping phase";
+  EXPECT_GE(s->last_phases().stiffness, 0);
+}
+
+}  // namespace
+}  // namespace dynsolid::solid

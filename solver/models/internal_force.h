@@ -22,6 +22,14 @@ class InternalForceModel {
   virtual void ResetFrames() = 0;
 
   virtual std::string_view name() const = 0;
+
+  // Wall time of the last Forces call's parts, milliseconds: the
+  // deformation measure (-1 when the model has none) and the element loop.
+  struct Timing {
+    double measure_ms = -1;
+    double elements_ms = 0;
+  };
+  virtual Timing last_timing() const = 0;
 };
 
 }  // namespace dynsolid::models

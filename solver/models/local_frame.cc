@@ -1,5 +1,7 @@
 #include "solver/models/local_frame.h"
 
+#include <chrono>
+
 
 #include "solver/models/rotation.h"
 
@@ -132,10 +134,12 @@ void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Work
 
 double LocalFrameModel::Forces(const Points& d, Points& g) {
   // The measure in parts per thread, summed in chunk order.
+  const auto t0 = std::chrono::steady_clock::now();
   const int chunks = static_cast<int>(work_.size());
   pool_.Run([&](int k) { measure_.ApplyPart(d, k, chunks, work_[k].delta); });
   delta_ = work_[0].delta;
   for (int k = 1; k < chunks; ++k) delta_ += work_[k].delta;
+  const auto t1 = std::chrono::steady_clock::now();
   // Batches in contiguous chunks per thread, each with its own force
   // buffer, summed in chunk order: the same bits whatever the timing.
   pool_.Run([&](int k) { RunBatches(chunk_start_[k], chunk_start_[k + 1], d, work_[k]); });
@@ -145,6 +149,9 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
     g += work_[k].g;
     energy += work_[k].energy;
   }
+  const auto t2 = std::chrono::steady_clock::now();
+  timing_.measure_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
   return energy;
 }
 

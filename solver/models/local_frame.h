@@ -44,6 +44,7 @@ class LocalFrameModel final : public InternalForceModel {
   double Forces(const Points& d, Points& g) override;
   void ResetFrames() override;
   std::string_view name() const override { return "local_frame"; }
+  Timing last_timing() const override { return timing_; }
 
   // The three matrices of group `group` of kind block `kind` (tests, reports).
   const Eigen::MatrixXd& K(int kind, int32_t group, int axis) const {
@@ -79,6 +80,7 @@ class LocalFrameModel final : public InternalForceModel {
   std::vector<size_t> chunk_start_;
   std::vector<Workspace> work_;
   Points delta_;
+  Timing timing_;
 };
 
 }  // namespace dynsolid::models

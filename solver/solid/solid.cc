@@ -322,7 +322,9 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   last_strain_energy = model->Forces(nodes, g);
-  phases.stiffness = MsSince(t0);
+  const models::InternalForceModel::Timing timing = model->last_timing();
+  phases.measure = timing.measure_ms;
+  phases.stiffness = timing.elements_ms;
   t0 = Clock::now();
   out.noalias() = d->node_matrix.transpose() * g;
   out = -out;
@@ -547,6 +549,7 @@ absl::Status Solid::Step() {
   PhaseTimes sub;
   PhaseTimes sum;
   sum.nodes = sum.stiffness = sum.project = 0;
+  sum.measure = 0;
   im.backup_p = p_;
   im.backup_prev = p_prev_;
   if (im.has_const_force || !im.spring_point.empty()) sum.loads = 0;
@@ -554,6 +557,7 @@ absl::Status Solid::Step() {
     im.ControlForces(p_, im.f, sub);
     sum.nodes += sub.nodes;
     sum.stiffness += sub.stiffness;
+    sum.measure += sub.measure;
     sum.project += sub.project;
     if (sum.loads >= 0) sum.loads += sub.loads;
     const auto t0 = Clock::now();
@@ -576,7 +580,6 @@ absl::Status Solid::Step() {
     ++stats.substeps;
   }
   sum.solve = solve_ms;
-  if (im.has_damping) sum.damping = 0;  // folded into the solve's matrices
   phases_ = sum;
   last_step_ = stats;
   time_ += h_;

@@ -51,7 +51,7 @@ struct PhaseTimes {
   double stiffness = -1;   // element forces R_e K_i dhat
   double project = -1;     // A^T (f - g)
   double loads = -1;       // external forces and penalty springs
-  double damping = -1;     // Dt terms
+  double damping = -1;     // Dt terms (folded into the solve; kept for models that split them)
   double solve = -1;       // conjugate gradient
 };
 

@@ -1,0 +1,94 @@
+// The local-frame model's element matrices and deformation measure.
+#include "solver/models/local_frame.h"
+
+#include <Eigen/Eigenvalues>
+#include <gtest/gtest.h>
+
+#include "solver/scene/build.h"
+#include "solver/scene/scene_loader.h"
+#include "tests/testing/status_matchers.h"
+
+namespace dynsolid::models {
+namespace {
+
+struct Fixture {
+  scene::Discretization d;
+  Points rest;
+  ElementLayout layout;
+  WorkerPool pool{1};
+  std::unique_ptr<LocalFrameModel> model;
+};
+
+std::unique_ptr<Fixture> Build(const std::string& name, int levels) {
+  auto f = std::make_unique<Fixture>();
+  auto scene = scene::BuiltinScene(name);
+  EXPECT_OK(scene);
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), levels);
+  EXPECT_OK(d);
+  f->d = *std::move(d);
+  f->rest = f->d.node_matrix * f->d.control().positions();
+  // A non-uniform material: softer where x > 0.5, so groups differ by material too.
+  MaterialSampler sampler = [](const Eigen::Vector3d& x, int32_t) {
+    return MaterialPoint{x.x() > 0.5 ? 2e5 : 1e5, 0.3, 1000, 0};
+  };
+  f->layout = BuildElementLayout(f->d.elements, f->rest, f->d.hierarchy.control_cell, sampler);
+  f->model = std::make_unique<LocalFrameModel>(
+      f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest),
+      f->d.elements.num_nodes(), f->pool);
+  return f;
+}
+
+TEST(LocalFrameTest, ElementMatricesAreSymmetricWithConstantsAsTheirNullSpace) {
+  auto f = Build("mixed", 2);  // cubic, linear and pyramid elements
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& block = f->layout.blocks[kind];
+    ASSERT_GT(block.groups.size(), 0u) << "kind " << kind;
+    for (size_t g = 0; g < std::min<size_t>(block.groups.size(), 6); ++g) {
+      for (int axis = 0; axis < 3; ++axis) {
+        const Eigen::MatrixXd& k = f->model->K(kind, static_cast<int32_t>(g), axis);
+        const double scale = k.cwiseAbs().maxCoeff();
+        EXPECT_LE((k - k.transpose()).cwiseAbs().maxCoeff(), 1e-12 * scale)
+            << "kind " << kind << " group " << g << " axis " << axis << " symmetric";
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(k);
+        const Eigen::VectorXd& l = eig.eigenvalues();
+        // One zero mode at rounding level; the next is orders of magnitude
+        // above it (tricubic B-spline elements are ill-conditioned on their
+        // own: about 1e-9 relative for the smallest non-zero mode).
+        EXPECT_LE(std::abs(l[0]), 1e-13 * l[l.size() - 1]) << "one zero mode";
+        EXPECT_GT(l[1], 1e-11 * l[l.size() - 1]) << "only one zero mode";
+        const Eigen::VectorXd ones = Eigen::VectorXd::Ones(k.rows());
+        EXPECT_LE((k * ones).norm(), 1e-10 * scale * k.rows()) << "constants are the null space";
+      }
+    }
+  }
+}
+
+TEST(LocalFrameTest, GroupsShareMatricesOnRegularGrids) {
+  auto f = Build("block4", 2);
+  const ElementBlock& cubic = f->layout.blocks[0];
+  EXPECT_LT(cubic.groups.size(), static_cast<size_t>(cubic.size()) / 4)
+      << cubic.size() << " cubic elements share " << cubic.groups.size() << " matrices";
+}
+
+TEST(LocalFrameTest, MeasureIsZeroForRigidMotionAndCatchesStretchAndShear) {
+  auto f = Build("block3", 1);
+  DeformationMeasure m(f->d.fine(), f->d.elements, f->rest);
+  Points delta;
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, -1, 0.2).normalized()).toRotationMatrix();
+  const Points moved = (f->rest * r.transpose()).rowwise() + Eigen::RowVector3d(1, 2, 3);
+  m.Apply(moved, delta);
+  EXPECT_LT(delta.cwiseAbs().maxCoeff(), 1e-12);
+  // Uniform stretch along x by 1 %: edge terms only; the ends move outward.
+  Points stretched = f->rest;
+  stretched.col(0) *= 1.01;
+  m.Apply(stretched, delta);
+  EXPECT_GT(delta.col(0).cwiseAbs().maxCoeff(), 1e-4);
+  // Simple shear: corner angles change.
+  Points sheared = f->rest;
+  sheared.col(0) += 0.01 * f->rest.col(1);
+  m.Apply(sheared, delta);
+  EXPECT_GT(delta.cwiseAbs().maxCoeff(), 1e-4);
+}
+
+}  // namespace
+}  // namespace dynsolid::models

@@ -6,14 +6,21 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <thread>
 #include <vector>
 
 namespace dynsolid {
 
-// Number of chunks to split build work into: the hardware's threads, at
-// most 8, at least 1.
+// Number of threads for build and step work: the hardware's threads, at
+// most 8, at least 1; the environment variable DYNSOLID_THREADS (1-8)
+// overrides it (benchmarks, and the tests that check results do not depend
+// on it).
 inline int BuildThreads() {
+  if (const char* env = std::getenv("DYNSOLID_THREADS")) {
+    const int n = std::atoi(env);
+    if (n >= 1 && n <= 8) return n;
+  }
   const unsigned n = std::thread::hardware_concurrency();
   return static_cast<int>(std::clamp(n, 1u, 8u));
 }

@@ -8,7 +8,7 @@
 namespace dynsolid::models {
 namespace {
 
-constexpr int32_t kBatch = 256;
+constexpr int32_t kBatch = 64;
 
 }  // namespace
 
@@ -52,7 +52,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       }
     }
   }
-  work_.resize(pool.size());
+  work_.resize(kForceParts);
   // Balance chunks by cost: an element of n nodes costs about n^2.
   double total = 0;
   for (const Batch& b : batches_) {
@@ -84,6 +84,9 @@ void LocalFrameModel::ResetFrames() {
 }
 
 void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Workspace& w) {
+  using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::ColMajor, fem::kCubicNodes, 3>;
+  NodeBlock pos, del, loc;
+  std::array<Eigen::Matrix3d, kBatch> rot;
   w.g.setZero();
   w.energy = 0;
   for (size_t bi = begin; bi < end; ++bi) {
@@ -91,26 +94,28 @@ void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Work
     const ElementBlock& block = layout_.blocks[batch.kind];
     const ElementGroup& grp = block.groups[batch.group];
     const int n = block.nodes;
+    pos.resize(n, 3);
+    del.resize(n, 3);
     auto dx = w.dx.topLeftCorner(n, batch.count);
     auto dy = w.dy.topLeftCorner(n, batch.count);
     auto dz = w.dz.topLeftCorner(n, batch.count);
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
-      // Deformation gradient at the centre, then its rotation.
-      Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
       for (int i = 0; i < n; ++i) {
-        f += d.row(ids[i]).transpose() * grp.centre_gradient.row(i);
+        pos.row(i) = d.row(ids[i]);
+        del.row(i) = delta_.row(ids[i]);
       }
+      // Deformation gradient at the centre, then its rotation R_e.
+      const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
       Eigen::Quaterniond& q = frames_[batch.kind][e];
       ExtractRotation(f, q);
-      const Eigen::Matrix3d r = q.toRotationMatrix();
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector3d local = r.transpose() * delta_.row(ids[i]).transpose();
-        dx(i, b) = local.x();
-        dy(i, b) = local.y();
-        dz(i, b) = local.z();
-      }
+      rot[b] = q.toRotationMatrix();
+      // dhat = R_e^T delta, node by node: rows of delta times R_e.
+      loc.noalias() = del.lazyProduct(rot[b]);
+      dx.col(b) = loc.col(0);
+      dy.col(b) = loc.col(1);
+      dz.col(b) = loc.col(2);
     }
     const auto& k = k_[batch.kind][batch.group];
     auto yx = w.yx.topLeftCorner(n, batch.count);
@@ -119,36 +124,57 @@ void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Work
     yx.noalias() = k[0] * dx;
     yy.noalias() = k[1] * dy;
     yz.noalias() = k[2] * dz;
-    w.energy += 0.5 * (dx.cwiseProduct(yx).sum() + dy.cwiseProduct(yy).sum() +
-                       dz.cwiseProduct(yz).sum());
+    for (int32_t b = 0; b < batch.count; ++b) {
+      w.energy += 0.5 * (dx.col(b).dot(yx.col(b)) + dy.col(b).dot(yy.col(b)) +
+                         dz.col(b).dot(yz.col(b)));
+    }
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
-      const Eigen::Matrix3d r = frames_[batch.kind][e].toRotationMatrix();
-      for (int i = 0; i < n; ++i) {
-        w.g.row(ids[i]) += (r * Eigen::Vector3d(yx(i, b), yy(i, b), yz(i, b))).transpose();
-      }
+      // g += R_e (K dhat), node by node: rows of (K dhat) times R_e^T.
+      del.col(0) = yx.col(b);
+      del.col(1) = yy.col(b);
+      del.col(2) = yz.col(b);
+      loc.noalias() = del.lazyProduct(rot[b].transpose());
+      for (int i = 0; i < n; ++i) w.g.row(ids[i]) += loc.row(i);
     }
   }
 }
 
 double LocalFrameModel::Forces(const Points& d, Points& g) {
-  // The measure in parts per thread, summed in chunk order.
+  // The measure in fixed parts (threads take parts t, t + T, ...), summed
+  // in part order.
   const auto t0 = std::chrono::steady_clock::now();
-  const int chunks = static_cast<int>(work_.size());
-  pool_.Run([&](int k) { measure_.ApplyPart(d, k, chunks, work_[k].delta); });
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) measure_.ApplyPart(d, k, parts, work_[k].delta);
+  });
   delta_ = work_[0].delta;
-  for (int k = 1; k < chunks; ++k) delta_ += work_[k].delta;
+  for (int k = 1; k < parts; ++k) delta_ += work_[k].delta;
   const auto t1 = std::chrono::steady_clock::now();
   // Batches in contiguous chunks per thread, each with its own force
   // buffer, summed in chunk order: the same bits whatever the timing.
-  pool_.Run([&](int k) { RunBatches(chunk_start_[k], chunk_start_[k + 1], d, work_[k]); });
-  g = work_[0].g;
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) {
+      RunBatches(chunk_start_[k], chunk_start_[k + 1], d, work_[k]);
+    }
+  });
+  // y = dE/d delta = sum_e R_e K dhat; the force is its pull-back through
+  // the measure: g = (d delta / d d)^T y (the gradient of the energy).
+  y_ = work_[0].g;
   double energy = work_[0].energy;
-  for (size_t k = 1; k < chunks; ++k) {
-    g += work_[k].g;
+  for (int k = 1; k < parts; ++k) {
+    y_ += work_[k].g;
     energy += work_[k].energy;
   }
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) {
+      measure_.ApplyTransposePart(d, y_, k, parts, work_[k].delta);
+    }
+  });
+  g = work_[0].delta;
+  for (int k = 1; k < parts; ++k) g += work_[k].delta;
   const auto t2 = std::chrono::steady_clock::now();
   timing_.measure_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
   timing_.elements_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();

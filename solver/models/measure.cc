@@ -91,3 +91,71 @@ void DeformationMeasure::ApplyPart(const Points& d, int k, int parts, Points& de
 }
 
 }  // namespace dynsolid::models
+
+namespace dynsolid::models {
+
+// Edge (i, j): c = 1/2 (1 - l0 / l) r with r = d_j - d_i adds to delta_j and
+// subtracts from delta_i, so d/dr of (y_j - y_i) . c is
+// J (y_j - y_i) with J = 1/2 [(1 - l0/l) I + (l0 / l^3) r r^T].
+//
+// Corner (n; a, b): with ra = a - n, rb = b - n, c = cos(theta),
+// s = sin(theta), phi = (theta - theta0)/2, C = cos(phi), S = sin(phi), the
+// rotations give delta_a = alpha ra - beta la b^, delta_b = alpha rb - beta lb a^
+// with alpha = 1 - C + c S / s and beta = S / s. For F = ya.delta_a + yb.delta_b
+// = alpha P - beta Q (P = ya.ra + yb.rb, Q = la ya.b^ + lb yb.a^) and
+// dtheta/dra = -ta / la, dtheta/drb = -tb / lb (ta, tb the in-plane unit
+// vectors perpendicular to a^ and b^ towards each other):
+//   dF/dra = (P alpha' - Q beta') (-ta / la) + alpha ya
+//            - beta [(ya.b^) a^ + (lb / la)(yb - (yb.a^) a^)],
+// and symmetrically for rb; n gets minus both.
+void DeformationMeasure::ApplyTransposePart(const Points& d, const Points& y, int k, int parts,
+                                            Points& out) const {
+  out.setZero(d.rows(), 3);
+  const size_t ne = edges_.size(), nk = corners_.size();
+  for (size_t i = ne * k / parts; i < ne * (k + 1) / parts; ++i) {
+    const Edge& e = edges_[i];
+    const Eigen::Vector3d r = d.row(e.j) - d.row(e.i);
+    const double l = r.norm();
+    if (l <= 0) continue;
+    const Eigen::Vector3d dy = (y.row(e.j) - y.row(e.i)).transpose();
+    const Eigen::Vector3d w =
+        0.5 * ((1.0 - e.rest_length / l) * dy + (e.rest_length / (l * l * l)) * r.dot(dy) * r);
+    out.row(e.j) += w.transpose();
+    out.row(e.i) -= w.transpose();
+  }
+  for (size_t i = nk * k / parts; i < nk * (k + 1) / parts; ++i) {
+    const Corner& cn = corners_[i];
+    const Eigen::Vector3d ra = d.row(cn.a) - d.row(cn.n);
+    const Eigen::Vector3d rb = d.row(cn.b) - d.row(cn.n);
+    const double la = ra.norm(), lb = rb.norm();
+    if (la <= 0 || lb <= 0) continue;
+    const Eigen::Vector3d ah = ra / la, bh = rb / lb;
+    const double c = ah.dot(bh);
+    const double s = ah.cross(bh).norm();
+    if (s <= 1e-300) continue;
+    const double cos_d = c * cn.cos0 + s * cn.sin0;
+    const double sin_d = s * cn.cos0 - c * cn.sin0;
+    const double C = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
+    if (C < 1e-12) continue;
+    const double S = sin_d / (2.0 * C);
+    const double alpha = 1.0 - C + c * S / s;
+    const double beta = S / s;
+    const double dalpha = -0.5 * S + c * C / (2.0 * s) - c * c * S / (s * s);
+    const double dbeta = C / (2.0 * s) - S * c / (s * s);
+    const Eigen::Vector3d ya = y.row(cn.a).transpose(), yb = y.row(cn.b).transpose();
+    const double p = ya.dot(ra) + yb.dot(rb);
+    const double yab = ya.dot(bh), yba = yb.dot(ah);
+    const double q = la * yab + lb * yba;
+    const double dtheta_coef = p * dalpha - q * dbeta;
+    const Eigen::Vector3d ta = (bh - c * ah) / s, tb = (ah - c * bh) / s;
+    const Eigen::Vector3d ga = dtheta_coef * (-ta / la) + alpha * ya -
+                               beta * (yab * ah + (lb / la) * (yb - yba * ah));
+    const Eigen::Vector3d gb = dtheta_coef * (-tb / lb) + alpha * yb -
+                               beta * (yba * bh + (la / lb) * (ya - yab * bh));
+    out.row(cn.a) += ga.transpose();
+    out.row(cn.b) += gb.transpose();
+    out.row(cn.n) -= (ga + gb).transpose();
+  }
+}
+
+}  // namespace dynsolid::models

@@ -33,6 +33,11 @@ class DeformationMeasure {
   // parts' deltas in order gives Apply's result (to rounding of the sum).
   void ApplyPart(const Points& d, int k, int parts, Points& delta) const;
 
+  // The transpose of the measure's Jacobian applied to y (#nodes by 3):
+  // out = (d delta / d d)^T y, so that for an energy E(delta), the force is
+  // dE/dd = ApplyTranspose(dE/d delta). Part k of `parts` as in ApplyPart.
+  void ApplyTransposePart(const Points& d, const Points& y, int k, int parts, Points& out) const;
+
   int64_t num_edges() const { return static_cast<int64_t>(edges_.size()); }
   int64_t num_corners() const { return static_cast<int64_t>(corners_.size()); }
 

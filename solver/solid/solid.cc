@@ -597,6 +597,16 @@ Points Solid::InternalControlForces(const Points& p) {
   return d_.node_matrix.transpose() * g;
 }
 
+double Solid::StrainEnergy(const Points& p) {
+  Impl& im = *impl_;
+  const Points d = d_.node_matrix * p;
+  Points g(d.rows(), 3);
+  im.model->ResetFrames();
+  const double e = im.model->Forces(d, g);
+  im.model->ResetFrames();
+  return e;
+}
+
 Points Solid::ApplyMass(const Points& x) const { return impl_->mt * x; }
 
 Points Solid::NodePositions() const { return d_.node_matrix * p_; }

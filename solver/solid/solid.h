@@ -95,6 +95,10 @@ class Solid {
   // finite-difference checks). Does not change the solid's state.
   Points InternalControlForces(const Points& p);
 
+  // The model's strain energy (J) at control positions p (frames found
+  // afresh). Does not change the solid's state.
+  double StrainEnergy(const Points& p);
+
   // Mt x (#control by 3): the control-space mass matrix applied to x.
   Points ApplyMass(const Points& x) const;
 

@@ -1,0 +1,109 @@
+// Corotational linear elasticity (MODEL.md 4b; Mueller and Gross 2004):
+// the standard comparison for the paper's local-frame model.
+//
+// Per element group (shared rest shape up to translation and material) the
+// full element stiffness
+//   K = integral B^T C B dV          (3n x 3n, N/m),
+// B the 6 x 3n strain-displacement matrix of the physical rest gradients
+// G = dN J0^-1 at each quadrature point (strains xx, yy, zz and the
+// engineering shears xy, yz, zx), C the isotropic matrix of the point's
+// Lame parameters, dV the rest volume. Ordering is node-major:
+// [x0 y0 z0 x1 y1 z1 ...], so an n x 3 row-major block of node vectors is
+// one column of the product. K is symmetric positive semi-definite with
+// the six rigid motions of the rest nodes as its null space.
+//
+// Per step, for each element e with nodes d_i (current) and x0_i (its own
+// rest positions, not the group's: groups share shape only up to
+// translation) and centroids dbar, x0bar:
+//   F   = sum_i d_i (x) G_centre_i          (deformation gradient at centre)
+//   R_e = rotation of F (warm started, rotation.h)
+//   u_i = R_e^T (d_i - dbar) - (x0_i - x0bar)
+//   g_i += R_e (K u)_i,        E += 1/2 u . K u.
+// Subtracting the centroids changes nothing in exact arithmetic (K kills
+// translations) and keeps large coordinates out of the product. Rigid motion
+// gives u = 0, hence no force. The force is the gradient of E with the
+// frames held fixed (the standard corotational force, no dR/dd term).
+//
+// Elements of one group are processed in batches as dense products: the
+// shared K times a 3n x batch block of local displacements.
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "solver/common/worker_pool.h"
+#include "solver/models/element_blocks.h"
+#include "solver/models/internal_force.h"
+#include "solver/models/local_frame.h"  // kForceParts
+
+namespace dynsolid::models {
+
+class CorotationalModel final : public InternalForceModel {
+ public:
+  // `layout` and `pool` must outlive the model; `rest` (#nodes by 3, metres:
+  // the FEM nodes at rest, the positions `layout` was built from) is copied.
+  CorotationalModel(const ElementLayout& layout, const Points& rest, WorkerPool& pool);
+  CorotationalModel(const CorotationalModel&) = delete;
+  CorotationalModel& operator=(const CorotationalModel&) = delete;
+
+  double Forces(const Points& d, Points& g) override;
+  void ResetFrames() override;
+  std::string_view name() const override { return "corotational"; }
+  Timing last_timing() const override { return timing_; }
+
+  // out (#nodes by 3, N) = sum_e R_e K R_e^T P v_e for v (#nodes by 3, m):
+  // the linearization of Forces with the frames of the last Forces call held
+  // fixed (P removes the element's mean, which K ignores anyway). Symmetric
+  // positive semi-definite in v. Identity frames before the first Forces call
+  // or after ResetFrames. For matrix-free CG in backward Euler.
+  // Uses the model's scratch buffers: not concurrent with Forces or itself.
+  void ApplyLinearized(const Points& v, Points& out) const;
+
+  // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
+  // 2 pyramid): 3n x 3n, node-major, N/m.
+  const Eigen::MatrixXd& K(int kind, int32_t group) const { return k_[kind][group]; }
+  // Bytes of the shared group matrices; bytes per element of per-element
+  // state (node ids, group id, cell id, warm-started frame). The copy of the
+  // rest positions (24 bytes per node) is in neither.
+  int64_t shared_matrix_bytes() const;
+  int64_t per_element_bytes() const;
+
+ private:
+  struct Batch {
+    int kind;
+    int32_t group;
+    int32_t first, count;  // range of block.by_group
+  };
+  struct Workspace {
+    Points g;
+    Eigen::MatrixXd u, y;  // 3n x batch local displacements and forces
+    double energy = 0;
+  };
+  using Frames = std::array<std::vector<Eigen::Quaterniond>, 3>;
+  // Runs batches [begin, end) into w. With `update` (Forces): x = d, the
+  // frames are extracted into *update and u = R^T (d - dbar) - (x0 - x0bar).
+  // Without (ApplyLinearized): x = v, the frames are read from frames_ and
+  // u = R^T (v - vbar).
+  void RunBatches(size_t begin, size_t end, const Points& x, Frames* update, Workspace& w) const;
+
+  const ElementLayout& layout_;
+  WorkerPool& pool_;
+  Points rest_;
+  int32_t num_nodes_;
+  // k_[kind][group]: 3n x 3n.
+  std::array<std::vector<Eigen::MatrixXd>, 3> k_;
+  Frames frames_;  // per element, by kind; written by Forces only
+  std::vector<Batch> batches_;
+  // Part k runs batches_[chunk_start_[k] .. chunk_start_[k+1]), balanced by
+  // estimated cost ((3n)^2 per element).
+  std::vector<size_t> chunk_start_;
+  // Per-part scratch, allocated at construction (mutable for the const
+  // ApplyLinearized).
+  mutable std::vector<Workspace> work_;
+  Timing timing_;
+};
+
+}  // namespace dynsolid::models

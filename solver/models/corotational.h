@@ -60,14 +60,16 @@ class CorotationalModel final : public InternalForceModel {
   // positive semi-definite in v. Identity frames before the first Forces call
   // or after ResetFrames. For matrix-free CG in backward Euler.
   // Uses the model's scratch buffers: not concurrent with Forces or itself.
+  // Like Forces, allocates nothing once `out` has #nodes rows.
   void ApplyLinearized(const Points& v, Points& out) const;
 
   // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
   // 2 pyramid): 3n x 3n, node-major, N/m.
   const Eigen::MatrixXd& K(int kind, int32_t group) const { return k_[kind][group]; }
   // Bytes of the shared group matrices; bytes per element of per-element
-  // state (node ids, group id, cell id, warm-started frame). The copy of the
-  // rest positions (24 bytes per node) is in neither.
+  // state (node ids, group id, place in by_group, warm-started frame), as
+  // LocalFrameModel counts them. The copy of the rest positions (24 bytes
+  // per node) is in neither.
   int64_t shared_matrix_bytes() const;
   int64_t per_element_bytes() const;
 

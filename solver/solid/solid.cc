@@ -14,6 +14,7 @@
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
 #include "solver/integrators/central_difference.h"
+#include "solver/models/corotational.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/local_frame.h"
 #include "solver/models/measure.h"
@@ -100,6 +101,28 @@ struct Solid::Impl {
     fem::Shape(static_cast<fem::ElementKind>(m.kind), m.uvw[0], m.uvw[1], m.uvw[2], n.data(),
                dn.data());
   }
+
+  // Energy bookkeeping for the stability guard: H = kinetic + strain +
+  // spring energy - work of the constant external forces never grows for a
+  // stable run (damping only lowers it).
+  struct Ledger {
+    double work = 0;       // J, cumulative external work
+    double h_min = 0;      // lowest H so far
+    double peak = 0;       // highest kinetic + strain + spring energy so far
+    bool started = false;
+  };
+  Ledger ledger;
+  Points velocity, mass_velocity, f_next;
+  bool forces_valid = false;
+
+  void SetSubsteps(int n, double h) {
+    substeps = n;
+    h_sub = h / n;
+    integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+  }
+  // Runs the sub-steps of one scene step from (p, p_prev); error when the
+  // state goes non-finite or H grows (p, p_prev are then garbage).
+  absl::Status Advance(Points& p, Points& p_prev, double h, StepStats& stats, PhaseTimes& phases);
 
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
@@ -341,6 +364,72 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   }
 }
 
+absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, double h, StepStats& stats,
+                                   PhaseTimes& out) {
+  PhaseTimes sub, sum;
+  sum.nodes = sum.stiffness = sum.project = sum.measure = sum.solve = 0;
+  if (has_const_force || !spring_point.empty()) sum.loads = 0;
+  auto add = [&](const PhaseTimes& t) {
+    sum.nodes += t.nodes;
+    sum.stiffness += t.stiffness;
+    sum.measure += std::max(0.0, t.measure);
+    sum.project += t.project;
+    if (sum.loads >= 0) sum.loads += t.loads;
+  };
+  // Forces at p (kept from the end of the last step unless a rollback or
+  // the first step invalidated them), so that every state's strain energy
+  // is checked in the step that produced it.
+  if (!forces_valid) {
+    ControlForces(p, f, sub);
+    add(sub);
+    forces_valid = true;
+  }
+  for (int k = 0; k < substeps; ++k) {
+    const auto t0 = Clock::now();
+    const integrators::CgStats cg =
+        integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(), settings.cg_max_iterations());
+    sum.solve += MsSince(t0);
+    stats.cg_iterations += cg.iterations;
+    stats.cg_max_iterations = std::max(stats.cg_max_iterations, cg.max_iterations);
+    stats.cg_relative_residual = std::max(stats.cg_relative_residual, cg.relative_residual);
+    forces_valid = false;
+    if (!p_next.allFinite()) {
+      return absl::InternalError(absl::StrCat("non-finite control points at sub-step ", k));
+    }
+    // Forces (and strain energy) at the new state, reused by the next sub-step.
+    ControlForces(p_next, f_next, sub);
+    add(sub);
+    // Energy ledger: H = kinetic + strain + springs - external work.
+    velocity = (p_next - p) / h_sub;
+    mass_velocity.noalias() = mt * velocity;
+    const double kinetic = 0.5 * (velocity.array() * mass_velocity.array()).sum();
+    double springs = 0;
+    for (size_t s = 0; s < spring_point.size(); ++s) {
+      springs += 0.5 * spring_k[s] *
+                 (p_next.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
+    }
+    if (has_const_force) ledger.work += (f_const.array() * (p_next - p).array()).sum();
+    const double mech = kinetic + last_strain_energy + springs;
+    const double hamiltonian = mech - ledger.work;
+    ledger.peak = std::max(ledger.peak, mech);
+    if (!std::isfinite(hamiltonian) ||
+        hamiltonian - ledger.h_min > 0.5 * ledger.peak + 1e-12 * (1.0 + ledger.peak)) {
+      return absl::InternalError(absl::StrCat(
+          "energy grew without external work at sub-step ", k, " (H rose by ",
+          hamiltonian - ledger.h_min, " J over a peak of ", ledger.peak, " J)"));
+    }
+    ledger.h_min = std::min(ledger.h_min, hamiltonian);
+    p_prev.swap(p);
+    p.swap(p_next);
+    f.swap(f_next);
+    forces_valid = true;
+    ++stats.substeps;
+  }
+  out = sum;
+  (void)h;
+  return absl::OkStatus();
+}
+
 Solid::Solid() = default;
 Solid::~Solid() = default;
 
@@ -353,10 +442,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   Impl& im = *s->impl_;
   im.d = &s->d_;
   im.settings = scene::ResolvedSolverSettings(scene);
-  if (im.settings.model() == SolverSettings::COROTATIONAL) {
-    return absl::UnimplementedError(
-        "solver.model: corotational is not available in this build yet (local_frame only)");
-  }
   if (im.settings.integrator() == SolverSettings::BACKWARD_EULER ||
       im.settings.integrator() == SolverSettings::AUTO) {
     return absl::UnimplementedError(
@@ -403,14 +488,21 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     for (const auto& m : array) im.has_damping |= m.damping > 0;
   }
 
-  // The model.
-  models::DeformationMeasure measure(s->d_.fine(), s->d_.elements, rest);
-  auto model = std::make_unique<models::LocalFrameModel>(im.layout, std::move(measure),
-                                                          s->d_.elements.num_nodes(), *im.pool);
+  // The model the scene asks for.
   BuildReport& rep = s->report_;
-  rep.shared_matrix_bytes = model->shared_matrix_bytes();
-  rep.element_bytes = model->per_element_bytes();
-  im.model = std::move(model);
+  if (im.settings.model() == SolverSettings::COROTATIONAL) {
+    auto model = std::make_unique<models::CorotationalModel>(im.layout, rest, *im.pool);
+    rep.shared_matrix_bytes = model->shared_matrix_bytes();
+    rep.element_bytes = model->per_element_bytes();
+    im.model = std::move(model);
+  } else {
+    models::DeformationMeasure measure(s->d_.fine(), s->d_.elements, rest);
+    auto model = std::make_unique<models::LocalFrameModel>(im.layout, std::move(measure),
+                                                            s->d_.elements.num_nodes(), *im.pool);
+    rep.shared_matrix_bytes = model->shared_matrix_bytes();
+    rep.element_bytes = model->per_element_bytes();
+    im.model = std::move(model);
+  }
   rep.cubic_groups = static_cast<int32_t>(im.layout.blocks[0].groups.size());
   rep.linear_groups = static_cast<int32_t>(im.layout.blocks[1].groups.size());
   rep.pyramid_groups = static_cast<int32_t>(im.layout.blocks[2].groups.size());
@@ -516,8 +608,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
         im.settings.max_substeps(), "; lower the time step or the stiffness"));
   }
   rep.substeps = im.substeps;
-  im.h_sub = s->h_ / im.substeps;
-  im.integrator.Setup(&im.mt, im.has_damping ? &im.dt : nullptr, im.h_sub, im.fixed);
+  im.SetSubsteps(im.substeps, s->h_);
 
   // State: rest positions, initial rigid velocity.
   s->p_ = im.rest_control;
@@ -537,54 +628,57 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   im.p_next.setZero(nc, 3);
   im.backup_p.setZero(nc, 3);
   im.backup_prev.setZero(nc, 3);
+  im.f_next.setZero(nc, 3);
+  im.velocity = (s->p_ - s->p_prev_) / im.h_sub;
+  im.mass_velocity = im.mt * im.velocity;
+  // The ledger starts from the initial kinetic energy (no strain at rest).
+  im.ledger.started = true;
+  im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
+  im.ledger.peak = im.ledger.h_min;
   rep.build_ms = MsSince(t_build);
   return s;
 }
 
 absl::Status Solid::Step() {
   Impl& im = *impl_;
-  PhaseTimes phases;
   StepStats stats;
-  double solve_ms = 0;
-  PhaseTimes sub;
-  PhaseTimes sum;
-  sum.nodes = sum.stiffness = sum.project = 0;
-  sum.measure = 0;
   im.backup_p = p_;
   im.backup_prev = p_prev_;
-  if (im.has_const_force || !im.spring_point.empty()) sum.loads = 0;
-  for (int k = 0; k < im.substeps; ++k) {
-    im.ControlForces(p_, im.f, sub);
-    sum.nodes += sub.nodes;
-    sum.stiffness += sub.stiffness;
-    sum.measure += sub.measure;
-    sum.project += sub.project;
-    if (sum.loads >= 0) sum.loads += sub.loads;
-    const auto t0 = Clock::now();
-    const integrators::CgStats cg = im.integrator.Step(
-        p_, p_prev_, im.f, im.p_next, im.settings.cg_tolerance(), im.settings.cg_max_iterations());
-    solve_ms += MsSince(t0);
-    stats.cg_iterations += cg.iterations;
-    stats.cg_max_iterations = std::max(stats.cg_max_iterations, cg.max_iterations);
-    stats.cg_relative_residual = std::max(stats.cg_relative_residual, cg.relative_residual);
-    if (!im.p_next.allFinite()) {
-      p_ = im.backup_p;
-      p_prev_ = im.backup_prev;
-      im.model->ResetFrames();
+  const Impl::Ledger ledger_at_start = im.ledger;
+  for (int attempt = 0;; ++attempt) {
+    const absl::Status st = im.Advance(p_, p_prev_, h_, stats, phases_);
+    if (st.ok()) break;
+    // Stability guard: back to the step's start, halve the sub-step, retry.
+    p_ = im.backup_p;
+    p_prev_ = im.backup_prev;
+    im.ledger = ledger_at_start;
+    im.model->ResetFrames();
+    im.forces_valid = false;
+    ++stats.rollbacks;
+    ++rollbacks_;
+    if (attempt >= kMaxHalvings || im.substeps * 2 > im.settings.max_substeps()) {
+      last_step_ = stats;
       return absl::FailedPreconditionError(absl::StrCat(
-          "non-finite control points at step ", steps_, " sub-step ", k,
-          "; state restored to the step's start"));
+          "step ", steps_, ": ", st.message(), "; still unstable after ", attempt + 1,
+          " halvings of the sub-step (", im.substeps, " sub-steps of ", im.h_sub,
+          " s); state restored to the step's start"));
     }
-    p_prev_.swap(p_);
-    p_.swap(im.p_next);
-    ++stats.substeps;
+    const double ratio = 0.5;
+    p_prev_ = p_ - ratio * (p_ - p_prev_);  // keep the velocity
+    im.SetSubsteps(im.substeps * 2, h_);
+    report_.substeps = im.substeps;
   }
-  sum.solve = solve_ms;
-  phases_ = sum;
   last_step_ = stats;
   time_ += h_;
   ++steps_;
   return absl::OkStatus();
+}
+
+void Solid::SetSubstepsForTesting(int substeps) {
+  const double old_h = impl_->h_sub;
+  impl_->SetSubsteps(std::max(1, substeps), h_);
+  p_prev_ = p_ - (impl_->h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
+  report_.substeps = impl_->substeps;
 }
 
 Points Solid::InternalControlForces(const Points& p) {

@@ -57,6 +57,7 @@ struct PhaseTimes {
 
 struct StepStats {
   int32_t substeps = 0;
+  int32_t rollbacks = 0;           // stability-guard rollbacks in this step
   int32_t cg_iterations = 0;       // summed over sub-steps and components
   int32_t cg_max_iterations = 0;   // largest single solve
   double cg_relative_residual = 0; // largest at exit
@@ -78,9 +79,20 @@ class Solid {
   static absl::StatusOr<std::unique_ptr<Solid>> Create(const Scene& scene,
                                                        scene::Discretization discretization);
 
-  // Advances one scene time step h. On a non-finite state it restores the
-  // state before the step and returns FailedPrecondition.
+  // Advances one scene time step h. Stability guard: when the state goes
+  // non-finite or the energy H = kinetic + strain + springs - external work
+  // grows (a stable run only loses it), the step is rolled back to its
+  // start, the explicit sub-step halved, and the step retried (reported in
+  // last_step().rollbacks and rollbacks()). After kMaxHalvings failed
+  // halvings the state stays at the step's start and the result is
+  // FailedPrecondition saying why.
   absl::Status Step();
+  static constexpr int kMaxHalvings = 6;
+
+  // Overrides the sub-step count chosen from the stable-step estimate
+  // (tests of the stability guard; stress cases in reports).
+  void SetSubstepsForTesting(int substeps);
+  int64_t rollbacks() const { return rollbacks_; }
 
   double time() const { return time_; }
   int64_t steps() const { return steps_; }
@@ -128,6 +140,7 @@ class Solid {
   double h_ = 1e-3;
   double time_ = 0.0;
   int64_t steps_ = 0;
+  int64_t rollbacks_ = 0;
   double total_mass_ = 0.0, rest_volume_ = 0.0;
   std::vector<std::string> traced_names_;
   BuildReport report_;

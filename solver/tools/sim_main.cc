@@ -87,7 +87,8 @@ int main(int argc, char** argv) {
       return 2;
     }
     dynsolid::solid::Solid& s = **solid;
-    const auto& rep = s.build_report();
+    const dynsolid::solid::BuildReport rep_at_build = s.build_report();
+    const auto& rep = rep_at_build;
     log->info("solid built in {:.0f} ms: omega_max {:.4g} rad/s, stable step {:.4g} s, {} "
               "sub-step(s) of h = {} s",
               rep.build_ms, rep.omega_max, rep.stable_step, rep.substeps, s.time_step());
@@ -130,14 +131,21 @@ int main(int argc, char** argv) {
       }
     }
     run.energies = s.ComputeEnergies();
-    run.build = &rep;
+    run.rollbacks = s.rollbacks();
+    run.final_substeps = s.build_report().substeps;
+    run.build = &rep_at_build;
     run.time_step = s.time_step();
+    run.model = loaded->scene.solver().model() == dynsolid::SolverSettings::COROTATIONAL
+                    ? "corotational"
+                    : "local_frame";
     run.total_mass = s.total_mass();
     run.rest_volume = s.rest_volume();
     control = s.control_positions();
     const double ms = dynsolid::tools::Median(run.step_ms);
-    log->info("{} steps: median {:.3f} ms per step ({:.0f} steps/s), kinetic {:.4g} J, strain {:.4g} J",
-              steps, ms, ms > 0 ? 1000.0 / ms : 0.0, run.energies.kinetic, run.energies.strain);
+    log->info("{} steps: median {:.3f} ms per step ({:.0f} steps/s), kinetic {:.4g} J, strain {:.4g} J, "
+              "{} rollback(s), {} sub-step(s) at the end",
+              steps, ms, ms > 0 ? 1000.0 / ms : 0.0, run.energies.kinetic, run.energies.strain,
+              run.rollbacks, run.final_substeps);
     const absl::Status written =
         dynsolid::tools::WriteOutputs(*d, timings, loaded->origin, run, control, out);
     if (!written.ok()) {

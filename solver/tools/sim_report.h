@@ -15,6 +15,8 @@ struct RunRecord {
   std::vector<solid::PhaseTimes> phases;       // per step
   std::vector<int32_t> cg_iterations;          // per step (summed)
   int32_t cg_max = 0;
+  int64_t rollbacks = 0;                       // stability-guard rollbacks
+  int32_t final_substeps = 1;
   solid::Energies energies;                    // at the end
   const solid::BuildReport* build = nullptr;
   double time_step = 0, total_mass = 0, rest_volume = 0;

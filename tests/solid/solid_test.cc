@@ -216,6 +216,27 @@ TEST(SolidTest, LoadedCantileverStaysBoundedAndResultsDoNotDependOnThreads) {
   EXPECT_EQ(tips[0], tips[2]) << "1 and 3 threads give the same bits";
 }
 
+TEST(SolidTest, StabilityGuardRollsBackAndHalvesTheStep) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 1 nz: 1 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e7 density: 1000 } }
+    constraints { fixed { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 2 z: 2 } } } }
+    loads { point_forces { position { x: 1.9 y: 0.5 z: 0.5 } force { z: -1000 } } }
+    solver { time_step: 0.02 max_substeps: 100000 }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  const int stable = s->build_report().substeps;
+  ASSERT_GT(stable, 2) << "h = 20 ms is far above the stable step";
+  s->SetSubstepsForTesting(1);  // explicit step about " << stable << "x too large
+  for (int i = 0; i < 20; ++i) ASSERT_OK(s->Step());
+  EXPECT_GT(s->rollbacks(), 0) << "the guard caught the blow-up";
+  EXPECT_GE(s->build_report().substeps, stable / 2) << "and halved down to a stable step";
+  EXPECT_TRUE(s->control_positions().allFinite());
+  const Eigen::Vector3d tip = s->control_positions().colwise().maxCoeff();
+  EXPECT_LT(tip.norm(), 10.0) << "no blow-up reached the state";
+}
+
 TEST(SolidTest, SceneWithoutDampingLoadsOrConstraintsBuildsNoneOfThem) {
   auto s = Make(kBlock);
   ASSERT_NE(s, nullptr);

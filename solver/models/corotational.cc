@@ -1,0 +1,239 @@
+#include "solver/models/corotational.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include "solver/models/rotation.h"
+
+namespace dynsolid::models {
+namespace {
+
+// Elements per dense product (columns of the 3n x batch block).
+constexpr int32_t kBatch = 64;
+// K is applied in row panels of at most this many rows: Eigen's GEMM keeps
+// its packing buffers on the stack below 128 KB (a 64 x 192 panel and a
+// 192 x 64 block are 96 KB each) and would allocate on the heap for the
+// whole 192 x 192 cubic matrix.
+constexpr int kPanelRows = 64;
+// Iteration cap of ExtractRotation. Its iteration converges linearly (the
+// error shrinks by about 3 per iteration), and u = R^T d - x0 is first order
+// in a frame error: 8 iterations (local_frame's cap) leave spurious forces of
+// about 1e-9 of a 0.1 % strain under a rotation of 0.01 rad per step, 32 reach
+// the stopping test from rest to a rotation of 1 rad in one call. The
+// iteration stops there, so a slowly turning solid costs few iterations.
+constexpr int kRotationIterations = 32;
+
+// The 6 x 3n strain-displacement matrix of gradients g (n x 3): strains
+// xx, yy, zz, then engineering shears xy, yz, zx.
+void StrainDisplacement(const fem::NodeMatrixX3& g, Eigen::Matrix<double, 6, Eigen::Dynamic>& b) {
+  const int n = static_cast<int>(g.rows());
+  b.setZero(6, 3 * n);
+  for (int i = 0; i < n; ++i) {
+    const double gx = g(i, 0), gy = g(i, 1), gz = g(i, 2);
+    b(0, 3 * i + 0) = gx;
+    b(1, 3 * i + 1) = gy;
+    b(2, 3 * i + 2) = gz;
+    b(3, 3 * i + 0) = gy;
+    b(3, 3 * i + 1) = gx;
+    b(4, 3 * i + 1) = gz;
+    b(4, 3 * i + 2) = gy;
+    b(5, 3 * i + 0) = gz;
+    b(5, 3 * i + 2) = gx;
+  }
+}
+
+// Isotropic elasticity in Voigt form with engineering shears.
+Eigen::Matrix<double, 6, 6> Isotropic(double lambda, double mu) {
+  Eigen::Matrix<double, 6, 6> c = Eigen::Matrix<double, 6, 6>::Zero();
+  c.topLeftCorner<3, 3>().setConstant(lambda);
+  c.topLeftCorner<3, 3>().diagonal().array() += 2 * mu;
+  c.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
+  return c;
+}
+
+}  // namespace
+
+CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
+                                     WorkerPool& pool)
+    : layout_(layout), pool_(pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
+  fem::NodeMatrixX3 g;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> b;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& block = layout.blocks[kind];
+    const fem::KindTable& table = layout.tables[kind];
+    const int n = block.nodes;
+    k_[kind].resize(block.groups.size());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      const ElementGroup& grp = block.groups[gi];
+      const auto& material = layout.materials[grp.material];
+      // K = sum_q B_q^T C_q B_q dV_q.
+      Eigen::MatrixXd& k = k_[kind][gi];
+      k.setZero(3 * n, 3 * n);
+      for (int q = 0; q < table.points; ++q) {
+        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+        const double dv = std::max(det, 0.0) * table.weight[q];
+        StrainDisplacement(g, b);
+        const Eigen::Matrix<double, 6, 6> c =
+            Isotropic(material[q].lame_lambda(), material[q].lame_mu()) * dv;
+        k.noalias() += b.transpose() * (c * b);
+      }
+      // Exactly symmetric (a + b == b + a in floating point).
+      k = 0.5 * (k + k.transpose()).eval();
+    }
+    frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += kBatch) {
+        batches_.push_back({kind, static_cast<int32_t>(gi), s,
+                            std::min(kBatch, block.group_start[gi + 1] - s)});
+      }
+    }
+  }
+  work_.resize(kForceParts);
+  // Balance the parts by cost: an element of n nodes costs about (3n)^2.
+  auto cost = [&](const Batch& bt) {
+    const double m = 3.0 * layout.blocks[bt.kind].nodes;
+    return m * m * bt.count;
+  };
+  double total = 0;
+  for (const Batch& bt : batches_) total += cost(bt);
+  chunk_start_.assign(1, 0);
+  double acc = 0;
+  for (size_t i = 0; i < batches_.size(); ++i) {
+    acc += cost(batches_[i]);
+    while (chunk_start_.size() < work_.size() &&
+           acc >= total * static_cast<double>(chunk_start_.size()) / work_.size()) {
+      chunk_start_.push_back(i + 1);
+    }
+  }
+  while (chunk_start_.size() <= work_.size()) chunk_start_.push_back(batches_.size());
+  int max_nodes = 0;
+  for (const ElementBlock& block : layout.blocks) {
+    if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
+  }
+  for (Workspace& w : work_) {
+    w.g.setZero(num_nodes_, 3);
+    w.u.setZero(3 * max_nodes, kBatch);
+    w.y.setZero(3 * max_nodes, kBatch);
+  }
+}
+
+void CorotationalModel::ResetFrames() {
+  for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
+}
+
+void CorotationalModel::RunBatches(size_t begin, size_t end, const Points& x, Frames* update,
+                                   Workspace& w) const {
+  using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
+  using NodeMap = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
+  NodeBlock pos, x0;
+  std::array<Eigen::Matrix3d, kBatch> rot;
+  w.g.setZero();
+  w.energy = 0;
+  for (size_t bi = begin; bi < end; ++bi) {
+    const Batch& batch = batches_[bi];
+    const ElementBlock& block = layout_.blocks[batch.kind];
+    const ElementGroup& grp = block.groups[batch.group];
+    const int n = block.nodes;
+    const int m = 3 * n;
+    pos.resize(n, 3);
+    x0.resize(n, 3);
+    auto u = w.u.topLeftCorner(m, batch.count);
+    auto y = w.y.topLeftCorner(m, batch.count);
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < n; ++i) pos.row(i) = x.row(ids[i]);
+      if (update != nullptr) {
+        // Deformation gradient at the centre, then its rotation R_e.
+        const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+        Eigen::Quaterniond& q = (*update)[batch.kind][e];
+        ExtractRotation(f, q, kRotationIterations);
+        rot[b] = q.toRotationMatrix();
+      } else {
+        rot[b] = frames_[batch.kind][e].toRotationMatrix();
+      }
+      // Column b of u as n x 3 node rows: u_i^T = (x_i - xbar)^T R_e
+      // [- (x0_i - x0bar)^T].
+      NodeMap ub(u.col(b).data(), n, 3);
+      const Eigen::RowVector3d xbar = pos.colwise().mean();
+      pos.rowwise() -= xbar;
+      ub.noalias() = pos.lazyProduct(rot[b]);
+      if (update != nullptr) {
+        for (int i = 0; i < n; ++i) x0.row(i) = rest_.row(ids[i]);
+        const Eigen::RowVector3d x0bar = x0.colwise().mean();
+        x0.rowwise() -= x0bar;
+        ub -= x0;
+      }
+    }
+    // y = K u, in row panels (see kPanelRows).
+    const Eigen::MatrixXd& k = k_[batch.kind][batch.group];
+    for (int r = 0; r < m; r += kPanelRows) {
+      const int rows = std::min(kPanelRows, m - r);
+      y.middleRows(r, rows).noalias() = k.middleRows(r, rows) * u;
+    }
+    for (int32_t b = 0; b < batch.count; ++b) {
+      w.energy += 0.5 * u.col(b).dot(y.col(b));
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      // g_i += R_e y_i: rows of y times R_e^T.
+      const NodeMap yb(y.col(b).data(), n, 3);
+      pos.noalias() = yb.lazyProduct(rot[b].transpose());
+      for (int i = 0; i < n; ++i) w.g.row(ids[i]) += pos.row(i);
+    }
+  }
+}
+
+double CorotationalModel::Forces(const Points& d, Points& g) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  // Parts t, t + T, ... on thread t, each into its own buffer, summed in part
+  // order: the same bits for any thread count.
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) {
+      RunBatches(chunk_start_[k], chunk_start_[k + 1], d, &frames_, work_[k]);
+    }
+  });
+  g = work_[0].g;
+  double energy = work_[0].energy;
+  for (int k = 1; k < parts; ++k) {
+    g += work_[k].g;
+    energy += work_[k].energy;
+  }
+  const auto t1 = std::chrono::steady_clock::now();
+  timing_.measure_ms = -1;
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  return energy;
+}
+
+void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) {
+      RunBatches(chunk_start_[k], chunk_start_[k + 1], v, nullptr, work_[k]);
+    }
+  });
+  out = work_[0].g;
+  for (int k = 1; k < parts; ++k) out += work_[k].g;
+}
+
+int64_t CorotationalModel::shared_matrix_bytes() const {
+  int64_t bytes = 0;
+  for (const auto& kind : k_)
+    for (const auto& m : kind) bytes += static_cast<int64_t>(m.size()) * 8;
+  return bytes;
+}
+
+int64_t CorotationalModel::per_element_bytes() const {
+  // node ids, group id, place in by_group, warm-started frame.
+  int64_t bytes = 0, count = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& b = layout_.blocks[kind];
+    bytes += static_cast<int64_t>(b.size()) * (b.nodes * 4 + 4 + 4 + sizeof(Eigen::Quaterniond));
+    count += b.size();
+  }
+  return count > 0 ? bytes / count : 0;
+}
+
+}  // namespace dynsolid::models

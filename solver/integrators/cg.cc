@@ -7,10 +7,58 @@
 
 namespace dynsolid::integrators {
 
-struct ConjugateGradient::Ic {
+struct ColumnPreconditioner::Ic {
   Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::AMDOrdering<int>> factor;
-  Eigen::VectorXd in, out;
+  mutable Eigen::VectorXd in, out;
+  std::vector<uint8_t> fixed;
 };
+
+ColumnPreconditioner::ColumnPreconditioner() = default;
+ColumnPreconditioner::~ColumnPreconditioner() = default;
+ColumnPreconditioner::ColumnPreconditioner(ColumnPreconditioner&&) noexcept = default;
+ColumnPreconditioner& ColumnPreconditioner::operator=(ColumnPreconditioner&&) noexcept = default;
+
+void ColumnPreconditioner::Setup(const SparseMatrix& s, const std::vector<uint8_t>& fixed,
+                                 Preconditioner kind) {
+  const int64_t n = s.rows();
+  inv_diag_ = s.diagonal();
+  for (int64_t i = 0; i < n; ++i) {
+    inv_diag_[i] = inv_diag_[i] > 0 && !fixed[i] ? 1.0 / inv_diag_[i] : 0.0;
+  }
+  ic_.reset();
+  if (kind != Preconditioner::kIncompleteCholesky) return;
+  // The reduced matrix: fixed rows and columns replaced by identity.
+  Eigen::SparseMatrix<double> reduced = s;
+  for (int k = 0; k < reduced.outerSize(); ++k) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(reduced, k); it; ++it) {
+      if (fixed[it.row()] || fixed[it.col()]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
+    }
+  }
+  ic_ = std::make_unique<Ic>();
+  ic_->factor.compute(reduced);
+  if (ic_->factor.info() != Eigen::Success) {
+    ic_.reset();  // fall back to Jacobi
+    return;
+  }
+  ic_->in.resize(n);
+  ic_->out.resize(n);
+  ic_->fixed = fixed;
+}
+
+void ColumnPreconditioner::Apply(const Points& r, Points& z) const {
+  if (!ic_) {
+    z = inv_diag_.asDiagonal() * r;
+    return;
+  }
+  for (int c = 0; c < 3; ++c) {
+    ic_->in = r.col(c);
+    ic_->out = ic_->factor.solve(ic_->in);
+    z.col(c) = ic_->out;
+  }
+  for (int64_t i = 0; i < z.rows(); ++i) {
+    if (ic_->fixed[i]) z.row(i).setZero();
+  }
+}
 
 ConjugateGradient::ConjugateGradient() = default;
 ConjugateGradient::~ConjugateGradient() = default;
@@ -23,42 +71,8 @@ void ConjugateGradient::Setup(const SparseMatrix* s, std::vector<uint8_t> fixed,
   const int64_t n = s->rows();
   fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
   any_fixed_ = std::find(fixed_.begin(), fixed_.end(), 1) != fixed_.end();
-  inv_diag_ = s->diagonal();
-  for (int64_t i = 0; i < n; ++i) inv_diag_[i] = inv_diag_[i] > 0 ? 1.0 / inv_diag_[i] : 0.0;
   for (Points* m : {&r_, &z_, &p_, &q_, &b0_}) m->setZero(n, 3);
-  ic_.reset();
-  if (preconditioner == Preconditioner::kIncompleteCholesky) {
-    // The reduced matrix: fixed rows and columns replaced by identity.
-    Eigen::SparseMatrix<double> reduced = *s;
-    if (any_fixed_) {
-      for (int k = 0; k < reduced.outerSize(); ++k) {
-        for (Eigen::SparseMatrix<double>::InnerIterator it(reduced, k); it; ++it) {
-          if (fixed_[it.row()] || fixed_[it.col()]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
-        }
-      }
-    }
-    ic_ = std::make_unique<Ic>();
-    ic_->factor.compute(reduced);
-    if (ic_->factor.info() != Eigen::Success) {
-      ic_.reset();  // fall back to Jacobi
-    } else {
-      ic_->in.resize(n);
-      ic_->out.resize(n);
-    }
-  }
-}
-
-void ConjugateGradient::Precondition() {
-  if (!ic_) {
-    z_ = inv_diag_.asDiagonal() * r_;
-    return;
-  }
-  for (int c = 0; c < 3; ++c) {
-    ic_->in = r_.col(c);
-    ic_->out = ic_->factor.solve(ic_->in);
-    z_.col(c) = ic_->out;
-  }
-  MaskFixed(z_);
+  pre_.Setup(*s, fixed_, preconditioner);
 }
 
 void ConjugateGradient::MaskFixed(Points& m) const {

@@ -18,6 +18,11 @@ namespace dynsolid::integrators {
 
 using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>;
 
+enum class Preconditioner {
+  kJacobi,               // diagonal
+  kIncompleteCholesky,   // Eigen's IncompleteCholesky (threshold IC, AMD order)
+};
+
 struct CgStats {
   int32_t iterations = 0;       // summed over the three columns
   int32_t max_iterations = 0;   // of the slowest column
@@ -25,9 +30,24 @@ struct CgStats {
   bool converged = true;
 };
 
-enum class Preconditioner {
-  kJacobi,               // diagonal
-  kIncompleteCholesky,   // Eigen's IncompleteCholesky (threshold IC, AMD order)
+// P^-1 for a sparse SPD matrix S, applied to each of the three columns:
+// Jacobi or incomplete Cholesky of S with fixed rows and columns replaced by
+// the identity (it then maps fixed rows to zero).
+class ColumnPreconditioner {
+ public:
+  ColumnPreconditioner();
+  ~ColumnPreconditioner();
+  ColumnPreconditioner(ColumnPreconditioner&&) noexcept;
+  ColumnPreconditioner& operator=(ColumnPreconditioner&&) noexcept;
+
+  void Setup(const SparseMatrix& s, const std::vector<uint8_t>& fixed, Preconditioner kind);
+  // z = P^-1 r (#rows by 3); fixed rows of z are zero.
+  void Apply(const Points& r, Points& z) const;
+
+ private:
+  struct Ic;
+  Eigen::VectorXd inv_diag_;
+  std::unique_ptr<Ic> ic_;
 };
 
 class ConjugateGradient {
@@ -50,14 +70,12 @@ class ConjugateGradient {
 
  private:
   void MaskFixed(Points& m) const;
-  void Precondition();  // z_ = P^-1 r_
-  struct Ic;
+  void Precondition() { pre_.Apply(r_, z_); }
 
   const SparseMatrix* s_ = nullptr;
   std::vector<uint8_t> fixed_;
   bool any_fixed_ = false;
-  Eigen::VectorXd inv_diag_;
-  std::unique_ptr<Ic> ic_;
+  ColumnPreconditioner pre_;
   Points r_, z_, p_, q_, b0_;
 };
 

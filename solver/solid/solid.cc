@@ -13,6 +13,7 @@
 #include "solver/common/parallel.h"
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
+#include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
 #include "solver/models/corotational.h"
 #include "solver/models/element_blocks.h"
@@ -77,6 +78,11 @@ struct Solid::Impl {
   SparseMatrix mt, dt;
   bool has_damping = false;
   integrators::CentralDifference integrator;
+  integrators::BackwardEuler implicit;
+  bool use_implicit = false;
+  models::CorotationalModel* corotational = nullptr;  // == model when corotational
+  Points x_nodes, kx_nodes;
+  integrators::BackwardEuler::StiffnessOperator stiffness_op;
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
@@ -118,7 +124,11 @@ struct Solid::Impl {
   void SetSubsteps(int n, double h) {
     substeps = n;
     h_sub = h / n;
-    integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+    if (use_implicit) {
+      implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+    } else {
+      integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+    }
   }
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
@@ -387,7 +397,10 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, double h, StepStats
   for (int k = 0; k < substeps; ++k) {
     const auto t0 = Clock::now();
     const integrators::CgStats cg =
-        integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(), settings.cg_max_iterations());
+        use_implicit ? implicit.Step(p, p_prev, f, stiffness_op, p_next, settings.cg_tolerance(),
+                                     settings.cg_max_iterations())
+                     : integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(),
+                                       settings.cg_max_iterations());
     sum.solve += MsSince(t0);
     stats.cg_iterations += cg.iterations;
     stats.cg_max_iterations = std::max(stats.cg_max_iterations, cg.max_iterations);
@@ -442,10 +455,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   Impl& im = *s->impl_;
   im.d = &s->d_;
   im.settings = scene::ResolvedSolverSettings(scene);
-  if (im.settings.integrator() == SolverSettings::BACKWARD_EULER ||
-      im.settings.integrator() == SolverSettings::AUTO) {
+  if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
+      im.settings.model() != SolverSettings::COROTATIONAL) {
     return absl::UnimplementedError(
-        "solver.integrator: only central_difference is available in this build yet");
+        "solver.integrator: backward_euler linearizes the corotational model (MODEL.md 5); "
+        "with solver.model local_frame it is not available in this build");
   }
   s->h_ = im.settings.time_step();
   const mesh::CellComplex& control = s->d_.control();
@@ -492,6 +506,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   BuildReport& rep = s->report_;
   if (im.settings.model() == SolverSettings::COROTATIONAL) {
     auto model = std::make_unique<models::CorotationalModel>(im.layout, rest, *im.pool);
+    im.corotational = model.get();
     rep.shared_matrix_bytes = model->shared_matrix_bytes();
     rep.element_bytes = model->per_element_bytes();
     im.model = std::move(model);
@@ -601,7 +616,29 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   rep.stable_step = rep.omega_max > 0 ? 2.0 / rep.omega_max : INFINITY;
   const double limit = im.settings.stability_safety() * rep.stable_step;
   im.substeps = std::max(1, static_cast<int>(std::ceil(s->h_ / limit)));
-  if (im.substeps > im.settings.max_substeps()) {
+  // Implicit steps: asked for, or chosen by `auto` when the explicit scheme
+  // would need more than kAutoImplicitSubsteps sub-steps (corotational only).
+  constexpr int kAutoImplicitSubsteps = 4;
+  im.use_implicit =
+      im.settings.integrator() == SolverSettings::BACKWARD_EULER ||
+      (im.settings.integrator() == SolverSettings::AUTO && im.corotational != nullptr &&
+       im.substeps > kAutoImplicitSubsteps);
+  rep.implicit = im.use_implicit;
+  if (im.use_implicit) {
+    im.substeps = 1;
+    im.x_nodes.setZero(rest.rows(), 3);
+    im.kx_nodes.setZero(rest.rows(), 3);
+    Impl* ip = &im;
+    im.stiffness_op = [ip](const Points& x, Points& out) {
+      ip->x_nodes.noalias() = ip->d->node_matrix * x;
+      ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+      out.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
+      for (size_t s = 0; s < ip->spring_point.size(); ++s) {
+        out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
+      }
+    };
+  }
+  if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
         "solver.time_step: ", s->h_, " s needs ", im.substeps,
         " explicit sub-steps (stable step ", rep.stable_step, " s) but solver.max_substeps is ",

@@ -40,6 +40,7 @@ struct BuildReport {
   double omega_max = 0.0;          // rad/s, from power iteration
   double stable_step = 0.0;        // 2 / omega_max, seconds
   int32_t substeps = 1;            // explicit sub-steps per scene step
+  bool implicit = false;           // backward Euler (asked for, or chosen by auto)
   double build_ms = 0.0;
 };
 

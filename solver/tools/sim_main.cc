@@ -135,6 +135,7 @@ int main(int argc, char** argv) {
     run.final_substeps = s.build_report().substeps;
     run.build = &rep_at_build;
     run.time_step = s.time_step();
+    run.integrator = rep_at_build.implicit ? "backward_euler" : "central_difference";
     run.model = loaded->scene.solver().model() == dynsolid::SolverSettings::COROTATIONAL
                     ? "corotational"
                     : "local_frame";

@@ -1,0 +1,82 @@
+#include "solver/integrators/backward_euler.h"
+
+#include <cmath>
+
+namespace dynsolid::integrators {
+
+void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h,
+                          std::vector<uint8_t> fixed) {
+  mt_ = mt;
+  dt_ = dt;
+  h_ = h;
+  md_ = *mt;
+  if (dt != nullptr) md_ += h * (*dt);
+  const int64_t n = mt->rows();
+  fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
+  pre_.Setup(md_, fixed_, Preconditioner::kIncompleteCholesky);
+  for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_}) m->setZero(n, 3);
+}
+
+void BackwardEuler::Mask(Points& m) const {
+  for (int64_t i = 0; i < m.rows(); ++i) {
+    if (fixed_[i]) m.row(i).setZero();
+  }
+}
+
+void BackwardEuler::Apply(const StiffnessOperator& kt, const Points& x, Points& y) {
+  kt(x, tmp_);
+  y.noalias() = md_ * x;
+  y += (h_ * h_) * tmp_;
+  Mask(y);
+}
+
+CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points& force,
+                            const StiffnessOperator& kt, Points& p_next, double tolerance,
+                            int max_iterations) {
+  CgStats stats;
+  v_ = (p - p_prev) / h_;
+  Mask(v_);
+  // rhs = h (F - h Kt v).
+  kt(v_, tmp_);
+  rhs_ = h_ * (force - h_ * tmp_);
+  Mask(rhs_);
+  const double bnorm = std::sqrt(rhs_.squaredNorm());
+  x_.setZero();
+  r_ = rhs_;
+  int it = 0;
+  double rr = rhs_.squaredNorm();
+  if (bnorm > 0) {
+    pre_.Apply(r_, z_);
+    p_ = z_;
+    double rz = (r_.array() * z_.array()).sum();
+    for (; it < max_iterations && std::sqrt(rr) > tolerance * bnorm; ++it) {
+      Apply(kt, p_, q_);
+      const double pq = (p_.array() * q_.array()).sum();
+      if (pq <= 0) break;
+      const double alpha = rz / pq;
+      x_ += alpha * p_;
+      r_ -= alpha * q_;
+      rr = r_.squaredNorm();
+      if (std::sqrt(rr) <= tolerance * bnorm) {
+        ++it;
+        break;
+      }
+      pre_.Apply(r_, z_);
+      const double rz_new = (r_.array() * z_.array()).sum();
+      p_ = z_ + (rz_new / rz) * p_;
+      rz = rz_new;
+    }
+  }
+  stats.iterations = it;
+  stats.max_iterations = it;
+  stats.relative_residual = bnorm > 0 ? std::sqrt(rr) / bnorm : 0.0;
+  stats.converged = stats.relative_residual <= tolerance;
+  // v' = v + dv, p' = p + h v'.
+  p_next = p + h_ * (v_ + x_);
+  for (int64_t i = 0; i < p.rows(); ++i) {
+    if (fixed_[i]) p_next.row(i) = p.row(i);
+  }
+  return stats;
+}
+
+}  // namespace dynsolid::integrators

@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 bash scripts/build.sh dynsolid-sim
 SIM=build/${PRESET:-release}/solver/tools/dynsolid-sim
 OUT=${OUT:-out/main}
-STEPS=${STEPS:-200}
+STEPS=${STEPS:-100}
 mkdir -p "$OUT"
 SCENES="block3 block4 chair bridge nozzle torus mixed beam"
 for s in $SCENES; do

@@ -225,15 +225,6 @@ int64_t CorotationalModel::shared_matrix_bytes() const {
   return bytes;
 }
 
-int64_t CorotationalModel::per_element_bytes() const {
-  // node ids, group id, place in by_group, warm-started frame.
-  int64_t bytes = 0, count = 0;
-  for (int kind = 0; kind < 3; ++kind) {
-    const ElementBlock& b = layout_.blocks[kind];
-    bytes += static_cast<int64_t>(b.size()) * (b.nodes * 4 + 4 + 4 + sizeof(Eigen::Quaterniond));
-    count += b.size();
-  }
-  return count > 0 ? bytes / count : 0;
-}
+int64_t CorotationalModel::per_element_bytes() const { return PerElementBytes(layout_); }
 
 }  // namespace dynsolid::models

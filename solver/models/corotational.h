@@ -37,7 +37,6 @@
 #include "solver/common/worker_pool.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
-#include "solver/models/local_frame.h"  // kForceParts
 
 namespace dynsolid::models {
 

@@ -17,6 +17,15 @@ const std::vector<int32_t>& CellsOfKind(const fem::ElementSet& e, int kind) {
 
 }  // namespace
 
+int64_t PerElementBytes(const ElementLayout& layout) {
+  int64_t bytes = 0, count = 0;
+  for (const ElementBlock& b : layout.blocks) {
+    bytes += static_cast<int64_t>(b.size()) * (b.nodes * 4 + 4 + 4 + 4 * 8);
+    count += b.size();
+  }
+  return count > 0 ? bytes / count : 0;
+}
+
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler) {

@@ -63,6 +63,10 @@ struct ElementLayout {
   int32_t inverted_elements = 0;          // elements with det J0 <= 0 somewhere
 };
 
+// Bytes a model keeps per element beyond the mesh: node ids, group id, the
+// element's place in by_group, and its warm-started frame (a quaternion).
+int64_t PerElementBytes(const ElementLayout& layout);
+
 // Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
 // `cell_control_cell` maps level-L cells to control cells for the sampler.
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,

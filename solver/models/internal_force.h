@@ -8,6 +8,11 @@
 
 namespace dynsolid::models {
 
+// Models split their per-step loops into this many fixed parts, whatever
+// the number of threads, and add the parts' sums in part order: results are
+// bit-identical for any thread count.
+inline constexpr int kForceParts = 8;
+
 class InternalForceModel {
  public:
   virtual ~InternalForceModel() = default;

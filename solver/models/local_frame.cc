@@ -191,15 +191,6 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
   return bytes;
 }
 
-int64_t LocalFrameModel::per_element_bytes() const {
-  // node ids, group id, warm-started frame.
-  int64_t bytes = 0, count = 0;
-  for (int kind = 0; kind < 3; ++kind) {
-    const ElementBlock& b = layout_.blocks[kind];
-    bytes += static_cast<int64_t>(b.size()) * (b.nodes * 4 + 4 + 4 + sizeof(Eigen::Quaterniond));
-    count += b.size();
-  }
-  return count > 0 ? bytes / count : 0;
-}
+int64_t LocalFrameModel::per_element_bytes() const { return PerElementBytes(layout_); }
 
 }  // namespace dynsolid::models

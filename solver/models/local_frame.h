@@ -44,10 +44,6 @@ namespace dynsolid::models {
 
 inline constexpr double kStiffnessFactor = 1.0;
 
-// The element loop and the measure are split into this many fixed parts,
-// whatever the number of threads, and the parts' sums are added in part
-// order: results are bit-identical for any thread count.
-inline constexpr int kForceParts = 8;
 
 class LocalFrameModel final : public InternalForceModel {
  public:

@@ -8,6 +8,7 @@
 #include <numeric>
 
 #include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/parallel.h"
@@ -738,6 +739,119 @@ double Solid::StrainEnergy(const Points& p) {
   return e;
 }
 
+absl::StatusOr<Points> Solid::SolveStaticLinear() {
+  Impl& im = *impl_;
+  if (im.corotational == nullptr) {
+    return absl::FailedPreconditionError(
+        "a linear static solve needs solver.model: COROTATIONAL (the local-frame model has no "
+        "assembled stiffness)");
+  }
+  const SparseMatrix& nm = d_.node_matrix;
+  const int32_t nc = static_cast<int32_t>(nm.cols());
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
+  std::vector<int32_t> support;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = im.layout.blocks[kind];
+    const int n = block.nodes;
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t* ids = block.element_nodes(e);
+      support.clear();
+      for (int i = 0; i < n; ++i) {
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) support.push_back(static_cast<int32_t>(it.col()));
+      }
+      std::sort(support.begin(), support.end());
+      support.erase(std::unique(support.begin(), support.end()), support.end());
+      const int s = static_cast<int>(support.size());
+      // E = B (x) I3: node-major element DOFs from control DOFs.
+      Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, s);
+      for (int i = 0; i < n; ++i) {
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+          b(i, std::lower_bound(support.begin(), support.end(), it.col()) - support.begin()) = it.value();
+        }
+      }
+      uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
+      auto mix = [&](uint64_t x) {
+        h1 = (h1 ^ x) * 1099511628211ull;
+        h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
+      };
+      mix(static_cast<uint64_t>(kind));
+      mix(static_cast<uint64_t>(block.group[e]));
+      for (Eigen::Index k = 0; k < b.size(); ++k) {
+        uint64_t bits;
+        std::memcpy(&bits, b.data() + k, sizeof(bits));
+        mix(bits);
+      }
+      auto it = cache.find({h1, h2});
+      if (it == cache.end()) {
+        Eigen::MatrixXd ex = Eigen::MatrixXd::Zero(3 * n, 3 * s);
+        for (int i = 0; i < n; ++i)
+          for (int a = 0; a < s; ++a)
+            for (int c = 0; c < 3; ++c) ex(3 * i + c, 3 * a + c) = b(i, a);
+        const Eigen::MatrixXd& k = im.corotational->K(kind, block.group[e]);
+        it = cache.emplace(std::make_pair(h1, h2), Eigen::MatrixXd(ex.transpose() * k * ex)).first;
+      }
+      const Eigen::MatrixXd& tk = it->second;
+      for (int a = 0; a < 3 * s; ++a) {
+        for (int c = 0; c < 3 * s; ++c) {
+          if (tk(a, c) != 0) t.emplace_back(3 * support[a / 3] + a % 3, 3 * support[c / 3] + c % 3, tk(a, c));
+        }
+      }
+    }
+  }
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * nc);
+  for (size_t k = 0; k < im.spring_point.size(); ++k) {
+    for (int c = 0; c < 3; ++c) {
+      t.emplace_back(3 * im.spring_point[k] + c, 3 * im.spring_point[k] + c, im.spring_k[k]);
+    }
+  }
+  if (im.has_const_force) {
+    for (int32_t i = 0; i < nc; ++i)
+      for (int c = 0; c < 3; ++c) f[3 * i + c] = im.f_const(i, c);
+  }
+  // Fixed points: identity rows and columns, zero load.
+  for (auto& x : t) {
+    const bool fr = im.fixed[x.row() / 3] != 0, fc = im.fixed[x.col() / 3] != 0;
+    if (fr || fc) x = Eigen::Triplet<double, int32_t>(x.row(), x.col(), 0.0);
+  }
+  for (int32_t i = 0; i < nc; ++i) {
+    if (!im.fixed[i]) continue;
+    for (int c = 0; c < 3; ++c) {
+      t.emplace_back(3 * i + c, 3 * i + c, 1.0);
+      f[3 * i + c] = 0.0;
+    }
+  }
+  Eigen::SparseMatrix<double> k0(3 * nc, 3 * nc);
+  k0.setFromTriplets(t.begin(), t.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(k0);
+  if (ldlt.info() != Eigen::Success) {
+    return absl::FailedPreconditionError("the static system is singular (is the solid fixed?)");
+  }
+  const Eigen::VectorXd u = ldlt.solve(f);
+  if (ldlt.info() != Eigen::Success || !u.allFinite()) {
+    return absl::FailedPreconditionError("the static system is singular (is the solid fixed?)");
+  }
+  Points p = im.rest_control;
+  for (int32_t i = 0; i < nc; ++i)
+    for (int c = 0; c < 3; ++c) p(i, c) += u[3 * i + c];
+  return p;
+}
+
+std::vector<Eigen::Vector3d> Solid::TracedPositionsAt(const Points& p) const {
+  const Impl& im = *impl_;
+  std::vector<Eigen::Vector3d> out;
+  const Points nodes = d_.node_matrix * p;
+  std::vector<double> shape;
+  for (const MaterialLocation& m : im.traced) {
+    im.ShapeAt(m, shape);
+    const int32_t* ids = im.layout.blocks[m.kind].element_nodes(m.element);
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * nodes.row(ids[k]).transpose();
+    out.push_back(x);
+  }
+  return out;
+}
+
 Points Solid::ApplyMass(const Points& x) const { return impl_->mt * x; }
 
 Points Solid::NodePositions() const { return d_.node_matrix * p_; }
@@ -752,19 +866,6 @@ Energies Solid::ComputeEnergies() const {
   return e;
 }
 
-std::vector<Eigen::Vector3d> Solid::TracedPositions() const {
-  const Impl& im = *impl_;
-  std::vector<Eigen::Vector3d> out;
-  const Points nodes = d_.node_matrix * p_;
-  std::vector<double> shape;
-  for (const MaterialLocation& m : im.traced) {
-    im.ShapeAt(m, shape);
-    const int32_t* ids = im.layout.blocks[m.kind].element_nodes(m.element);
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * nodes.row(ids[k]).transpose();
-    out.push_back(x);
-  }
-  return out;
-}
+std::vector<Eigen::Vector3d> Solid::TracedPositions() const { return TracedPositionsAt(p_); }
 
 }  // namespace dynsolid::solid

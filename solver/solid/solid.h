@@ -112,6 +112,14 @@ class Solid {
   // afresh). Does not change the solid's state.
   double StrainEnergy(const Points& p);
 
+  // Linear static equilibrium of the corotational model about rest under the
+  // scene's constant loads and penalty springs, with fixed points held:
+  // K0 u = F, K0 = A^T K A assembled in control space and solved directly
+  // (sparse LDL^T). Returns the control positions rest + u; does not change
+  // the solid's state. FailedPrecondition for the local-frame model or a
+  // singular system (a free solid).
+  absl::StatusOr<Points> SolveStaticLinear();
+
   // Mt x (#control by 3): the control-space mass matrix applied to x.
   Points ApplyMass(const Points& x) const;
 
@@ -124,6 +132,8 @@ class Solid {
 
   // Current positions of the scene's traced points, in scene order.
   std::vector<Eigen::Vector3d> TracedPositions() const;
+  // The traced points for control positions p (e.g. a static solution).
+  std::vector<Eigen::Vector3d> TracedPositionsAt(const Points& p) const;
   const std::vector<std::string>& traced_names() const { return traced_names_; }
 
   const BuildReport& build_report() const { return report_; }

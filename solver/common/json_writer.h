@@ -25,7 +25,9 @@ class JsonWriter {
   }
   JsonWriter& End() {
     first_.pop_back();
-    out_ += "\n" + std::string(2 * first_.size(), ' ') + "}";
+    out_ += '\n';
+    out_.append(2 * first_.size(), ' ');
+    out_ += '}';
     return *this;
   }
   JsonWriter& Add(std::string_view key, double v) {
@@ -81,7 +83,10 @@ class JsonWriter {
   void KeyPrefix(std::string_view key) {
     if (!first_.back()) out_ += ",";
     first_.back() = false;
-    out_ += "\n" + std::string(2 * first_.size(), ' ') + Quote(key) + ": ";
+    out_ += '\n';
+    out_.append(2 * first_.size(), ' ');
+    out_ += Quote(key);
+    out_ += ": ";
   }
 
   std::string out_;

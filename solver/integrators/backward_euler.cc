@@ -2,7 +2,54 @@
 
 #include <cmath>
 
+#include <Eigen/SparseCholesky>
+
 namespace dynsolid::integrators {
+
+struct BackwardEuler::Flat {
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> factor;
+  mutable Eigen::VectorXd out;
+};
+
+void BackwardEuler::SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>& k0) {
+  const int64_t n = md_.rows();
+  std::vector<Eigen::Triplet<double>> t;
+  for (int64_t r = 0; r < n; ++r) {
+    for (SparseMatrix::InnerIterator it(md_, r); it; ++it) {
+      for (int c = 0; c < 3; ++c) t.emplace_back(3 * r + c, 3 * it.col() + c, it.value());
+    }
+  }
+  for (int k = 0; k < k0.outerSize(); ++k) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(k0, k); it; ++it) {
+      t.emplace_back(it.row(), it.col(), h_ * h_ * it.value());
+    }
+  }
+  Eigen::SparseMatrix<double> p(3 * n, 3 * n);
+  p.setFromTriplets(t.begin(), t.end());
+  // Fixed DOFs: identity rows and columns.
+  for (int k = 0; k < p.outerSize(); ++k) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(p, k); it; ++it) {
+      if (fixed_[it.row() / 3] || fixed_[it.col() / 3]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
+    }
+  }
+  auto flat = std::make_shared<Flat>();
+  flat->factor.compute(p);
+  if (flat->factor.info() != Eigen::Success) return;  // keep the column preconditioner
+  flat->out.resize(3 * n);
+  flat_ = std::move(flat);
+}
+
+void BackwardEuler::Precondition(const Points& r, Points& z) const {
+  if (!flat_) {
+    pre_.Apply(r, z);
+    return;
+  }
+  // Row-major #control by 3 is the flat DOF vector 3 i + c.
+  const Eigen::Map<const Eigen::VectorXd> rv(r.data(), r.size());
+  flat_->out = flat_->factor.solve(rv);
+  Eigen::Map<Eigen::VectorXd>(z.data(), z.size()) = flat_->out;
+  Mask(z);
+}
 
 void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h,
                           std::vector<uint8_t> fixed) {
@@ -11,6 +58,7 @@ void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double
   h_ = h;
   md_ = *mt;
   if (dt != nullptr) md_ += h * (*dt);
+  flat_.reset();
   const int64_t n = mt->rows();
   fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
   pre_.Setup(md_, fixed_, Preconditioner::kIncompleteCholesky);
@@ -46,7 +94,7 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
   int it = 0;
   double rr = rhs_.squaredNorm();
   if (bnorm > 0) {
-    pre_.Apply(r_, z_);
+    Precondition(r_, z_);
     p_ = z_;
     double rz = (r_.array() * z_.array()).sum();
     for (; it < max_iterations && std::sqrt(rr) > tolerance * bnorm; ++it) {
@@ -61,7 +109,7 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
         ++it;
         break;
       }
-      pre_.Apply(r_, z_);
+      Precondition(r_, z_);
       const double rz_new = (r_.array() * z_.array()).sum();
       p_ = z_ + (rz_new / rz) * p_;
       rz = rz_new;

@@ -127,6 +127,7 @@ struct Solid::Impl {
     h_sub = h / n;
     if (use_implicit) {
       implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+      if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
     } else {
       integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
     }
@@ -134,6 +135,9 @@ struct Solid::Impl {
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, double h, StepStats& stats, PhaseTimes& phases);
+
+  std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const;
+  Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
 
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
@@ -639,6 +643,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       }
     };
   }
+  if (im.use_implicit) {
+    const std::vector<Eigen::Triplet<double, int32_t>> t = im.StiffnessTriplets();
+    im.k0.resize(3 * nc, 3 * nc);
+    im.k0.setFromTriplets(t.begin(), t.end());
+  }
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
         "solver.time_step: ", s->h_, " s needs ", im.substeps,
@@ -739,20 +748,16 @@ double Solid::StrainEnergy(const Points& p) {
   return e;
 }
 
-absl::StatusOr<Points> Solid::SolveStaticLinear() {
-  Impl& im = *impl_;
-  if (im.corotational == nullptr) {
-    return absl::FailedPreconditionError(
-        "a linear static solve needs solver.model: COROTATIONAL (the local-frame model has no "
-        "assembled stiffness)");
-  }
-  const SparseMatrix& nm = d_.node_matrix;
+// K0 = A^T K A (3 #control square, node-major DOFs 3 i + c) of the
+// corotational model at rest, plus the penalty springs, as triplets.
+std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets() const {
+  const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
   std::vector<Eigen::Triplet<double, int32_t>> t;
   std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
   std::vector<int32_t> support;
   for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = im.layout.blocks[kind];
+    const models::ElementBlock& block = layout.blocks[kind];
     const int n = block.nodes;
     for (int32_t e = 0; e < block.size(); ++e) {
       const int32_t* ids = block.element_nodes(e);
@@ -788,7 +793,7 @@ absl::StatusOr<Points> Solid::SolveStaticLinear() {
         for (int i = 0; i < n; ++i)
           for (int a = 0; a < s; ++a)
             for (int c = 0; c < 3; ++c) ex(3 * i + c, 3 * a + c) = b(i, a);
-        const Eigen::MatrixXd& k = im.corotational->K(kind, block.group[e]);
+        const Eigen::MatrixXd& k = corotational->K(kind, block.group[e]);
         it = cache.emplace(std::make_pair(h1, h2), Eigen::MatrixXd(ex.transpose() * k * ex)).first;
       }
       const Eigen::MatrixXd& tk = it->second;
@@ -799,12 +804,24 @@ absl::StatusOr<Points> Solid::SolveStaticLinear() {
       }
     }
   }
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * nc);
-  for (size_t k = 0; k < im.spring_point.size(); ++k) {
+  for (size_t k = 0; k < spring_point.size(); ++k) {
     for (int c = 0; c < 3; ++c) {
-      t.emplace_back(3 * im.spring_point[k] + c, 3 * im.spring_point[k] + c, im.spring_k[k]);
+      t.emplace_back(3 * spring_point[k] + c, 3 * spring_point[k] + c, spring_k[k]);
     }
   }
+  return t;
+}
+
+absl::StatusOr<Points> Solid::SolveStaticLinear() {
+  Impl& im = *impl_;
+  if (im.corotational == nullptr) {
+    return absl::FailedPreconditionError(
+        "a linear static solve needs solver.model: COROTATIONAL (the local-frame model has no "
+        "assembled stiffness)");
+  }
+  const int32_t nc = static_cast<int32_t>(d_.node_matrix.cols());
+  std::vector<Eigen::Triplet<double, int32_t>> t = im.StiffnessTriplets();
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * nc);
   if (im.has_const_force) {
     for (int32_t i = 0; i < nc; ++i)
       for (int c = 0; c < 3; ++c) f[3 * i + c] = im.f_const(i, c);

@@ -47,13 +47,21 @@ TEST(ElementSetTest, CubicNodesFormTheFourByFourByFourBlock) {
     auto id = [&](int i, int j, int k) { return n[16 * i + 4 * j + k]; };
     auto at = [&](int i, int j, int k) -> Eigen::Vector3d { return p.row(id(i, j, k)); };
     // Topology: tensor neighbours along each axis are joined by an edge.
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) {
         for (int k = 0; k < 4; ++k) {
-          if (i < 3) ASSERT_GE(m.FindEdge(id(i, j, k), id(i + 1, j, k)), 0) << "u edge";
-          if (j < 3) ASSERT_GE(m.FindEdge(id(i, j, k), id(i, j + 1, k)), 0) << "v edge";
-          if (k < 3) ASSERT_GE(m.FindEdge(id(i, j, k), id(i, j, k + 1)), 0) << "w edge";
+          if (i < 3) {
+            ASSERT_GE(m.FindEdge(id(i, j, k), id(i + 1, j, k)), 0) << "u edge";
+          }
+          if (j < 3) {
+            ASSERT_GE(m.FindEdge(id(i, j, k), id(i, j + 1, k)), 0) << "v edge";
+          }
+          if (k < 3) {
+            ASSERT_GE(m.FindEdge(id(i, j, k), id(i, j, k + 1)), 0) << "w edge";
+          }
         }
+      }
+    }
     // The cell's own corners are the nodes with indices 1..2.
     const auto cv = m.cell_vertices(e.cubic_cell[el]);
     for (int i = 1; i <= 2; ++i)

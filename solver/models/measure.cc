@@ -54,6 +54,45 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
   }
 }
 
+namespace {
+
+// A corner's current geometry and the rotation that restores its angle:
+// with phi = (theta - theta0) / 2, C = cos(phi), S = sin(phi), rotating a by
+// +phi and b by -phi about n gives delta_a = alpha ra - beta la b^ and
+// delta_b = alpha rb - beta lb a^, alpha = 1 - C + c S / s, beta = S / s
+// (c, s the cosine and sine of the current angle).
+struct CornerState {
+  Eigen::Vector3d ra, rb, ah, bh;
+  double la, lb, c, s, cap_c, cap_s, alpha, beta;
+};
+
+// False for a degenerate corner (a zero side, collinear sides, or an angle
+// half a turn from its rest value): it contributes nothing.
+inline bool EvaluateCorner(const Points& d, int32_t n, int32_t a, int32_t b, double cos0,
+                           double sin0, CornerState& k) {
+  k.ra = d.row(a) - d.row(n);
+  k.rb = d.row(b) - d.row(n);
+  k.la = k.ra.norm();
+  k.lb = k.rb.norm();
+  if (k.la <= 0 || k.lb <= 0) return false;
+  k.ah = k.ra / k.la;
+  k.bh = k.rb / k.lb;
+  k.c = k.ah.dot(k.bh);
+  k.s = k.ah.cross(k.bh).norm();
+  if (k.s <= 1e-300) return false;
+  // phi in (-pi/2, pi/2) by half-angle formulas.
+  const double cos_d = k.c * cos0 + k.s * sin0;
+  const double sin_d = k.s * cos0 - k.c * sin0;
+  k.cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
+  if (k.cap_c < 1e-12) return false;
+  k.cap_s = sin_d / (2.0 * k.cap_c);
+  k.beta = k.cap_s / k.s;
+  k.alpha = 1.0 - k.cap_c + k.c * k.beta;
+  return true;
+}
+
+}  // namespace
+
 void DeformationMeasure::ApplyPart(const Points& d, int k, int parts, Points& delta) const {
   delta.setZero(d.rows(), 3);
   const size_t ne = edges_.size(), nk = corners_.size();
@@ -66,27 +105,12 @@ void DeformationMeasure::ApplyPart(const Points& d, int k, int parts, Points& de
     delta.row(e.i) -= s.transpose();
     delta.row(e.j) += s.transpose();
   }
+  CornerState g;
   for (size_t i = nk * k / parts; i < nk * (k + 1) / parts; ++i) {
     const Corner& c = corners_[i];
-    const Eigen::Vector3d ra = d.row(c.a) - d.row(c.n);
-    const Eigen::Vector3d rb = d.row(c.b) - d.row(c.n);
-    const Eigen::Vector3d axis = ra.cross(rb);
-    const double cross = axis.norm();
-    const double la = ra.norm(), lb = rb.norm();
-    if (cross <= 1e-300 || la <= 0 || lb <= 0) continue;  // collinear: no plane
-    const double cos_t = ra.dot(rb) / (la * lb), sin_t = cross / (la * lb);
-    // phi = (theta - theta0) / 2 in (-pi/2, pi/2), by half-angle formulas.
-    const double cos_d = cos_t * c.cos0 + sin_t * c.sin0;
-    const double sin_d = sin_t * c.cos0 - cos_t * c.sin0;
-    const double cos_phi = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
-    if (cos_phi < 1e-12) continue;
-    const double sin_phi = sin_d / (2.0 * cos_phi);
-    const Eigen::Vector3d k = axis / cross;
-    // a' - n = ra cos(phi) + (k x ra) sin(phi); b' - n = rb cos(phi) - (k x rb) sin(phi).
-    const Eigen::Vector3d da = ra * (1.0 - cos_phi) - k.cross(ra) * sin_phi;
-    const Eigen::Vector3d db = rb * (1.0 - cos_phi) + k.cross(rb) * sin_phi;
-    delta.row(c.a) += da.transpose();
-    delta.row(c.b) += db.transpose();
+    if (!EvaluateCorner(d, c.n, c.a, c.b, c.cos0, c.sin0, g)) continue;
+    delta.row(c.a) += (g.alpha * g.ra - (g.beta * g.la) * g.bh).transpose();
+    delta.row(c.b) += (g.alpha * g.rb - (g.beta * g.lb) * g.ah).transpose();
   }
 }
 
@@ -123,23 +147,13 @@ void DeformationMeasure::ApplyTransposePart(const Points& d, const Points& y, in
     out.row(e.j) += w.transpose();
     out.row(e.i) -= w.transpose();
   }
+  CornerState g;
   for (size_t i = nk * k / parts; i < nk * (k + 1) / parts; ++i) {
     const Corner& cn = corners_[i];
-    const Eigen::Vector3d ra = d.row(cn.a) - d.row(cn.n);
-    const Eigen::Vector3d rb = d.row(cn.b) - d.row(cn.n);
-    const double la = ra.norm(), lb = rb.norm();
-    if (la <= 0 || lb <= 0) continue;
-    const Eigen::Vector3d ah = ra / la, bh = rb / lb;
-    const double c = ah.dot(bh);
-    const double s = ah.cross(bh).norm();
-    if (s <= 1e-300) continue;
-    const double cos_d = c * cn.cos0 + s * cn.sin0;
-    const double sin_d = s * cn.cos0 - c * cn.sin0;
-    const double C = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
-    if (C < 1e-12) continue;
-    const double S = sin_d / (2.0 * C);
-    const double alpha = 1.0 - C + c * S / s;
-    const double beta = S / s;
+    if (!EvaluateCorner(d, cn.n, cn.a, cn.b, cn.cos0, cn.sin0, g)) continue;
+    const Eigen::Vector3d &ra = g.ra, &rb = g.rb, &ah = g.ah, &bh = g.bh;
+    const double la = g.la, lb = g.lb, c = g.c, s = g.s, C = g.cap_c, S = g.cap_s;
+    const double alpha = g.alpha, beta = g.beta;
     const double dalpha = -0.5 * S + c * C / (2.0 * s) - c * c * S / (s * s);
     const double dbeta = C / (2.0 * s) - S * c / (s * s);
     const Eigen::Vector3d ya = y.row(cn.a).transpose(), yb = y.row(cn.b).transpose();

@@ -134,7 +134,7 @@ struct Solid::Impl {
   }
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
-  absl::Status Advance(Points& p, Points& p_prev, double h, StepStats& stats, PhaseTimes& phases);
+  absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);
 
   std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const;
   Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
@@ -374,12 +374,11 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
       const int32_t i = spring_point[s];
       out.row(i) -= spring_k[s] * (p.row(i) - rest_control.row(i));
     }
-    last_strain_energy += 0;  // spring energy reported separately (not elastic)
     phases.loads = MsSince(t0);
   }
 }
 
-absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, double h, StepStats& stats,
+absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
   sum.nodes = sum.stiffness = sum.project = sum.measure = sum.solve = 0;
@@ -444,7 +443,6 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, double h, StepStats
     ++stats.substeps;
   }
   out = sum;
-  (void)h;
   return absl::OkStatus();
 }
 
@@ -693,7 +691,7 @@ absl::Status Solid::Step() {
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
   for (int attempt = 0;; ++attempt) {
-    const absl::Status st = im.Advance(p_, p_prev_, h_, stats, phases_);
+    const absl::Status st = im.Advance(p_, p_prev_, stats, phases_);
     if (st.ok()) break;
     // Stability guard: back to the step's start, halve the sub-step, retry.
     p_ = im.backup_p;

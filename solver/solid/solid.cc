@@ -61,6 +61,51 @@ models::MaterialPoint ToPoint(const Material& m) {
   return {r.young_modulus(), r.poisson_ratio(), r.density(), r.damping()};
 }
 
+// An element's rows of the node matrix restricted to its control support:
+// B (n x s) with support[a] the control point of column a, and a 128-bit
+// hash of (kind, group, B) under which B^T X B products are cached
+// (regular grids repeat them).
+struct ElementSupport {
+  std::vector<int32_t> support;
+  Eigen::MatrixXd b;
+  std::pair<uint64_t, uint64_t> key;
+};
+
+void GatherSupport(const subdivision::SparseMatrix& nm, const int32_t* ids, int n, int kind,
+                   int32_t group, ElementSupport& out) {
+  out.support.clear();
+  for (int i = 0; i < n; ++i) {
+    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+      out.support.push_back(static_cast<int32_t>(it.col()));
+    }
+  }
+  std::sort(out.support.begin(), out.support.end());
+  out.support.erase(std::unique(out.support.begin(), out.support.end()), out.support.end());
+  const int s = static_cast<int>(out.support.size());
+  out.b.setZero(n, s);
+  for (int i = 0; i < n; ++i) {
+    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+      out.b(i, std::lower_bound(out.support.begin(), out.support.end(), it.col()) -
+                   out.support.begin()) = it.value();
+    }
+  }
+  // FNV-1a and a multiplicative mix over the bits of (kind, group, s, B).
+  uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
+  auto mix = [&](uint64_t x) {
+    h1 = (h1 ^ x) * 1099511628211ull;
+    h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
+  };
+  mix(static_cast<uint64_t>(kind));
+  mix(static_cast<uint64_t>(group));
+  mix(static_cast<uint64_t>(s));
+  for (Eigen::Index k = 0; k < out.b.size(); ++k) {
+    uint64_t bits;
+    std::memcpy(&bits, out.b.data() + k, sizeof(bits));
+    mix(bits);
+  }
+  out.key = {h1, h2};
+}
+
 // A material point: an element and its parametric coordinates.
 struct MaterialLocation {
   int kind = 0;
@@ -216,8 +261,8 @@ void Solid::Impl::AssembleControlMatrices(const Points& rest) {
     mt_dense = Eigen::MatrixXd::Zero(nc, nc);
     if (has_damping) dt_dense = Eigen::MatrixXd::Zero(nc, nc);
   }
-  std::vector<int32_t> support;
-  // Cache of B^T M_e B (and B^T D_e B) by a 128-bit hash of (group, B).
+  ElementSupport es;
+  // Cache of B^T M_e B (and B^T D_e B) by a 128-bit hash of (kind, group, B).
   std::map<std::pair<uint64_t, uint64_t>, std::pair<Eigen::MatrixXd, Eigen::MatrixXd>> cache;
   fem::NodeMatrixX3 g;
   for (int kind = 0; kind < 3; ++kind) {
@@ -240,44 +285,16 @@ void Solid::Impl::AssembleControlMatrices(const Points& rest) {
       }
     }
     for (int32_t e = 0; e < block.size(); ++e) {
-      const int32_t* ids = block.element_nodes(e);
-      support.clear();
-      for (int i = 0; i < n; ++i) {
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          support.push_back(static_cast<int32_t>(it.col()));
-        }
-      }
-      std::sort(support.begin(), support.end());
-      support.erase(std::unique(support.begin(), support.end()), support.end());
+      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
+      const std::vector<int32_t>& support = es.support;
+      const Eigen::MatrixXd& b = es.b;
       const int s = static_cast<int>(support.size());
-      Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, s);
-      for (int i = 0; i < n; ++i) {
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          const int col = static_cast<int>(
-              std::lower_bound(support.begin(), support.end(), it.col()) - support.begin());
-          b(i, col) = it.value();
-        }
-      }
-      // FNV-1a and a multiplicative mix over the bits of (group, s, B).
-      uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
-      auto mix = [&](uint64_t x) {
-        h1 = (h1 ^ x) * 1099511628211ull;
-        h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
-      };
-      mix(static_cast<uint64_t>(block.group[e]));
-      mix(static_cast<uint64_t>(s));
-      for (Eigen::Index k = 0; k < b.size(); ++k) {
-        uint64_t bits;
-        std::memcpy(&bits, b.data() + k, sizeof(bits));
-        mix(bits);
-      }
-      auto it = cache.find({h1, h2});
+      auto it = cache.find(es.key);
       if (it == cache.end()) {
         Eigen::MatrixXd tm = b.transpose() * me[block.group[e]] * b;
         Eigen::MatrixXd td;
         if (has_damping) td = b.transpose() * de[block.group[e]] * b;
-        it = cache.emplace(std::make_pair(h1, h2), std::make_pair(std::move(tm), std::move(td)))
-                 .first;
+        it = cache.emplace(es.key, std::make_pair(std::move(tm), std::move(td))).first;
       }
       const Eigen::MatrixXd& tm = it->second.first;
       const Eigen::MatrixXd& td = it->second.second;
@@ -750,49 +767,26 @@ double Solid::StrainEnergy(const Points& p) {
 // corotational model at rest, plus the penalty springs, as triplets.
 std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets() const {
   const SparseMatrix& nm = d->node_matrix;
-  const int32_t nc = static_cast<int32_t>(nm.cols());
   std::vector<Eigen::Triplet<double, int32_t>> t;
   std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
-  std::vector<int32_t> support;
+  ElementSupport es;
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int n = block.nodes;
     for (int32_t e = 0; e < block.size(); ++e) {
-      const int32_t* ids = block.element_nodes(e);
-      support.clear();
-      for (int i = 0; i < n; ++i) {
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) support.push_back(static_cast<int32_t>(it.col()));
-      }
-      std::sort(support.begin(), support.end());
-      support.erase(std::unique(support.begin(), support.end()), support.end());
+      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
+      const std::vector<int32_t>& support = es.support;
+      const Eigen::MatrixXd& b = es.b;
       const int s = static_cast<int>(support.size());
-      // E = B (x) I3: node-major element DOFs from control DOFs.
-      Eigen::MatrixXd b = Eigen::MatrixXd::Zero(n, s);
-      for (int i = 0; i < n; ++i) {
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          b(i, std::lower_bound(support.begin(), support.end(), it.col()) - support.begin()) = it.value();
-        }
-      }
-      uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
-      auto mix = [&](uint64_t x) {
-        h1 = (h1 ^ x) * 1099511628211ull;
-        h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
-      };
-      mix(static_cast<uint64_t>(kind));
-      mix(static_cast<uint64_t>(block.group[e]));
-      for (Eigen::Index k = 0; k < b.size(); ++k) {
-        uint64_t bits;
-        std::memcpy(&bits, b.data() + k, sizeof(bits));
-        mix(bits);
-      }
-      auto it = cache.find({h1, h2});
+      auto it = cache.find(es.key);
       if (it == cache.end()) {
+        // E = B (x) I3: node-major element DOFs from control DOFs.
         Eigen::MatrixXd ex = Eigen::MatrixXd::Zero(3 * n, 3 * s);
         for (int i = 0; i < n; ++i)
           for (int a = 0; a < s; ++a)
             for (int c = 0; c < 3; ++c) ex(3 * i + c, 3 * a + c) = b(i, a);
         const Eigen::MatrixXd& k = corotational->K(kind, block.group[e]);
-        it = cache.emplace(std::make_pair(h1, h2), Eigen::MatrixXd(ex.transpose() * k * ex)).first;
+        it = cache.emplace(es.key, Eigen::MatrixXd(ex.transpose() * k * ex)).first;
       }
       const Eigen::MatrixXd& tk = it->second;
       for (int a = 0; a < 3 * s; ++a) {

@@ -522,8 +522,25 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     for (const auto& m : array) im.has_damping |= m.damping > 0;
   }
 
-  // The model the scene asks for.
+  // The model the scene asks for, after checking what its shared element
+  // matrices would take: curved meshes share few of them.
   BuildReport& rep = s->report_;
+  {
+    const bool corot = im.settings.model() == SolverSettings::COROTATIONAL;
+    double bytes = 0;
+    for (const models::ElementBlock& block : im.layout.blocks) {
+      const double n = block.nodes;
+      bytes += static_cast<double>(block.groups.size()) * (corot ? 9.0 : 3.0) * n * n * 8.0;
+    }
+    if (bytes > kMaxSharedMatrixBytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "the ", corot ? "corotational" : "local-frame", " element matrices of this scene would take ",
+          static_cast<int64_t>(bytes / 1048576.0), " MiB (", im.layout.blocks[0].groups.size(),
+          " distinct cubic elements), above the limit of ",
+          static_cast<int64_t>(kMaxSharedMatrixBytes / 1048576.0),
+          " MiB; use fewer subdivision levels or a more regular control mesh"));
+    }
+  }
   if (im.settings.model() == SolverSettings::COROTATIONAL) {
     auto model = std::make_unique<models::CorotationalModel>(im.layout, rest, *im.pool);
     im.corotational = model.get();

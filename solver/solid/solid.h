@@ -89,6 +89,9 @@ class Solid {
   // FailedPrecondition saying why.
   absl::Status Step();
   static constexpr int kMaxHalvings = 6;
+  // Create refuses scenes whose shared element matrices would exceed this
+  // (ResourceExhausted): elements of curved meshes rarely share them.
+  static constexpr double kMaxSharedMatrixBytes = 4.0 * 1024 * 1024 * 1024;
 
   // Overrides the sub-step count chosen from the stable-step estimate
   // (tests of the stability guard; stress cases in reports).

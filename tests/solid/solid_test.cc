@@ -281,6 +281,19 @@ TEST(SolidTest, BackwardEulerStaysBoundedOnAStiffScene) {
   EXPECT_TRUE(a->build_report().implicit);
 }
 
+TEST(SolidTest, RefusesScenesWhoseElementMatricesWouldNotFit) {
+  // A curved mesh (the nozzle) shares almost no element matrices: at three
+  // levels the corotational ones would take about 10 GiB.
+  auto scene = scene::BuiltinScene("nozzle");
+  ASSERT_OK(scene);
+  scene->mutable_solver()->set_model(SolverSettings::COROTATIONAL);
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), 3);
+  ASSERT_OK(d);
+  EXPECT_THAT(Solid::Create(*scene, *std::move(d)),
+              StatusIs(absl::StatusCode::kResourceExhausted,
+                       HasSubstr("element matrices of this scene would take")));
+}
+
 TEST(SolidTest, SceneWithoutDampingLoadsOrConstraintsBuildsNoneOfThem) {
   auto s = Make(kBlock);
   ASSERT_NE(s, nullptr);

@@ -126,8 +126,8 @@ class Solid {
   // Mt x (#control by 3): the control-space mass matrix applied to x.
   Points ApplyMass(const Points& x) const;
 
-  // Kinetic energy from the last sub-step's velocity; strain energy at the
-  // positions of the last force evaluation (one sub-step behind p).
+  // Kinetic energy from the last sub-step's velocity; strain energy at p
+  // (forces and energy are evaluated at the end of every sub-step).
   Energies ComputeEnergies() const;
   // Total mass from Mt (kg) and the rest volume of the elements (m^3).
   double total_mass() const { return total_mass_; }

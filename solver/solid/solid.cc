@@ -753,6 +753,21 @@ absl::Status Solid::Step() {
   return absl::OkStatus();
 }
 
+void Solid::SetAtRest(const Points& p) {
+  Impl& im = *impl_;
+  p_ = p;
+  for (int64_t i = 0; i < p_.rows(); ++i) {
+    if (im.fixed[i]) p_.row(i) = im.rest_control.row(i);
+  }
+  p_prev_ = p_;
+  im.model->ResetFrames();
+  im.forces_valid = false;
+  im.ledger = Impl::Ledger();
+  im.ledger.started = true;
+  im.ledger.h_min = StrainEnergy(p_);
+  im.ledger.peak = im.ledger.h_min;
+}
+
 void Solid::SetSubstepsForTesting(int substeps) {
   const double old_h = impl_->h_sub;
   impl_->SetSubsteps(std::max(1, substeps), h_);

@@ -106,6 +106,10 @@ class Solid {
   Points NodePositions() const;                            // #nodes by 3: A p
   const scene::Discretization& discretization() const { return d_; }
 
+  // Puts the solid at control positions p at rest (zero velocity), e.g. a
+  // deflected shape to release. Fixed points keep their rest positions.
+  void SetAtRest(const Points& p);
+
   // A^T g(A p): the model's internal forces on the control points at
   // control positions p (#control by 3), frames found afresh (tests, reports,
   // finite-difference checks). Does not change the solid's state.

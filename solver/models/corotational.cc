@@ -81,31 +81,9 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
       k = 0.5 * (k + k.transpose()).eval();
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += kBatch) {
-        batches_.push_back({kind, static_cast<int32_t>(gi), s,
-                            std::min(kBatch, block.group_start[gi + 1] - s)});
-      }
-    }
   }
   work_.resize(kForceParts);
-  // Balance the parts by cost: an element of n nodes costs about (3n)^2.
-  auto cost = [&](const Batch& bt) {
-    const double m = 3.0 * layout.blocks[bt.kind].nodes;
-    return m * m * bt.count;
-  };
-  double total = 0;
-  for (const Batch& bt : batches_) total += cost(bt);
-  chunk_start_.assign(1, 0);
-  double acc = 0;
-  for (size_t i = 0; i < batches_.size(); ++i) {
-    acc += cost(batches_[i]);
-    while (chunk_start_.size() < work_.size() &&
-           acc >= total * static_cast<double>(chunk_start_.size()) / work_.size()) {
-      chunk_start_.push_back(i + 1);
-    }
-  }
-  while (chunk_start_.size() <= work_.size()) chunk_start_.push_back(batches_.size());
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts);
   int max_nodes = 0;
   for (const ElementBlock& block : layout.blocks) {
     if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
@@ -130,7 +108,7 @@ void CorotationalModel::RunBatches(size_t begin, size_t end, const Points& x, Fr
   w.g.setZero();
   w.energy = 0;
   for (size_t bi = begin; bi < end; ++bi) {
-    const Batch& batch = batches_[bi];
+    const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
     const ElementGroup& grp = block.groups[batch.group];
     const int n = block.nodes;
@@ -191,7 +169,7 @@ double CorotationalModel::Forces(const Points& d, Points& g) {
   // order: the same bits for any thread count.
   pool_.Run([&](int t) {
     for (int k = t; k < parts; k += threads) {
-      RunBatches(chunk_start_[k], chunk_start_[k + 1], d, &frames_, work_[k]);
+      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], d, &frames_, work_[k]);
     }
   });
   g = work_[0].g;
@@ -211,7 +189,7 @@ void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
   const int threads = pool_.size();
   pool_.Run([&](int t) {
     for (int k = t; k < parts; k += threads) {
-      RunBatches(chunk_start_[k], chunk_start_[k + 1], v, nullptr, work_[k]);
+      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], v, nullptr, work_[k]);
     }
   });
   out = work_[0].g;

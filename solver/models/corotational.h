@@ -73,11 +73,6 @@ class CorotationalModel final : public InternalForceModel {
   int64_t per_element_bytes() const;
 
  private:
-  struct Batch {
-    int kind;
-    int32_t group;
-    int32_t first, count;  // range of block.by_group
-  };
   struct Workspace {
     Points g;
     Eigen::MatrixXd u, y;  // 3n x batch local displacements and forces
@@ -97,10 +92,7 @@ class CorotationalModel final : public InternalForceModel {
   // k_[kind][group]: 3n x 3n.
   std::array<std::vector<Eigen::MatrixXd>, 3> k_;
   Frames frames_;  // per element, by kind; written by Forces only
-  std::vector<Batch> batches_;
-  // Part k runs batches_[chunk_start_[k] .. chunk_start_[k+1]), balanced by
-  // estimated cost ((3n)^2 per element).
-  std::vector<size_t> chunk_start_;
+  ElementSchedule schedule_;  // batches and their fixed parts
   // Per-part scratch, allocated at construction (mutable for the const
   // ApplyLinearized).
   mutable std::vector<Workspace> work_;

@@ -26,6 +26,38 @@ int64_t PerElementBytes(const ElementLayout& layout) {
   return count > 0 ? bytes / count : 0;
 }
 
+ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts) {
+  ElementSchedule out;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& block = layout.blocks[kind];
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += batch_size) {
+        out.batches.push_back({kind, static_cast<int32_t>(gi), s,
+                               std::min(batch_size, block.group_start[gi + 1] - s)});
+      }
+    }
+  }
+  auto cost = [&](const ElementBatch& b) {
+    const double n = layout.blocks[b.kind].nodes;
+    return n * n * b.count;
+  };
+  double total = 0;
+  for (const ElementBatch& b : out.batches) total += cost(b);
+  out.part_start.assign(1, 0);
+  double acc = 0;
+  for (size_t i = 0; i < out.batches.size(); ++i) {
+    acc += cost(out.batches[i]);
+    while (out.part_start.size() < static_cast<size_t>(parts) &&
+           acc >= total * static_cast<double>(out.part_start.size()) / parts) {
+      out.part_start.push_back(i + 1);
+    }
+  }
+  while (out.part_start.size() <= static_cast<size_t>(parts)) {
+    out.part_start.push_back(out.batches.size());
+  }
+  return out;
+}
+
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler) {

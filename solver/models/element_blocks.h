@@ -63,6 +63,25 @@ struct ElementLayout {
   int32_t inverted_elements = 0;          // elements with det J0 <= 0 somewhere
 };
 
+// Consecutive elements of one group (block.by_group[first .. first+count)),
+// processed together as one dense matrix product.
+struct ElementBatch {
+  int kind;
+  int32_t group;
+  int32_t first, count;
+};
+
+// The batches of every group (at most `batch_size` elements each), and
+// `parts` + 1 boundaries splitting them into contiguous parts of about equal
+// cost (an element of n nodes costs about n^2): part k runs batches
+// [part_start[k], part_start[k+1]). Fixed for a layout, whatever the
+// number of threads.
+struct ElementSchedule {
+  std::vector<ElementBatch> batches;
+  std::vector<size_t> part_start;
+};
+ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts);
+
 // Bytes a model keeps per element beyond the mesh: node ids, group id, the
 // element's place in by_group, and its warm-started frame (a quaternion).
 int64_t PerElementBytes(const ElementLayout& layout);

@@ -44,32 +44,9 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       }
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
-    // Batches: consecutive elements of one group.
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += kBatch) {
-        batches_.push_back({kind, static_cast<int32_t>(gi), s,
-                            std::min(kBatch, block.group_start[gi + 1] - s)});
-      }
-    }
   }
   work_.resize(kForceParts);
-  // Balance chunks by cost: an element of n nodes costs about n^2.
-  double total = 0;
-  for (const Batch& b : batches_) {
-    const double n = layout.blocks[b.kind].nodes;
-    total += n * n * b.count;
-  }
-  chunk_start_.assign(1, 0);
-  double acc = 0;
-  for (size_t i = 0; i < batches_.size(); ++i) {
-    const double n = layout.blocks[batches_[i].kind].nodes;
-    acc += n * n * batches_[i].count;
-    while (chunk_start_.size() < work_.size() &&
-           acc >= total * static_cast<double>(chunk_start_.size()) / work_.size()) {
-      chunk_start_.push_back(i + 1);
-    }
-  }
-  while (chunk_start_.size() <= work_.size()) chunk_start_.push_back(batches_.size());
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts);
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_, 3);
     for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
@@ -90,7 +67,7 @@ void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Work
   w.g.setZero();
   w.energy = 0;
   for (size_t bi = begin; bi < end; ++bi) {
-    const Batch& batch = batches_[bi];
+    const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
     const ElementGroup& grp = block.groups[batch.group];
     const int n = block.nodes;
@@ -157,7 +134,7 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
   // buffer, summed in chunk order: the same bits whatever the timing.
   pool_.Run([&](int t) {
     for (int k = t; k < parts; k += threads) {
-      RunBatches(chunk_start_[k], chunk_start_[k + 1], d, work_[k]);
+      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], d, work_[k]);
     }
   });
   // y = dE/d delta = sum_e R_e K dhat; the force is its pull-back through

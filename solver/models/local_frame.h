@@ -64,11 +64,6 @@ class LocalFrameModel final : public InternalForceModel {
   int64_t per_element_bytes() const;
 
  private:
-  struct Batch {
-    int kind;
-    int32_t group;
-    int32_t first, count;  // range of block.by_group
-  };
   struct Workspace {
     Points g;
     Points delta;  // this chunk's part of the deformation measure
@@ -84,10 +79,7 @@ class LocalFrameModel final : public InternalForceModel {
   // k_[kind][group][axis]: n x n.
   std::array<std::vector<std::array<Eigen::MatrixXd, 3>>, 3> k_;
   std::array<std::vector<Eigen::Quaterniond>, 3> frames_;  // per element
-  std::vector<Batch> batches_;
-  // Part k of a step runs batches_[chunk_start_[k] .. chunk_start_[k+1]),
-  // balanced by estimated cost (n^2 per element).
-  std::vector<size_t> chunk_start_;
+  ElementSchedule schedule_;  // batches and their fixed parts
   std::vector<Workspace> work_;
   Points delta_, y_;
   Timing timing_;

@@ -444,32 +444,26 @@ class VtkParser {
         continue;
       }
       Shape shape;
-      int needed;
       const char* name;
       switch (type) {
         case kVtkTetra:
           shape = Shape::kTetrahedron;
-          needed = 4;
           name = "VTK_TETRA";
           break;
         case kVtkVoxel:
           shape = Shape::kHexahedron;
-          needed = 8;
           name = "VTK_VOXEL";
           break;
         case kVtkHexahedron:
           shape = Shape::kHexahedron;
-          needed = 8;
           name = "VTK_HEXAHEDRON";
           break;
         case kVtkWedge:
           shape = Shape::kPrism;
-          needed = 6;
           name = "VTK_WEDGE";
           break;
         case kVtkPyramid:
           shape = Shape::kPyramid;
-          needed = 5;
           name = "VTK_PYRAMID";
           break;
         default: {
@@ -483,6 +477,7 @@ class VtkParser {
                             "wedge, 14 pyramid, 42 polyhedron; types 0-9 are skipped"));
         }
       }
+      const int needed = internal::NumNodes(shape);
       if (static_cast<int64_t>(ids.size()) != needed) {
         return cursor_.ErrorAt(cell_lines_[c], internal::Cat("cell ", c, " is a ", name, " (type ",
                                                              type, ") and needs ", needed,

@@ -1,0 +1,327 @@
+#include "server/surface_codec.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+
+namespace dynsolid::server {
+namespace {
+
+// Code of x on one axis, or -1 when it lies outside the grid.
+int64_t Quantize(const Grid& g, int axis, double x) {
+  const double q = std::nearbyint((x - g.origin[axis]) / g.step[axis]);
+  if (!(q >= 0.0 && q <= static_cast<double>(kMaxCode))) return -1;
+  return static_cast<int64_t>(q);
+}
+
+uint32_t ZigZag(int32_t d) {
+  return d >= 0 ? static_cast<uint32_t>(d) << 1 : (static_cast<uint32_t>(-(d + 1)) << 1) | 1u;
+}
+int32_t UnZigZag(uint32_t z) {
+  return (z & 1u) ? -static_cast<int32_t>(z >> 1) - 1 : static_cast<int32_t>(z >> 1);
+}
+
+int BitWidth(uint32_t v) {
+  int b = 0;
+  while (v != 0) {
+    ++b;
+    v >>= 1;
+  }
+  return b;
+}
+
+class BitWriter {
+ public:
+  explicit BitWriter(std::string* out) : out_(out) {}
+  void Put(uint32_t value, int bits) {
+    for (int i = 0; i < bits; ++i) {
+      if (used_ == 0) out_->push_back('\0');
+      if ((value >> i) & 1u) out_->back() = static_cast<char>(out_->back() | (1 << used_));
+      used_ = (used_ + 1) & 7;
+    }
+  }
+
+ private:
+  std::string* out_;
+  int used_ = 0;
+};
+
+class BitReader {
+ public:
+  explicit BitReader(const std::string& in) : in_(in) {}
+  bool Get(int bits, uint32_t* value) {
+    uint32_t v = 0;
+    for (int i = 0; i < bits; ++i, ++at_) {
+      if (at_ / 8 >= in_.size()) return false;
+      if ((static_cast<unsigned char>(in_[at_ / 8]) >> (at_ % 8)) & 1u) v |= 1u << i;
+    }
+    *value = v;
+    return true;
+  }
+
+ private:
+  const std::string& in_;
+  size_t at_ = 0;
+};
+
+void SetVec3(const std::array<double, 3>& a, Vec3* v) {
+  v->set_x(a[0]);
+  v->set_y(a[1]);
+  v->set_z(a[2]);
+}
+
+void SetBound(const Grid& g, Vec3* v) {
+  v->set_x(g.step[0] / 2);
+  v->set_y(g.step[1] / 2);
+  v->set_z(g.step[2] / 2);
+}
+
+// The bytes of a varint.
+size_t VarintSize(uint64_t v) {
+  size_t n = 1;
+  while (v >= 128) {
+    v >>= 7;
+    ++n;
+  }
+  return n;
+}
+
+}  // namespace
+
+Grid GridFor(const std::vector<double>& positions) {
+  std::array<double, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  const size_t n = positions.size() / 3;
+  for (int a = 0; a < 3; ++a) {
+    if (n > 0) lo[a] = hi[a] = positions[a];
+    for (size_t i = 1; i < n; ++i) {
+      lo[a] = std::min(lo[a], positions[3 * i + a]);
+      hi[a] = std::max(hi[a], positions[3 * i + a]);
+    }
+  }
+  const double largest = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double floor_margin = largest > 0 ? 1e-3 * largest : 1e-3;
+  Grid g;
+  for (int a = 0; a < 3; ++a) {
+    const double margin = std::max(0.25 * (hi[a] - lo[a]), floor_margin);
+    g.origin[a] = lo[a] - margin;
+    g.step[a] = (hi[a] - lo[a] + 2 * margin) / kMaxCode;
+  }
+  return g;
+}
+
+void SurfaceEncoder::EncodeKeyframe(const SurfaceSnapshot& s, const std::vector<uint16_t>* codes,
+                                    Frame* frame) {
+  const SurfaceTopology& topo = *s.topology;
+  const size_t n = static_cast<size_t>(topo.vertex_count);
+  if (codes == nullptr) {
+    grid_ = GridFor(s.positions);
+    codes_.assign(3 * n, 0);
+    for (size_t i = 0; i < 3 * n; ++i) {
+      const int64_t q = Quantize(grid_, static_cast<int>(i % 3), s.positions[i]);
+      codes_[i] = static_cast<uint16_t>(std::clamp<int64_t>(q, 0, kMaxCode));
+    }
+  } else {
+    codes_ = *codes;
+  }
+  Keyframe* k = frame->mutable_keyframe();
+  k->set_topology_version(topo.version);
+  k->set_vertex_count(topo.vertex_count);
+  k->mutable_quads()->Assign(topo.quads.begin(), topo.quads.end());
+  k->mutable_nodes()->Assign(topo.nodes.begin(), topo.nodes.end());
+  SetVec3(grid_.origin, k->mutable_grid()->mutable_origin());
+  SetVec3(grid_.step, k->mutable_grid()->mutable_step());
+  SetBound(grid_, k->mutable_error_bound());
+  std::string* bytes = k->mutable_codes();
+  bytes->resize(6 * n);
+  for (size_t i = 0; i < 3 * n; ++i) {
+    (*bytes)[2 * i] = static_cast<char>(codes_[i] & 0xff);
+    (*bytes)[2 * i + 1] = static_cast<char>(codes_[i] >> 8);
+  }
+  SurfaceFields* f = k->mutable_fields();
+  if (fields_.displacement) f->mutable_displacement()->Assign(s.displacement.begin(), s.displacement.end());
+  if (fields_.strain) f->mutable_strain()->Assign(s.strain.begin(), s.strain.end());
+  if (fields_.stiffness) f->mutable_stiffness()->Assign(s.stiffness.begin(), s.stiffness.end());
+  if (!fields_.any()) k->clear_fields();
+}
+
+bool SurfaceEncoder::Encode(const SurfaceSnapshot& s, Frame* frame) {
+  frame->Clear();
+  frame->set_step(s.step);
+  frame->set_time(s.time);
+  const SurfaceTopology& topo = *s.topology;
+  const size_t n = static_cast<size_t>(topo.vertex_count);
+
+  bool key = !has_base_ || topo.version != topology_version_ ||
+             (fields_.any() && s.fields_version != fields_version_) || codes_.size() != 3 * n;
+  std::vector<uint16_t> codes;
+  if (!key) {
+    // Quantize on the watcher's grid; a vertex off the grid, or a solid
+    // that shrank below a quarter of the grid, asks for a new keyframe.
+    codes.resize(3 * n);
+    std::array<double, 3> lo{}, hi{};
+    for (size_t i = 0; i < n && !key; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        const double x = s.positions[3 * i + a];
+        if (i == 0 || x < lo[a]) lo[a] = x;
+        if (i == 0 || x > hi[a]) hi[a] = x;
+        const int64_t q = Quantize(grid_, a, x);
+        if (q < 0) {
+          key = true;
+          break;
+        }
+        codes[3 * i + a] = static_cast<uint16_t>(q);
+      }
+    }
+    if (!key) {
+      int big = 0;
+      for (int a = 1; a < 3; ++a) {
+        if (grid_.step[a] > grid_.step[big]) big = a;
+      }
+      if ((hi[big] - lo[big]) < 0.25 * grid_.step[big] * kMaxCode) key = true;
+    }
+  }
+
+  if (!key) {
+    // Runs of moved vertices and the largest code difference.
+    Delta* d = frame->mutable_delta();
+    std::vector<uint32_t> runs;
+    uint32_t max_zigzag = 0;
+    int32_t moved = 0;
+    bool taking = false;
+    uint32_t run = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const bool m = codes[3 * i] != codes_[3 * i] || codes[3 * i + 1] != codes_[3 * i + 1] ||
+                     codes[3 * i + 2] != codes_[3 * i + 2];
+      if (m != taking) {
+        runs.push_back(run);
+        run = 0;
+        taking = m;
+      }
+      ++run;
+      if (m) {
+        ++moved;
+        for (int a = 0; a < 3; ++a) {
+          const int32_t diff = static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a];
+          max_zigzag = std::max(max_zigzag, ZigZag(diff));
+        }
+      }
+    }
+    if (taking) runs.push_back(run);
+    if (moved == 0) runs.clear();
+    const int bits = std::max(1, BitWidth(max_zigzag));
+    size_t delta_bytes = (static_cast<size_t>(moved) * 3 * bits + 7) / 8;
+    for (uint32_t r : runs) delta_bytes += VarintSize(r);
+    const int field_count = fields_.displacement + fields_.strain + fields_.stiffness;
+    delta_bytes += static_cast<size_t>(moved) * 4 * field_count;
+    const size_t key_bytes = 6 * n + 4 * n * field_count;
+    if (delta_bytes > key_bytes) {
+      key = true;  // a stale watcher: a fresh keyframe is smaller
+      frame->clear_delta();
+    } else {
+      d->set_base_step(base_step_);
+      d->mutable_runs()->Assign(runs.begin(), runs.end());
+      d->set_bits(static_cast<uint32_t>(bits));
+      d->set_moved(moved);
+      SetBound(grid_, d->mutable_error_bound());
+      std::string* packed = d->mutable_packed();
+      packed->reserve((static_cast<size_t>(moved) * 3 * bits + 7) / 8);
+      BitWriter w(packed);
+      SurfaceFields* f = d->mutable_fields();
+      for (size_t i = 0; i < n; ++i) {
+        if (codes[3 * i] == codes_[3 * i] && codes[3 * i + 1] == codes_[3 * i + 1] &&
+            codes[3 * i + 2] == codes_[3 * i + 2]) {
+          continue;
+        }
+        for (int a = 0; a < 3; ++a) {
+          w.Put(ZigZag(static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a]), bits);
+        }
+        if (fields_.displacement) f->add_displacement(s.displacement[i]);
+        if (fields_.strain) f->add_strain(s.strain[i]);
+        if (fields_.stiffness) f->add_stiffness(s.stiffness[i]);
+      }
+      if (!fields_.any()) d->clear_fields();
+      codes_.swap(codes);
+    }
+  }
+  if (key) EncodeKeyframe(s, nullptr, frame);
+  has_base_ = true;
+  base_step_ = s.step;
+  topology_version_ = topo.version;
+  fields_version_ = s.fields_version;
+  return key;
+}
+
+absl::Status SurfaceDecoder::Apply(const Frame& frame) {
+  if (frame.has_keyframe()) {
+    const Keyframe& k = frame.keyframe();
+    const size_t n = static_cast<size_t>(k.vertex_count());
+    if (k.codes().size() != 6 * n) {
+      return absl::InvalidArgumentError(absl::StrCat("keyframe.codes has ", k.codes().size(),
+                                                     " bytes, expected 6 x ", n));
+    }
+    grid_.origin = {k.grid().origin().x(), k.grid().origin().y(), k.grid().origin().z()};
+    grid_.step = {k.grid().step().x(), k.grid().step().y(), k.grid().step().z()};
+    error_bound_ = k.error_bound();
+    quads_.assign(k.quads().begin(), k.quads().end());
+    codes_.resize(3 * n);
+    for (size_t i = 0; i < 3 * n; ++i) {
+      codes_[i] = static_cast<unsigned char>(k.codes()[2 * i]) |
+                  (static_cast<uint32_t>(static_cast<unsigned char>(k.codes()[2 * i + 1])) << 8);
+    }
+    displacement_.assign(k.fields().displacement().begin(), k.fields().displacement().end());
+    strain_.assign(k.fields().strain().begin(), k.fields().strain().end());
+    stiffness_.assign(k.fields().stiffness().begin(), k.fields().stiffness().end());
+    topology_version_ = k.topology_version();
+    has_keyframe_ = true;
+    step_ = frame.step();
+    return absl::OkStatus();
+  }
+  if (!frame.has_delta()) return absl::InvalidArgumentError("frame has neither keyframe nor delta");
+  if (!has_keyframe_) return absl::FailedPreconditionError("a delta before any keyframe");
+  const Delta& d = frame.delta();
+  if (d.base_step() != step_) {
+    return absl::FailedPreconditionError(absl::StrCat("delta.base_step ", d.base_step(),
+                                                      " is not the last frame's step ", step_));
+  }
+  const size_t n = codes_.size() / 3;
+  BitReader r(d.packed());
+  const int bits = static_cast<int>(d.bits());
+  size_t at = 0;
+  int32_t listed = 0;
+  for (int i = 0; i < d.runs_size(); ++i) {
+    const size_t len = d.runs(i);
+    if (at + len > n) return absl::InvalidArgumentError("delta.runs go past the last vertex");
+    if (i % 2 == 1) {
+      for (size_t v = at; v < at + len; ++v) {
+        for (int a = 0; a < 3; ++a) {
+          uint32_t z = 0;
+          if (!r.Get(bits, &z)) return absl::InvalidArgumentError("delta.packed is too short");
+          const int64_t q = static_cast<int64_t>(codes_[3 * v + a]) + UnZigZag(z);
+          if (q < 0 || q > kMaxCode) return absl::InvalidArgumentError("delta code out of range");
+          codes_[3 * v + a] = static_cast<uint32_t>(q);
+        }
+        if (d.fields().displacement_size() > listed) displacement_[v] = d.fields().displacement(listed);
+        if (d.fields().strain_size() > listed) strain_[v] = d.fields().strain(listed);
+        if (d.fields().stiffness_size() > listed) stiffness_[v] = d.fields().stiffness(listed);
+        ++listed;
+      }
+    }
+    at += len;
+  }
+  if (listed != d.moved()) {
+    return absl::InvalidArgumentError(absl::StrCat("delta lists ", listed, " vertices, moved says ",
+                                                   d.moved()));
+  }
+  step_ = frame.step();
+  return absl::OkStatus();
+}
+
+std::vector<double> SurfaceDecoder::Positions() const {
+  std::vector<double> p(codes_.size());
+  for (size_t i = 0; i < codes_.size(); ++i) p[i] = grid_.Decode(static_cast<int>(i % 3), codes_[i]);
+  return p;
+}
+
+}  // namespace dynsolid::server

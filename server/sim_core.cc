@@ -104,6 +104,12 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
       reply->set_load_id(*id);
       return absl::OkStatus();
     }
+    case Command::kAddPressure: {
+      absl::StatusOr<int64_t> id = solid_->AddPressure(c.add_pressure());
+      if (!id.ok()) return Rename(id.status(), "pressure", "add_pressure");
+      reply->set_load_id(*id);
+      return absl::OkStatus();
+    }
     case Command::kSetGravity:
       return Rename(solid_->SetGravity(c.set_gravity()), "gravity", "set_gravity");
     case Command::kRemoveLoad:
@@ -118,6 +124,12 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
     case Command::kUnfix:
       return Rename(solid_->Unfix(c.unfix().constraint_id()), "constraint_id",
                     "unfix.constraint_id");
+    case Command::kPaintMaterial: {
+      absl::Status s = solid_->PaintMaterial(c.paint_material());
+      if (!s.ok()) return Rename(s, "paint", "paint_material");
+      ++fields_version_;
+      return s;
+    }
     case Command::kPause:
       paused_ = true;
       steps_remaining_ = 0;

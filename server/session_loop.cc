@@ -267,6 +267,7 @@ void SessionLoop::Run() {
         (void)core_->StepOnce();
         const Clock::time_point t1 = Clock::now();
         RecordStep(duration<double, std::milli>(t1 - t0).count());
+        UpdateCounters();
         ++rate_steps;
         next_step += h;
         const Clock::duration lag = t1 - next_step;
@@ -311,18 +312,6 @@ void SessionLoop::Run() {
       const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
                          core_->fields_version() != last_published_fields_;
       if (dirty && (publish_requested || now >= next_publish_)) Publish(now);
-    }
-    {
-      absl::MutexLock lock(&stats_mu_);
-      counters_.step = core_->steps();
-      counters_.time = core_->solid().time();
-      counters_.paused = core_->paused();
-      counters_.steps_remaining = core_->steps_remaining();
-      counters_.last_error = core_->last_error();
-      counters_.rollbacks = core_->solid().rollbacks();
-      counters_.fields_version = core_->fields_version();
-      counters_.applied = core_->commands_applied();
-      counters_.rejected = core_->commands_rejected();
     }
   }
   // Shutdown: a last snapshot makes the next start quick.
@@ -370,6 +359,7 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands) {
     }
     batch.replies.emplace_back(std::move(c.sink), std::move(reply));
   }
+  UpdateCounters();
   if (duplicates > 0) {
     absl::MutexLock lock(&stats_mu_);
     counters_.duplicates += duplicates;
@@ -451,6 +441,19 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
     i.done(std::move(r));
   }
   waiting_inspects_ = std::move(keep);
+}
+
+void SessionLoop::UpdateCounters() {
+  absl::MutexLock lock(&stats_mu_);
+  counters_.step = core_->steps();
+  counters_.time = core_->solid().time();
+  counters_.paused = core_->paused();
+  counters_.steps_remaining = core_->steps_remaining();
+  counters_.last_error = core_->last_error();
+  counters_.rollbacks = core_->solid().rollbacks();
+  counters_.fields_version = core_->fields_version();
+  counters_.applied = core_->commands_applied();
+  counters_.rejected = core_->commands_rejected();
 }
 
 void SessionLoop::RecordStep(double ms) {

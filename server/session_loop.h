@@ -150,6 +150,9 @@ class SessionLoop {
   void Publish(std::chrono::steady_clock::time_point now);
   void AnswerInspects(bool all_unavailable);
   void RecordStep(double ms);
+  // Copies the core's state into the stats (before replies and inspections
+  // go out, so a client never sees stats older than an answer it got).
+  void UpdateCounters();
   void Deliver(PersistBatch batch);
 
   const std::string id_;

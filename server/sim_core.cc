@@ -144,8 +144,13 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
         return absl::InvalidArgumentError(absl::StrCat(
             "command.step.count: must be in [1, ", kMaxStepCount, "], got ", n));
       }
+      if (steps_remaining_ > kMaxStepCount - n) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "command.step.count: ", n, " more steps would leave more than ", kMaxStepCount,
+            " to take (", steps_remaining_, " are left)"));
+      }
       paused_ = true;
-      steps_remaining_ = n;
+      steps_remaining_ += n;
       return absl::OkStatus();
     }
     case Command::kSave:

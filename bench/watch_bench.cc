@@ -207,8 +207,8 @@ int main(int argc, char** argv) {
   }
   dc::ChannelOptions channel_options;
   channel_options.address = server.address();
-  auto channel = dc::MakeChannel(channel_options);
-  auto stub = dynsolid::Sessions::NewStub(channel);
+  const dc::ChannelFactory channels = dc::ChannelFactoryFor(channel_options);
+  auto stub = dynsolid::Sessions::NewStub(channels());
 
   dynsolid::CreateSessionRequest create;
   create.set_builtin_scene(absl::GetFlag(FLAGS_scene));
@@ -234,7 +234,7 @@ int main(int argc, char** argv) {
 
   // Keep the solid moving: swap a sideways force on the top every shake_ms.
   std::atomic<bool> stop_shaking{false};
-  dc::CommandChannel commands(channel, ref, "watch_bench");
+  dc::CommandChannel commands(channels, ref, "watch_bench");
   std::thread shaker([&] {
     const int ms = absl::GetFlag(FLAGS_shake_ms);
     if (ms <= 0) return;

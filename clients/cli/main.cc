@@ -38,6 +38,7 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "clients/lib/script.h"
 #include "clients/lib/session_runner.h"
@@ -75,6 +76,7 @@ ABSL_FLAG(bool, keep_going, false, "run: continue after a rejected command");
 ABSL_FLAG(int, break_every, 0,
           "run, testing: drop the command stream after every N-th command (0: never) to "
           "exercise reconnect and resend");
+ABSL_FLAG(bool, verbose, false, "run: print each script line and every reconnect on stderr");
 ABSL_FLAG(double, reconnect_seconds, 30,
           "run: give up when no stream has worked for this long");
 
@@ -165,8 +167,8 @@ class Client {
     if (!ca.empty() && !ReadFile(ca, &options.tls_root_certs)) {
       ca_error_ = absl::StrCat("cannot read --tls_ca ", ca);
     }
-    channel_ = dynsolid::client::MakeChannel(options);
-    stub_ = dynsolid::Sessions::NewStub(channel_);
+    channels_ = dynsolid::client::ChannelFactoryFor(options);
+    stub_ = dynsolid::Sessions::NewStub(channels_());
   }
 
   const std::string& ca_error() const { return ca_error_; }
@@ -291,7 +293,15 @@ class Client {
     o.commands.reconnect_timeout = absl::Seconds(absl::GetFlag(FLAGS_reconnect_seconds));
     o.watcher.reconnect_timeout = o.commands.reconnect_timeout;
 
-    absl::StatusOr<dc::RunReport> report = dc::RunScript(channel_, script, o);
+    if (absl::GetFlag(FLAGS_verbose)) {
+      const auto start = std::chrono::steady_clock::now();
+      o.log = [start](const std::string& message) {
+        const double t =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        std::cerr << absl::StrFormat("[%8.3f s] %s\n", t, message);
+      };
+    }
+    absl::StatusOr<dc::RunReport> report = dc::RunScript(channels_, script, o);
     if (!report.ok()) {
       std::cerr << "dynsolid-client: "
                 << CodeName(static_cast<grpc::StatusCode>(report.status().code())) << ": "
@@ -337,7 +347,7 @@ class Client {
     return 0;
   }
 
-  std::shared_ptr<grpc::Channel> channel_;
+  dynsolid::client::ChannelFactory channels_;
   std::unique_ptr<dynsolid::Sessions::Stub> stub_;
   std::string ca_error_;
   const bool close_given_;

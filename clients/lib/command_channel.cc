@@ -31,9 +31,10 @@ absl::Status ToAbsl(const grpc::Status& s) {
 
 }  // namespace
 
-CommandChannel::CommandChannel(std::shared_ptr<grpc::Channel> channel, SessionRef session,
+CommandChannel::CommandChannel(ChannelFactory channels, SessionRef session,
                                std::string client_id, CommandChannelOptions options)
-    : stub_(Sessions::NewStub(std::move(channel))),
+    : channels_(std::move(channels)),
+      stub_(Sessions::NewStub(channels_())),
       session_(std::move(session)),
       client_id_(std::move(client_id)),
       options_(options) {
@@ -91,7 +92,8 @@ absl::StatusOr<uint64_t> CommandChannel::Send(const Command& command, std::strin
   return seq;
 }
 
-std::shared_ptr<CommandChannel::Stream> CommandChannel::Open() {
+std::shared_ptr<CommandChannel::Stream> CommandChannel::Open(bool fresh) {
+  if (fresh) stub_ = Sessions::NewStub(channels_());
   auto s = std::make_shared<Stream>();
   absl::MutexLock write_lock(&write_mu_);
   s->rw = stub_->Commands(&s->context);
@@ -139,7 +141,7 @@ void CommandChannel::ReaderLoop() {
       absl::MutexLock lock(&mu_);
       if (done_ || (closing_ && unanswered_ == 0)) break;
     }
-    std::shared_ptr<Stream> s = Open();
+    std::shared_ptr<Stream> s = Open(/*fresh=*/broken);
     const Clock::time_point opened = Clock::now();
     CommandReply reply;
     bool got_reply = false;
@@ -198,6 +200,11 @@ void CommandChannel::ReaderLoop() {
       break;
     }
     ++reconnects_;
+    if (options_.log) {
+      options_.log(absl::StrCat("commands: stream ended (", status.error_code(), " ",
+                                status.error_message(), "); reconnect ", reconnects_, " with ",
+                                unanswered_, " unanswered"));
+    }
     // Sleep outside the lock, but wake early when closing.
     const absl::Duration wait = absl::Milliseconds(backoff_ms);
     backoff_ms = std::min(backoff_ms * 2, 1000);

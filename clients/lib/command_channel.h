@@ -24,6 +24,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
+#include "clients/lib/channel.h"
 #include "dynsolid/service.grpc.pb.h"
 
 namespace dynsolid::client {
@@ -35,6 +36,8 @@ struct CommandChannelOptions {
   // n-th command (0: never), before its reply is read, as a broken network
   // would; the channel then reconnects and resends.
   int break_every = 0;
+  // Progress messages (reconnects); may be empty.
+  LogFn log;
 };
 
 // One command's life.
@@ -60,7 +63,8 @@ struct CommandRecord {
 
 class CommandChannel {
  public:
-  CommandChannel(std::shared_ptr<grpc::Channel> channel, SessionRef session,
+  // `channels` makes the channel of each stream (a new one per reconnect).
+  CommandChannel(ChannelFactory channels, SessionRef session,
                  std::string client_id, CommandChannelOptions options = {});
   ~CommandChannel();
   CommandChannel(const CommandChannel&) = delete;
@@ -91,12 +95,14 @@ class CommandChannel {
     std::unique_ptr<grpc::ClientReaderWriter<CommandRequest, CommandReply>> rw;
   };
   void ReaderLoop();
-  // Opens a stream and writes every unanswered command (under write_mu_).
-  std::shared_ptr<Stream> Open();
+  // Opens a stream and writes every unanswered command (under write_mu_);
+  // `fresh`: on a new channel.
+  std::shared_ptr<Stream> Open(bool fresh);
   CommandRequest RequestFor(const CommandRecord& r, bool first) const;
   void HandleReply(const CommandReply& reply);
 
-  std::unique_ptr<Sessions::Stub> stub_;
+  const ChannelFactory channels_;
+  std::unique_ptr<Sessions::Stub> stub_;  // used by the reader thread only
   const SessionRef session_;
   const std::string client_id_;
   const CommandChannelOptions options_;

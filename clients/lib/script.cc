@@ -377,6 +377,9 @@ std::string ParseLine(const std::vector<std::string>& words,
     if (auto n = p.Integer("count", 1, kMaxStepCount)) c.mutable_step()->set_count(*n);
   } else if (verb == "save") {
     c.mutable_save();
+  } else if (verb == "wait" && !p.Has("steps")) {
+    out.kind = ScriptLine::Kind::kWaitSteps;
+    c.Clear();
   } else if (verb == "wait" || verb == "wait_until") {
     const std::string key = verb == "wait" ? "steps" : "step";
     p.Require(key, "N");

@@ -20,6 +20,7 @@ namespace dynsolid::client {
 struct ScriptLine {
   enum class Kind {
     kCommand,    // send `command` (a service.proto Command)
+    kWaitSteps,  // wait until the steps of every Step command so far are done
     kWait,       // wait until the session reaches base + `steps`, base the
                  // step at which the last command was applied
     kWaitUntil,  // wait until the session reaches step `steps`

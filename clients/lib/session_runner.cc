@@ -55,10 +55,64 @@ const char* CodeName(int code) {
   return code >= 0 && code <= 16 ? kNames[code] : "UNKNOWN";
 }
 
+// Unary calls that ride out a server restart: a call goes on a fresh
+// channel when the current one is not READY (a channel whose server went
+// away may stay stuck; see channel.h), and UNAVAILABLE is retried on a
+// fresh channel (backoff 50 ms doubling to 1 s) until `patience` has
+// passed. Only for idempotent calls (not CreateSession).
+class Caller {
+ public:
+  Caller(ChannelFactory channels, absl::Duration patience, LogFn log)
+      : channels_(std::move(channels)), patience_(patience), log_(std::move(log)) {
+    Renew();
+  }
+
+  // fn(Sessions::Stub&) makes one attempt (with its own ClientContext).
+  template <typename Fn>
+  grpc::Status Call(Fn fn) {
+    const Clock::time_point give_up = Clock::now() + absl::ToChronoNanoseconds(patience_);
+    int backoff_ms = 50;
+    for (;;) {
+      if (used_) {
+        const grpc_connectivity_state state = channel_->GetState(false);
+        if (state != GRPC_CHANNEL_READY) {
+          if (log_) log_(absl::StrCat("calls: channel state ", state, ", using a new channel"));
+          Renew();
+        }
+      }
+      used_ = true;
+      const grpc::Status s = fn(*stub_);
+      if (s.error_code() != grpc::StatusCode::UNAVAILABLE || Clock::now() > give_up) return s;
+      if (log_) log_(absl::StrCat("calls: ", s.error_message(), "; retrying on a new channel"));
+      std::this_thread::sleep_for(std::chrono::milliseconds(backoff_ms));
+      backoff_ms = std::min(2 * backoff_ms, 1000);
+      Renew();
+    }
+  }
+  Sessions::Stub& stub() {
+    used_ = true;
+    return *stub_;
+  }
+
+ private:
+  void Renew() {
+    channel_ = channels_();
+    stub_ = Sessions::NewStub(channel_);
+    used_ = false;
+  }
+
+  const ChannelFactory channels_;
+  const absl::Duration patience_;
+  const LogFn log_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<Sessions::Stub> stub_;
+  bool used_ = false;  // a call was made on channel_ (a new one is IDLE, not READY)
+};
+
 // Runs the lines of one script; keeps the state the lines share.
 class Run {
  public:
-  Run(Sessions::Stub& stub, const Script& script, const RunOptions& options, RunReport& report,
+  Run(Caller& stub, const Script& script, const RunOptions& options, RunReport& report,
       CommandChannel& commands, Watcher* watcher)
       : stub_(stub),
         script_(script),
@@ -80,6 +134,7 @@ class Run {
  private:
   absl::Status Line(const ScriptLine& line) {
     const std::string where = absl::StrCat(script_.Where(line), ": ", line.verb);
+    if (options_.log) options_.log(where);
     switch (line.kind) {
       case ScriptLine::Kind::kCommand: {
         Command command = line.command;
@@ -108,6 +163,13 @@ class Run {
         if (!seq.ok()) return Annotate(where, seq.status());
         lines_[*seq] = &line;
         if (!line.name.empty()) named_[line.name] = Named{*seq, line.line};
+        return absl::OkStatus();
+      }
+      case ScriptLine::Kind::kWaitSteps: {
+        if (absl::Status s = Barrier(); !s.ok()) return s;
+        absl::StatusOr<int64_t> at = WaitForStepsDone(where);
+        if (!at.ok()) return at.status();
+        known_step_ = std::max(known_step_, *at);
         return absl::OkStatus();
       }
       case ScriptLine::Kind::kWait:
@@ -176,13 +238,15 @@ class Run {
   }
 
   absl::StatusOr<InspectReply> WaitForStep(int64_t step, const std::string& where) {
-    grpc::ClientContext context;
-    context.set_deadline(DeadlineIn(options_.wait_timeout));
     InspectRequest request;
     *request.mutable_session() = Ref();
     request.set_wait_for_step(step);
     InspectReply reply;
-    const grpc::Status s = stub_.Inspect(&context, request, &reply);
+    const grpc::Status s = stub_.Call([&](Sessions::Stub& stub) {
+      grpc::ClientContext context;
+      context.set_deadline(DeadlineIn(options_.wait_timeout));
+      return stub.Inspect(&context, request, &reply);
+    });
     if (s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED) {
       return absl::DeadlineExceededError(absl::StrCat(
           where, ": the session did not reach step ", step, " within ",
@@ -191,6 +255,35 @@ class Run {
     }
     if (!s.ok()) return Annotate(where, ToAbsl(s, "Inspect"));
     return reply;
+  }
+
+  // Polls GetStats until no steps of Step commands are left; returns the
+  // step the session is at then.
+  absl::StatusOr<int64_t> WaitForStepsDone(const std::string& where) {
+    const Clock::time_point give_up =
+        Clock::now() + absl::ToChronoNanoseconds(options_.wait_timeout);
+    int poll_us = 500;
+    for (;;) {
+      SessionStats stats;
+      const grpc::Status s = stub_.Call([&](Sessions::Stub& stub) {
+        grpc::ClientContext context;
+        context.set_deadline(DeadlineIn(options_.call_timeout));
+        return stub.GetStats(&context, Ref(), &stats);
+      });
+      if (!s.ok()) return Annotate(where, ToAbsl(s, "GetStats"));
+      if (!stats.last_error().empty()) {
+        return absl::AbortedError(absl::StrCat(where, ": the session stopped at step ",
+                                               stats.step(), ": ", stats.last_error()));
+      }
+      if (stats.steps_remaining() == 0) return stats.step();
+      if (Clock::now() > give_up) {
+        return absl::DeadlineExceededError(absl::StrCat(
+            where, ": ", stats.steps_remaining(), " steps still to take after ",
+            absl::FormatDuration(options_.wait_timeout), " (at step ", stats.step(), ")"));
+      }
+      std::this_thread::sleep_for(std::chrono::microseconds(poll_us));
+      poll_us = std::min(2 * poll_us, 20000);
+    }
   }
 
   SessionRef Ref() const {
@@ -208,7 +301,7 @@ class Run {
     uint64_t seq;
     int line;
   };
-  Sessions::Stub& stub_;
+  Caller& stub_;
   const Script& script_;
   const RunOptions& options_;
   RunReport& report_;
@@ -263,26 +356,6 @@ std::string MessageJson(const google::protobuf::Message& m) {
 
 }  // namespace
 
-std::shared_ptr<grpc::Channel> MakeChannel(const ChannelOptions& options) {
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(options.max_message_bytes);
-  args.SetMaxSendMessageSize(options.max_message_bytes);
-  // Reconnect within a second when the server comes back (the default
-  // backoff grows to two minutes).
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
-  std::shared_ptr<grpc::ChannelCredentials> credentials;
-  if (options.tls_root_certs.empty()) {
-    credentials = grpc::InsecureChannelCredentials();
-  } else {
-    grpc::SslCredentialsOptions ssl;
-    ssl.pem_root_certs = options.tls_root_certs;
-    credentials = grpc::SslCredentials(ssl);
-  }
-  return grpc::CreateCustomChannel(options.address, credentials, args);
-}
-
 double Percentile(std::vector<double> values, double p) {
   if (values.empty()) return 0;
   std::sort(values.begin(), values.end());
@@ -291,10 +364,10 @@ double Percentile(std::vector<double> values, double p) {
   return values[i];
 }
 
-absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, const Script& script,
+absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script& script,
                                     const RunOptions& options) {
   const Clock::time_point start = Clock::now();
-  auto stub = Sessions::NewStub(channel);
+  Caller caller(channels, options.commands.reconnect_timeout, options.log);
   RunReport report;
   report.script_file = script.file;
   report.script_lines = static_cast<int>(script.lines.size());
@@ -303,9 +376,11 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
   // The session.
   std::string token;
   if (!options.join.id().empty()) {
-    grpc::ClientContext context;
-    context.set_deadline(DeadlineIn(options.call_timeout));
-    const grpc::Status s = stub->GetSession(&context, options.join, &report.session);
+    const grpc::Status s = caller.Call([&](Sessions::Stub& stub) {
+      grpc::ClientContext context;
+      context.set_deadline(DeadlineIn(options.call_timeout));
+      return stub.GetSession(&context, options.join, &report.session);
+    });
     if (!s.ok()) return ToAbsl(s, absl::StrCat("GetSession ", options.join.id()));
     token = options.join.token();
   } else {
@@ -319,7 +394,8 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
     request.set_start_paused(options.start_paused);
     grpc::ClientContext context;
     context.set_deadline(DeadlineIn(options.call_timeout));
-    const grpc::Status s = stub->CreateSession(&context, request, &report.session);
+    // Not retried: a lost answer would leave a second session behind.
+    const grpc::Status s = caller.stub().CreateSession(&context, request, &report.session);
     if (!s.ok()) return ToAbsl(s, "CreateSession");
     token = report.session.token();
     report.created = true;
@@ -333,25 +409,31 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
   std::unique_ptr<Watcher> watcher;
   if (options.watch) {
     WatcherOptions w = options.watcher;
+    w.log = options.log;
     w.frames_dir = options.frames_dir;
     w.write_obj = options.write_obj;
     w.write_vtu = options.write_vtu;
-    watcher = std::make_unique<Watcher>(channel, ref, w);
+    watcher = std::make_unique<Watcher>(channels, ref, w);
   }
-  auto commands = std::make_unique<CommandChannel>(channel, ref, report.client_id,
-                                                   options.commands);
-  Run run(*stub, script, options, report, *commands, watcher.get());
+  CommandChannelOptions command_options = options.commands;
+  command_options.log = options.log;
+  auto commands = std::make_unique<CommandChannel>(channels, ref, report.client_id,
+                                                   command_options);
+  Run run(caller, script, options, report, *commands, watcher.get());
   run.token_ = token;
   report.status = run.Execute();
 
+  if (options.log) options.log(absl::StrCat("script done: ", report.status.ToString()));
   // The end: where the session is, what the watcher holds.
   InspectReply at_end;
   {
-    grpc::ClientContext context;
-    context.set_deadline(DeadlineIn(options.call_timeout));
     InspectRequest request;
     *request.mutable_session() = ref;
-    const grpc::Status s = stub->Inspect(&context, request, &at_end);
+    const grpc::Status s = caller.Call([&](Sessions::Stub& stub) {
+      grpc::ClientContext context;
+      context.set_deadline(DeadlineIn(options.call_timeout));
+      return stub.Inspect(&context, request, &at_end);
+    });
     if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "Inspect");
   }
   if (watcher != nullptr) {
@@ -362,13 +444,15 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
     // Same step on both sides only when the session stands still.
     if (at_end.paused() && report.final_surface.step == at_end.step() &&
         at_end.steps_remaining() == 0) {
-      grpc::ClientContext context;
-      context.set_deadline(DeadlineIn(options.call_timeout));
       InspectRequest request;
       *request.mutable_session() = ref;
       request.set_surface_positions(true);
       InspectReply exact;
-      const grpc::Status s = stub->Inspect(&context, request, &exact);
+      const grpc::Status s = caller.Call([&](Sessions::Stub& stub) {
+        grpc::ClientContext context;
+        context.set_deadline(DeadlineIn(options.call_timeout));
+        return stub.Inspect(&context, request, &exact);
+      });
       const Surface& got = report.final_surface;
       if (s.ok() && exact.step() == got.step &&
           exact.surface_positions_size() == static_cast<int>(got.positions.size())) {
@@ -386,9 +470,11 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
     }
   }
   {
-    grpc::ClientContext context;
-    context.set_deadline(DeadlineIn(options.call_timeout));
-    const grpc::Status s = stub->GetStats(&context, ref, &report.stats);
+    const grpc::Status s = caller.Call([&](Sessions::Stub& stub) {
+      grpc::ClientContext context;
+      context.set_deadline(DeadlineIn(options.call_timeout));
+      return stub.GetStats(&context, ref, &report.stats);
+    });
     if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "GetStats");
   }
   const absl::Status closed = commands->Close(absl::Seconds(30));
@@ -402,10 +488,12 @@ absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, cons
     if (!w.ok() && report.status.ok()) report.status = w;
   }
   if (options.close_at_end) {
-    grpc::ClientContext context;
-    context.set_deadline(DeadlineIn(options.call_timeout));
     google::protobuf::Empty empty;
-    const grpc::Status s = stub->CloseSession(&context, ref, &empty);
+    const grpc::Status s = caller.Call([&](Sessions::Stub& stub) {
+      grpc::ClientContext context;
+      context.set_deadline(DeadlineIn(options.call_timeout));
+      return stub.CloseSession(&context, ref, &empty);
+    });
     if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "CloseSession");
     report.closed = s.ok();
   }
@@ -482,7 +570,8 @@ std::string ReportJson(const RunReport& r) {
   const double fps = w.seconds > 0 ? (w.frames - 1) / w.seconds : 0;
   absl::StrAppend(&j, ",\n  \"watch\": {\"frames\": ", w.frames, ", \"keyframes\": ", w.keyframes,
                   ", \"deltas\": ", w.deltas, ", \"skipped\": ", w.skipped,
-                  ", \"bytes\": ", w.bytes, ", \"raw_float32_bytes\": ", w.raw_float32_bytes,
+                  ", \"bytes\": ", w.bytes, ", \"field_bytes\": ", w.field_bytes,
+                  ", \"raw_float32_bytes\": ", w.raw_float32_bytes,
                   ", \"reconnects\": ", w.reconnects, ", \"first_step\": ", w.first_step,
                   ", \"last_step\": ", w.last_step, ", \"seconds\": ", JsonNumber(w.seconds),
                   ", \"frames_per_second\": ", JsonNumber(fps),
@@ -560,10 +649,14 @@ std::string ReportText(const RunReport& r) {
                         Percentile(latencies, 0.5), Percentile(latencies, 0.99));
   absl::StrAppendFormat(&t,
                         "frames: %d received (%d keyframes), %d skipped, %.1f frames/s, "
-                        "%d bytes (%.1f %% of raw float32), %d written\n",
+                        "%d bytes (%d of them fields); without fields %.1f %% of raw float32 "
+                        "positions; %d written\n",
                         w.frames, w.keyframes, w.skipped,
                         w.seconds > 0 ? (w.frames - 1) / w.seconds : 0.0, w.bytes,
-                        w.raw_float32_bytes > 0 ? 100.0 * w.bytes / w.raw_float32_bytes : 0.0,
+                        w.field_bytes,
+                        w.raw_float32_bytes > 0
+                            ? 100.0 * (w.bytes - w.field_bytes) / w.raw_float32_bytes
+                            : 0.0,
                         w.frames_written);
   absl::StrAppendFormat(&t, "server: step %d, step time median %.3f ms, p99 %.3f ms\n",
                         r.stats.step(), r.stats.step_ms_median(), r.stats.step_ms_p99());

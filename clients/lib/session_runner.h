@@ -14,22 +14,13 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "clients/lib/channel.h"
 #include "clients/lib/command_channel.h"
 #include "clients/lib/script.h"
 #include "clients/lib/watcher.h"
 #include "dynsolid/service.grpc.pb.h"
 
 namespace dynsolid::client {
-
-struct ChannelOptions {
-  std::string address = "127.0.0.1:50051";
-  // PEM root certificates: use TLS (empty: plaintext).
-  std::string tls_root_certs;
-  int max_message_bytes = 4 << 20;
-};
-
-// A channel that reconnects quickly after the server comes back.
-std::shared_ptr<grpc::Channel> MakeChannel(const ChannelOptions& options);
 
 struct RunOptions {
   // Create a session from exactly one of these, or join `join`.
@@ -54,6 +45,8 @@ struct RunOptions {
   absl::Duration wait_timeout = absl::Seconds(120);
   absl::Duration call_timeout = absl::Seconds(120);
   CommandChannelOptions commands;
+  // Progress messages (each script line, reconnects); may be empty.
+  LogFn log;
 };
 
 struct SnapshotFile {
@@ -95,7 +88,7 @@ struct RunReport {
 
 // Runs `script`; the report is filled as far as the run got (its status
 // says why it stopped early). Fails only when no session could be had.
-absl::StatusOr<RunReport> RunScript(std::shared_ptr<grpc::Channel> channel, const Script& script,
+absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script& script,
                                     const RunOptions& options);
 
 // The report as JSON (docs/client.md "Report").

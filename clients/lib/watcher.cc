@@ -27,9 +27,8 @@ bool Fatal(grpc::StatusCode code) {
 
 }  // namespace
 
-Watcher::Watcher(std::shared_ptr<grpc::Channel> channel, SessionRef session,
-                 WatcherOptions options)
-    : stub_(Sessions::NewStub(std::move(channel))),
+Watcher::Watcher(ChannelFactory channels, SessionRef session, WatcherOptions options)
+    : channels_(std::move(channels)),
       session_(std::move(session)),
       options_(std::move(options)) {
   thread_ = std::thread([this] { Loop(); });
@@ -47,7 +46,9 @@ void Watcher::Loop() {
   Clock::time_point broken_since{};
   bool broken = false;
   int backoff_ms = 50;
+  std::unique_ptr<Sessions::Stub> stub = Sessions::NewStub(channels_());
   for (;;) {
+    if (broken) stub = Sessions::NewStub(channels_());  // a fresh connection
     grpc::ClientContext context;
     {
       absl::MutexLock lock(&mu_);
@@ -56,7 +57,7 @@ void Watcher::Loop() {
       decoder_.Reset();  // a new stream starts with a keyframe
     }
     const Clock::time_point opened = Clock::now();
-    std::unique_ptr<grpc::ClientReader<Frame>> reader = stub_->Watch(&context, request);
+    std::unique_ptr<grpc::ClientReader<Frame>> reader = stub->Watch(&context, request);
     Frame frame;
     bool got_frame = false;
     bool bad_frame = false;
@@ -89,6 +90,10 @@ void Watcher::Loop() {
         }
         c.skipped += frame.skipped();
         c.bytes += static_cast<int64_t>(frame.ByteSizeLong());
+        const SurfaceFields& f =
+            frame.has_keyframe() ? frame.keyframe().fields() : frame.delta().fields();
+        c.field_bytes +=
+            int64_t{4} * (f.displacement_size() + f.strain_size() + f.stiffness_size());
         c.raw_float32_bytes += int64_t{12} * decoder_.surface().vertex_count();
         c.last_step = frame.step();
         c.seconds = std::chrono::duration<double>(now - first_time_).count();
@@ -125,6 +130,10 @@ void Watcher::Loop() {
       break;
     }
     ++counts_.reconnects;
+    if (options_.log) {
+      options_.log(absl::StrCat("watch: stream ended (", status.error_code(), " ",
+                                status.error_message(), "); reconnect ", counts_.reconnects));
+    }
     mu_.AwaitWithTimeout(absl::Condition(&stop_), absl::Milliseconds(backoff_ms));
     backoff_ms = std::min(backoff_ms * 2, 1000);
   }

@@ -17,6 +17,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
+#include "clients/lib/channel.h"
 #include "clients/lib/surface.h"
 #include "dynsolid/service.grpc.pb.h"
 
@@ -34,6 +35,8 @@ struct WatcherOptions {
   bool write_obj = true;
   bool write_vtu = false;
   absl::Duration reconnect_timeout = absl::Seconds(30);
+  // Progress messages (reconnects); may be empty.
+  LogFn log;
 };
 
 struct WatcherCounts {
@@ -44,6 +47,8 @@ struct WatcherCounts {
   // did not get (it was still busy with an earlier one).
   int64_t skipped = 0;
   int64_t bytes = 0;  // serialized Frame bytes received
+  // Of those, the per-vertex field values (4 bytes each).
+  int64_t field_bytes = 0;
   // Bytes the same frames would take as raw float32 positions (12 per
   // vertex), for comparison.
   int64_t raw_float32_bytes = 0;
@@ -57,7 +62,8 @@ struct WatcherCounts {
 
 class Watcher {
  public:
-  Watcher(std::shared_ptr<grpc::Channel> channel, SessionRef session, WatcherOptions options);
+  // `channels` makes the channel of each stream (a new one per reconnect).
+  Watcher(ChannelFactory channels, SessionRef session, WatcherOptions options);
   ~Watcher();
   Watcher(const Watcher&) = delete;
   Watcher& operator=(const Watcher&) = delete;
@@ -77,7 +83,7 @@ class Watcher {
   void Loop();
   void Record(const Surface& s);
 
-  std::unique_ptr<Sessions::Stub> stub_;
+  const ChannelFactory channels_;
   const SessionRef session_;
   const WatcherOptions options_;
 

@@ -49,11 +49,12 @@ TEST(ScriptTest, EveryVerbBuildsItsCommand) {
       "step count=5\n"
       "save\n"
       "wait 20\n"
+      "wait\n"
       "wait_until step=500\n"
       "sleep 0.25\n"
       "snapshot pulled\n"
       "snapshot\n");
-  ASSERT_EQ(s.lines.size(), 21u);
+  ASSERT_EQ(s.lines.size(), 22u);
   const auto& l = s.lines;
   EXPECT_EQ(l[0].line, 3);
   EXPECT_EQ(l[0].name, "pull");
@@ -106,14 +107,15 @@ TEST(ScriptTest, EveryVerbBuildsItsCommand) {
 
   EXPECT_EQ(l[16].kind, ScriptLine::Kind::kWait);
   EXPECT_EQ(l[16].steps, 20);
-  EXPECT_EQ(l[17].kind, ScriptLine::Kind::kWaitUntil);
-  EXPECT_EQ(l[17].steps, 500);
-  EXPECT_EQ(l[18].kind, ScriptLine::Kind::kSleep);
-  EXPECT_EQ(l[18].seconds, 0.25);
-  EXPECT_EQ(l[19].kind, ScriptLine::Kind::kSnapshot);
-  EXPECT_EQ(l[19].name, "pulled");
-  EXPECT_EQ(l[20].name, "snapshot_line23");
-  EXPECT_EQ(s.Where(l[20]), "s.txt:23");
+  EXPECT_EQ(l[17].kind, ScriptLine::Kind::kWaitSteps);
+  EXPECT_EQ(l[18].kind, ScriptLine::Kind::kWaitUntil);
+  EXPECT_EQ(l[18].steps, 500);
+  EXPECT_EQ(l[19].kind, ScriptLine::Kind::kSleep);
+  EXPECT_EQ(l[19].seconds, 0.25);
+  EXPECT_EQ(l[20].kind, ScriptLine::Kind::kSnapshot);
+  EXPECT_EQ(l[20].name, "pulled");
+  EXPECT_EQ(l[21].name, "snapshot_line24");
+  EXPECT_EQ(s.Where(l[21]), "s.txt:24");
 
   // Every command kind of service.proto is reachable from the language.
   std::set<std::string> kinds;
@@ -215,6 +217,7 @@ TEST(ScriptTest, EveryBadLineIsReportedAndGoodLinesDoNotHideThem) {
             "s.txt:4: unknown command \"foo\" (commands: force, pressure, gravity, remove, fix, "
             "unfix, paint, pause, resume, step, save, wait, wait_until, sleep, snapshot)\n"
             "s.txt:6: sleep: missing seconds=SECONDS");
+  EXPECT_EQ(Error("wait_until\n"), "s.txt:1: wait_until: missing step=N");
   // At most 20 are listed.
   std::string many;
   for (int i = 0; i < 30; ++i) many += "bad\n";

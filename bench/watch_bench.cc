@@ -16,6 +16,7 @@
 //
 // Delta bytes are compared with what the same frames would take as raw
 // float32 positions (12 bytes per surface vertex).
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,6 +26,9 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -53,6 +57,7 @@ ABSL_FLAG(int, rounds, 2, "Pairs of (no watchers, watchers) phases");
 ABSL_FLAG(bool, decode, true, "Watchers decode every frame (as a real client does)");
 ABSL_FLAG(int, shake_ms, 250, "Swap the sideways force every this many ms (0: no force)");
 ABSL_FLAG(double, shake_newtons, 2e4, "Magnitude of the sideways force, newtons");
+ABSL_FLAG(std::string, server_log, "/dev/null", "Where the server's log (stderr) goes");
 
 namespace {
 
@@ -69,12 +74,14 @@ std::string DefaultServerBinary(const char* argv0) {
 // The server child process.
 class ServerProcess {
  public:
-  explicit ServerProcess(const std::string& binary, int max_watchers) {
+  ServerProcess(const std::string& binary, int max_watchers, const std::string& log) {
     int out[2];
     if (::pipe(out) != 0) return;
     pid_ = ::fork();
     if (pid_ == 0) {
       ::dup2(out[1], 1);
+      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
+      if (err >= 0) ::dup2(err, 2);
       ::close(out[0]);
       const std::string watchers = absl::StrCat("--max_watchers_per_session=", max_watchers);
       ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", watchers.c_str(),
@@ -97,6 +104,7 @@ class ServerProcess {
     }
   }
   const std::string& address() const { return address_; }
+  pid_t pid() const { return pid_; }
 
  private:
   pid_t pid_ = -1;
@@ -181,12 +189,30 @@ dynsolid::SessionStats Stats(dynsolid::Sessions::Stub& stub, const dynsolid::Ses
   return stats;
 }
 
+// CPU seconds (user + system) a process has used so far, from
+// /proc/PID/stat (fields 14 and 15, in clock ticks).
+double CpuSeconds(pid_t pid) {
+  std::ifstream in(absl::StrCat("/proc/", pid, "/stat"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t close = text.rfind(')');
+  if (close == std::string::npos) return 0;
+  std::istringstream fields(text.substr(close + 2));
+  std::string f;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && fields >> f; ++i) {
+    if (i == 14) utime = std::stod(f);
+    if (i == 15) stime = std::stod(f);
+  }
+  return (utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
 struct Phase {
   int watchers = 0;
   int64_t steps = 0;
   double seconds = 0;
   double step_ms_median = 0, step_ms_p99 = 0;
   int64_t overruns = 0;
+  double server_cpu = 0, bench_cpu = 0;  // CPU seconds used in the phase
   std::vector<WatcherResult> results;
   double rate() const { return seconds > 0 ? steps / seconds : 0; }
 };
@@ -200,7 +226,7 @@ int main(int argc, char** argv) {
   const int n_watchers = absl::GetFlag(FLAGS_watchers);
   const double hz = absl::GetFlag(FLAGS_hz);
   const auto phase_length = std::chrono::duration<double>(absl::GetFlag(FLAGS_seconds));
-  ServerProcess server(binary, std::max(n_watchers, 1));
+  ServerProcess server(binary, std::max(n_watchers, 1), absl::GetFlag(FLAGS_server_log));
   if (server.address().empty()) {
     std::cerr << "watch_bench: " << binary << " did not start\n";
     return 1;
@@ -273,11 +299,14 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_for(std::chrono::seconds(1));  // settle: keyframes, connections
     std::vector<WatcherResult> before;
     for (auto& w : ws) before.push_back(w->Take());
+    const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
     const dynsolid::SessionStats s0 = Stats(*stub, ref);
     const Clock::time_point t0 = Clock::now();
     std::this_thread::sleep_for(phase_length);
     const dynsolid::SessionStats s1 = Stats(*stub, ref);
     const Clock::time_point t1 = Clock::now();
+    p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
+    p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
     for (size_t i = 0; i < ws.size(); ++i) {
       WatcherResult a = ws[i]->Take();
       const WatcherResult& b = before[i];
@@ -311,10 +340,11 @@ int main(int argc, char** argv) {
   (void)commands.Close(absl::Seconds(10));
 
   std::cout << "\n| phase | watchers | steps | seconds | steps/s | step ms median | step ms p99 "
-               "| overruns | frames/watcher (min..max) | frames/s/watcher | skipped/watcher "
+               "| overruns | server CPU s | server CPU ms/step | bench CPU s "
+               "| frames/watcher (min..max) | frames/s/watcher | skipped/watcher "
                "| keyframes | delta bytes / raw float32 | moved/delta |\n"
-               "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: "
-               "| ---: | ---: | ---: |\n";
+               "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+               "| --- | ---: | ---: | ---: | ---: | ---: |\n";
   double rate0 = 0, rate_n = 0;
   int n0 = 0, nn = 0;
   int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
@@ -348,8 +378,10 @@ int main(int argc, char** argv) {
       ++nn;
     }
     std::cout << absl::StrFormat(
-        "| %d | %d | %d | %.2f | %.1f | %.3f | %.3f | %d | %s | %s | %s | %d | %s | %s |\n", i + 1,
-        p.watchers, p.steps, p.seconds, p.rate(), p.step_ms_median, p.step_ms_p99, p.overruns,
+        "| %d | %d | %d | %.2f | %.1f | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %s | %s | %s | %d "
+        "| %s | %s |\n",
+        i + 1, p.watchers, p.steps, p.seconds, p.rate(), p.step_ms_median, p.step_ms_p99,
+        p.overruns, p.server_cpu, p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0, p.bench_cpu,
         p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
         p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
         p.watchers ? absl::StrFormat("%.1f", skipped / nw) : "-", keys,
@@ -358,6 +390,19 @@ int main(int argc, char** argv) {
   }
   rate0 /= std::max(n0, 1);
   rate_n /= std::max(nn, 1);
+  double cpu0 = 0, cpu_n = 0;
+  int64_t steps0 = 0, steps_n = 0;
+  for (const Phase& p : phases) {
+    (p.watchers == 0 ? cpu0 : cpu_n) += p.server_cpu;
+    (p.watchers == 0 ? steps0 : steps_n) += p.steps;
+  }
+  std::cout << absl::StrFormat(
+      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers (frames "
+      "encoded and sent: %+.2f ms per step); %d cores online, shared with this benchmark's "
+      "watchers\n",
+      steps0 ? 1000 * cpu0 / steps0 : 0.0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
+      (steps_n ? 1000 * cpu_n / steps_n : 0.0) - (steps0 ? 1000 * cpu0 / steps0 : 0.0),
+      ::sysconf(_SC_NPROCESSORS_ONLN));
   std::cout << absl::StrFormat(
       "\nsim step rate: %.1f steps/s without watchers, %.1f with %d watchers at %g Hz: "
       "%+.2f %% (target: within 5 %%)\n",

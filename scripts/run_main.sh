@@ -10,14 +10,16 @@
 #                           final) and every RECORD_EVERY-th frame, .obj + .vtu
 #   session/client.txt      the client's summary lines
 #   session/server.log      the server's log
-#   offline/<scene>/        dynsolid-sim of every built-in scene (OFFLINE=0: skip)
+#   offline/<scene>/        dynsolid-sim of every built-in scene for STEPS (20)
+#                           steps: the Table-1 style table (OFFLINE=0: skip;
+#                           about a minute on two cores)
 #   summary.md              the session summary and the Table-1 style table
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PRESET="${PRESET:-release}"
 OUT=${OUT:-out/main}
 OFFLINE=${OFFLINE:-1}
-STEPS=${STEPS:-100}
+STEPS=${STEPS:-20}
 RECORD_EVERY=${RECORD_EVERY:-10}
 TARGETS="dynsolid-server dynsolid-client"
 if [ "$OFFLINE" != 0 ]; then TARGETS="$TARGETS dynsolid-sim"; fi

@@ -17,8 +17,8 @@ def fmt(v, digits=4):
     return "%.*g" % (digits, v) if isinstance(v, float) else str(v)
 
 
-def vec(v):
-    return "(" + ", ".join("%.4f" % x for x in v) + ")"
+def vec(v, form="%.4f"):
+    return "(" + ", ".join(form % x for x in v) + ")"
 
 
 def main():
@@ -131,7 +131,7 @@ def main():
     if ch["done"]:
         p("Watched surface against the server's exact positions at step %d: largest error %s m "
           "per axis, quantization bound %s m: %s." % (
-              ch["step"], vec(ch["max_error"]), vec(s["error_bound"]),
+              ch["step"], vec(ch["max_error"], "%.3g"), vec(s["error_bound"], "%.3g"),
               "within the bound" if ch["within_bound"] else "**outside the bound**"))
     print("\n".join(out))
 

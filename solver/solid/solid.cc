@@ -548,7 +548,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     rep.element_bytes = model->per_element_bytes();
     im.model = std::move(model);
   } else {
-    models::DeformationMeasure measure(s->d_.fine(), s->d_.elements, rest);
+    // One measure part per thread: its sums do not depend on the split.
+    models::DeformationMeasure measure(s->d_.fine(), s->d_.elements, rest, im.pool->size());
     auto model = std::make_unique<models::LocalFrameModel>(im.layout, std::move(measure),
                                                             s->d_.elements.num_nodes(), *im.pool);
     rep.shared_matrix_bytes = model->shared_matrix_bytes();

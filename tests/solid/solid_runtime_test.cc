@@ -239,6 +239,33 @@ TEST(SolidRuntimeTest, FixHoldsPointsWhereTheyAreAndUnfixReleasesThem) {
                                       HasSubstr(absl::StrCat("constraint id ", *id, " not found"))));
 }
 
+TEST(SolidRuntimeTest, UnfixingTheScenesClampFreesTheSolid) {
+  std::string text(kBeam);
+  text.replace(text.find(" damping: 3000"), 14, "");
+  auto s = Make(text);
+  ASSERT_NE(s, nullptr);
+  for (int i = 0; i < 50; ++i) ASSERT_OK(s->Step());
+  ASSERT_EQ(s->constraint_ids().size(), 1u);
+  ASSERT_OK(s->Unfix(s->constraint_ids()[0]));
+  EXPECT_EQ(s->build_report().fixed_control_points, 0);
+  EXPECT_TRUE(s->constraint_ids().empty());
+  // Free under gravity (no damping): the centre of mass falls at g, its
+  // second difference per step g h^2 (central differences are exact for a
+  // constant acceleration, with or without sub-steps).
+  const double h = s->time_step();
+  Eigen::Vector3d c0 = Centre(*s), c1;
+  ASSERT_OK(s->Step());
+  c1 = Centre(*s);
+  for (int i = 0; i < 60; ++i) {
+    ASSERT_OK(s->Step());
+    const Eigen::Vector3d c2 = Centre(*s);
+    EXPECT_NEAR((c2 - 2 * c1 + c0).z(), -9.81 * h * h, 1e-12) << "step " << i;
+    c0 = c1;
+    c1 = c2;
+  }
+  EXPECT_EQ(s->rollbacks(), 0);
+}
+
 TEST(SolidRuntimeTest, PaintingStiffnessOnHalfTheBeamChangesTheStaticDeflection) {
   std::string text(kBeam);
   text.replace(text.find("solver {"), 8, "solver { model: COROTATIONAL ");

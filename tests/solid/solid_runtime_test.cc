@@ -196,6 +196,37 @@ TEST(SolidRuntimeTest, PressureOnOneFaceHasResultantPressureTimesArea) {
   EXPECT_GT(got.x(), 0);
 }
 
+TEST(SolidRuntimeTest, ScenePressuresAreLoadsWithIdsAndAreValidated) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e4 density: 100 damping: 200 } }
+    loads {
+      point_forces { position { x: 1 y: 1 z: 1 } force { x: 1 } }
+      pressures { region { box { min { x: -1 y: -1 z: -1 } max { x: 3 y: 3 z: 3 } } } pascals: 300 }
+    }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  EXPECT_EQ(s->load_ids(), (std::vector<int64_t>{1, 2})) << "point forces, then pressures";
+  const double v0 = EnclosedVolume(*s);
+  for (int i = 0; i < 200; ++i) ASSERT_OK(s->Step());
+  EXPECT_GT(EnclosedVolume(*s), v0 * 1.001);
+  ASSERT_OK(s->RemoveLoad(2));
+  EXPECT_EQ(s->load_ids(), (std::vector<int64_t>{1}));
+  EXPECT_THAT(scene::ParseScene(R"pb(
+                mesh { block { nx: 1 ny: 1 nz: 1 } }
+                loads { pressures { region { sphere { radius: 0 } } pascals: 1 } }
+              )pb", "t"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("loads.pressures[0].region.sphere.radius must be > 0 metres")));
+  EXPECT_THAT(scene::ParseScene(R"pb(
+                mesh { block { nx: 1 ny: 1 nz: 1 } }
+                loads { pressures { region { control_cells: 0 } } }
+              )pb", "t"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("loads.pressures[0].pascals must be non-zero")));
+}
+
 const char* kBeam = R"pb(
   mesh { beam { length: 1 width: 0.1 height: 0.1 cells_along: 6 cells_across: 1 } }
   subdivision { levels: 1 }

@@ -213,7 +213,7 @@ class StateReader {
       Fail(absl::StrCat(what, ": ", n, " values, expected ", expected));
     }
     std::vector<double> v(ok() ? n : 0);
-    if (ok() && Need(v.size() * sizeof(double), what)) {
+    if (ok() && !v.empty() && Need(v.size() * sizeof(double), what)) {
       std::memcpy(v.data(), b_.data() + pos_, v.size() * sizeof(double));
       pos_ += v.size() * sizeof(double);
     }
@@ -2018,7 +2018,9 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
       break;
     }
     arrays[k].resize(v.size() / 4);
-    std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
+    if (!v.empty()) {
+      std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
+    }
   }
   std::array<std::vector<int32_t>, 3> element_array;
   for (int kind = 0; kind < 3 && r.ok(); ++kind) {
@@ -2044,7 +2046,9 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
     const std::vector<double> v = r.Doubles("frames", 4 * int64_t{cur.blocks[kind].size()});
     if (!r.ok()) break;
     frames[kind].resize(cur.blocks[kind].size());
-    std::memcpy(static_cast<void*>(frames[kind].data()), v.data(), v.size() * sizeof(double));
+    if (!v.empty()) {
+      std::memcpy(static_cast<void*>(frames[kind].data()), v.data(), v.size() * sizeof(double));
+    }
   }
   if (r.ok() && !r.at_end()) r.Fail(absl::StrCat("unexpected bytes after byte ", r.pos()));
   RETURN_IF_ERROR(r.status());

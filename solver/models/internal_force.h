@@ -2,7 +2,11 @@
 // integrators only ever ask for g(d), the internal forces on the FEM nodes.
 #pragma once
 
+#include <array>
 #include <string_view>
+#include <vector>
+
+#include <Eigen/Geometry>
 
 #include "solver/mesh/points.h"
 
@@ -25,6 +29,15 @@ class InternalForceModel {
 
   // Forget warm-started frames (after a rollback or a jump in state).
   virtual void ResetFrames() = 0;
+
+  // The warm-started element frames, per kind (cubic, linear, pyramid), one
+  // unit quaternion per element of ElementLayout::blocks[kind]: part of a
+  // solid's exact state (saved and restored bit for bit) and handed over to
+  // a model rebuilt after a material change. set_frames needs the sizes of
+  // frames().
+  using Frames = std::array<std::vector<Eigen::Quaterniond>, 3>;
+  virtual const Frames& frames() const = 0;
+  virtual void set_frames(const Frames& frames) = 0;
 
   virtual std::string_view name() const = 0;
 

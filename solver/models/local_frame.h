@@ -53,6 +53,8 @@ class LocalFrameModel final : public InternalForceModel {
 
   double Forces(const Points& d, Points& g) override;
   void ResetFrames() override;
+  const InternalForceModel::Frames& frames() const override { return frames_; }
+  void set_frames(const InternalForceModel::Frames& frames) override { frames_ = frames; }
   std::string_view name() const override { return "local_frame"; }
   Timing last_timing() const override { return timing_; }
 

@@ -214,7 +214,7 @@ absl::Status CheckValues(const google::protobuf::Message& message, const std::st
   return absl::OkStatus();
 }
 
-absl::Status ValidateRegion(const Region& region, const std::string& field) {
+absl::Status ValidateRegionImpl(const Region& region, absl::string_view field) {
   switch (region.shape_case()) {
     case Region::kBox: {
       const Vec3& lo = region.box().min();
@@ -306,6 +306,54 @@ absl::Status ValidateTraced(const Scene& scene) {
 }
 
 }  // namespace
+
+absl::Status ValidateValues(const google::protobuf::Message& message, std::string_view field) {
+  return CheckValues(message, std::string(field));
+}
+
+absl::Status ValidateRegion(const Region& region, std::string_view field) {
+  return ValidateRegionImpl(region, A(field));
+}
+
+absl::Status ValidateNonEmptyRegion(const Region& region, std::string_view field) {
+  RETURN_IF_ERROR(ValidateRegion(region, field));
+  if (region.shape_case() == Region::SHAPE_NOT_SET && region.control_cells_size() == 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        A(field), " is empty: set a box, a sphere or control_cells"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidatePointForce(const PointForce& force, std::string_view field) {
+  return ValidateValues(force, field);
+}
+
+absl::Status ValidatePressure(const Pressure& pressure, std::string_view field) {
+  RETURN_IF_ERROR(ValidateValues(pressure, field));
+  RETURN_IF_ERROR(ValidateNonEmptyRegion(pressure.region(), absl::StrCat(A(field), ".region")));
+  if (pressure.pascals() == 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        A(field), ".pascals must be non-zero (positive inflates, negative deflates), got 0"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateMaterialPaint(const MaterialPaint& paint, std::string_view field) {
+  RETURN_IF_ERROR(ValidateValues(paint, field));
+  RETURN_IF_ERROR(ValidateNonEmptyRegion(paint.region(), absl::StrCat(A(field), ".region")));
+  const std::string material = absl::StrCat(A(field), ".material");
+  RETURN_IF_ERROR(ValidateMaterial(paint.material(), material));
+  const Material& m = paint.material();
+  if (m.young_modulus() == 0 && m.poisson_ratio() == 0 && m.density() == 0 && m.damping() == 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        material, " sets no field: give young_modulus, poisson_ratio, density or damping"));
+  }
+  if (!(paint.strength() > 0 && paint.strength() <= 1)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(A(field), ".strength must be in (0, 1], got ", paint.strength()));
+  }
+  return absl::OkStatus();
+}
 
 absl::Status ValidateMaterial(const Material& material, std::string_view field) {
   const absl::string_view f = A(field);
@@ -457,6 +505,10 @@ absl::Status ValidateScene(const Scene& scene) {
       return absl::InvalidArgumentError(
           absl::StrCat(name, ".stiffness must be >= 0 N/m, got ", spring.stiffness()));
     }
+  }
+  for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+    RETURN_IF_ERROR(
+        ValidatePressure(scene.loads().pressures(i), absl::StrCat("loads.pressures[", i, "]")));
   }
   RETURN_IF_ERROR(ValidateTraced(scene));
   RETURN_IF_ERROR(ValidateSolverSettings(scene.solver()));

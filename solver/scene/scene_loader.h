@@ -20,6 +20,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include <google/protobuf/message.h>
 #include "dynsolid/scene.pb.h"
 #include "solver/mesh/cell_complex.h"
 
@@ -41,6 +42,7 @@ namespace dynsolid::scene {
 //    sphere.radius > 0, control_cells >= 0 (their upper bound is checked by
 //    the solver against the mesh after refinement);
 //  - constraints.springs[i].stiffness >= 0;
+//  - loads.pressures[i]: ValidatePressure;
 //  - traced[i].name non-empty, unique, and free of control characters,
 //    commas and double quotes (it is a column name of trace.csv);
 //  - solver: time_step in [0, 1] s, cg_tolerance in [0, 1),
@@ -55,6 +57,35 @@ absl::Status ValidateScene(const Scene& scene);
 // ResolvedMaterial). `field` names the material in messages
 // ("materials.base": "materials.base.poisson_ratio must be in [0, 0.5) ...").
 absl::Status ValidateMaterial(const Material& material, std::string_view field = "material");
+
+// The rules of one concept, shared by ValidateScene and the solid's runtime
+// commands (solid.h), so each is written once. `field` names the value in
+// messages ("loads.pressures[2]", "pressure"); every message starts with
+// the path of the field at fault, e.g.
+//   "pressure.region.sphere.radius must be > 0 metres, got -1".
+
+// Every double (and float) in `message` and its sub-messages is finite and
+// every enum holds a declared value ("point_force.force.x must be finite,
+// got nan").
+absl::Status ValidateValues(const google::protobuf::Message& message, std::string_view field);
+
+// box.min <= box.max componentwise, sphere.radius > 0, control_cells >= 0
+// (their upper bound needs the mesh: the solver checks it). An empty region
+// (no shape, no cells) is allowed here; see ValidateNonEmptyRegion.
+absl::Status ValidateRegion(const Region& region, std::string_view field);
+// ValidateRegion, and the region has a shape or control cells.
+absl::Status ValidateNonEmptyRegion(const Region& region, std::string_view field);
+
+// Finite position and force (whether the position lies inside the solid is
+// the solver's check).
+absl::Status ValidatePointForce(const PointForce& force, std::string_view field);
+
+// Finite values, a non-empty valid region, pascals != 0.
+absl::Status ValidatePressure(const Pressure& pressure, std::string_view field);
+
+// Finite values, a non-empty valid region, a valid material
+// (ValidateMaterial) that sets at least one field, strength in (0, 1].
+absl::Status ValidateMaterialPaint(const MaterialPaint& paint, std::string_view field);
 
 // ---- Defaults (proto/dynsolid/scene.proto): a field left at 0 means these.
 

@@ -4,11 +4,18 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <map>
 #include <numeric>
+#include <optional>
+#include <span>
+#include <type_traits>
 
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
+
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl_lite.h>
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/parallel.h"
@@ -19,6 +26,7 @@
 #include "solver/models/corotational.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/local_frame.h"
+#include "solver/mesh/boundary.h"
 #include "solver/models/measure.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/subdivision/mcj.h"
@@ -113,13 +121,271 @@ struct MaterialLocation {
   Eigen::Vector3d uvw;
 };
 
+absl::string_view A(std::string_view s) { return absl::string_view(s.data(), s.size()); }
+
+// A 128-bit hash (FNV-1a and a multiplicative mix, as GatherSupport's key).
+class Hash128 {
+ public:
+  void Mix(uint64_t x) {
+    h1_ = (h1_ ^ x) * 1099511628211ull;
+    h2_ = (h2_ ^ (x + 0x632be59bd9b4e019ull + (h2_ << 6) + (h2_ >> 2))) * 0xff51afd7ed558ccdull;
+  }
+  void Doubles(const double* v, size_t n) {
+    Mix(n);
+    for (size_t i = 0; i < n; ++i) {
+      uint64_t bits;
+      std::memcpy(&bits, v + i, sizeof(bits));
+      Mix(bits);
+    }
+  }
+  void Ints(const int32_t* v, size_t n) {
+    Mix(n);
+    for (size_t i = 0; i < n; ++i) Mix(static_cast<uint32_t>(v[i]));
+  }
+  void Bytes(std::string_view s) {
+    Mix(s.size());
+    for (unsigned char c : s) Mix(c);
+  }
+  std::pair<uint64_t, uint64_t> value() const { return {h1_, h2_}; }
+
+ private:
+  uint64_t h1_ = 1469598103934665603ull, h2_ = 0x9e3779b97f4a7c15ull;
+};
+
+// FNV-1a 64 over bytes: the state's checksum.
+uint64_t Checksum(std::string_view bytes) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+// Binary state encoding: fixed-width little-endian values (this build runs
+// on little-endian machines only), length-prefixed arrays.
+class StateWriter {
+ public:
+  template <typename T>
+  void Put(T v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    out.append(reinterpret_cast<const char*>(&v), sizeof(T));
+  }
+  void Doubles(const double* v, size_t n) {
+    Put<uint64_t>(n);
+    out.append(reinterpret_cast<const char*>(v), n * sizeof(double));
+  }
+  void Matrix(const Points& m) {
+    Put<int64_t>(m.rows());
+    out.append(reinterpret_cast<const char*>(m.data()), m.size() * sizeof(double));
+  }
+  void Bytes(std::string_view s) {
+    Put<uint64_t>(s.size());
+    out.append(s.data(), s.size());
+  }
+  void Vec(const Eigen::Vector3d& v) { Doubles(v.data(), 3); }
+  std::string out;
+};
+
+// Reads what StateWriter wrote; the first failure is kept (DataLoss naming
+// what was being read and where) and later reads return zeros.
+class StateReader {
+ public:
+  explicit StateReader(std::string_view bytes) : b_(bytes) {}
+  template <typename T>
+  T Get(const char* what) {
+    T v{};
+    if (Need(sizeof(T), what)) {
+      std::memcpy(&v, b_.data() + pos_, sizeof(T));
+      pos_ += sizeof(T);
+    }
+    return v;
+  }
+  // A count that must be at most `max` (guards allocations).
+  int64_t Count(const char* what, int64_t max) {
+    const uint64_t n = Get<uint64_t>(what);
+    if (ok() && n > static_cast<uint64_t>(max)) {
+      Fail(absl::StrCat(what, ": count ", n, " is above the possible ", max));
+      return 0;
+    }
+    return static_cast<int64_t>(n);
+  }
+  std::vector<double> Doubles(const char* what, int64_t expected = -1) {
+    const int64_t n = Count(what, static_cast<int64_t>((b_.size() - pos_) / sizeof(double)));
+    if (expected >= 0 && ok() && n != expected) {
+      Fail(absl::StrCat(what, ": ", n, " values, expected ", expected));
+    }
+    std::vector<double> v(ok() ? n : 0);
+    if (ok() && !v.empty() && Need(v.size() * sizeof(double), what)) {
+      std::memcpy(v.data(), b_.data() + pos_, v.size() * sizeof(double));
+      pos_ += v.size() * sizeof(double);
+    }
+    return v;
+  }
+  Eigen::Vector3d Vec(const char* what) {
+    const std::vector<double> v = Doubles(what, 3);
+    return ok() ? Eigen::Vector3d(v[0], v[1], v[2]) : Eigen::Vector3d::Zero();
+  }
+  Points Matrix(const char* what, int64_t rows) {
+    const int64_t n = Get<int64_t>(what);
+    Points m;
+    if (!ok()) return m;
+    if (n != rows) {
+      Fail(absl::StrCat(what, ": ", n, " rows, the solid has ", rows));
+      return m;
+    }
+    m.resize(rows, 3);
+    if (Need(m.size() * sizeof(double), what)) {
+      std::memcpy(m.data(), b_.data() + pos_, m.size() * sizeof(double));
+      pos_ += m.size() * sizeof(double);
+    }
+    return m;
+  }
+  std::string Bytes(const char* what) {
+    const int64_t n = Count(what, static_cast<int64_t>(b_.size() - pos_));
+    std::string s;
+    if (ok() && Need(n, what)) {
+      s.assign(b_.data() + pos_, n);
+      pos_ += n;
+    }
+    return s;
+  }
+  void Fail(std::string message) {
+    if (error_.empty()) error_ = std::move(message);
+  }
+  bool ok() const { return error_.empty(); }
+  bool at_end() const { return pos_ == b_.size(); }
+  size_t pos() const { return pos_; }
+  absl::Status status() const {
+    if (ok()) return absl::OkStatus();
+    return absl::DataLossError(absl::StrCat("solid state: ", error_));
+  }
+
+ private:
+  bool Need(size_t n, const char* what) {
+    if (!ok()) return false;
+    if (b_.size() - pos_ < n) {
+      Fail(absl::StrCat("truncated at byte ", pos_, " while reading ", what, " (", n,
+                        " bytes needed, ", b_.size() - pos_, " left)"));
+      return false;
+    }
+    return true;
+  }
+  std::string_view b_;
+  size_t pos_ = 0;
+  std::string error_;
+};
+
+// smoothstep(t) = t^2 (3 - 2 t) on [0, 1].
+double Smoothstep(double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  return t * t * (3.0 - 2.0 * t);
+}
+
+// The paint weight of a sample at rest position x in control cell `cell`
+// (scene.proto MaterialPaint).
+double PaintWeight(const MaterialPaint& paint, const Eigen::Vector3d& x, int32_t cell) {
+  const Region& r = paint.region();
+  double w = 0;
+  for (int32_t c : r.control_cells()) {
+    if (c == cell) w = paint.strength();
+  }
+  double depth = -1, band = 0;
+  if (r.shape_case() == Region::kSphere) {
+    depth = r.sphere().radius() - (x - V(r.sphere().center())).norm();
+    band = 0.25 * r.sphere().radius();
+  } else if (r.shape_case() == Region::kBox) {
+    const Eigen::Vector3d lo = V(r.box().min()), hi = V(r.box().max());
+    depth = std::min((x - lo).minCoeff(), (hi - x).minCoeff());
+    band = 0.25 * 0.5 * (hi - lo).minCoeff();
+  }
+  if (depth >= 0) {
+    const double s = band > 0 ? Smoothstep(depth / band) : 1.0;
+    w = std::max(w, paint.strength() * s);
+  }
+  return w;
+}
+
+double Blend(double value, double target, double w) {
+  if (target == 0 || w <= 0) return value;  // unset fields are not painted
+  if (w >= 1) return target;
+  return value + w * (target - value);
+}
+
+// A MaterialSampler for BuildElementLayout that hands out samples by their
+// place (kind, element, quadrature point) rather than by position:
+// BuildElementLayout samples in exactly that order (kinds 0..2, elements in
+// block order, points in table order). `fn(kind, e, q, x, cell)` gives the
+// sample. Each call's position is checked against the expected sample's
+// (the same expression as BuildElementLayout's), so a change of that order
+// is caught (ok() false) instead of silently scrambling materials.
+class OrderedSampler {
+ public:
+  using Fn = std::function<models::MaterialPoint(int kind, int32_t e, int q,
+                                                 const Eigen::Vector3d& x, int32_t cell)>;
+  OrderedSampler(const models::ElementLayout& layout, const Points& rest_nodes, Fn fn)
+      : layout_(layout), rest_(rest_nodes), fn_(std::move(fn)) {
+    Skip();
+  }
+  models::MaterialPoint operator()(const Eigen::Vector3d& x, int32_t cell) {
+    if (kind_ >= 3) {
+      ok_ = false;
+      return {};
+    }
+    const models::ElementBlock& block = layout_.blocks[kind_];
+    const fem::KindTable& table = layout_.tables[kind_];
+    const int n = block.nodes;
+    const int32_t* ids = block.element_nodes(e_);
+    xe_.resize(n, 3);
+    for (int i = 0; i < n; ++i) xe_.row(i) = rest_.row(ids[i]);
+    const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q_), n);
+    const Eigen::Vector3d expected = (nq * xe_).transpose();
+    // The same point to rounding (the layout builder and this check may
+    // fuse multiply-adds differently).
+    if ((expected - x).norm() > 1e-12 * (1.0 + x.norm())) ok_ = false;
+    const models::MaterialPoint m = fn_(kind_, e_, q_, x, cell);
+    if (++q_ == table.points) {
+      q_ = 0;
+      ++e_;
+      Skip();
+    }
+    return m;
+  }
+  // Every sample was handed out, in order.
+  bool ok() const { return ok_ && kind_ == 3; }
+
+ private:
+  void Skip() {
+    while (kind_ < 3 && e_ >= layout_.blocks[kind_].size()) {
+      ++kind_;
+      e_ = 0;
+    }
+  }
+  const models::ElementLayout& layout_;
+  const Points& rest_;
+  Fn fn_;
+  int kind_ = 0;
+  int32_t e_ = 0;
+  int q_ = 0;
+  bool ok_ = true;
+  fem::NodeMatrixX3 xe_;
+};
+
+// What depends on the material samples: rebuilt together by Create,
+// PaintMaterial and RestoreState (one path).
+struct MaterialBuild {
+  std::unique_ptr<models::ElementLayout> layout;
+  std::unique_ptr<models::InternalForceModel> model;
+  models::CorotationalModel* corotational = nullptr;
+  SparseMatrix mt, dt;
+  bool has_damping = false;
+  int64_t shared_matrix_bytes = 0, element_bytes = 0;
+};
+
 }  // namespace
 
 struct Solid::Impl {
   scene::Discretization* d = nullptr;
   SolverSettings settings;
   std::unique_ptr<WorkerPool> pool;
-  models::ElementLayout layout;
+  std::unique_ptr<models::ElementLayout> layout;  // the model references *layout
   std::unique_ptr<models::InternalForceModel> model;
   SparseMatrix mt, dt;
   bool has_damping = false;
@@ -137,17 +403,60 @@ struct Solid::Impl {
   std::vector<int32_t> spring_point;
   std::vector<double> spring_k;
   Points rest_control;
+  Points rest_nodes;  // A rest_control: FEM nodes at rest
   // Traced material points.
   std::vector<MaterialLocation> traced;
   double h_sub = 0;
   int substeps = 1;
+  double omega_max = 0, stable_step = INFINITY;
+  // The fixed set the stable-step estimate was made with: it holds for any
+  // superset (constraints only lower the largest eigenvalue).
+  std::vector<uint8_t> omega_fixed;
   // Per-step buffers.
   Points nodes, g, f, p_next, backup_p, backup_prev;
   double last_strain_energy = 0;
+  const Solid::Surface* surface = nullptr;  // the solid's boundary surface
+  std::pair<uint64_t, uint64_t> fingerprint;
+
+  // ---- Runtime loads and constraints (ids from one counter, ascending).
+  struct PointLoad {
+    int64_t id;
+    PointForce msg;
+    MaterialLocation at;
+  };
+  struct PressureLoad {
+    int64_t id;
+    Pressure msg;
+    std::vector<int32_t> quads;  // selected surface quads
+  };
+  struct FixConstraint {
+    int64_t id;
+    Region region;
+    std::vector<int32_t> points;  // control points, ascending
+  };
+  std::vector<PointLoad> point_loads;
+  std::vector<PressureLoad> pressures;
+  std::vector<FixConstraint> fixes;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  int64_t next_id = 1;
+  std::vector<int32_t> fix_count;  // per control point: active constraints holding it
+  Points hold;                     // rows of fixed points: where they are held
+
+  // ---- Boundary surface (quads of Solid::surface_).
+  SparseMatrix surface_rows;                  // node_matrix rows of the surface vertices
+  std::vector<int32_t> quad_cell;             // level-L cell of each quad
+  std::vector<Eigen::Vector3d> quad_centroid; // rest centroid of the quad's face
+  Points surface_rest;                        // #surface vertices x 3
+  // Pressure: total pascals per quad, the quads with a non-zero one, and the
+  // control forces at p and at the next state (for the ledger's work).
+  std::vector<double> quad_pascals;
+  std::vector<int32_t> pressed;
+  bool has_pressure = false;
+  Points surf_x, surf_f, f_press, f_press_next;
 
   // Shape values of a kind at (u, v, w).
   void ShapeAt(const MaterialLocation& m, std::vector<double>& n) const {
-    const int nodes_per = layout.blocks[m.kind].nodes;
+    const int nodes_per = layout->blocks[m.kind].nodes;
     n.resize(nodes_per);
     std::vector<double> dn(3 * nodes_per);
     fem::Shape(static_cast<fem::ElementKind>(m.kind), m.uvw[0], m.uvw[1], m.uvw[2], n.data(),
@@ -155,7 +464,7 @@ struct Solid::Impl {
   }
 
   // Energy bookkeeping for the stability guard: H = kinetic + strain +
-  // spring energy - work of the constant external forces never grows for a
+  // spring energy - work of the external forces never grows for a
   // stable run (damping only lowers it).
   struct Ledger {
     double work = 0;       // J, cumulative external work
@@ -164,6 +473,9 @@ struct Solid::Impl {
     bool started = false;
   };
   Ledger ledger;
+  // Re-baseline the ledger at the start of the next step (after a fix,
+  // unfix or paint changed what the energies mean).
+  bool ledger_rebase = false;
   Points velocity, mass_velocity, f_next;
   bool forces_valid = false;
 
@@ -181,21 +493,60 @@ struct Solid::Impl {
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);
 
-  std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const;
+  static std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets(
+      const SparseMatrix& nm, const models::ElementLayout& layout,
+      const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
+      const std::vector<double>& spring_k);
+  std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const {
+    return StiffnessTriplets(d->node_matrix, *layout, *corotational, spring_point, spring_k);
+  }
   Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
 
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
-  void AssembleControlMatrices(const Points& rest);
-  double EstimateOmegaMax(const Points& rest);
-  void ControlForces(const Points& p, Points& out, PhaseTimes& phases);
+  static void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
+                                      bool has_damping, SparseMatrix& mt, SparseMatrix& dt);
+  double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
+                          const std::vector<uint8_t>& fixed_set) const;
+  void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+
+  // Material: builds what depends on it from a layout (ResourceExhausted
+  // when the element matrices would not fit), and installs a build.
+  absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l) const;
+  void InstallMaterial(MaterialBuild b);
+  int SubstepsFor(double omega) const;
+  // Loads from the lists (in id order), from scratch: f_const (point forces
+  // then gravity) and the per-quad pressure.
+  void RebuildConstantLoads();
+  void RebuildPressure();
+  void PressureForces(const Points& p, Points& out);
+  // Selections of a region at rest.
+  std::vector<int32_t> SelectControlPoints(const Region& r) const;
+  std::vector<int32_t> SelectQuads(const Region& r) const;
+  absl::Status CheckControlCells(const Region& r, std::string_view field) const;
+  double SpringEnergy(const Points& p) const {
+    double e = 0;
+    for (size_t s = 0; s < spring_point.size(); ++s) {
+      e += 0.5 * spring_k[s] * (p.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
+    }
+    return e;
+  }
+  void RebaseLedger(const Points& p, const Points& p_prev) {
+    const Points v = (p - p_prev) / h_sub;
+    const Points mv = mt * v;
+    const double mech = 0.5 * (v.array() * mv.array()).sum() + last_strain_energy + SpringEnergy(p);
+    ledger.work = 0;
+    ledger.h_min = mech;
+    ledger.peak = std::max(ledger.peak, mech);
+    ledger.started = true;
+  }
 };
 
 absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, const Points& rest,
                                                      bool snap) const {
   std::vector<double> n, dn;
   for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout.blocks[kind];
+    const models::ElementBlock& block = layout->blocks[kind];
     const int nn = block.nodes;
     n.resize(nn);
     dn.resize(3 * nn);
@@ -232,7 +583,7 @@ absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, c
       MaterialLocation m{kind, e, u.cwiseMax(0.0).cwiseMin(1.0)};
       if (snap) {
         // The paper's shortcut: the nearest quadrature point.
-        const fem::KindTable& t = layout.tables[kind];
+        const fem::KindTable& t = layout->tables[kind];
         int best = 0;
         for (int q = 1; q < t.points; ++q) {
           if ((t.uvw[q] - u).squaredNorm() < (t.uvw[best] - u).squaredNorm()) best = q;
@@ -250,8 +601,8 @@ absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, c
 // restricted to its control support (and Dt alike). Element matrices are
 // shared per group; B_e^T M_e B_e is cached by (group, B_e values), which
 // regular grids repeat.
-void Solid::Impl::AssembleControlMatrices(const Points& rest) {
-  const SparseMatrix& nm = d->node_matrix;
+void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
+                                          bool has_damping, SparseMatrix& mt, SparseMatrix& dt) {
   const int32_t nc = static_cast<int32_t>(nm.cols());
   // Small control meshes accumulate densely; large ones through triplets.
   const bool dense = nc <= 6000;
@@ -329,7 +680,9 @@ void Solid::Impl::AssembleControlMatrices(const Points& rest) {
 // omega_max^2 = largest eigenvalue of Mt^-1 Kt on the free control points,
 // by power iteration with Kt v = A^T (g(d0 + eps A v) / eps) (g(d0) = 0) plus
 // the penalty springs.
-double Solid::Impl::EstimateOmegaMax(const Points& rest) {
+double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
+                                     const std::vector<uint8_t>& fixed_set) const {
+  const Points& rest = rest_nodes;
   const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
   Points v(nc, 3), kv(nc, 3), y(nc, 3), dn(nm.rows(), 3), gn(nm.rows(), 3);
@@ -338,40 +691,41 @@ double Solid::Impl::EstimateOmegaMax(const Points& rest) {
     for (int c = 0; c < 3; ++c) v(i, c) = std::sin(1.0 + 7.0 * i + 3.0 * c);
   }
   integrators::ConjugateGradient cg;
-  cg.Setup(&mt, fixed);
+  cg.Setup(&mass, fixed_set);
   double scale = 0;
   for (int32_t i = 0; i < rest.rows(); ++i) scale = std::max(scale, rest.row(i).cwiseAbs().maxCoeff());
   double lambda = 0;
   for (int it = 0; it < 40; ++it) {
     for (int32_t i = 0; i < nc; ++i) {
-      if (fixed[i]) v.row(i).setZero();
+      if (fixed_set[i]) v.row(i).setZero();
     }
     const double vn = v.norm();
     if (vn == 0) return 0;
     v /= vn;
     const double eps = 1e-7 * std::max(scale, 1e-3);
     dn = rest + eps * (nm * v);
-    model->ResetFrames();
-    model->Forces(dn, gn);
+    m.ResetFrames();
+    m.Forces(dn, gn);
     kv.noalias() = nm.transpose() * gn;
     kv /= eps;
     for (size_t s = 0; s < spring_point.size(); ++s) kv.row(spring_point[s]) += spring_k[s] * v.row(spring_point[s]);
     for (int32_t i = 0; i < nc; ++i) {
-      if (fixed[i]) kv.row(i).setZero();
+      if (fixed_set[i]) kv.row(i).setZero();
     }
     // Rayleigh quotient and the next iterate y = Mt^-1 Kt v.
-    y.noalias() = mt * v;
+    y.noalias() = mass * v;
     const double vmv = (v.array() * y.array()).sum();
     lambda = std::max(lambda, (v.array() * kv.array()).sum() / vmv);
     y.setZero();
     cg.Solve(kv, y, 1e-8, 500);
     v = y;
   }
-  model->ResetFrames();
+  m.ResetFrames();
   return std::sqrt(std::max(lambda, 0.0));
 }
 
-void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases) {
+void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases,
+                                Points& pressure) {
   auto t0 = Clock::now();
   nodes.noalias() = d->node_matrix * p;
   phases.nodes = MsSince(t0);
@@ -384,12 +738,16 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   out.noalias() = d->node_matrix.transpose() * g;
   out = -out;
   phases.project = MsSince(t0);
-  if (has_const_force || !spring_point.empty()) {
+  if (has_const_force || !spring_point.empty() || has_pressure) {
     t0 = Clock::now();
     if (has_const_force) out += f_const;
     for (size_t s = 0; s < spring_point.size(); ++s) {
       const int32_t i = spring_point[s];
       out.row(i) -= spring_k[s] * (p.row(i) - rest_control.row(i));
+    }
+    if (has_pressure) {
+      PressureForces(p, pressure);
+      out += pressure;
     }
     phases.loads = MsSince(t0);
   }
@@ -399,7 +757,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
   sum.nodes = sum.stiffness = sum.project = sum.measure = sum.solve = 0;
-  if (has_const_force || !spring_point.empty()) sum.loads = 0;
+  if (has_const_force || !spring_point.empty() || has_pressure) sum.loads = 0;
   auto add = [&](const PhaseTimes& t) {
     sum.nodes += t.nodes;
     sum.stiffness += t.stiffness;
@@ -411,9 +769,13 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // the first step invalidated them), so that every state's strain energy
   // is checked in the step that produced it.
   if (!forces_valid) {
-    ControlForces(p, f, sub);
+    ControlForces(p, f, sub, f_press);
     add(sub);
     forces_valid = true;
+  }
+  if (ledger_rebase) {
+    RebaseLedger(p, p_prev);
+    ledger_rebase = false;
   }
   for (int k = 0; k < substeps; ++k) {
     const auto t0 = Clock::now();
@@ -431,7 +793,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       return absl::InternalError(absl::StrCat("non-finite control points at sub-step ", k));
     }
     // Forces (and strain energy) at the new state, reused by the next sub-step.
-    ControlForces(p_next, f_next, sub);
+    ControlForces(p_next, f_next, sub, f_press_next);
     add(sub);
     // Energy ledger: H = kinetic + strain + springs - external work.
     velocity = (p_next - p) / h_sub;
@@ -443,6 +805,10 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                  (p_next.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
     }
     if (has_const_force) ledger.work += (f_const.array() * (p_next - p).array()).sum();
+    // Follower pressure: trapezoidal work over the sub-step.
+    if (has_pressure) {
+      ledger.work += 0.5 * ((f_press + f_press_next).array() * (p_next - p).array()).sum();
+    }
     const double mech = kinetic + last_strain_energy + springs;
     const double hamiltonian = mech - ledger.work;
     ledger.peak = std::max(ledger.peak, mech);
@@ -456,6 +822,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     p_prev.swap(p);
     p.swap(p_next);
     f.swap(f_next);
+    if (has_pressure) f_press.swap(f_press_next);
     forces_valid = true;
     ++stats.substeps;
   }
@@ -466,6 +833,201 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
 Solid::Solid() = default;
 Solid::~Solid() = default;
 
+absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
+    std::unique_ptr<models::ElementLayout> l) const {
+  MaterialBuild b;
+  for (const auto& array : l->materials) {
+    for (const auto& m : array) b.has_damping |= m.damping > 0;
+  }
+  // The model the scene asks for, after checking what its shared element
+  // matrices would take: curved meshes share few of them.
+  const bool corot = settings.model() == SolverSettings::COROTATIONAL;
+  double bytes = 0;
+  for (const models::ElementBlock& block : l->blocks) {
+    const double n = block.nodes;
+    bytes += static_cast<double>(block.groups.size()) * (corot ? 9.0 : 3.0) * n * n * 8.0;
+  }
+  if (bytes > kMaxSharedMatrixBytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "the ", corot ? "corotational" : "local-frame", " element matrices of this scene would take ",
+        static_cast<int64_t>(bytes / 1048576.0), " MiB (", l->blocks[0].groups.size(),
+        " distinct cubic elements), above the limit of ",
+        static_cast<int64_t>(kMaxSharedMatrixBytes / 1048576.0),
+        " MiB; use fewer subdivision levels or a more regular control mesh"));
+  }
+  if (corot) {
+    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, *pool);
+    b.corotational = m.get();
+    b.shared_matrix_bytes = m->shared_matrix_bytes();
+    b.element_bytes = m->per_element_bytes();
+    b.model = std::move(m);
+  } else {
+    // One measure part per thread: its sums do not depend on the split.
+    models::DeformationMeasure measure(d->fine(), d->elements, rest_nodes, pool->size());
+    auto m = std::make_unique<models::LocalFrameModel>(*l, std::move(measure),
+                                                        d->elements.num_nodes(), *pool);
+    b.shared_matrix_bytes = m->shared_matrix_bytes();
+    b.element_bytes = m->per_element_bytes();
+    b.model = std::move(m);
+  }
+  // Mass (and damping) in control-point space.
+  AssembleControlMatrices(d->node_matrix, *l, b.has_damping, b.mt, b.dt);
+  b.layout = std::move(l);
+  return b;
+}
+
+void Solid::Impl::InstallMaterial(MaterialBuild b) {
+  // The old model references the old layout: replace the model first.
+  model = std::move(b.model);
+  corotational = b.corotational;
+  layout = std::move(b.layout);
+  mt = std::move(b.mt);
+  dt = std::move(b.dt);
+  has_damping = b.has_damping;
+}
+
+int Solid::Impl::SubstepsFor(double omega) const {
+  const double stable = omega > 0 ? 2.0 / omega : INFINITY;
+  const double limit = settings.stability_safety() * stable;
+  return std::max(1, static_cast<int>(std::ceil(settings.time_step() / limit)));
+}
+
+void Solid::Impl::RebuildConstantLoads() {
+  has_const_force = !point_loads.empty() || gravity.squaredNorm() > 0;
+  if (!has_const_force) {
+    f_const.resize(0, 3);
+    return;
+  }
+  Points fd = Points::Zero(d->node_matrix.rows(), 3);
+  std::vector<double> shape;
+  for (const PointLoad& load : point_loads) {
+    ShapeAt(load.at, shape);
+    const int32_t* ids = layout->blocks[load.at.kind].element_nodes(load.at.element);
+    for (size_t k = 0; k < shape.size(); ++k) {
+      fd.row(ids[k]) += shape[k] * V(load.msg.force()).transpose();
+    }
+  }
+  if (gravity.squaredNorm() > 0) {
+    // Body force mu g: f_i = g int mu N_i dV.
+    fem::NodeMatrixX3 gr;
+    for (int kind = 0; kind < 3; ++kind) {
+      const models::ElementBlock& block = layout->blocks[kind];
+      const fem::KindTable& table = layout->tables[kind];
+      std::vector<Eigen::VectorXd> weights(block.groups.size());
+      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+        const auto& grp = block.groups[gi];
+        weights[gi] = Eigen::VectorXd::Zero(block.nodes);
+        for (int q = 0; q < table.points; ++q) {
+          const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
+          weights[gi] += (layout->materials[grp.material][q].density * std::max(det, 0.0) *
+                          table.weight[q]) *
+                         Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
+        }
+      }
+      for (int32_t e = 0; e < block.size(); ++e) {
+        const int32_t* ids = block.element_nodes(e);
+        for (int k = 0; k < block.nodes; ++k) {
+          fd.row(ids[k]) += weights[block.group[e]][k] * gravity.transpose();
+        }
+      }
+    }
+  }
+  f_const = d->node_matrix.transpose() * fd;
+}
+
+void Solid::Impl::RebuildPressure() {
+  has_pressure = !pressures.empty();
+  quad_pascals.assign(quad_cell.size(), 0.0);
+  for (const PressureLoad& load : pressures) {
+    for (int32_t q : load.quads) quad_pascals[q] += load.msg.pascals();
+  }
+  pressed.clear();
+  for (size_t q = 0; q < quad_pascals.size(); ++q) {
+    if (quad_pascals[q] != 0) pressed.push_back(static_cast<int32_t>(q));
+  }
+  const int64_t nc = rest_control.rows(), ns = surface_rows.rows();
+  if (has_pressure) {
+    surf_x.setZero(ns, 3);
+    surf_f.setZero(ns, 3);
+    f_press.setZero(nc, 3);
+    f_press_next.setZero(nc, 3);
+  }
+}
+
+// out = S^T f_s with f_s the consistent nodal forces of the pressure on the
+// surface quads at the current surface positions x_s = S p (S: the surface
+// rows of A). Each quad is a bilinear patch x(u, v) = sum N_i x_i over its
+// loop (a boundary face of a linear or pyramid element, so the element's own
+// interpolation): f_i = P int N_i (x_u x x_v) du dv, exact with 2 x 2 Gauss
+// points (the integrand has degree 2 in u and in v). x_u x x_v follows the
+// outward loop, so P > 0 pushes outward. The forces sum to P times the
+// quad's vector area; over a closed surface to zero.
+void Solid::Impl::PressureForces(const Points& p, Points& out) {
+  surf_x.noalias() = surface_rows * p;
+  surf_f.setZero();
+  const double g0 = 0.5 - 0.5 / std::sqrt(3.0), g1 = 0.5 + 0.5 / std::sqrt(3.0);
+  const double gp[2] = {g0, g1};
+  const std::vector<std::array<int32_t, 4>>& quads = surface->quads;
+  for (int32_t q : pressed) {
+    const std::array<int32_t, 4>& v = quads[q];
+    const Eigen::Vector3d x0 = surf_x.row(v[0]).transpose(), x1 = surf_x.row(v[1]).transpose(),
+                          x2 = surf_x.row(v[2]).transpose(), x3 = surf_x.row(v[3]).transpose();
+    Eigen::Vector3d fn[4] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                             Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+    for (double u : gp) {
+      for (double w : gp) {
+        // N0 = (1-u)(1-w), N1 = u(1-w), N2 = u w, N3 = (1-u) w.
+        const Eigen::Vector3d xu = (1 - w) * (x1 - x0) + w * (x2 - x3);
+        const Eigen::Vector3d xw = (1 - u) * (x3 - x0) + u * (x2 - x1);
+        const Eigen::Vector3d n = 0.25 * xu.cross(xw);  // Gauss weights 1/2 x 1/2
+        fn[0] += ((1 - u) * (1 - w)) * n;
+        fn[1] += (u * (1 - w)) * n;
+        fn[2] += (u * w) * n;
+        fn[3] += ((1 - u) * w) * n;
+      }
+    }
+    const double pa = quad_pascals[q];
+    for (int k = 0; k < 4; ++k) surf_f.row(v[k]) += (pa * fn[k]).transpose();
+  }
+  out.noalias() = surface_rows.transpose() * surf_f;
+}
+
+std::vector<int32_t> Solid::Impl::SelectControlPoints(const Region& r) const {
+  const mesh::CellComplex& control = d->control();
+  std::vector<int32_t> out;
+  for (int32_t i = 0; i < rest_control.rows(); ++i) {
+    if (InShape(r, rest_control.row(i).transpose())) out.push_back(i);
+  }
+  for (int32_t c : r.control_cells()) {
+    for (int32_t v : control.cell_vertices(c)) out.push_back(v);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::vector<int32_t> Solid::Impl::SelectQuads(const Region& r) const {
+  std::vector<int32_t> out;
+  const std::vector<int32_t>& cc = d->hierarchy.control_cell;
+  for (size_t q = 0; q < quad_cell.size(); ++q) {
+    const int32_t control_cell = cc.empty() ? quad_cell[q] : cc[quad_cell[q]];
+    if (InRegion(r, quad_centroid[q], control_cell)) out.push_back(static_cast<int32_t>(q));
+  }
+  return out;
+}
+
+absl::Status Solid::Impl::CheckControlCells(const Region& r, std::string_view field) const {
+  const int32_t n = d->control().num_cells();
+  for (int i = 0; i < r.control_cells_size(); ++i) {
+    if (r.control_cells(i) >= n) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          A(field), ".control_cells[", i, "] (", r.control_cells(i),
+          ") must be less than the number of control cells (", n, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
                                                      scene::Discretization discretization) {
   const auto t_build = Clock::now();
@@ -475,6 +1037,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   Impl& im = *s->impl_;
   im.d = &s->d_;
   im.settings = scene::ResolvedSolverSettings(scene);
+  im.surface = &s->surface_;
   if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
       im.settings.model() != SolverSettings::COROTATIONAL) {
     return absl::UnimplementedError(
@@ -492,10 +1055,15 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       }
     }
   }
+  for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+    RETURN_IF_ERROR(im.CheckControlCells(scene.loads().pressures(i).region(),
+                                         absl::StrCat("loads.pressures[", i, "].region")));
+  }
 
   // Rest configuration.
   im.rest_control = control.positions();
-  const Points rest = s->d_.node_matrix * im.rest_control;
+  im.rest_nodes = s->d_.node_matrix * im.rest_control;
+  const Points& rest = im.rest_nodes;
   im.pool = std::make_unique<WorkerPool>(BuildThreads());
 
   // Materials: base, then painted regions in order.
@@ -511,72 +1079,25 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     }
     return m;
   };
-  im.layout = models::BuildElementLayout(s->d_.elements, rest, s->d_.hierarchy.control_cell, sampler);
-  if (im.layout.inverted_elements > 0) {
+  auto layout = std::make_unique<models::ElementLayout>(
+      models::BuildElementLayout(s->d_.elements, rest, s->d_.hierarchy.control_cell, sampler));
+  if (layout->inverted_elements > 0) {
     return absl::InvalidArgumentError(absl::StrCat(
-        im.layout.inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "
+        layout->inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "
         "point); the subdivided mesh is too distorted for finite elements"));
   }
-  s->rest_volume_ = im.layout.rest_volume;
-  for (const auto& array : im.layout.materials) {
-    for (const auto& m : array) im.has_damping |= m.damping > 0;
-  }
-
-  // The model the scene asks for, after checking what its shared element
-  // matrices would take: curved meshes share few of them.
-  BuildReport& rep = s->report_;
-  {
-    const bool corot = im.settings.model() == SolverSettings::COROTATIONAL;
-    double bytes = 0;
-    for (const models::ElementBlock& block : im.layout.blocks) {
-      const double n = block.nodes;
-      bytes += static_cast<double>(block.groups.size()) * (corot ? 9.0 : 3.0) * n * n * 8.0;
-    }
-    if (bytes > kMaxSharedMatrixBytes) {
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "the ", corot ? "corotational" : "local-frame", " element matrices of this scene would take ",
-          static_cast<int64_t>(bytes / 1048576.0), " MiB (", im.layout.blocks[0].groups.size(),
-          " distinct cubic elements), above the limit of ",
-          static_cast<int64_t>(kMaxSharedMatrixBytes / 1048576.0),
-          " MiB; use fewer subdivision levels or a more regular control mesh"));
-    }
-  }
-  if (im.settings.model() == SolverSettings::COROTATIONAL) {
-    auto model = std::make_unique<models::CorotationalModel>(im.layout, rest, *im.pool);
-    im.corotational = model.get();
-    rep.shared_matrix_bytes = model->shared_matrix_bytes();
-    rep.element_bytes = model->per_element_bytes();
-    im.model = std::move(model);
-  } else {
-    // One measure part per thread: its sums do not depend on the split.
-    models::DeformationMeasure measure(s->d_.fine(), s->d_.elements, rest, im.pool->size());
-    auto model = std::make_unique<models::LocalFrameModel>(im.layout, std::move(measure),
-                                                            s->d_.elements.num_nodes(), *im.pool);
-    rep.shared_matrix_bytes = model->shared_matrix_bytes();
-    rep.element_bytes = model->per_element_bytes();
-    im.model = std::move(model);
-  }
-  rep.cubic_groups = static_cast<int32_t>(im.layout.blocks[0].groups.size());
-  rep.linear_groups = static_cast<int32_t>(im.layout.blocks[1].groups.size());
-  rep.pyramid_groups = static_cast<int32_t>(im.layout.blocks[2].groups.size());
-  rep.material_arrays = static_cast<int32_t>(im.layout.materials.size());
-  rep.damping_matrix = im.has_damping;
-
-  // Mass (and damping) in control-point space.
-  im.AssembleControlMatrices(rest);
+  s->rest_volume_ = layout->rest_volume;
+  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout)));
+  im.InstallMaterial(std::move(material));
+  s->ReportMaterial();
   s->total_mass_ = im.mt.sum();
+  s->BuildSurface();
 
-  // Constraints.
+  // Constraints: the scene's fixed regions, held at rest.
+  im.fix_count.assign(nc, 0);
   im.fixed.assign(nc, 0);
-  for (const Region& r : scene.constraints().fixed()) {
-    for (int32_t i = 0; i < nc; ++i) {
-      if (InShape(r, im.rest_control.row(i).transpose())) im.fixed[i] = 1;
-    }
-    for (int32_t c : r.control_cells()) {
-      for (int32_t v : control.cell_vertices(c)) im.fixed[v] = 1;
-    }
-  }
-  rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  im.hold = im.rest_control;
+  BuildReport& rep = s->report_;
   for (const PenaltySpring& spring : scene.constraints().springs()) {
     for (int32_t i = 0; i < nc; ++i) {
       bool in = InShape(spring.region(), im.rest_control.row(i).transpose());
@@ -592,10 +1113,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   }
   rep.penalty_springs = static_cast<int32_t>(im.spring_point.size());
 
-  // Constant loads in control space.
-  Points fd = Points::Zero(rest.rows(), 3);
+  // Loads, with ids: point forces, then pressures (then fixed regions).
   const bool snap = im.settings.snap_forces_to_quadrature();
-  std::vector<double> shape;
   for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
     const PointForce& pf = scene.loads().point_forces(i);
     absl::StatusOr<MaterialLocation> at = im.Locate(V(pf.position()), rest, snap);
@@ -603,40 +1122,32 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       return absl::InvalidArgumentError(
           absl::StrCat("loads.point_forces[", i, "].position: ", at.status().message()));
     }
-    im.ShapeAt(*at, shape);
-    const int32_t* ids = im.layout.blocks[at->kind].element_nodes(at->element);
-    for (size_t k = 0; k < shape.size(); ++k) fd.row(ids[k]) += shape[k] * V(pf.force()).transpose();
-    ++rep.point_forces;
+    im.point_loads.push_back({im.next_id++, pf, *at});
   }
-  const Eigen::Vector3d gravity = V(scene.loads().gravity());
-  if (gravity.squaredNorm() > 0) {
-    // Body force mu g: f_i = g int mu N_i dV.
-    rep.gravity = true;
-    fem::NodeMatrixX3 gr;
-    for (int kind = 0; kind < 3; ++kind) {
-      const models::ElementBlock& block = im.layout.blocks[kind];
-      const fem::KindTable& table = im.layout.tables[kind];
-      std::vector<Eigen::VectorXd> weights(block.groups.size());
-      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-        const auto& grp = block.groups[gi];
-        weights[gi] = Eigen::VectorXd::Zero(block.nodes);
-        for (int q = 0; q < table.points; ++q) {
-          const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
-          weights[gi] += (im.layout.materials[grp.material][q].density * std::max(det, 0.0) *
-                          table.weight[q]) *
-                         Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
-        }
-      }
-      for (int32_t e = 0; e < block.size(); ++e) {
-        const int32_t* ids = block.element_nodes(e);
-        for (int k = 0; k < block.nodes; ++k) {
-          fd.row(ids[k]) += weights[block.group[e]][k] * gravity.transpose();
-        }
-      }
+  for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+    const Pressure& pr = scene.loads().pressures(i);
+    std::vector<int32_t> quads = im.SelectQuads(pr.region());
+    if (quads.empty()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "loads.pressures[", i, "].region selects no boundary face (no face has its rest "
+          "centroid in the region or its cell in control_cells)"));
     }
+    im.pressures.push_back({im.next_id++, pr, std::move(quads)});
   }
-  im.has_const_force = rep.point_forces > 0 || rep.gravity;
-  if (im.has_const_force) im.f_const = s->d_.node_matrix.transpose() * fd;
+  for (const Region& r : scene.constraints().fixed()) {
+    Impl::FixConstraint fix{im.next_id++, r, im.SelectControlPoints(r)};
+    for (int32_t i : fix.points) {
+      ++im.fix_count[i];
+      im.fixed[i] = 1;
+    }
+    im.fixes.push_back(std::move(fix));
+  }
+  rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  im.gravity = V(scene.loads().gravity());
+  im.RebuildConstantLoads();
+  im.RebuildPressure();
+  rep.point_forces = static_cast<int32_t>(im.point_loads.size());
+  rep.gravity = im.gravity.squaredNorm() > 0;
 
   // Traced points.
   for (int i = 0; i < static_cast<int>(scene.traced_size()); ++i) {
@@ -650,10 +1161,12 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   }
 
   // Stable step and sub-steps.
-  rep.omega_max = im.EstimateOmegaMax(rest);
-  rep.stable_step = rep.omega_max > 0 ? 2.0 / rep.omega_max : INFINITY;
-  const double limit = im.settings.stability_safety() * rep.stable_step;
-  im.substeps = std::max(1, static_cast<int>(std::ceil(s->h_ / limit)));
+  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed);
+  im.omega_fixed = im.fixed;
+  im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
+  rep.omega_max = im.omega_max;
+  rep.stable_step = im.stable_step;
+  im.substeps = im.SubstepsFor(im.omega_max);
   // Implicit steps: asked for, or chosen by `auto` when the explicit scheme
   // would need more than kAutoImplicitSubsteps sub-steps (corotational only).
   constexpr int kAutoImplicitSubsteps = 4;
@@ -715,6 +1228,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   im.ledger.started = true;
   im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
   im.ledger.peak = im.ledger.h_min;
+  im.fingerprint = s->Fingerprint(scene);
   rep.build_ms = MsSince(t_build);
   return s;
 }
@@ -725,6 +1239,7 @@ absl::Status Solid::Step() {
   im.backup_p = p_;
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
+  const bool rebase_at_start = im.ledger_rebase;
   for (int attempt = 0;; ++attempt) {
     const absl::Status st = im.Advance(p_, p_prev_, stats, phases_);
     if (st.ok()) break;
@@ -732,6 +1247,7 @@ absl::Status Solid::Step() {
     p_ = im.backup_p;
     p_prev_ = im.backup_prev;
     im.ledger = ledger_at_start;
+    im.ledger_rebase = rebase_at_start;
     im.model->ResetFrames();
     im.forces_valid = false;
     ++stats.rollbacks;
@@ -758,7 +1274,7 @@ void Solid::SetAtRest(const Points& p) {
   Impl& im = *impl_;
   p_ = p;
   for (int64_t i = 0; i < p_.rows(); ++i) {
-    if (im.fixed[i]) p_.row(i) = im.rest_control.row(i);
+    if (im.fixed[i]) p_.row(i) = im.hold.row(i);
   }
   p_prev_ = p_;
   im.model->ResetFrames();
@@ -767,6 +1283,7 @@ void Solid::SetAtRest(const Points& p) {
   im.ledger.started = true;
   im.ledger.h_min = StrainEnergy(p_);
   im.ledger.peak = im.ledger.h_min;
+  im.ledger_rebase = false;
 }
 
 void Solid::SetSubstepsForTesting(int substeps) {
@@ -798,8 +1315,10 @@ double Solid::StrainEnergy(const Points& p) {
 
 // K0 = A^T K A (3 #control square, node-major DOFs 3 i + c) of the
 // corotational model at rest, plus the penalty springs, as triplets.
-std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets() const {
-  const SparseMatrix& nm = d->node_matrix;
+std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
+    const SparseMatrix& nm, const models::ElementLayout& layout,
+    const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
+    const std::vector<double>& spring_k) {
   std::vector<Eigen::Triplet<double, int32_t>> t;
   std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
   ElementSupport es;
@@ -818,7 +1337,7 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets() co
         for (int i = 0; i < n; ++i)
           for (int a = 0; a < s; ++a)
             for (int c = 0; c < 3; ++c) ex(3 * i + c, 3 * a + c) = b(i, a);
-        const Eigen::MatrixXd& k = corotational->K(kind, block.group[e]);
+        const Eigen::MatrixXd& k = corotational.K(kind, block.group[e]);
         it = cache.emplace(es.key, Eigen::MatrixXd(ex.transpose() * k * ex)).first;
       }
       const Eigen::MatrixXd& tk = it->second;
@@ -886,7 +1405,7 @@ std::vector<Eigen::Vector3d> Solid::TracedPositionsAt(const Points& p) const {
   std::vector<double> shape;
   for (const MaterialLocation& m : im.traced) {
     im.ShapeAt(m, shape);
-    const int32_t* ids = im.layout.blocks[m.kind].element_nodes(m.element);
+    const int32_t* ids = im.layout->blocks[m.kind].element_nodes(m.element);
     Eigen::Vector3d x = Eigen::Vector3d::Zero();
     for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * nodes.row(ids[k]).transpose();
     out.push_back(x);
@@ -909,5 +1428,784 @@ Energies Solid::ComputeEnergies() const {
 }
 
 std::vector<Eigen::Vector3d> Solid::TracedPositions() const { return TracedPositionsAt(p_); }
+
+
+// ---- Build helpers.
+
+void Solid::ReportMaterial() {
+  const Impl& im = *impl_;
+  report_.cubic_groups = static_cast<int32_t>(im.layout->blocks[0].groups.size());
+  report_.linear_groups = static_cast<int32_t>(im.layout->blocks[1].groups.size());
+  report_.pyramid_groups = static_cast<int32_t>(im.layout->blocks[2].groups.size());
+  report_.material_arrays = static_cast<int32_t>(im.layout->materials.size());
+  report_.damping_matrix = im.has_damping;
+  // Filled by the model; BuildMaterial read them.
+  if (im.corotational != nullptr) {
+    report_.shared_matrix_bytes = im.corotational->shared_matrix_bytes();
+    report_.element_bytes = im.corotational->per_element_bytes();
+  } else {
+    const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());
+    report_.shared_matrix_bytes = lf->shared_matrix_bytes();
+    report_.element_bytes = lf->per_element_bytes();
+  }
+}
+
+void Solid::BuildSurface() {
+  Impl& im = *impl_;
+  const mesh::CellComplex& fine = d_.fine();
+  const mesh::BoundarySurface b = mesh::ExtractBoundary(fine);
+  surface_ = Surface();
+  surface_.nodes = b.mesh_vertex;
+  for (int32_t f = 0; f < b.faces.rows(); ++f) {
+    const std::span<const int32_t> loop = b.faces.row(f);
+    const int32_t cell = fine.face_cells(b.mesh_face[f])[0];
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (int32_t v : loop) centroid += im.rest_nodes.row(surface_.nodes[v]).transpose();
+    centroid /= static_cast<double>(loop.size());
+    auto emit = [&](int32_t a, int32_t b1, int32_t c, int32_t e) {
+      surface_.quads.push_back({a, b1, c, e});
+      im.quad_cell.push_back(cell);
+      im.quad_centroid.push_back(centroid);
+    };
+    const int n = static_cast<int>(loop.size());
+    if (n == 4) {
+      emit(loop[0], loop[1], loop[2], loop[3]);
+    } else {
+      // A fan of quads (and a last triangle as a degenerate quad) from loop[0].
+      for (int k = 1; k + 1 < n; k += 2) {
+        emit(loop[0], loop[k], loop[k + 1], k + 2 < n ? loop[k + 2] : loop[k + 1]);
+      }
+    }
+  }
+  // The surface rows of A, for positions and pressure forces.
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  for (size_t i = 0; i < surface_.nodes.size(); ++i) {
+    for (SparseMatrix::InnerIterator it(d_.node_matrix, surface_.nodes[i]); it; ++it) {
+      t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(it.col()), it.value());
+    }
+  }
+  im.surface_rows.resize(static_cast<Eigen::Index>(surface_.nodes.size()), d_.node_matrix.cols());
+  im.surface_rows.setFromTriplets(t.begin(), t.end());
+  im.surface_rows.makeCompressed();
+  im.surface_rest = im.surface_rows * im.rest_control;
+}
+
+std::pair<uint64_t, uint64_t> Solid::Fingerprint(const Scene& scene) const {
+  Hash128 h;
+  std::string bytes;
+  {
+    google::protobuf::io::StringOutputStream stream(&bytes);
+    google::protobuf::io::CodedOutputStream coded(&stream);
+    coded.SetSerializationDeterministic(true);
+    scene.SerializeToCodedStream(&coded);
+  }
+  h.Bytes(bytes);
+  const Impl& im = *impl_;
+  h.Doubles(im.rest_control.data(), im.rest_control.size());
+  const SparseMatrix& nm = d_.node_matrix;
+  h.Mix(nm.rows());
+  h.Mix(nm.cols());
+  h.Ints(nm.outerIndexPtr(), nm.outerSize() + 1);
+  h.Ints(nm.innerIndexPtr(), nm.nonZeros());
+  h.Doubles(nm.valuePtr(), nm.nonZeros());
+  for (const models::ElementBlock& block : im.layout->blocks) {
+    h.Ints(block.node_ids.data(), block.node_ids.size());
+  }
+  return h.value();
+}
+
+void Solid::ApplyFixed() {
+  Impl& im = *impl_;
+  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  report_.fixed_control_points =
+      static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  im.SetSubsteps(im.substeps, h_);
+}
+
+// ---- Loads.
+
+absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidatePointForce(f, "point_force"));
+  absl::StatusOr<MaterialLocation> at =
+      im.Locate(V(f.position()), im.rest_nodes, im.settings.snap_forces_to_quadrature());
+  if (!at.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("point_force.position: ", at.status().message()));
+  }
+  const int64_t id = im.next_id++;
+  im.point_loads.push_back({id, f, *at});
+  im.RebuildConstantLoads();
+  im.forces_valid = false;
+  report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+  return id;
+}
+
+absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidatePressure(p, "pressure"));
+  RETURN_IF_ERROR(im.CheckControlCells(p.region(), "pressure.region"));
+  std::vector<int32_t> quads = im.SelectQuads(p.region());
+  if (quads.empty()) {
+    return absl::InvalidArgumentError(
+        "pressure.region selects no boundary face (no face has its rest centroid in the region "
+        "or its cell in control_cells)");
+  }
+  const int64_t id = im.next_id++;
+  im.pressures.push_back({id, p, std::move(quads)});
+  im.RebuildPressure();
+  im.forces_valid = false;
+  return id;
+}
+
+absl::Status Solid::SetGravity(const Vec3& g) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
+  im.gravity = V(g);
+  im.RebuildConstantLoads();
+  im.forces_valid = false;
+  report_.gravity = im.gravity.squaredNorm() > 0;
+  return absl::OkStatus();
+}
+
+namespace {
+template <typename T>
+std::string IdList(const std::vector<T>& items) {
+  if (items.empty()) return "none";
+  std::string out;
+  for (const T& x : items) absl::StrAppend(&out, out.empty() ? "" : ", ", x.id);
+  return out;
+}
+}  // namespace
+
+absl::Status Solid::RemoveLoad(int64_t id) {
+  Impl& im = *impl_;
+  auto pf = std::find_if(im.point_loads.begin(), im.point_loads.end(),
+                         [id](const Impl::PointLoad& l) { return l.id == id; });
+  if (pf != im.point_loads.end()) {
+    im.point_loads.erase(pf);
+    im.RebuildConstantLoads();
+    im.forces_valid = false;
+    report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+    return absl::OkStatus();
+  }
+  auto pr = std::find_if(im.pressures.begin(), im.pressures.end(),
+                         [id](const Impl::PressureLoad& l) { return l.id == id; });
+  if (pr != im.pressures.end()) {
+    im.pressures.erase(pr);
+    im.RebuildPressure();
+    im.forces_valid = false;
+    return absl::OkStatus();
+  }
+  return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
+                                          IdList(im.point_loads), "; pressures: ",
+                                          IdList(im.pressures), ")"));
+}
+
+std::vector<int64_t> Solid::load_ids() const {
+  std::vector<int64_t> ids;
+  for (const auto& l : impl_->point_loads) ids.push_back(l.id);
+  for (const auto& l : impl_->pressures) ids.push_back(l.id);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+std::vector<int64_t> Solid::constraint_ids() const {
+  std::vector<int64_t> ids;
+  for (const auto& c : impl_->fixes) ids.push_back(c.id);
+  return ids;
+}
+
+Eigen::Vector3d Solid::gravity() const { return impl_->gravity; }
+
+// ---- Constraints.
+
+absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateValues(r, "region"));
+  RETURN_IF_ERROR(scene::ValidateNonEmptyRegion(r, "region"));
+  RETURN_IF_ERROR(im.CheckControlCells(r, "region"));
+  std::vector<int32_t> points = im.SelectControlPoints(r);
+  if (points.empty()) {
+    return absl::InvalidArgumentError(
+        "region selects no control point (no control point's rest position lies in it)");
+  }
+  // Newly held points stay where they are, with zero velocity.
+  for (int32_t i : points) {
+    if (im.fix_count[i]++ == 0) {
+      im.hold.row(i) = p_.row(i);
+      p_prev_.row(i) = p_.row(i);
+    }
+  }
+  const int64_t id = im.next_id++;
+  im.fixes.push_back({id, r, std::move(points)});
+  ApplyFixed();
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return id;
+}
+
+absl::Status Solid::Unfix(int64_t constraint_id) {
+  Impl& im = *impl_;
+  auto it = std::find_if(im.fixes.begin(), im.fixes.end(),
+                         [constraint_id](const Impl::FixConstraint& c) { return c.id == constraint_id; });
+  if (it == im.fixes.end()) {
+    return absl::NotFoundError(absl::StrCat("constraint id ", constraint_id,
+                                            " not found (active fixed regions: ",
+                                            IdList(im.fixes), ")"));
+  }
+  std::vector<int32_t> count = im.fix_count;
+  for (int32_t i : it->points) --count[i];
+  // The stable-step estimate holds while every point it was made with
+  // fixed stays fixed; otherwise estimate again (the live model's frames
+  // are kept).
+  bool reestimate = false;
+  for (size_t i = 0; i < count.size(); ++i) reestimate |= im.omega_fixed[i] && count[i] == 0;
+  double omega = im.omega_max;
+  int substeps = im.substeps;
+  std::vector<uint8_t> new_fixed(count.size());
+  for (size_t i = 0; i < count.size(); ++i) new_fixed[i] = count[i] > 0 ? 1 : 0;
+  if (reestimate) {
+    const models::InternalForceModel::Frames frames = im.model->frames();
+    omega = im.EstimateOmegaMax(*im.model, im.mt, new_fixed);
+    im.model->set_frames(frames);
+    if (!im.use_implicit) {
+      substeps = std::max(im.substeps, im.SubstepsFor(omega));
+      if (substeps > im.settings.max_substeps()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "constraint id ", constraint_id, ": without it the solid needs ", substeps,
+            " explicit sub-steps (stable step ", 2.0 / omega, " s) but solver.max_substeps is ",
+            im.settings.max_substeps()));
+      }
+    }
+  }
+  im.fix_count = std::move(count);
+  im.fixes.erase(it);
+  if (reestimate) {
+    im.omega_max = omega;
+    im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
+    im.omega_fixed = new_fixed;
+    report_.omega_max = im.omega_max;
+    report_.stable_step = im.stable_step;
+    if (substeps != im.substeps) {
+      const double old_h = im.h_sub;
+      im.substeps = substeps;
+      im.h_sub = h_ / substeps;
+      p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
+      report_.substeps = substeps;
+    }
+  }
+  ApplyFixed();
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return absl::OkStatus();
+}
+
+// ---- Material painting.
+
+absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateMaterialPaint(paint, "paint"));
+  RETURN_IF_ERROR(im.CheckControlCells(paint.region(), "paint.region"));
+  const models::ElementLayout& old = *im.layout;
+  const Material& target = paint.material();
+  int64_t touched = 0;
+  // Bounds for the new stable step: K' <= r K and M' >= m M in the PSD
+  // sense, r the largest ratio of the isotropic stiffness's eigenvalues
+  // (3 lambda + 2 mu, lambda + 2 mu, mu: the same eigenvectors for every
+  // isotropic C, and the local-frame model's diagonal blocks use the last
+  // two) and m the smallest density ratio over the samples; unpainted
+  // samples have ratio 1. Then omega'^2 <= omega^2 r / m.
+  double stiffness_ratio = 1, mass_ratio = 1;
+  auto stiffness_ratios = [](const models::MaterialPoint& a, const models::MaterialPoint& b) {
+    const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
+    return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
+  };
+  OrderedSampler sampler(
+      old, im.rest_nodes,
+      [&](int kind, int32_t e, int q, const Eigen::Vector3d& x, int32_t cell) {
+        const models::ElementBlock& block = old.blocks[kind];
+        models::MaterialPoint m = old.materials[block.groups[block.group[e]].material][q];
+        const double w = PaintWeight(paint, x, cell);
+        if (w > 0) {
+          ++touched;
+          m.young = Blend(m.young, target.young_modulus(), w);
+          m.poisson = Blend(m.poisson, target.poisson_ratio(), w);
+          m.density = Blend(m.density, target.density(), w);
+          m.damping = Blend(m.damping, target.damping(), w);
+          const models::MaterialPoint& was =
+              old.materials[block.groups[block.group[e]].material][q];
+          stiffness_ratio = std::max(stiffness_ratio, stiffness_ratios(was, m));
+          mass_ratio = std::min(mass_ratio, m.density / was.density);
+        }
+        return m;
+      });
+  auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
+      d_.elements, im.rest_nodes, d_.hierarchy.control_cell,
+      [&sampler](const Eigen::Vector3d& x, int32_t cell) { return sampler(x, cell); }));
+  if (!sampler.ok()) {
+    return absl::InternalError("paint: the element layout sampled materials out of order");
+  }
+  if (touched == 0) {
+    return absl::InvalidArgumentError(
+        "paint.region contains no material sample (quadrature point) of the solid");
+  }
+  ASSIGN_OR_RETURN(MaterialBuild build, im.BuildMaterial(std::move(layout)));
+  // The stable step: from the bound when it keeps the sub-step count (or
+  // the step is implicit), else estimated afresh (power iteration, the
+  // costliest part of a paint). Sub-steps never drop on a paint.
+  double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
+  bool estimated = false;
+  int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
+  if (!im.use_implicit && substeps > im.substeps) {
+    omega = im.EstimateOmegaMax(*build.model, build.mt, im.fixed);
+    estimated = true;
+    substeps = std::max(im.substeps, im.SubstepsFor(omega));
+  }
+  if (substeps > im.settings.max_substeps()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "paint: the painted solid needs ", substeps, " explicit sub-steps (stable step ",
+        2.0 / omega, " s) but solver.max_substeps is ", im.settings.max_substeps(),
+        "; paint a softer or denser material, or lower the time step"));
+  }
+  Eigen::SparseMatrix<double> k0;
+  if (im.use_implicit) {
+    const std::vector<Eigen::Triplet<double, int32_t>> t = Impl::StiffnessTriplets(
+        d_.node_matrix, *build.layout, *build.corotational, im.spring_point, im.spring_k);
+    const int64_t nc = p_.rows();
+    k0.resize(3 * nc, 3 * nc);
+    k0.setFromTriplets(t.begin(), t.end());
+  }
+  // Nothing can fail from here on.
+  build.model->set_frames(im.model->frames());
+  im.InstallMaterial(std::move(build));
+  if (im.use_implicit) im.k0 = std::move(k0);
+  im.omega_max = omega;
+  if (estimated) im.omega_fixed = im.fixed;  // a bound holds for the old estimate's set
+  im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
+  const double old_h = im.h_sub;
+  im.SetSubsteps(substeps, h_);
+  if (im.h_sub != old_h) p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
+  im.RebuildConstantLoads();  // gravity follows the density
+  total_mass_ = im.mt.sum();
+  ReportMaterial();
+  report_.omega_max = im.omega_max;
+  report_.stable_step = im.stable_step;
+  report_.substeps = im.substeps;
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return absl::OkStatus();
+}
+
+// ---- Exact state.
+
+namespace {
+constexpr char kStateMagic[8] = {'D', 'S', 'O', 'L', 'I', 'D', 'S', 'T'};
+constexpr size_t kHeaderBytes = 8 + 4 + 8 + 8 + 8;  // magic, version, fingerprint, payload size
+}  // namespace
+
+std::string Solid::SaveState() const {
+  const Impl& im = *impl_;
+  StateWriter w;
+  w.Put<double>(time_);
+  w.Put<int64_t>(steps_);
+  w.Put<int64_t>(rollbacks_);
+  w.Put<int32_t>(im.substeps);
+  w.Put<double>(im.omega_max);
+  w.Put<double>(im.stable_step);
+  w.Put<uint8_t>(im.forces_valid);
+  w.Put<double>(im.last_strain_energy);
+  w.Put<uint8_t>(im.ledger_rebase);
+  w.Put<double>(im.ledger.work);
+  w.Put<double>(im.ledger.h_min);
+  w.Put<double>(im.ledger.peak);
+  w.Put<uint8_t>(im.ledger.started);
+  w.Matrix(p_);
+  w.Matrix(p_prev_);
+  w.Matrix(im.f);
+  w.Put<uint8_t>(im.has_pressure);
+  if (im.has_pressure) w.Matrix(im.f_press);
+  w.Matrix(im.hold);
+  w.Bytes(std::string_view(reinterpret_cast<const char*>(im.omega_fixed.data()),
+                           im.omega_fixed.size()));
+  w.Put<int64_t>(im.next_id);
+  w.Vec(im.gravity);
+  w.Put<uint64_t>(im.point_loads.size());
+  for (const auto& l : im.point_loads) {
+    w.Put<int64_t>(l.id);
+    w.Bytes(l.msg.SerializeAsString());
+  }
+  w.Put<uint64_t>(im.pressures.size());
+  for (const auto& l : im.pressures) {
+    w.Put<int64_t>(l.id);
+    w.Bytes(l.msg.SerializeAsString());
+  }
+  w.Put<uint64_t>(im.fixes.size());
+  for (const auto& c : im.fixes) {
+    w.Put<int64_t>(c.id);
+    w.Bytes(c.region.SerializeAsString());
+  }
+  // Material samples: the distinct arrays and each element's array.
+  const models::ElementLayout& l = *im.layout;
+  w.Put<uint64_t>(l.materials.size());
+  for (const auto& array : l.materials) {
+    w.Doubles(reinterpret_cast<const double*>(array.data()), 4 * array.size());
+  }
+  for (const models::ElementBlock& block : l.blocks) {
+    w.Put<uint64_t>(block.size());
+    for (int32_t e = 0; e < block.size(); ++e) w.Put<int32_t>(block.groups[block.group[e]].material);
+  }
+  // Element frames (warm starts).
+  const models::InternalForceModel::Frames& frames = im.model->frames();
+  for (const auto& f : frames) {
+    w.Doubles(reinterpret_cast<const double*>(f.data()), 4 * f.size());
+  }
+  std::string out(kStateMagic, 8);
+  StateWriter h;
+  h.Put<uint32_t>(kStateFormatVersion);
+  h.Put<uint64_t>(im.fingerprint.first);
+  h.Put<uint64_t>(im.fingerprint.second);
+  h.Put<uint64_t>(w.out.size());
+  out += h.out;
+  out += w.out;
+  const uint64_t sum = Checksum(out);
+  out.append(reinterpret_cast<const char*>(&sum), sizeof(sum));
+  return out;
+}
+
+absl::Status Solid::RestoreState(std::string_view bytes) {
+  static_assert(sizeof(models::MaterialPoint) == 4 * sizeof(double));
+  Impl& im = *impl_;
+  const int64_t nc = p_.rows();
+  if (bytes.size() < kHeaderBytes + 8 || std::memcmp(bytes.data(), kStateMagic, 8) != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solid state: not a dynsolid solid state (", bytes.size(),
+        " bytes; it must start with \"DSOLIDST\")"));
+  }
+  StateReader header(bytes.substr(8, kHeaderBytes - 8));
+  const uint32_t version = header.Get<uint32_t>("version");
+  const uint64_t fp1 = header.Get<uint64_t>("fingerprint");
+  const uint64_t fp2 = header.Get<uint64_t>("fingerprint");
+  const uint64_t payload_size = header.Get<uint64_t>("payload size");
+  if (version != kStateFormatVersion) {
+    return absl::InvalidArgumentError(absl::StrCat("solid state: format version ", version,
+                                                   "; this build reads version ",
+                                                   kStateFormatVersion));
+  }
+  uint64_t stored_sum;
+  std::memcpy(&stored_sum, bytes.data() + bytes.size() - 8, 8);
+  if (Checksum(bytes.substr(0, bytes.size() - 8)) != stored_sum ||
+      payload_size != bytes.size() - kHeaderBytes - 8) {
+    return absl::DataLossError(absl::StrCat("solid state: checksum mismatch over ", bytes.size(),
+                                            " bytes: the state is corrupt or truncated"));
+  }
+  if (fp1 != im.fingerprint.first || fp2 != im.fingerprint.second) {
+    return absl::InvalidArgumentError(
+        "solid state: saved from a different scene or discretization (fingerprint mismatch); "
+        "restore into a solid created from the same scene and levels");
+  }
+
+  // Parse and check everything before changing anything.
+  StateReader r(bytes.substr(kHeaderBytes, payload_size));
+  const double time = r.Get<double>("time");
+  const int64_t steps = r.Get<int64_t>("steps");
+  const int64_t rollbacks = r.Get<int64_t>("rollbacks");
+  const int32_t substeps = r.Get<int32_t>("substeps");
+  const double omega = r.Get<double>("omega_max");
+  const double stable = r.Get<double>("stable_step");
+  const bool forces_valid = r.Get<uint8_t>("forces_valid") != 0;
+  const double strain = r.Get<double>("strain energy");
+  const bool rebase = r.Get<uint8_t>("ledger rebase") != 0;
+  Impl::Ledger ledger;
+  ledger.work = r.Get<double>("ledger");
+  ledger.h_min = r.Get<double>("ledger");
+  ledger.peak = r.Get<double>("ledger");
+  ledger.started = r.Get<uint8_t>("ledger") != 0;
+  Points p = r.Matrix("p", nc), p_prev = r.Matrix("p_prev", nc), f = r.Matrix("forces", nc);
+  const bool saved_pressure = r.Get<uint8_t>("pressure flag") != 0;
+  Points f_press;
+  if (saved_pressure) f_press = r.Matrix("pressure forces", nc);
+  Points hold = r.Matrix("held positions", nc);
+  const std::string omega_fixed_bytes = r.Bytes("stable-step fixed set");
+  if (r.ok() && static_cast<int64_t>(omega_fixed_bytes.size()) != nc) {
+    r.Fail(absl::StrCat("stable-step fixed set: ", omega_fixed_bytes.size(), " entries, expected ",
+                        nc));
+  }
+  const int64_t next_id = r.Get<int64_t>("next id");
+  const Eigen::Vector3d gravity = r.Vec("gravity");
+  if (r.ok() && (substeps < 1 || substeps > std::max(1, im.settings.max_substeps()))) {
+    r.Fail(absl::StrCat("substeps ", substeps, " out of range"));
+  }
+  RETURN_IF_ERROR(r.status());
+
+  // Loads and constraints: parsed, validated and located again.
+  int64_t last_id = 0;
+  auto check_id = [&](int64_t id, const char* what) {
+    if (r.ok() && (id <= last_id || id >= next_id)) {
+      r.Fail(absl::StrCat(what, " id ", id, " out of order or not below the next id ", next_id));
+    }
+    last_id = std::max(last_id, id);
+  };
+  std::vector<Impl::PointLoad> point_loads;
+  const int64_t n_forces = r.Count("point forces", next_id);
+  for (int64_t k = 0; k < n_forces && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("point force id");
+    check_id(id, "point force");
+    PointForce msg;
+    if (!msg.ParseFromString(r.Bytes("point force")) && r.ok()) r.Fail("point force: bad message");
+    if (!r.ok()) break;
+    absl::StatusOr<MaterialLocation> at =
+        im.Locate(V(msg.position()), im.rest_nodes, im.settings.snap_forces_to_quadrature());
+    if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
+      r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
+      break;
+    }
+    point_loads.push_back({id, std::move(msg), *at});
+  }
+  last_id = 0;
+  std::vector<Impl::PressureLoad> pressures;
+  const int64_t n_pressures = r.Count("pressures", next_id);
+  for (int64_t k = 0; k < n_pressures && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("pressure id");
+    check_id(id, "pressure");
+    Pressure msg;
+    if (!msg.ParseFromString(r.Bytes("pressure")) && r.ok()) r.Fail("pressure: bad message");
+    if (!r.ok()) break;
+    std::vector<int32_t> quads;
+    if (scene::ValidatePressure(msg, "pressure").ok() &&
+        im.CheckControlCells(msg.region(), "pressure.region").ok()) {
+      quads = im.SelectQuads(msg.region());
+    }
+    if (quads.empty()) {
+      r.Fail(absl::StrCat("pressure ", id, " is invalid for this solid"));
+      break;
+    }
+    pressures.push_back({id, std::move(msg), std::move(quads)});
+  }
+  if (r.ok() && saved_pressure != !pressures.empty()) r.Fail("pressure forces without pressures");
+  last_id = 0;
+  std::vector<Impl::FixConstraint> fixes;
+  std::vector<int32_t> fix_count(nc, 0);
+  const int64_t n_fixes = r.Count("fixed regions", next_id);
+  for (int64_t k = 0; k < n_fixes && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("fixed region id");
+    check_id(id, "fixed region");
+    Region region;
+    if (!region.ParseFromString(r.Bytes("fixed region")) && r.ok()) r.Fail("fixed region: bad message");
+    if (!r.ok()) break;
+    std::vector<int32_t> points;
+    if (scene::ValidateValues(region, "region").ok() && scene::ValidateRegion(region, "region").ok() &&
+        im.CheckControlCells(region, "region").ok()) {
+      points = im.SelectControlPoints(region);
+    }
+    if (points.empty()) {
+      r.Fail(absl::StrCat("fixed region ", id, " is invalid for this solid"));
+      break;
+    }
+    for (int32_t i : points) ++fix_count[i];
+    fixes.push_back({id, std::move(region), std::move(points)});
+  }
+  RETURN_IF_ERROR(r.status());
+
+  // Material samples.
+  const models::ElementLayout& cur = *im.layout;
+  int64_t max_arrays = 0;
+  for (const models::ElementBlock& block : cur.blocks) max_arrays += block.size();
+  const int64_t n_arrays = r.Count("material arrays", max_arrays);
+  std::vector<std::vector<models::MaterialPoint>> arrays(r.ok() ? n_arrays : 0);
+  for (int64_t k = 0; k < n_arrays && r.ok(); ++k) {
+    const std::vector<double> v = r.Doubles("material array");
+    if (!r.ok()) break;
+    if (v.size() % 4 != 0) {
+      r.Fail("material array: not whole samples");
+      break;
+    }
+    arrays[k].resize(v.size() / 4);
+    if (!v.empty()) {
+      std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
+    }
+  }
+  std::array<std::vector<int32_t>, 3> element_array;
+  for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+    const models::ElementBlock& block = cur.blocks[kind];
+    const int64_t count = r.Count("elements", max_arrays);
+    if (r.ok() && count != block.size()) {
+      r.Fail(absl::StrCat("material of kind ", kind, ": ", count, " elements, the solid has ",
+                          block.size()));
+    }
+    element_array[kind].resize(r.ok() ? count : 0);
+    for (int64_t e = 0; e < count && r.ok(); ++e) {
+      const int32_t a = r.Get<int32_t>("element material");
+      if (r.ok() && (a < 0 || a >= n_arrays ||
+                     static_cast<int>(arrays[a].size()) != cur.tables[kind].points)) {
+        r.Fail(absl::StrCat("element ", e, " of kind ", kind, ": bad material array ", a));
+      }
+      element_array[kind][e] = a;
+    }
+  }
+  // Element frames.
+  models::InternalForceModel::Frames frames;
+  for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+    const std::vector<double> v = r.Doubles("frames", 4 * int64_t{cur.blocks[kind].size()});
+    if (!r.ok()) break;
+    frames[kind].resize(cur.blocks[kind].size());
+    if (!v.empty()) {
+      std::memcpy(static_cast<void*>(frames[kind].data()), v.data(), v.size() * sizeof(double));
+    }
+  }
+  if (r.ok() && !r.at_end()) r.Fail(absl::StrCat("unexpected bytes after byte ", r.pos()));
+  RETURN_IF_ERROR(r.status());
+
+  // The material: rebuilt only when it differs from the current one.
+  bool same_material = static_cast<size_t>(n_arrays) == cur.materials.size();
+  for (int64_t k = 0; same_material && k < n_arrays; ++k) {
+    same_material = arrays[k].size() == cur.materials[k].size() &&
+                    std::memcmp(arrays[k].data(), cur.materials[k].data(),
+                                arrays[k].size() * sizeof(models::MaterialPoint)) == 0;
+  }
+  for (int kind = 0; kind < 3 && same_material; ++kind) {
+    const models::ElementBlock& block = cur.blocks[kind];
+    for (int32_t e = 0; e < block.size() && same_material; ++e) {
+      same_material = element_array[kind][e] == block.groups[block.group[e]].material;
+    }
+  }
+  std::optional<MaterialBuild> build;
+  Eigen::SparseMatrix<double> k0;
+  if (!same_material) {
+    OrderedSampler sampler(cur, im.rest_nodes,
+                           [&](int kind, int32_t e, int q, const Eigen::Vector3d&, int32_t) {
+                             return arrays[element_array[kind][e]][q];
+                           });
+    auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
+        d_.elements, im.rest_nodes, d_.hierarchy.control_cell,
+        [&sampler](const Eigen::Vector3d& x, int32_t cell) { return sampler(x, cell); }));
+    if (!sampler.ok()) {
+      return absl::InternalError("solid state: the element layout sampled materials out of order");
+    }
+    ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout)));
+    if (im.use_implicit) {
+      const std::vector<Eigen::Triplet<double, int32_t>> t = Impl::StiffnessTriplets(
+          d_.node_matrix, *build->layout, *build->corotational, im.spring_point, im.spring_k);
+      k0.resize(3 * nc, 3 * nc);
+      k0.setFromTriplets(t.begin(), t.end());
+    }
+  }
+
+  // Nothing can fail from here on.
+  if (build) {
+    im.InstallMaterial(*std::move(build));
+    if (im.use_implicit) im.k0 = std::move(k0);
+    total_mass_ = im.mt.sum();
+    ReportMaterial();
+  }
+  im.model->set_frames(frames);
+  im.point_loads = std::move(point_loads);
+  im.pressures = std::move(pressures);
+  im.fixes = std::move(fixes);
+  im.fix_count = std::move(fix_count);
+  im.next_id = next_id;
+  im.gravity = gravity;
+  im.RebuildConstantLoads();
+  im.RebuildPressure();
+  if (im.has_pressure) im.f_press = std::move(f_press);
+  im.hold = std::move(hold);
+  im.omega_fixed.assign(omega_fixed_bytes.begin(), omega_fixed_bytes.end());
+  im.omega_max = omega;
+  im.stable_step = stable;
+  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  im.SetSubsteps(substeps, h_);
+  p_ = std::move(p);
+  p_prev_ = std::move(p_prev);
+  im.f = std::move(f);
+  im.forces_valid = forces_valid;
+  im.last_strain_energy = strain;
+  im.ledger = ledger;
+  im.ledger_rebase = rebase;
+  time_ = time;
+  steps_ = steps;
+  rollbacks_ = rollbacks;
+  report_.substeps = substeps;
+  report_.omega_max = omega;
+  report_.stable_step = stable;
+  report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+  report_.gravity = im.gravity.squaredNorm() > 0;
+  report_.fixed_control_points =
+      static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  last_step_ = StepStats();
+  return absl::OkStatus();
+}
+
+// ---- Boundary surface.
+
+Points Solid::SurfacePositions() const { return impl_->surface_rows * p_; }
+
+Solid::Bounds Solid::SurfaceBounds() const {
+  const Points x = SurfacePositions();
+  Bounds b;
+  if (x.rows() == 0) return b;
+  b.min = x.colwise().minCoeff().transpose();
+  b.max = x.colwise().maxCoeff().transpose();
+  return b;
+}
+
+Solid::SurfaceFields Solid::ComputeSurfaceFields() const {
+  const Impl& im = *impl_;
+  const Points x = SurfacePositions();
+  const int64_t nv = x.rows();
+  SurfaceFields out;
+  out.displacement.resize(nv);
+  for (int64_t i = 0; i < nv; ++i) {
+    out.displacement[i] = static_cast<float>((x.row(i) - im.surface_rest.row(i)).norm());
+  }
+  // Strain: the largest |l / l0 - 1| over the edges and diagonals at a vertex.
+  std::vector<double> strain(nv, 0.0);
+  auto stretch = [&](int32_t a, int32_t b) {
+    const double l0 = (im.surface_rest.row(a) - im.surface_rest.row(b)).norm();
+    if (a == b || l0 <= 0) return;
+    const double e = std::abs((x.row(a) - x.row(b)).norm() / l0 - 1.0);
+    strain[a] = std::max(strain[a], e);
+    strain[b] = std::max(strain[b], e);
+  };
+  for (const auto& q : surface_.quads) {
+    for (int k = 0; k < 4; ++k) stretch(q[k], q[(k + 1) % 4]);
+    stretch(q[0], q[2]);
+    stretch(q[1], q[3]);
+  }
+  out.strain.assign(strain.begin(), strain.end());
+  // Stiffness: mean Young's modulus of the boundary cells' elements.
+  const int32_t ncells = d_.fine().num_cells();
+  std::vector<double> cell_sum(ncells, 0.0);
+  std::vector<int32_t> cell_count(ncells, 0);
+  std::vector<uint8_t> boundary_cell(ncells, 0);
+  for (int32_t c : im.quad_cell) boundary_cell[c] = 1;
+  for (const models::ElementBlock& block : im.layout->blocks) {
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t c = block.cell[e];
+      if (!boundary_cell[c]) continue;
+      for (const models::MaterialPoint& m : im.layout->materials[block.groups[block.group[e]].material]) {
+        cell_sum[c] += m.young;
+        ++cell_count[c];
+      }
+    }
+  }
+  std::vector<double> vsum(nv, 0.0);
+  std::vector<int32_t> vcount(nv, 0);
+  for (size_t q = 0; q < surface_.quads.size(); ++q) {
+    const int32_t c = im.quad_cell[q];
+    if (cell_count[c] == 0) continue;
+    const double e = cell_sum[c] / cell_count[c];
+    const auto& v = surface_.quads[q];
+    for (int k = 0; k < 4; ++k) {
+      if (k == 3 && v[3] == v[2]) continue;  // degenerate quad: a triangle
+      vsum[v[k]] += e;
+      ++vcount[v[k]];
+    }
+  }
+  out.stiffness.resize(nv);
+  for (int64_t i = 0; i < nv; ++i) {
+    out.stiffness[i] = vcount[i] > 0 ? static_cast<float>(vsum[i] / vcount[i]) : 0.0f;
+  }
+  return out;
+}
 
 }  // namespace dynsolid::solid

@@ -170,6 +170,7 @@ absl::StatusOr<int64_t> SessionLoop::AddWatcher(std::shared_ptr<WatchSink> sink)
         " watchers (--max_watchers_per_session)"));
   }
   const int64_t id = next_watcher_id_++;
+  sink->set_watcher_id(id);
   WatchSink* key = sink.get();
   watchers_.emplace(key, WatcherEntry{std::move(sink), id});
   publish_requested_ = true;  // its first frame now, not at the next tick
@@ -264,7 +265,9 @@ void SessionLoop::Run() {
       }
       if (now >= next_step) {
         const Clock::time_point t0 = Clock::now();
-        (void)core_->StepOnce();
+        if (absl::Status s = core_->StepOnce(); !s.ok()) {
+          SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
+        }
         const Clock::time_point t1 = Clock::now();
         RecordStep(duration<double, std::milli>(t1 - t0).count());
         UpdateCounters();
@@ -353,7 +356,7 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands) {
       reply.mutable_saved()->set_bytes(static_cast<int64_t>(batch.snapshot.size()));
     }
     if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
-      ServerLog().debug("session {}: client {} seq {} at step {}: code {} {}", id_,
+      SessionLog().debug("session {}: client {} seq {} at step {}: code {} {}", id_,
                         reply.client_id(), reply.seq(), reply.applied_step(), reply.code(),
                         reply.message());
     }
@@ -502,12 +505,16 @@ void SessionLoop::Persist() {
     }
     if (!s.ok()) {
       // Nothing is acknowledged that is not durable.
-      ServerLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      JournalLog().error("session {}: persistence failed: {}", id_, s.ToString());
       for (auto& [sink, reply] : batch.replies) {
         sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
                                                     s.message())));
       }
       continue;
+    }
+    if (!batch.snapshot.empty()) {
+      JournalLog().debug("session {}: snapshot at step {} ({} bytes)", id_, batch.snapshot_step,
+                         batch.snapshot.size());
     }
     {
       absl::MutexLock lock(&stats_mu_);

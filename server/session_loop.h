@@ -56,6 +56,8 @@ class WatchSink {
   virtual void Offer(std::shared_ptr<const SurfaceSnapshot> snapshot) = 0;
   virtual void Stop(const absl::Status& status) = 0;
   virtual WatcherStats Stats() const = 0;
+  // Its id, set by AddWatcher before the first Offer.
+  virtual void set_watcher_id(int64_t id) = 0;
   virtual const FieldChoice& fields() const = 0;
   virtual double rate_hz() const = 0;
 };

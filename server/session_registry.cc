@@ -100,7 +100,7 @@ int SessionRegistry::RecoverAll() {
     core_options.can_save = true;
     absl::StatusOr<RecoveredSession> r = RecoverSession(dir, options_.build, core_options);
     if (!r.ok()) {
-      ServerLog().error("cannot recover the session in {}: {}", dir, r.status().ToString());
+      SessionLog().error("cannot recover the session in {}: {}", dir, r.status().ToString());
       continue;
     }
     const persist::Manifest& m = r->manifest;
@@ -117,7 +117,7 @@ int SessionRegistry::RecoverAll() {
       ServerLog().error("cannot reopen the session in {}: {}", dir, error.ToString());
       continue;
     }
-    ServerLog().info("session {} recovered: {}", m.id(), r->summary);
+    SessionLog().info("session {} recovered: {}", m.id(), r->summary);
     ++opened;
   }
   return opened;

@@ -24,7 +24,7 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
       : reactor_(reactor), encoders_(encoders), fields_(fields), rate_hz_(rate_hz),
         encoder_(fields) {}
 
-  void set_id(int64_t id) {
+  void set_watcher_id(int64_t id) override {
     absl::MutexLock lock(&mu_);
     id_ = id;
   }
@@ -213,8 +213,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
       Finish(ToGrpcStatus(id.status()));
       return;
     }
-    state_->set_id(*id);
-    ServerLog().info("session {}: watcher {} joined at {:.0f} Hz", session_->id(), *id, rate);
+    WatchLog().info("session {}: watcher {} joined at {:.0f} Hz", session_->id(), *id, rate);
   }
 
   void OnWriteDone(bool ok) override { state_->OnWriteDone(ok); }
@@ -222,7 +221,14 @@ class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
     if (state_ != nullptr) state_->OnCancel();
   }
   void OnDone() override {
-    if (state_ != nullptr) session_->loop().RemoveWatcher(state_.get());
+    if (state_ != nullptr) {
+      const WatcherStats w = state_->Stats();
+      WatchLog().info("session {}: watcher {} left after {} frames ({} keyframes, {} bytes), {} "
+                      "skipped",
+                      session_->id(), w.watcher_id(), w.frames_sent(), w.keyframes_sent(),
+                      w.bytes_sent(), w.frames_skipped());
+      session_->loop().RemoveWatcher(state_.get());
+    }
     delete this;
   }
 
@@ -392,7 +398,7 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
         session_.reset();
         return r;
       }
-      ServerLog().info("session {}: command stream from {}", session_->id(), context_->peer());
+      SessionLog().info("session {}: command stream from {}", session_->id(), context_->peer());
     } else if (request_.has_session()) {
       if (request_.session().id() != session_->id()) {
         return absl::InvalidArgumentError(absl::StrCat(

@@ -648,6 +648,30 @@ TEST_F(LiveTest, StatsReportStepTimesPhasesAndCounts) {
   EXPECT_EQ(st.journal_records(), 0);  // no data dir
 }
 
+TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {
+  // h = 10 microseconds: no machine steps this block in real time, so every
+  // step overruns. The loop must count that and re-anchor its clock rather
+  // than owe ever more steps (counts only; no wall time is asserted).
+  const Session s = CreateText(R"(
+    name: "tiny_step"
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 } }
+    constraints { fixed { box { min { z: -0.01 } max { x: 3 y: 3 z: 0.01 } } } }
+    solver { time_step: 1e-5 }
+  )", /*paused=*/true);
+  CommandStream c(*stub_, s, "overrun");
+  ASSERT_EQ(c.Send(1, StepCommand(200)).code(), 0);
+  InspectAt(*stub_, s, 200, false, false);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 200);
+  EXPECT_GT(st.overruns(), 0);
+  EXPECT_GT(st.steps_dropped(), 0);
+  // Each overrun drops the lag of that one step: the lag reported is the
+  // last step's, not an accumulated debt.
+  EXPECT_LE(st.steps_behind(), st.steps_dropped());
+}
+
 TEST_F(LiveTest, ClosingASessionFinishesItsStreams) {
   const Session s = Create("block3", 1, false);
   grpc::ClientContext wc;

@@ -66,6 +66,42 @@ class BitReader {
   size_t at_ = 0;
 };
 
+// Rice code (service.proto Delta): u = z >> k ones, a zero, k low bits;
+// u >= 16 escapes to 16 ones and 17 raw bits.
+constexpr int kMaxRiceK = 16;
+constexpr uint32_t kRiceEscape = 16;
+
+size_t RiceBits(uint32_t z, int k) {
+  const uint32_t u = z >> k;
+  return u < kRiceEscape ? u + 1 + k : kRiceEscape + 17;
+}
+
+void PutRice(BitWriter& w, uint32_t z, int k) {
+  const uint32_t u = z >> k;
+  if (u < kRiceEscape) {
+    for (uint32_t i = 0; i < u; ++i) w.Put(1, 1);
+    w.Put(0, 1);
+    w.Put(z & ((1u << k) - 1), k);
+  } else {
+    for (uint32_t i = 0; i < kRiceEscape; ++i) w.Put(1, 1);
+    w.Put(z, 17);
+  }
+}
+
+bool GetRice(BitReader& r, int k, uint32_t* z) {
+  uint32_t u = 0;
+  for (;;) {
+    uint32_t bit = 0;
+    if (!r.Get(1, &bit)) return false;
+    if (bit == 0) break;
+    if (++u == kRiceEscape) return r.Get(17, z);
+  }
+  uint32_t low = 0;
+  if (!r.Get(k, &low)) return false;
+  *z = (u << k) | low;
+  return true;
+}
+
 void SetVec3(const std::array<double, 3>& a, Vec3* v) {
   v->set_x(a[0]);
   v->set_y(a[1]);
@@ -211,7 +247,31 @@ bool SurfaceEncoder::Encode(const SurfaceSnapshot& s, Frame* frame) {
     if (taking) runs.push_back(run);
     if (moved == 0) runs.clear();
     const int bits = std::max(1, BitWidth(max_zigzag));
-    size_t delta_bytes = (static_cast<size_t>(moved) * 3 * bits + 7) / 8;
+    // Rice parameters per axis: the k with the fewest bits, exactly.
+    std::array<int, 3> rice_k{0, 0, 0};
+    size_t rice_bits = 0;
+    {
+      std::array<std::array<size_t, kMaxRiceK + 1>, 3> cost{};
+      for (size_t i = 0; i < n; ++i) {
+        if (codes[3 * i] == codes_[3 * i] && codes[3 * i + 1] == codes_[3 * i + 1] &&
+            codes[3 * i + 2] == codes_[3 * i + 2]) {
+          continue;
+        }
+        for (int a = 0; a < 3; ++a) {
+          const uint32_t z = ZigZag(static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a]);
+          for (int k = 0; k <= kMaxRiceK; ++k) cost[a][k] += RiceBits(z, k);
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        for (int k = 1; k <= kMaxRiceK; ++k) {
+          if (cost[a][k] < cost[a][rice_k[a]]) rice_k[a] = k;
+        }
+        rice_bits += cost[a][rice_k[a]];
+      }
+    }
+    const size_t fixed_bits = static_cast<size_t>(moved) * 3 * bits;
+    const bool rice = rice_bits < fixed_bits;
+    size_t delta_bytes = ((rice ? rice_bits : fixed_bits) + 7) / 8;
     for (uint32_t r : runs) delta_bytes += VarintSize(r);
     const int field_count = fields_.displacement + fields_.strain + fields_.stiffness;
     delta_bytes += static_cast<size_t>(moved) * 4 * field_count;
@@ -222,11 +282,16 @@ bool SurfaceEncoder::Encode(const SurfaceSnapshot& s, Frame* frame) {
     } else {
       d->set_base_step(base_step_);
       d->mutable_runs()->Assign(runs.begin(), runs.end());
-      d->set_bits(static_cast<uint32_t>(bits));
+      if (rice) {
+        d->set_bits(0);
+        d->mutable_rice_k()->Add(rice_k.begin(), rice_k.end());
+      } else {
+        d->set_bits(static_cast<uint32_t>(bits));
+      }
       d->set_moved(moved);
       SetBound(grid_, d->mutable_error_bound());
       std::string* packed = d->mutable_packed();
-      packed->reserve((static_cast<size_t>(moved) * 3 * bits + 7) / 8);
+      packed->reserve(delta_bytes);
       BitWriter w(packed);
       SurfaceFields* f = d->mutable_fields();
       for (size_t i = 0; i < n; ++i) {
@@ -235,7 +300,12 @@ bool SurfaceEncoder::Encode(const SurfaceSnapshot& s, Frame* frame) {
           continue;
         }
         for (int a = 0; a < 3; ++a) {
-          w.Put(ZigZag(static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a]), bits);
+          const uint32_t z = ZigZag(static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a]);
+          if (rice) {
+            PutRice(w, z, rice_k[a]);
+          } else {
+            w.Put(z, bits);
+          }
         }
         if (fields_.displacement) f->add_displacement(s.displacement[i]);
         if (fields_.strain) f->add_strain(s.strain[i]);
@@ -288,6 +358,12 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
   const size_t n = codes_.size() / 3;
   BitReader r(d.packed());
   const int bits = static_cast<int>(d.bits());
+  const bool rice = d.rice_k_size() > 0;
+  if (rice ? (d.rice_k_size() != 3 || d.rice_k(0) > kMaxRiceK || d.rice_k(1) > kMaxRiceK ||
+              d.rice_k(2) > kMaxRiceK)
+           : (d.moved() > 0 && (bits < 1 || bits > 17))) {
+    return absl::InvalidArgumentError("delta: bad bits or rice_k");
+  }
   size_t at = 0;
   int32_t listed = 0;
   for (int i = 0; i < d.runs_size(); ++i) {
@@ -297,7 +373,9 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
       for (size_t v = at; v < at + len; ++v) {
         for (int a = 0; a < 3; ++a) {
           uint32_t z = 0;
-          if (!r.Get(bits, &z)) return absl::InvalidArgumentError("delta.packed is too short");
+          if (!(rice ? GetRice(r, static_cast<int>(d.rice_k(a)), &z) : r.Get(bits, &z))) {
+            return absl::InvalidArgumentError("delta.packed is too short");
+          }
           const int64_t q = static_cast<int64_t>(codes_[3 * v + a]) + UnZigZag(z);
           if (q < 0 || q > kMaxCode) return absl::InvalidArgumentError("delta code out of range");
           codes_[3 * v + a] = static_cast<uint32_t>(q);

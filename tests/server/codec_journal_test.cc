@@ -132,6 +132,50 @@ TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
   EXPECT_LE(worst * 4, raw) << "delta " << worst << " bytes, raw float32 " << raw;
 }
 
+TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
+  auto topo = GridTopology();
+  SurfaceEncoder enc(FieldChoice{});
+  SurfaceDecoder dec;
+  Frame frame;
+  auto base = Wave(topo, 0, 0.2, 0);
+  enc.Encode(*base, &frame);
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  // Small moves everywhere and one large outlier: Rice is shorter.
+  auto mixed = std::make_shared<SurfaceSnapshot>(*base);
+  mixed->step = 1;
+  for (size_t i = 0; i < mixed->positions.size(); ++i) mixed->positions[i] += 1e-4 * (i % 7);
+  mixed->positions[0] += 0.3;
+  enc.Encode(*mixed, &frame);
+  ASSERT_TRUE(frame.has_delta());
+  EXPECT_EQ(frame.delta().rice_k_size(), 3);
+  EXPECT_EQ(frame.delta().bits(), 0u);
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  EXPECT_LE(WorstRatio(dec, *mixed), 1.0 + 1e-9);
+  // Every vertex moved by the same 5 codes on every axis: fixed width
+  // (4 bits each) is shorter than any Rice code.
+  Frame key;
+  SurfaceEncoder enc2(FieldChoice{});
+  SurfaceDecoder dec2;
+  enc2.Encode(*base, &key);
+  ASSERT_TRUE(dec2.Apply(key).ok());
+  const Keyframe& k = key.keyframe();
+  const double sx = k.grid().step().x(), sy = k.grid().step().y(), sz = k.grid().step().z();
+  auto shifted = std::make_shared<SurfaceSnapshot>(*base);
+  shifted->step = 1;
+  const std::vector<double> start = dec2.Positions();
+  for (size_t i = 0; i < start.size(); i += 3) {
+    shifted->positions[i] = start[i] + 5 * sx;
+    shifted->positions[i + 1] = start[i + 1] + 5 * sy;
+    shifted->positions[i + 2] = start[i + 2] + 5 * sz;
+  }
+  enc2.Encode(*shifted, &key);
+  ASSERT_TRUE(key.has_delta());
+  EXPECT_EQ(key.delta().rice_k_size(), 0);
+  EXPECT_EQ(key.delta().bits(), 4u);
+  ASSERT_TRUE(dec2.Apply(key).ok());
+  EXPECT_LE(WorstRatio(dec2, *shifted), 1.0 + 1e-9);
+}
+
 TEST(SurfaceCodecTest, LeavingTheGridOrChangingTopologyGivesAKeyframe) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});

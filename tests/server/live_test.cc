@@ -4,6 +4,7 @@
 // tokens, stats, persistence across a restart, and TLS.
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <memory>
@@ -158,6 +159,51 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
   }
   EXPECT_GT(moved_total, vertices) << "deltas listed too few moved vertices";
   EXPECT_EQ(static_cast<int>(decoder.displacement().size()), vertices);
+  wc.TryCancel();
+}
+
+TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
+  // The default scene at its two levels, pulled at the top corner: every
+  // delta frame of a 60 Hz watcher against 12 bytes per vertex.
+  const Session s = Create("block3", 2, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(120));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, wr);
+  SurfaceDecoder decoder;
+  std::vector<Frame> frames;
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
+  const int vertices = frames[0].keyframe().vertex_count();
+  EXPECT_EQ(vertices, 6 * 12 * 12 + 2);
+  CommandStream c(*stub_, s, "pull");
+  ASSERT_EQ(c.Send(1, ForceCommand(3, 3, 3, 2e4, 1e4, 0)).code(), 0);
+  ASSERT_EQ(c.Send(2, StepCommand(300)).code(), 0);
+  const InspectReply server = InspectAt(*stub_, s, 300);
+  frames.clear();
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 300, &frames));
+  EXPECT_LE(WorstRatio(decoder, server), 1.0 + 1e-9);
+  size_t delta_bytes = 0, deltas = 0, largest = 0;
+  int64_t moved = 0;
+  for (const Frame& f : frames) {
+    if (!f.has_delta()) continue;
+    ++deltas;
+    delta_bytes += f.ByteSizeLong();
+    largest = std::max(largest, f.ByteSizeLong());
+    moved += f.delta().moved();
+  }
+  const double raw = 12.0 * vertices;
+  ASSERT_GT(deltas, 3u);
+  EXPECT_GT(moved, 0);
+  const double mean_ratio = delta_bytes / (deltas * raw);
+  RecordProperty("delta_frames", static_cast<int>(deltas));
+  RecordProperty("mean_delta_over_raw_percent", static_cast<int>(100 * mean_ratio));
+  RecordProperty("largest_delta_over_raw_percent", static_cast<int>(100 * largest / raw));
+  std::printf("block3: %zu delta frames, mean %.1f %% and largest %.1f %% of a raw float32 "
+              "frame (%.0f bytes), %.0f moved vertices per delta\n",
+              deltas, 100 * mean_ratio, 100 * largest / raw, raw,
+              static_cast<double>(moved) / deltas);
+  EXPECT_LE(mean_ratio, 0.25);
   wc.TryCancel();
 }
 

@@ -495,8 +495,11 @@ void SessionLoop::Persist() {
       batch = std::move(persist_queue_.front());
       persist_queue_.pop_front();
     }
-    absl::Status s;
-    if (!batch.framed.empty()) {
+    // After a failed write nothing more is written (a record after a torn
+    // one would be unreachable on recovery) and nothing more is
+    // acknowledged: the session's commands fail until it is recovered.
+    absl::Status s = persist_error_;
+    if (s.ok() && !batch.framed.empty()) {
       s = journal_->Append(batch.framed);
       if (s.ok()) s = journal_->Sync();
     }
@@ -505,7 +508,10 @@ void SessionLoop::Persist() {
     }
     if (!s.ok()) {
       // Nothing is acknowledged that is not durable.
-      JournalLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      if (persist_error_.ok()) {
+        JournalLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      }
+      persist_error_ = s;
       for (auto& [sink, reply] : batch.replies) {
         sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
                                                     s.message())));

@@ -200,6 +200,7 @@ class SessionLoop {
   std::deque<PersistBatch> persist_queue_ ABSL_GUARDED_BY(persist_mu_);
   bool persist_stop_ ABSL_GUARDED_BY(persist_mu_) = false;
   std::thread persist_thread_;
+  absl::Status persist_error_;  // persistence thread only
 
   // Stats (written by the simulation and persistence threads).
   mutable absl::Mutex stats_mu_;

@@ -69,9 +69,12 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
   auto core = std::make_unique<SimCore>(solid->solid, core_options, request.start_paused());
   absl::Status error;
   std::shared_ptr<const SolidSession> session =
-      OpenLocked(std::move(id), std::move(token), scene->scene.name(), created, *std::move(solid),
-                 std::move(core), Recovered{}, std::move(dir), &error);
-  if (session == nullptr) return error;
+      OpenLocked(id, std::move(token), scene->scene.name(), created, *std::move(solid),
+                 std::move(core), Recovered{}, dir, &error);
+  if (session == nullptr) {
+    if (!dir.empty()) (void)RemoveDirTree(dir);
+    return error;
+  }
   return session;
 }
 

@@ -121,6 +121,8 @@ class SessionLoop {
 
   SessionStats Stats() const;
   double time_step() const { return time_step_; }
+  // Shared by this session's watchers' encoders.
+  const std::shared_ptr<EncodeCache>& encode_cache() const { return encode_cache_; }
 
  private:
   SessionLoop(std::string session_id, std::unique_ptr<SimCore> core, LoopOptions options,
@@ -162,6 +164,7 @@ class SessionLoop {
   const std::string dir_;
   const double time_step_;
   std::unique_ptr<SimCore> core_;  // simulation thread only (after Start)
+  const std::shared_ptr<EncodeCache> encode_cache_ = std::make_shared<EncodeCache>();
 
   // Queues and membership.
   mutable absl::Mutex mu_;

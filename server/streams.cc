@@ -20,9 +20,9 @@ namespace {
 class WatchState final : public WatchSink, public std::enable_shared_from_this<WatchState> {
  public:
   WatchState(grpc::ServerWriteReactor<Frame>* reactor, WorkQueue& encoders, FieldChoice fields,
-             double rate_hz)
+             double rate_hz, std::shared_ptr<EncodeCache> cache)
       : reactor_(reactor), encoders_(encoders), fields_(fields), rate_hz_(rate_hz),
-        encoder_(fields) {}
+        encoder_(fields, std::move(cache)) {}
 
   void set_watcher_id(int64_t id) override {
     absl::MutexLock lock(&mu_);
@@ -147,7 +147,7 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
       return;
     }
     // Only the holder of busy_ touches the encoder and frame_.
-    const bool key = encoder_.Encode(*snap, &frame_);
+    const bool key = encoder_.Encode(snap, &frame_);
     frame_.set_skipped(skipped);
     frame_.set_watcher_id(id);
     {
@@ -206,7 +206,8 @@ class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
     }
     session_ = *std::move(session);
     FieldChoice fields{request.displacement(), request.strain(), request.stiffness()};
-    state_ = std::make_shared<WatchState>(this, encoders, fields, rate);
+    state_ = std::make_shared<WatchState>(this, encoders, fields, rate,
+                                          session_->loop().encode_cache());
     absl::StatusOr<int64_t> id = session_->loop().AddWatcher(state_);
     if (!id.ok()) {
       state_.reset();

@@ -13,6 +13,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev
   gmsh
   python3 python3-meshio python3-numpy
+  openssl
 )
 
 missing=()

@@ -1,8 +1,17 @@
 // dynsolid-server: serves dynsolid.Sessions (proto/dynsolid/service.proto).
 //
-//   dynsolid-server [--listen 127.0.0.1:50051] [--max_sessions 16]
-//                   [--max_message_bytes 4194304] [--max_cells 1000000]
-//                   [--build_threads 1]
+//   dynsolid-server [--listen 127.0.0.1:50051] [--data_dir DIR]
+//                   [--tls_cert CERT.pem --tls_key KEY.pem]
+//                   [--max_sessions 16] [--max_message_bytes 4194304]
+//                   [--max_cells 1000000] [--max_watchers_per_session 64]
+//                   [--max_commands_per_second 1000] [--watch_hz 60]
+//                   [--max_watch_hz 240] [--answer_cache 256]
+//                   [--snapshot_every_steps 20000] [--build_threads 1]
+//                   [--encode_threads 2]
+//
+// (Abseil flags: --data-dir is spelled --data_dir, --tls-cert --tls_cert,
+// and so on.) With --data_dir every session is journaled and snapshotted
+// there and restored when the server starts again (server/persistence.h).
 //
 // The first line of stdout is "listening on HOST:PORT" (the bound port, also
 // when --listen asks for port 0), flushed; logs go to stderr. SIGINT or
@@ -28,12 +37,28 @@ ABSL_FLAG(int, max_message_bytes, 4 << 20, "Largest gRPC message received or sen
 ABSL_FLAG(int64_t, max_cells, 1'000'000,
           "Most level-L cells of a session's solid (checked before building)");
 ABSL_FLAG(int, build_threads, 1, "Threads that build solids, off the gRPC threads");
+ABSL_FLAG(int, encode_threads, 2, "Threads that encode watch frames, off the simulation threads");
+ABSL_FLAG(std::string, data_dir, "",
+          "Directory for session journals and snapshots; sessions found there are restored "
+          "on start. Empty: sessions live in memory only");
+ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain: serve TLS (with --tls_key)");
+ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert");
+ABSL_FLAG(int, max_watchers_per_session, 64, "Most Watch streams open on one session");
+ABSL_FLAG(double, max_commands_per_second, 1000,
+          "Commands per second per client_id (token bucket with one second of burst)");
+ABSL_FLAG(double, watch_hz, 60, "Frames per second for watchers that do not ask for a rate");
+ABSL_FLAG(double, max_watch_hz, 240, "Highest frame rate a watcher may ask for");
+ABSL_FLAG(int, answer_cache, 256, "Command answers remembered per client for resends");
+ABSL_FLAG(int64_t, snapshot_every_steps, 20000,
+          "With --data_dir, write a snapshot every this many steps (and on shutdown)");
 ABSL_FLAG(double, shutdown_grace_seconds, 5.0,
           "On SIGINT/SIGTERM, how long running calls may take before they are cancelled");
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage(
-      "dynsolid-server [--listen HOST:PORT] [--max_sessions N] [--max_message_bytes B]");
+      "dynsolid-server [--listen HOST:PORT] [--data_dir DIR] [--tls_cert PEM --tls_key PEM] "
+      "[--max_sessions N] [--max_message_bytes B] [--max_watchers_per_session N] "
+      "[--max_commands_per_second R] [--watch_hz HZ]");
   absl::ParseCommandLine(argc, argv);
 
   // Block the shutdown signals in every thread (gRPC's threads inherit the
@@ -50,6 +75,16 @@ int main(int argc, char** argv) {
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_cells = absl::GetFlag(FLAGS_max_cells);
   options.build_threads = absl::GetFlag(FLAGS_build_threads);
+  options.encode_threads = absl::GetFlag(FLAGS_encode_threads);
+  options.data_dir = absl::GetFlag(FLAGS_data_dir);
+  options.tls_cert_file = absl::GetFlag(FLAGS_tls_cert);
+  options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
+  options.loop.max_watchers = absl::GetFlag(FLAGS_max_watchers_per_session);
+  options.loop.commands_per_second = absl::GetFlag(FLAGS_max_commands_per_second);
+  options.loop.watch_hz = absl::GetFlag(FLAGS_watch_hz);
+  options.loop.max_watch_hz = absl::GetFlag(FLAGS_max_watch_hz);
+  options.loop.core.answer_cache = absl::GetFlag(FLAGS_answer_cache);
+  options.loop.snapshot_every_steps = absl::GetFlag(FLAGS_snapshot_every_steps);
   absl::StatusOr<std::unique_ptr<dynsolid::server::Server>> server =
       dynsolid::server::Server::Start(options);
   if (!server.ok()) {

@@ -6,6 +6,7 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include "absl/strings/str_cat.h"
+#include "server/journal.h"
 #include "server/log.h"
 
 namespace dynsolid::server {
@@ -33,6 +34,30 @@ absl::Status CheckOptions(const ServerOptions& o) {
   if (o.max_cells < 1) {
     return absl::InvalidArgumentError(absl::StrCat("max_cells must be >= 1, got ", o.max_cells));
   }
+  if (o.encode_threads < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("encode_threads must be >= 1, got ", o.encode_threads));
+  }
+  if (!(o.loop.watch_hz > 0) || !(o.loop.max_watch_hz >= o.loop.watch_hz)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "watch_hz must be > 0 and <= max_watch_hz, got ", o.loop.watch_hz, " and ",
+        o.loop.max_watch_hz));
+  }
+  if (o.loop.max_watchers < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_watchers_per_session must be >= 1, got ", o.loop.max_watchers));
+  }
+  if (!(o.loop.commands_per_second > 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "max_commands_per_second must be > 0, got ", o.loop.commands_per_second));
+  }
+  if (o.loop.core.answer_cache < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("answer_cache must be >= 1, got ", o.loop.core.answer_cache));
+  }
+  if (o.tls_cert_file.empty() != o.tls_key_file.empty()) {
+    return absl::InvalidArgumentError("tls_cert and tls_key must be given together");
+  }
   if (o.build_threads < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("build_threads must be >= 1, got ", o.build_threads));
@@ -44,20 +69,37 @@ absl::Status CheckOptions(const ServerOptions& o) {
 
 Server::Server(const ServerOptions& options)
     : options_(options),
-      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}}),
+      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}, options.loop,
+                                options.data_dir}),
       builds_(options.build_threads),
-      service_(registry_, builds_) {}
+      encoders_(options.encode_threads),
+      service_(registry_, builds_, encoders_,
+               StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
   if (absl::Status s = CheckOptions(options); !s.ok()) return s;
+  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  if (!options.tls_cert_file.empty()) {
+    absl::StatusOr<std::string> cert = ReadWholeFile(options.tls_cert_file);
+    if (!cert.ok()) return cert.status();
+    absl::StatusOr<std::string> key = ReadWholeFile(options.tls_key_file);
+    if (!key.ok()) return key.status();
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back({*key, *cert});
+    credentials = grpc::SslServerCredentials(ssl);
+  }
+  if (!options.data_dir.empty()) {
+    if (absl::Status s = MakeDirs(options.data_dir + "/sessions"); !s.ok()) return s;
+  }
   std::unique_ptr<Server> server(new Server(options));
+  server->recovered_ = server->registry_.RecoverAll();
 
   // Both are process-wide switches read when a server is built.
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(options.listen, credentials, &server->port_);
   // Fail to start rather than share a port with another process.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);
@@ -65,16 +107,22 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   builder.RegisterService(&server->service_);
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
+    server->registry_.StopAll(absl::UnavailableError("the server could not start"));
     server->builds_.Join();
+    server->encoders_.Join();
     if (server->server_ != nullptr) server->server_->Shutdown();
     absl::MutexLock lock(&server->shutdown_mu_);
     server->shut_down_ = true;
     return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
   }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
-  ServerLog().info("serving dynsolid.Sessions on {} (max {} sessions, {} cells, {} bytes)",
-                   server->address_, options.max_sessions, options.max_cells,
-                   options.max_message_bytes);
+  ServerLog().info(
+      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {})",
+      server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
+      options.max_sessions, options.max_cells, options.max_message_bytes,
+      options.data_dir.empty() ? std::string("in memory")
+                               : absl::StrCat("data in ", options.data_dir, ", ",
+                                              server->recovered_, " sessions recovered"));
   return server;
 }
 
@@ -90,13 +138,16 @@ void Server::Shutdown(absl::Duration deadline) {
   // 1. No new sessions; queued builds Finish with UNAVAILABLE.
   registry_.StopAccepting();
   builds_.Stop();
-  // 2. Running calls finish (or are cancelled at the deadline); a running
+  // 2. Sessions stop: loops end, journals flush, streams finish.
+  registry_.StopAll(absl::UnavailableError("the server is shutting down"));
+  // 3. Running calls finish (or are cancelled at the deadline); a running
   //    build Finishes when it is done.
   server_->Shutdown(std::chrono::system_clock::now() +
                     absl::ToChronoMilliseconds(deadline));
   server_->Wait();
-  // 3. No call can post work any more.
+  // 4. No call can post work any more.
   builds_.Join();
+  encoders_.Join();
   ServerLog().info("stopped");
 }
 

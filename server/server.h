@@ -33,26 +33,44 @@ struct ServerOptions {
   int64_t max_cells = 1'000'000;
   // Threads that build solids (off the gRPC threads).
   int build_threads = 1;
+  // Threads that encode watch frames (off the simulation threads).
+  int encode_threads = 2;
+  // How sessions run: watch rates, watchers per session, commands per
+  // second per client, answer cache, snapshot period.
+  LoopOptions loop;
+  // Persist every session under this directory and restore them on start
+  // (persistence.h); empty: sessions live in memory only.
+  std::string data_dir;
+  // TLS: PEM files of the server's certificate chain and private key. Both
+  // or neither; empty: plaintext.
+  std::string tls_cert_file;
+  std::string tls_key_file;
 };
 
 class Server {
  public:
-  // Checks the options and starts serving. InvalidArgument for bad options,
-  // Unavailable when the address cannot be bound.
+  // Checks the options, recovers the sessions of data_dir, and starts
+  // serving. InvalidArgument for bad options, NotFound/Internal for TLS
+  // files that cannot be read, Unavailable when the address cannot be bound.
   static absl::StatusOr<std::unique_ptr<Server>> Start(const ServerOptions& options);
 
   ~Server();  // Shutdown(absl::Seconds(5)) unless already shut down
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
+  // Sessions recovered from data_dir at start.
+  int recovered_sessions() const { return recovered_; }
+
   // The port actually bound, and "HOST:PORT" with it.
   int port() const { return port_; }
   const std::string& address() const { return address_; }
 
-  // Stops creating sessions (queued builds finish with UNAVAILABLE), lets
-  // running calls finish until `deadline` from now and cancels the rest,
-  // waits for the gRPC server and joins the build threads. A build already
-  // running is not interrupted: shutdown waits for it. Idempotent.
+  // Stops creating sessions (queued builds finish with UNAVAILABLE), stops
+  // every session loop (streams finish with UNAVAILABLE, journals are
+  // flushed, a last snapshot is written), lets running calls finish until
+  // `deadline` from now and cancels the rest, waits for the gRPC server and
+  // joins the build and encoder threads. A build already running is not
+  // interrupted: shutdown waits for it. Idempotent.
   void Shutdown(absl::Duration deadline);
 
   SessionRegistry& registry() { return registry_; }
@@ -63,7 +81,9 @@ class Server {
   const ServerOptions options_;
   SessionRegistry registry_;
   WorkQueue builds_;
+  WorkQueue encoders_;
   SessionsService service_;
+  int recovered_ = 0;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
   std::string address_;

@@ -21,7 +21,8 @@ Session SolidSession::ToProto() const {
   s.set_token(token_);
   s.set_scene_name(scene_name_);
   SetTimestamp(created_, s.mutable_created());
-  *s.mutable_stats() = solid_.stats;
+  *s.mutable_stats() = stats_;
+  s.set_time_step(loop_->time_step());
   return s;
 }
 

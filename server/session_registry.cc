@@ -5,6 +5,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
+#include "server/journal.h"
+#include "server/log.h"
+#include "server/persistence.h"
 
 namespace dynsolid::server {
 
@@ -45,10 +48,86 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
     id = random_.Next(kSessionIdBits);
   } while (sessions_.contains(id));
   std::string token = random_.Next(kTokenBits);
-  auto session = std::make_shared<const SolidSession>(id, std::move(token), scene->scene.name(),
-                                                      absl::Now(), *std::move(solid));
+  const absl::Time created = absl::Now();
+  std::string dir;
+  if (!options_.data_dir.empty()) {
+    dir = SessionDir(options_.data_dir, id);
+    persist::Manifest m;
+    m.set_format(1);
+    m.set_id(id);
+    m.set_token(token);
+    *m.mutable_scene() = scene->scene;
+    m.set_base_dir(scene->base_dir);
+    m.set_levels(scene->levels.value_or(-1));
+    m.set_origin(scene->origin);
+    m.set_created_unix_micros(absl::ToUnixMicros(created));
+    m.set_start_paused(request.start_paused());
+    if (absl::Status s = CreateSessionDir(dir, m); !s.ok()) return s;
+  }
+  CoreOptions core_options = options_.loop.core;
+  core_options.can_save = !dir.empty();
+  auto core = std::make_unique<SimCore>(solid->solid, core_options, request.start_paused());
+  absl::Status error;
+  std::shared_ptr<const SolidSession> session =
+      OpenLocked(id, std::move(token), scene->scene.name(), created, *std::move(solid),
+                 std::move(core), Recovered{}, dir, &error);
+  if (session == nullptr) {
+    if (!dir.empty()) (void)RemoveDirTree(dir);
+    return error;
+  }
+  return session;
+}
+
+std::shared_ptr<const SolidSession> SessionRegistry::OpenLocked(
+    std::string id, std::string token, std::string scene_name, absl::Time created,
+    BuiltSolid built, std::unique_ptr<SimCore> core, Recovered recovered, std::string dir,
+    absl::Status* error) {
+  absl::StatusOr<std::unique_ptr<SessionLoop>> loop =
+      SessionLoop::Start(id, std::move(core), options_.loop, dir, recovered);
+  if (!loop.ok()) {
+    *error = loop.status();
+    return nullptr;
+  }
+  auto session = std::make_shared<const SolidSession>(
+      id, std::move(token), std::move(scene_name), created, std::move(built.stats),
+      std::move(built.discretization), *std::move(loop), std::move(dir));
   sessions_.emplace(std::move(id), Entry{next_serial_++, session});
   return session;
+}
+
+int SessionRegistry::RecoverAll() {
+  if (options_.data_dir.empty()) return 0;
+  int opened = 0;
+  for (const std::string& dir : ListSessionDirs(options_.data_dir)) {
+    CoreOptions core_options = options_.loop.core;
+    core_options.can_save = true;
+    absl::StatusOr<RecoveredSession> r = RecoverSession(dir, options_.build, core_options);
+    if (!r.ok()) {
+      SessionLog().error("cannot recover the session in {}: {}", dir, r.status().ToString());
+      continue;
+    }
+    const persist::Manifest& m = r->manifest;
+    absl::MutexLock lock(&mu_);
+    if (sessions_.contains(m.id())) {
+      ServerLog().error("{}: a session {} is already open", dir, m.id());
+      continue;
+    }
+    absl::Status error;
+    std::shared_ptr<const SolidSession> s =
+        OpenLocked(m.id(), m.token(), m.scene().name(), absl::FromUnixMicros(m.created_unix_micros()),
+                   std::move(r->built), std::move(r->core), r->recovered, dir, &error);
+    if (s == nullptr) {
+      ServerLog().error("cannot reopen the session in {}: {}", dir, error.ToString());
+      continue;
+    }
+    SessionLog().info("session {} recovered: {}", m.id(), r->summary);
+    ++opened;
+  }
+  return opened;
+}
+
+void SessionRegistry::StopAll(const absl::Status& status) {
+  for (const auto& session : List()) session->loop().Stop(status);
 }
 
 absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Find(
@@ -76,12 +155,20 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Get(
 }
 
 absl::Status SessionRegistry::Close(absl::string_view id, absl::string_view token) {
-  std::shared_ptr<const SolidSession> closed;  // freed after the lock is released
-  absl::MutexLock lock(&mu_);
-  absl::StatusOr<std::shared_ptr<const SolidSession>> found = Find(id, token);
-  if (!found.ok()) return found.status();
-  closed = *std::move(found);
-  sessions_.erase(closed->id());
+  std::shared_ptr<const SolidSession> closed;  // stopped and freed after the lock is released
+  {
+    absl::MutexLock lock(&mu_);
+    absl::StatusOr<std::shared_ptr<const SolidSession>> found = Find(id, token);
+    if (!found.ok()) return found.status();
+    closed = *std::move(found);
+    sessions_.erase(closed->id());
+  }
+  closed->loop().Stop(absl::UnavailableError(absl::StrCat("session ", closed->id(), " was closed")));
+  if (!closed->dir().empty()) {
+    if (absl::Status s = RemoveDirTree(closed->dir()); !s.ok()) {
+      ServerLog().warn("session {}: {}", closed->id(), s.ToString());
+    }
+  }
   return absl::OkStatus();
 }
 

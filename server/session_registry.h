@@ -21,6 +21,8 @@
 #include "absl/synchronization/mutex.h"
 #include "dynsolid/service.pb.h"
 #include "server/session.h"
+#include "server/session_loop.h"
+#include "server/sim_core.h"
 #include "server/solid_builder.h"
 #include "server/tokens.h"
 
@@ -30,6 +32,11 @@ struct RegistryOptions {
   // Open sessions plus creations in progress, at most.
   int max_sessions = 16;
   BuildLimits build;
+  // How sessions run (watch rates, limits, answer caches, snapshots).
+  LoopOptions loop;
+  // With a data directory, every session persists under
+  // data_dir/sessions/ID (persistence.h); empty: nothing is written.
+  std::string data_dir;
 };
 
 class SessionRegistry {
@@ -61,6 +68,15 @@ class SessionRegistry {
   // Every open session, oldest first.
   std::vector<std::shared_ptr<const SolidSession>> List() const;
 
+  // Restores every session found under options.data_dir (persistence.h),
+  // in directory order. A session that cannot be recovered is logged and
+  // left on disk untouched; the others open. Returns how many opened.
+  int RecoverAll();
+
+  // Stops every session's loop with `status` (server shutdown): streams
+  // finish, journals are flushed, a last snapshot is written.
+  void StopAll(const absl::Status& status);
+
   int size() const;
 
   // From now on Create fails with Unavailable (server shutdown). Sessions
@@ -76,6 +92,14 @@ class SessionRegistry {
     uint64_t serial;  // creation order
     std::shared_ptr<const SolidSession> session;
   };
+
+  // Opens a built solid as session `id` (lock held).
+  std::shared_ptr<const SolidSession> OpenLocked(std::string id, std::string token,
+                                                 std::string scene_name, absl::Time created,
+                                                 BuiltSolid built, std::unique_ptr<SimCore> core,
+                                                 Recovered recovered, std::string dir,
+                                                 absl::Status* error)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const RegistryOptions options_;
   mutable absl::Mutex mu_;

@@ -68,4 +68,44 @@ grpc::ServerUnaryReactor* SessionsService::CloseSession(grpc::CallbackServerCont
   return reactor;
 }
 
+grpc::ServerWriteReactor<Frame>* SessionsService::Watch(grpc::CallbackServerContext* context,
+                                                        const WatchRequest* request) {
+  return StartWatch(context, request, registry_, encoders_, stream_options_);
+}
+
+grpc::ServerBidiReactor<CommandRequest, CommandReply>* SessionsService::Commands(
+    grpc::CallbackServerContext* context) {
+  return StartCommands(context, registry_);
+}
+
+grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext* context,
+                                                    const SessionRef* request,
+                                                    SessionStats* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+      registry_.Get(request->id(), request->token());
+  if (session.ok()) *response = (*session)->loop().Stats();
+  reactor->Finish(ToGrpcStatus(session.status()));
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::Inspect(grpc::CallbackServerContext* context,
+                                                   const InspectRequest* request,
+                                                   InspectReply* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+      registry_.Get(request->session().id(), request->session().token());
+  if (!session.ok()) {
+    reactor->Finish(ToGrpcStatus(session.status()));
+    return reactor;
+  }
+  // Answered by the simulation thread at a step boundary; response and
+  // reactor stay valid until Finish.
+  (*session)->loop().Inspect(*request, [reactor, response](absl::StatusOr<InspectReply> r) {
+    if (r.ok()) *response = *std::move(r);
+    reactor->Finish(ToGrpcStatus(r.status()));
+  });
+  return reactor;
+}
+
 }  // namespace dynsolid::server

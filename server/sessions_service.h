@@ -2,13 +2,15 @@
 // callback API. Reactors never block on a build: CreateSession hands the
 // build to a WorkQueue and Finishes from there; the other calls only look
 // up the registry (a short lock) and Finish at once. Every reactor calls
-// Finish exactly once, also when the server shuts down.
+// Finish exactly once, also when the server shuts down. The streaming calls
+// live in streams.h.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
 
 #include "dynsolid/service.grpc.pb.h"
 #include "server/session_registry.h"
+#include "server/streams.h"
 #include "server/work_queue.h"
 
 namespace dynsolid::server {
@@ -16,8 +18,10 @@ namespace dynsolid::server {
 class SessionsService final : public Sessions::CallbackService {
  public:
   // `registry` and `builds` outlive the service and the gRPC server.
-  SessionsService(SessionRegistry& registry, WorkQueue& builds)
-      : registry_(registry), builds_(builds) {}
+  SessionsService(SessionRegistry& registry, WorkQueue& builds, WorkQueue& encoders,
+                  StreamOptions stream_options)
+      : registry_(registry), builds_(builds), encoders_(encoders),
+        stream_options_(stream_options) {}
   SessionsService(const SessionsService&) = delete;
   SessionsService& operator=(const SessionsService&) = delete;
 
@@ -32,10 +36,20 @@ class SessionsService final : public Sessions::CallbackService {
   grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context,
                                          const SessionRef* request,
                                          google::protobuf::Empty* response) override;
+  grpc::ServerWriteReactor<Frame>* Watch(grpc::CallbackServerContext* context,
+                                         const WatchRequest* request) override;
+  grpc::ServerBidiReactor<CommandRequest, CommandReply>* Commands(
+      grpc::CallbackServerContext* context) override;
+  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,
+                                     const SessionRef* request, SessionStats* response) override;
+  grpc::ServerUnaryReactor* Inspect(grpc::CallbackServerContext* context,
+                                    const InspectRequest* request, InspectReply* response) override;
 
  private:
   SessionRegistry& registry_;
   WorkQueue& builds_;
+  WorkQueue& encoders_;
+  const StreamOptions stream_options_;
 };
 
 }  // namespace dynsolid::server

@@ -153,11 +153,18 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
   absl::StatusOr<scene::Discretization> d =
       scene::Discretize(request.scene, *control, request.levels);
   if (!d.ok()) return WithOrigin(d.status(), request.origin);
+  SolidStats stats = ComputeStats(*d, 0);
+  absl::StatusOr<std::unique_ptr<solid::Solid>> solid =
+      solid::Solid::Create(request.scene, *std::move(d));
+  if (!solid.ok()) return WithOrigin(solid.status(), request.origin);
   const double ms = std::chrono::duration<double, std::milli>(
                         std::chrono::steady_clock::now() - start).count();
+  stats.set_build_milliseconds(ms);
   BuiltSolid out;
-  out.stats = ComputeStats(*d, ms);
-  out.discretization = std::make_shared<const scene::Discretization>(*std::move(d));
+  out.stats = std::move(stats);
+  out.solid = std::shared_ptr<solid::Solid>(*std::move(solid));
+  out.discretization =
+      std::shared_ptr<const scene::Discretization>(out.solid, &out.solid->discretization());
   return out;
 }
 

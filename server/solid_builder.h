@@ -13,6 +13,7 @@
 #include "dynsolid/service.pb.h"
 #include "solver/mesh/cell_complex.h"
 #include "solver/scene/build.h"
+#include "solver/solid/solid.h"
 
 namespace dynsolid::server {
 
@@ -42,13 +43,17 @@ struct BuildLimits {
   int64_t max_cells = 1'000'000;
 };
 
-// A built solid: shared read-only by the session and, later, the sim loop.
+// A built solid: its dynamics (solid::Solid, for the session's simulation
+// thread only) and, sharing its lifetime, its read-only discretization.
 struct BuiltSolid {
+  std::shared_ptr<solid::Solid> solid;
+  // Aliases solid->discretization().
   std::shared_ptr<const scene::Discretization> discretization;
   SolidStats stats;
 };
 
-// Loads the control mesh, checks the size limit and discretizes. Errors:
+// Loads the control mesh, checks the size limit, discretizes and builds the
+// solid's dynamics (solid::Solid::Create). Errors:
 // the solver's (InvalidArgument naming the field or mesh item, prefixed
 // with request.origin), ResourceExhausted when the solid would exceed
 // limits.max_cells. Can take seconds for large solids: call it off the

@@ -1,0 +1,604 @@
+#include "server/session_loop.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
+#include "dynsolid/journal.pb.h"
+#include "server/log.h"
+
+namespace dynsolid::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr size_t kStepWindow = 1000;
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  // Nearest rank: the smallest value with at least q of the values <= it.
+  std::sort(v.begin(), v.end());
+  size_t k = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
+  if (k > 0) --k;
+  return v[std::min(k, v.size() - 1)];
+}
+
+void PushWindow(std::deque<double>& d, double v) {
+  d.push_back(v);
+  if (d.size() > kStepWindow) d.pop_front();
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<SessionLoop>> SessionLoop::Start(std::string session_id,
+                                                                std::unique_ptr<SimCore> core,
+                                                                LoopOptions options,
+                                                                std::string dir,
+                                                                Recovered recovered) {
+  std::unique_ptr<SessionLoop> loop(new SessionLoop(std::move(session_id), std::move(core),
+                                                    std::move(options), std::move(dir),
+                                                    recovered));
+  if (!loop->dir_.empty()) {
+    absl::StatusOr<std::unique_ptr<JournalWriter>> journal =
+        JournalWriter::Open(absl::StrCat(loop->dir_, "/journal"), recovered.journal_end);
+    if (!journal.ok()) return journal.status();
+    loop->journal_ = *std::move(journal);
+    loop->persist_thread_ = std::thread([l = loop.get()] { l->Persist(); });
+  }
+  loop->sim_thread_ = std::thread([l = loop.get()] { l->Run(); });
+  return loop;
+}
+
+SessionLoop::SessionLoop(std::string session_id, std::unique_ptr<SimCore> core,
+                         LoopOptions options, std::string dir, Recovered recovered)
+    : id_(std::move(session_id)),
+      options_(std::move(options)),
+      dir_(std::move(dir)),
+      time_step_(core->solid().time_step()),
+      core_(std::move(core)) {
+  journal_submitted_ = recovered.journal_end;
+  last_snapshot_step_ = recovered.last_snapshot_step;
+  absl::MutexLock lock(&stats_mu_);
+  counters_.journal_records = recovered.journal_records;
+  counters_.journal_bytes = static_cast<int64_t>(recovered.journal_end);
+  counters_.last_snapshot_step = std::max<int64_t>(0, recovered.last_snapshot_step);
+  counters_.step = core_->steps();
+  counters_.time = core_->solid().time();
+  counters_.paused = core_->paused();
+  counters_.steps_remaining = core_->steps_remaining();
+  counters_.applied = core_->commands_applied();
+  counters_.rejected = core_->commands_rejected();
+  counters_.fields_version = core_->fields_version();
+  counters_.last_error = core_->last_error();
+}
+
+SessionLoop::~SessionLoop() { Stop(absl::UnavailableError("the session is closed")); }
+
+void SessionLoop::Stop(const absl::Status& status) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (stop_) {
+      mu_.Await(absl::Condition(&stopped_));
+      return;
+    }
+    stop_ = true;
+    stop_status_ = status;
+    wake_.SignalAll();
+  }
+  if (sim_thread_.joinable()) sim_thread_.join();
+  if (persist_thread_.joinable()) {
+    {
+      absl::MutexLock lock(&persist_mu_);
+      persist_stop_ = true;
+    }
+    persist_thread_.join();
+  }
+  journal_.reset();
+  std::vector<std::shared_ptr<WatchSink>> watchers;
+  std::vector<std::shared_ptr<ReplySink>> streams;
+  std::deque<PendingCommand> unanswered;
+  {
+    absl::MutexLock lock(&mu_);
+    for (auto& [ptr, entry] : watchers_) watchers.push_back(entry.sink);
+    for (auto& [ptr, sink] : command_streams_) streams.push_back(sink);
+    unanswered.swap(commands_);
+  }
+  for (auto& w : watchers) w->Stop(status);
+  for (auto& s : streams) s->Stop(status);
+  for (PendingCommand& c : unanswered) c.sink->Stop(status);
+  absl::MutexLock lock(&mu_);
+  stopped_ = true;
+}
+
+bool SessionLoop::AllowCommand(const std::string& client_id) {
+  const Clock::time_point now = Clock::now();
+  const double rate = options_.commands_per_second;
+  absl::MutexLock lock(&mu_);
+  auto [it, inserted] = buckets_.try_emplace(client_id);
+  Bucket& b = it->second;
+  if (inserted) {
+    b.tokens = rate;
+  } else {
+    const double dt = std::chrono::duration<double>(now - b.last).count();
+    b.tokens = std::min(rate, b.tokens + dt * rate);
+  }
+  b.last = now;
+  if (b.tokens < 1.0) return false;
+  b.tokens -= 1.0;
+  return true;
+}
+
+void SessionLoop::Submit(const CommandRequest& request, std::shared_ptr<ReplySink> sink) {
+  absl::Status stopped;
+  {
+    absl::MutexLock lock(&mu_);
+    if (!stop_) {
+      commands_.push_back(PendingCommand{request, std::move(sink)});
+      wake_.Signal();
+      return;
+    }
+    stopped = stop_status_;
+  }
+  sink->Stop(stopped);  // no lock held: a reactor may finish inline
+}
+
+absl::Status SessionLoop::RegisterCommandStream(std::shared_ptr<ReplySink> sink) {
+  absl::MutexLock lock(&mu_);
+  if (stop_) return stop_status_;
+  ReplySink* key = sink.get();
+  command_streams_.emplace(key, std::move(sink));
+  return absl::OkStatus();
+}
+
+void SessionLoop::UnregisterCommandStream(ReplySink* sink) {
+  std::shared_ptr<ReplySink> gone;  // released after the lock
+  absl::MutexLock lock(&mu_);
+  auto it = command_streams_.find(sink);
+  if (it == command_streams_.end()) return;
+  gone = std::move(it->second);
+  command_streams_.erase(it);
+}
+
+absl::StatusOr<int64_t> SessionLoop::AddWatcher(std::shared_ptr<WatchSink> sink) {
+  absl::MutexLock lock(&mu_);
+  if (stop_) return stop_status_;
+  if (static_cast<int>(watchers_.size()) >= options_.max_watchers) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "session ", id_, " already has its maximum of ", options_.max_watchers,
+        " watchers (--max_watchers_per_session)"));
+  }
+  const int64_t id = next_watcher_id_++;
+  sink->set_watcher_id(id);
+  WatchSink* key = sink.get();
+  watchers_.emplace(key, WatcherEntry{std::move(sink), id});
+  publish_requested_ = true;  // its first frame now, not at the next tick
+  wake_.Signal();
+  return id;
+}
+
+void SessionLoop::RemoveWatcher(WatchSink* sink) {
+  std::shared_ptr<WatchSink> gone;
+  {
+    absl::MutexLock lock(&mu_);
+    auto it = watchers_.find(sink);
+    if (it == watchers_.end()) return;
+    gone = std::move(it->second.sink);
+    watchers_.erase(it);
+  }
+  const WatcherStats w = gone->Stats();
+  absl::MutexLock lock(&stats_mu_);
+  counters_.gone_sent += w.frames_sent();
+  counters_.gone_skipped += w.frames_skipped();
+  counters_.gone_keyframes += w.keyframes_sent();
+  counters_.gone_bytes += w.bytes_sent();
+}
+
+void SessionLoop::Inspect(const InspectRequest& request,
+                          std::function<void(absl::StatusOr<InspectReply>)> done) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (!stop_) {
+      inspects_.push_back(PendingInspect{request, std::move(done)});
+      wake_.Signal();
+      return;
+    }
+  }
+  done(absl::UnavailableError("the session is closed"));
+}
+
+// ---- Simulation thread ----
+
+void SessionLoop::Run() {
+  using std::chrono::duration;
+  const auto h = std::chrono::duration_cast<Clock::duration>(duration<double>(time_step_));
+  Clock::time_point next_step{};
+  bool anchored = false;
+  Clock::time_point rate_start = Clock::now();
+  int64_t rate_steps = 0;
+  next_publish_ = Clock::now();
+  for (;;) {
+    std::deque<PendingCommand> commands;
+    bool stop = false;
+    bool publish_requested = false;
+    bool has_watchers = false;
+    {
+      absl::MutexLock lock(&mu_);
+      for (;;) {
+        if (stop_ || !commands_.empty() || !inspects_.empty()) break;
+        const Clock::time_point now = Clock::now();
+        Clock::time_point deadline = Clock::time_point::max();
+        if (core_->WantsStep()) deadline = anchored ? next_step : now;
+        const bool dirty = publish_requested_ || core_->steps() != last_published_step_ ||
+                           core_->fields_version() != last_published_fields_;
+        if (!watchers_.empty() && dirty) deadline = std::min(deadline, next_publish_);
+        if (deadline <= now) break;
+        const absl::Duration wait = deadline == Clock::time_point::max()
+                                        ? absl::Seconds(1)
+                                        : absl::FromChrono(deadline - now);
+        wake_.WaitWithTimeout(&mu_, wait);
+      }
+      stop = stop_;
+      commands.swap(commands_);
+      for (PendingInspect& i : inspects_) waiting_inspects_.push_back(std::move(i));
+      inspects_.clear();
+      publish_requested = publish_requested_;
+      has_watchers = !watchers_.empty();
+    }
+    if (stop) {
+      // Commands not yet applied are not answered (the client resends).
+      for (PendingCommand& c : commands) {
+        absl::MutexLock lock(&mu_);
+        commands_.push_back(std::move(c));
+      }
+      break;
+    }
+    ApplyCommands(commands);
+    AnswerInspects(false);
+
+    Clock::time_point now = Clock::now();
+    if (core_->WantsStep()) {
+      if (!anchored) {
+        next_step = now;  // resuming: no debt from the paused time
+        anchored = true;
+      }
+      if (now >= next_step) {
+        const Clock::time_point t0 = Clock::now();
+        if (absl::Status s = core_->StepOnce(); !s.ok()) {
+          SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
+        }
+        const Clock::time_point t1 = Clock::now();
+        RecordStep(duration<double, std::milli>(t1 - t0).count());
+        UpdateCounters();
+        ++rate_steps;
+        next_step += h;
+        const Clock::duration lag = t1 - next_step;
+        int64_t behind = 0;
+        int64_t dropped = 0;
+        bool overrun = false;
+        if (lag > Clock::duration::zero()) behind = lag / h;
+        if (lag > h) {
+          // More than a whole step behind: give the debt up and re-anchor.
+          overrun = true;
+          dropped = behind;
+          next_step = t1;
+        }
+        {
+          absl::MutexLock lock(&stats_mu_);
+          counters_.steps_behind = behind;
+          counters_.steps_dropped += dropped;
+          if (overrun) ++counters_.overruns;
+        }
+        AnswerInspects(false);
+        if (!dir_.empty() && options_.snapshot_every_steps > 0 &&
+            core_->steps() - std::max<int64_t>(last_snapshot_step_, 0) >=
+                options_.snapshot_every_steps) {
+          PersistBatch batch;
+          batch.snapshot = MakeSnapshotBytes();
+          batch.snapshot_step = core_->steps();
+          Deliver(std::move(batch));
+        }
+        now = Clock::now();
+      }
+    } else {
+      anchored = false;
+    }
+    if (now - rate_start >= std::chrono::seconds(1)) {
+      absl::MutexLock lock(&stats_mu_);
+      counters_.steps_per_second =
+          rate_steps / duration<double>(now - rate_start).count();
+      rate_start = now;
+      rate_steps = 0;
+    }
+    if (has_watchers) {
+      const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
+                         core_->fields_version() != last_published_fields_;
+      if (dirty && (publish_requested || now >= next_publish_)) Publish(now);
+    }
+  }
+  // Shutdown: a last snapshot makes the next start quick.
+  if (!dir_.empty() && core_->steps() != last_snapshot_step_) {
+    PersistBatch batch;
+    batch.snapshot = MakeSnapshotBytes();
+    batch.snapshot_step = core_->steps();
+    Deliver(std::move(batch));
+  }
+  AnswerInspects(true);
+}
+
+void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands) {
+  if (commands.empty()) return;
+  PersistBatch batch;
+  int64_t duplicates = 0;
+  for (PendingCommand& c : commands) {
+    CommandReply reply;
+    const SimCore::Outcome outcome = core_->Process(c.request, &reply);
+    if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
+      if (!dir_.empty()) {
+        persist::JournalRecord record;
+        record.set_step(reply.applied_step());
+        record.set_client_id(c.request.client_id());
+        record.set_seq(c.request.seq());
+        *record.mutable_command() = c.request.command();
+        *record.mutable_reply() = reply;
+        std::string framed = FrameRecord(record.SerializeAsString());
+        journal_submitted_ += framed.size();
+        batch.framed += framed;
+        ++batch.records;
+      }
+    }
+    if (outcome == SimCore::Outcome::kDuplicate) ++duplicates;
+    if (core_->TakeSaveRequest()) {
+      // The Save's own record goes first; the snapshot covers it.
+      batch.snapshot = MakeSnapshotBytes();
+      batch.snapshot_step = core_->steps();
+      reply.mutable_saved()->set_bytes(static_cast<int64_t>(batch.snapshot.size()));
+    }
+    if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
+      SessionLog().debug("session {}: client {} seq {} at step {}: code {} {}", id_,
+                        reply.client_id(), reply.seq(), reply.applied_step(), reply.code(),
+                        reply.message());
+    }
+    batch.replies.emplace_back(std::move(c.sink), std::move(reply));
+  }
+  UpdateCounters();
+  if (duplicates > 0) {
+    absl::MutexLock lock(&stats_mu_);
+    counters_.duplicates += duplicates;
+  }
+  Deliver(std::move(batch));
+}
+
+std::string SessionLoop::MakeSnapshotBytes() {
+  persist::Snapshot snapshot;
+  core_->SaveTo(&snapshot);
+  snapshot.set_journal_offset(journal_submitted_);
+  snapshot.set_solid_state(core_->solid().SaveState());
+  last_snapshot_step_ = core_->steps();
+  return FrameRecord(snapshot.SerializeAsString());
+}
+
+void SessionLoop::Deliver(PersistBatch batch) {
+  if (dir_.empty()) {
+    for (auto& [sink, reply] : batch.replies) sink->Reply(reply);
+    return;
+  }
+  absl::MutexLock lock(&persist_mu_);
+  persist_queue_.push_back(std::move(batch));
+}
+
+void SessionLoop::Publish(Clock::time_point now) {
+  std::vector<std::shared_ptr<WatchSink>> sinks;
+  bool fields = false;
+  double rate = 0;
+  {
+    absl::MutexLock lock(&mu_);
+    for (auto& [ptr, entry] : watchers_) {
+      sinks.push_back(entry.sink);
+      fields = fields || entry.sink->fields().any();
+      rate = std::max(rate, entry.sink->rate_hz());
+    }
+    publish_requested_ = false;
+  }
+  if (sinks.empty()) return;
+  std::shared_ptr<const SurfaceSnapshot> snap = core_->MakeSnapshot(fields);
+  for (auto& s : sinks) s->Offer(snap);
+  last_published_step_ = snap->step;
+  last_published_fields_ = snap->fields_version;
+  rate = std::clamp(rate > 0 ? rate : options_.watch_hz, 0.1, options_.max_watch_hz);
+  next_publish_ = now + std::chrono::duration_cast<Clock::duration>(
+                            std::chrono::duration<double>(1.0 / rate));
+  absl::MutexLock lock(&stats_mu_);
+  ++counters_.frames_published;
+}
+
+void SessionLoop::AnswerInspects(bool all_unavailable) {
+  if (waiting_inspects_.empty()) return;
+  std::vector<PendingInspect> keep;
+  for (PendingInspect& i : waiting_inspects_) {
+    if (all_unavailable) {
+      i.done(absl::UnavailableError("the session is closed"));
+      continue;
+    }
+    if (i.request.wait_for_step() > core_->steps()) {
+      keep.push_back(std::move(i));
+      continue;
+    }
+    InspectReply r;
+    const solid::Solid& s = core_->solid();
+    r.set_step(s.steps());
+    r.set_time(s.time());
+    r.set_paused(core_->paused());
+    r.set_steps_remaining(core_->steps_remaining());
+    r.set_topology_version(s.topology_version());
+    r.set_surface_vertices(static_cast<int32_t>(s.BoundarySurface().nodes.size()));
+    if (i.request.surface_positions()) {
+      const Points p = s.SurfacePositions();
+      r.mutable_surface_positions()->Assign(p.data(), p.data() + p.size());
+    }
+    if (i.request.control_positions()) {
+      const Points& p = s.control_positions();
+      r.mutable_control_positions()->Assign(p.data(), p.data() + p.size());
+    }
+    i.done(std::move(r));
+  }
+  waiting_inspects_ = std::move(keep);
+}
+
+void SessionLoop::UpdateCounters() {
+  absl::MutexLock lock(&stats_mu_);
+  counters_.step = core_->steps();
+  counters_.time = core_->solid().time();
+  counters_.paused = core_->paused();
+  counters_.steps_remaining = core_->steps_remaining();
+  counters_.last_error = core_->last_error();
+  counters_.rollbacks = core_->solid().rollbacks();
+  counters_.fields_version = core_->fields_version();
+  counters_.applied = core_->commands_applied();
+  counters_.rejected = core_->commands_rejected();
+}
+
+void SessionLoop::RecordStep(double ms) {
+  const solid::PhaseTimes& p = core_->solid().last_phases();
+  const std::pair<const char*, double> phases[] = {
+      {"nodes", p.nodes},         {"measure", p.measure}, {"stiffness", p.stiffness},
+      {"project", p.project},     {"loads", p.loads},     {"damping", p.damping},
+      {"solve", p.solve}};
+  absl::MutexLock lock(&stats_mu_);
+  PushWindow(counters_.step_ms, ms);
+  for (const auto& [name, value] : phases) {
+    if (value < 0) continue;  // absent in this scene
+    auto it = std::find_if(counters_.phases.begin(), counters_.phases.end(),
+                           [n = name](const auto& e) { return e.first == n; });
+    if (it == counters_.phases.end()) {
+      counters_.phases.emplace_back(name, std::deque<double>());
+      it = counters_.phases.end() - 1;
+    }
+    PushWindow(it->second, value);
+  }
+}
+
+// ---- Persistence thread ----
+
+void SessionLoop::Persist() {
+  for (;;) {
+    PersistBatch batch;
+    {
+      absl::MutexLock lock(&persist_mu_);
+      persist_mu_.Await(absl::Condition(
+          +[](SessionLoop* l) ABSL_EXCLUSIVE_LOCKS_REQUIRED(l->persist_mu_) {
+            return l->persist_stop_ || !l->persist_queue_.empty();
+          },
+          this));
+      if (persist_queue_.empty()) return;  // stopped and drained
+      batch = std::move(persist_queue_.front());
+      persist_queue_.pop_front();
+    }
+    // After a failed write nothing more is written (a record after a torn
+    // one would be unreachable on recovery) and nothing more is
+    // acknowledged: the session's commands fail until it is recovered.
+    absl::Status s = persist_error_;
+    if (s.ok() && !batch.framed.empty()) {
+      s = journal_->Append(batch.framed);
+      if (s.ok()) s = journal_->Sync();
+    }
+    if (s.ok() && !batch.snapshot.empty()) {
+      s = WriteFileAtomically(dir_, "snapshot.binpb", batch.snapshot);
+    }
+    if (!s.ok()) {
+      // Nothing is acknowledged that is not durable.
+      if (persist_error_.ok()) {
+        JournalLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      }
+      persist_error_ = s;
+      for (auto& [sink, reply] : batch.replies) {
+        sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
+                                                    s.message())));
+      }
+      continue;
+    }
+    if (!batch.snapshot.empty()) {
+      JournalLog().debug("session {}: snapshot at step {} ({} bytes)", id_, batch.snapshot_step,
+                         batch.snapshot.size());
+    }
+    {
+      absl::MutexLock lock(&stats_mu_);
+      counters_.journal_records += batch.records;
+      counters_.journal_bytes = static_cast<int64_t>(journal_->size());
+      if (!batch.snapshot.empty()) {
+        ++counters_.snapshots;
+        counters_.last_snapshot_step = batch.snapshot_step;
+      }
+    }
+    for (auto& [sink, reply] : batch.replies) sink->Reply(reply);
+  }
+}
+
+// ---- Stats ----
+
+SessionStats SessionLoop::Stats() const {
+  SessionStats s;
+  std::vector<WatcherStats> watchers;
+  {
+    absl::MutexLock lock(&mu_);
+    for (const auto& [ptr, entry] : watchers_) {
+      WatcherStats w = entry.sink->Stats();
+      w.set_watcher_id(entry.id);
+      watchers.push_back(std::move(w));
+    }
+  }
+  std::sort(watchers.begin(), watchers.end(),
+            [](const WatcherStats& a, const WatcherStats& b) {
+              return a.watcher_id() < b.watcher_id();
+            });
+  absl::MutexLock lock(&stats_mu_);
+  const Counters& c = counters_;
+  s.set_step(c.step);
+  s.set_time(c.time);
+  s.set_paused(c.paused);
+  s.set_steps_remaining(c.steps_remaining);
+  s.set_time_step(time_step_);
+  std::vector<double> ms(c.step_ms.begin(), c.step_ms.end());
+  s.set_step_ms_median(Percentile(ms, 0.5));
+  s.set_step_ms_p99(Percentile(ms, 0.99));
+  s.set_steps_measured(static_cast<int64_t>(ms.size()));
+  for (const auto& [name, values] : c.phases) {
+    PhaseTime* p = s.add_phases();
+    p->set_name(name);
+    p->set_median_ms(Percentile(std::vector<double>(values.begin(), values.end()), 0.5));
+  }
+  s.set_steps_behind(c.steps_behind);
+  s.set_overruns(c.overruns);
+  s.set_steps_dropped(c.steps_dropped);
+  s.set_steps_per_second(c.steps_per_second);
+  s.set_watchers(static_cast<int32_t>(watchers.size()));
+  int64_t sent = c.gone_sent, skipped = c.gone_skipped, keys = c.gone_keyframes,
+          bytes = c.gone_bytes;
+  for (WatcherStats& w : watchers) {
+    sent += w.frames_sent();
+    skipped += w.frames_skipped();
+    keys += w.keyframes_sent();
+    bytes += w.bytes_sent();
+    *s.add_watcher_details() = std::move(w);
+  }
+  s.set_frames_published(c.frames_published);
+  s.set_frames_sent(sent);
+  s.set_frames_skipped(skipped);
+  s.set_keyframes_sent(keys);
+  s.set_bytes_sent(bytes);
+  s.set_commands_applied(c.applied);
+  s.set_commands_rejected(c.rejected);
+  s.set_commands_duplicate(c.duplicates);
+  s.set_commands_rate_limited(rate_limited_.load());
+  s.set_journal_records(c.journal_records);
+  s.set_journal_bytes(c.journal_bytes);
+  s.set_snapshots(c.snapshots);
+  s.set_last_snapshot_step(c.last_snapshot_step);
+  s.set_rollbacks(c.rollbacks);
+  s.set_last_error(c.last_error);
+  s.set_fields_version(c.fields_version);
+  return s;
+}
+
+}  // namespace dynsolid::server

@@ -1,0 +1,233 @@
+// A session's simulation thread and everything around it: the command
+// queue (applied at step boundaries in arrival order), the fixed-step
+// real-time clock with overrun accounting, frame publication to watchers,
+// inspections, stats, and (with a data directory) the journal and
+// snapshots written by a persistence thread.
+//
+// Threads:
+//  - the simulation thread owns the SimCore (the solid): it alone steps,
+//    applies commands, builds SurfaceSnapshots and snapshot bytes;
+//  - the persistence thread appends journal records, fdatasyncs, writes
+//    snapshots, and only then releases the replies that depend on them;
+//  - gRPC threads call the public methods, which only enqueue or copy
+//    stats under short locks; nothing here blocks on a client.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/container/flat_hash_map.h"
+#include "absl/container/flat_hash_set.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "dynsolid/service.pb.h"
+#include "server/journal.h"
+#include "server/sim_core.h"
+#include "server/surface_codec.h"
+
+namespace dynsolid::server {
+
+// Receives the replies of one Commands stream. Implemented by the reactor.
+class ReplySink {
+ public:
+  virtual ~ReplySink() = default;
+  // One reply; never blocks (the reactor queues it).
+  virtual void Reply(const CommandReply& reply) = 0;
+  // The session is going away: finish the stream with `status`.
+  virtual void Stop(const absl::Status& status) = 0;
+};
+
+// One watcher of the session's surface. Implemented by the Watch reactor.
+class WatchSink {
+ public:
+  virtual ~WatchSink() = default;
+  // A new snapshot: the watcher keeps only the latest (replacing one it has
+  // not started sending counts as skipped). Never blocks.
+  virtual void Offer(std::shared_ptr<const SurfaceSnapshot> snapshot) = 0;
+  virtual void Stop(const absl::Status& status) = 0;
+  virtual WatcherStats Stats() const = 0;
+  // Its id, set by AddWatcher before the first Offer.
+  virtual void set_watcher_id(int64_t id) = 0;
+  virtual const FieldChoice& fields() const = 0;
+  virtual double rate_hz() const = 0;
+};
+
+struct LoopOptions {
+  // Default and largest watch rate, frames per second.
+  double watch_hz = 60;
+  double max_watch_hz = 240;
+  int max_watchers = 64;
+  // Per client_id: commands per second (token bucket, burst of one second).
+  double commands_per_second = 1000;
+  // Write a snapshot every this many steps (with a data directory).
+  int64_t snapshot_every_steps = 20000;
+  CoreOptions core;
+};
+
+// State recovered from a session directory (see persistence.h).
+struct Recovered {
+  uint64_t journal_end = 0;  // where appending resumes
+  int64_t journal_records = 0;
+  int64_t last_snapshot_step = -1;
+};
+
+class SessionLoop {
+ public:
+  // Starts the simulation thread (and, with a non-empty `dir`, the
+  // persistence thread appending to dir/journal from recovered.journal_end).
+  static absl::StatusOr<std::unique_ptr<SessionLoop>> Start(std::string session_id,
+                                                            std::unique_ptr<SimCore> core,
+                                                            LoopOptions options, std::string dir,
+                                                            Recovered recovered);
+  ~SessionLoop();  // Stop(Unavailable "the session is closed")
+  SessionLoop(const SessionLoop&) = delete;
+  SessionLoop& operator=(const SessionLoop&) = delete;
+
+  // Stops stepping, writes a last snapshot (with a data directory), flushes
+  // the journal, answers pending inspections and finishes every watcher and
+  // command stream with `status`. Idempotent.
+  void Stop(const absl::Status& status);
+
+  // ---- Commands. Rate check (per client_id, call once per command).
+  bool AllowCommand(const std::string& client_id);
+  // Queues a command; its reply goes to `sink` (after it is durable).
+  void Submit(const CommandRequest& request, std::shared_ptr<ReplySink> sink);
+  // Command streams to finish when the session stops. Register fails with
+  // Unavailable once stopped.
+  absl::Status RegisterCommandStream(std::shared_ptr<ReplySink> sink);
+  void UnregisterCommandStream(ReplySink* sink);
+  void CountRateLimited() { rate_limited_.fetch_add(1); }
+
+  // ---- Watchers. ResourceExhausted at max_watchers, Unavailable once
+  // stopped. Returns the watcher id.
+  absl::StatusOr<int64_t> AddWatcher(std::shared_ptr<WatchSink> sink);
+  // Removes it and adds its counts to the session totals.
+  void RemoveWatcher(WatchSink* sink);
+
+  // ---- Inspection: `done` is called once, from the simulation thread (or
+  // from Stop with Unavailable).
+  void Inspect(const InspectRequest& request,
+               std::function<void(absl::StatusOr<InspectReply>)> done);
+
+  SessionStats Stats() const;
+  double time_step() const { return time_step_; }
+  // Shared by this session's watchers' encoders.
+  const std::shared_ptr<EncodeCache>& encode_cache() const { return encode_cache_; }
+
+ private:
+  SessionLoop(std::string session_id, std::unique_ptr<SimCore> core, LoopOptions options,
+              std::string dir, Recovered recovered);
+  void Run();
+  void Persist();
+
+  struct PendingCommand {
+    CommandRequest request;
+    std::shared_ptr<ReplySink> sink;
+  };
+  struct PendingInspect {
+    InspectRequest request;
+    std::function<void(absl::StatusOr<InspectReply>)> done;
+  };
+  // Work for the persistence thread: records to append and sync, maybe a
+  // snapshot to write, then replies to release.
+  struct PersistBatch {
+    std::string framed;
+    int64_t records = 0;
+    std::string snapshot;  // framed Snapshot, empty for none
+    int64_t snapshot_step = -1;
+    std::vector<std::pair<std::shared_ptr<ReplySink>, CommandReply>> replies;
+  };
+
+  // Simulation-thread helpers.
+  void ApplyCommands(std::deque<PendingCommand>& commands);
+  std::string MakeSnapshotBytes();
+  void Publish(std::chrono::steady_clock::time_point now);
+  void AnswerInspects(bool all_unavailable);
+  void RecordStep(double ms);
+  // Copies the core's state into the stats (before replies and inspections
+  // go out, so a client never sees stats older than an answer it got).
+  void UpdateCounters();
+  void Deliver(PersistBatch batch);
+
+  const std::string id_;
+  const LoopOptions options_;
+  const std::string dir_;
+  const double time_step_;
+  std::unique_ptr<SimCore> core_;  // simulation thread only (after Start)
+  const std::shared_ptr<EncodeCache> encode_cache_ = std::make_shared<EncodeCache>();
+
+  // Queues and membership.
+  mutable absl::Mutex mu_;
+  absl::CondVar wake_;
+  bool stop_ ABSL_GUARDED_BY(mu_) = false;
+  bool stopped_ ABSL_GUARDED_BY(mu_) = false;  // Stop finished
+  absl::Status stop_status_ ABSL_GUARDED_BY(mu_);
+  std::deque<PendingCommand> commands_ ABSL_GUARDED_BY(mu_);
+  std::deque<PendingInspect> inspects_ ABSL_GUARDED_BY(mu_);
+  bool publish_requested_ ABSL_GUARDED_BY(mu_) = false;
+  struct WatcherEntry {
+    std::shared_ptr<WatchSink> sink;
+    int64_t id;
+  };
+  absl::flat_hash_map<WatchSink*, WatcherEntry> watchers_ ABSL_GUARDED_BY(mu_);
+  int64_t next_watcher_id_ ABSL_GUARDED_BY(mu_) = 1;
+  absl::flat_hash_map<ReplySink*, std::shared_ptr<ReplySink>> command_streams_
+      ABSL_GUARDED_BY(mu_);
+  struct Bucket {
+    double tokens = 0;
+    std::chrono::steady_clock::time_point last;
+  };
+  absl::flat_hash_map<std::string, Bucket> buckets_ ABSL_GUARDED_BY(mu_);
+
+  // Simulation-thread state.
+  std::vector<PendingInspect> waiting_inspects_;
+  int64_t last_published_step_ = -1;
+  int64_t last_published_fields_ = -1;
+  std::chrono::steady_clock::time_point next_publish_;
+  uint64_t journal_submitted_ = 0;  // logical journal size incl. queued
+  int64_t last_snapshot_step_ = -1;
+
+  // Persistence thread.
+  std::unique_ptr<JournalWriter> journal_;
+  absl::Mutex persist_mu_;
+  std::deque<PersistBatch> persist_queue_ ABSL_GUARDED_BY(persist_mu_);
+  bool persist_stop_ ABSL_GUARDED_BY(persist_mu_) = false;
+  std::thread persist_thread_;
+  absl::Status persist_error_;  // persistence thread only
+
+  // Stats (written by the simulation and persistence threads).
+  mutable absl::Mutex stats_mu_;
+  struct Counters {
+    int64_t step = 0;
+    double time = 0;
+    bool paused = false;
+    int64_t steps_remaining = 0;
+    std::string last_error;
+    int64_t rollbacks = 0;
+    int64_t fields_version = 0;
+    int64_t applied = 0, rejected = 0, duplicates = 0;
+    int64_t steps_behind = 0, overruns = 0, steps_dropped = 0;
+    double steps_per_second = 0;
+    int64_t frames_published = 0;
+    // Totals of watchers that left.
+    int64_t gone_sent = 0, gone_skipped = 0, gone_keyframes = 0, gone_bytes = 0;
+    int64_t journal_records = 0, journal_bytes = 0, snapshots = 0, last_snapshot_step = 0;
+    std::deque<double> step_ms;  // last 1000
+    std::vector<std::pair<std::string, std::deque<double>>> phases;
+  } counters_ ABSL_GUARDED_BY(stats_mu_);
+  std::atomic<int64_t> rate_limited_{0};
+
+  std::thread sim_thread_;
+};
+
+}  // namespace dynsolid::server

@@ -1,0 +1,293 @@
+#include "server/sim_core.h"
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "server/finite_check.h"
+
+namespace dynsolid::server {
+namespace {
+
+constexpr int64_t kMaxStepCount = 1'000'000;
+
+// The solver names its arguments ("point_force.position: ..."); a command
+// reply names the request field ("command.add_point_force.position: ...").
+absl::Status Rename(const absl::Status& s, absl::string_view solver_name,
+                    absl::string_view command_field) {
+  if (s.ok()) return s;
+  const std::string field = absl::StrCat("command.", command_field);
+  absl::string_view m = s.message();
+  if (absl::StartsWith(m, solver_name) && m.size() > solver_name.size() &&
+      (m[solver_name.size()] == '.' || m[solver_name.size()] == ':' ||
+       m[solver_name.size()] == ' ' || m[solver_name.size()] == '[')) {
+    return absl::Status(s.code(), absl::StrCat(field, m.substr(solver_name.size())));
+  }
+  return absl::Status(s.code(), absl::StrCat(field, ": ", m));
+}
+
+void SetStatus(const absl::Status& s, CommandReply* reply) {
+  reply->set_code(static_cast<int32_t>(s.code()));
+  reply->set_message(std::string(s.message()));
+}
+
+}  // namespace
+
+absl::Status CheckCommandEnvelope(const CommandRequest& request) {
+  const std::string& id = request.client_id();
+  if (id.empty() || id.size() > 64) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "client_id: must have 1 to 64 characters, got ", id.size()));
+  }
+  for (const char c : id) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      return absl::InvalidArgumentError("client_id: must not contain control characters");
+    }
+  }
+  if (request.seq() < 1) return absl::InvalidArgumentError("seq: must be >= 1, got 0");
+  return absl::OkStatus();
+}
+
+SimCore::SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused)
+    : solid_(std::move(solid)), options_(options), paused_(start_paused) {}
+
+void SimCore::Remember(Client& client, const CommandReply& reply) {
+  client.last_seq = reply.seq();
+  client.replies.push_back(reply);
+  while (static_cast<int>(client.replies.size()) > options_.answer_cache) {
+    client.replies.pop_front();
+  }
+}
+
+SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* reply) {
+  reply->Clear();
+  reply->set_client_id(request.client_id());
+  reply->set_seq(request.seq());
+  Client& client = clients_[request.client_id()];
+  if (request.seq() <= client.last_seq) {
+    for (const CommandReply& r : client.replies) {
+      if (r.seq() == request.seq()) {
+        *reply = r;
+        reply->set_duplicate(true);
+        return Outcome::kDuplicate;
+      }
+    }
+    reply->set_applied_step(-1);
+    SetStatus(absl::OutOfRangeError(absl::StrCat(
+                  "seq: ", request.seq(), " is not above client ", request.client_id(),
+                  "'s last applied seq ", client.last_seq,
+                  " and no answer to it is kept (the server keeps the last ",
+                  options_.answer_cache, " per client)")),
+              reply);
+    return Outcome::kUnknown;
+  }
+  reply->set_applied_step(solid_->steps());
+  const absl::Status s = Apply(request.command(), reply);
+  SetStatus(s, reply);
+  Remember(client, *reply);
+  if (s.ok()) {
+    ++applied_;
+    return Outcome::kApplied;
+  }
+  ++rejected_;
+  return Outcome::kRejected;
+}
+
+absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
+  if (absl::Status s = CheckFinite(c, "command"); !s.ok()) return s;
+  switch (c.kind_case()) {
+    case Command::kAddPointForce: {
+      absl::StatusOr<int64_t> id = solid_->AddPointForce(c.add_point_force());
+      if (!id.ok()) return Rename(id.status(), "point_force", "add_point_force");
+      reply->set_load_id(*id);
+      return absl::OkStatus();
+    }
+    case Command::kAddPressure: {
+      absl::StatusOr<int64_t> id = solid_->AddPressure(c.add_pressure());
+      if (!id.ok()) return Rename(id.status(), "pressure", "add_pressure");
+      reply->set_load_id(*id);
+      return absl::OkStatus();
+    }
+    case Command::kSetGravity:
+      return Rename(solid_->SetGravity(c.set_gravity()), "gravity", "set_gravity");
+    case Command::kRemoveLoad:
+      return Rename(solid_->RemoveLoad(c.remove_load().load_id()), "load_id",
+                    "remove_load.load_id");
+    case Command::kFixRegion: {
+      absl::StatusOr<int64_t> id = solid_->FixRegion(c.fix_region());
+      if (!id.ok()) return Rename(id.status(), "region", "fix_region");
+      reply->set_constraint_id(*id);
+      return absl::OkStatus();
+    }
+    case Command::kUnfix:
+      return Rename(solid_->Unfix(c.unfix().constraint_id()), "constraint_id",
+                    "unfix.constraint_id");
+    case Command::kPaintMaterial: {
+      absl::Status s = solid_->PaintMaterial(c.paint_material());
+      if (!s.ok()) return Rename(s, "paint", "paint_material");
+      ++fields_version_;
+      return s;
+    }
+    case Command::kPause:
+      paused_ = true;
+      steps_remaining_ = 0;
+      return absl::OkStatus();
+    case Command::kResume:
+      paused_ = false;
+      steps_remaining_ = 0;
+      return absl::OkStatus();
+    case Command::kStep: {
+      const int64_t n = c.step().count();
+      if (n < 1 || n > kMaxStepCount) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "command.step.count: must be in [1, ", kMaxStepCount, "], got ", n));
+      }
+      if (steps_remaining_ > kMaxStepCount - n) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "command.step.count: ", n, " more steps would leave more than ", kMaxStepCount,
+            " to take (", steps_remaining_, " are left)"));
+      }
+      paused_ = true;
+      steps_remaining_ += n;
+      return absl::OkStatus();
+    }
+    case Command::kSave:
+      if (!options_.can_save) {
+        return absl::FailedPreconditionError(
+            "command.save: this server runs without --data-dir; there is nowhere to save");
+      }
+      save_requested_ = true;
+      reply->mutable_saved()->set_step(solid_->steps());
+      return absl::OkStatus();
+    case Command::KIND_NOT_SET:
+      break;
+  }
+  return absl::InvalidArgumentError("command: no command kind is set");
+}
+
+absl::Status SimCore::StepOnce() {
+  const absl::Status s = solid_->Step();
+  if (!s.ok()) {
+    paused_ = true;
+    steps_remaining_ = 0;
+    last_error_ = absl::StrCat("step ", solid_->steps() + 1, " failed: ", s.message());
+    return s;
+  }
+  if (steps_remaining_ > 0 && --steps_remaining_ == 0) paused_ = true;
+  return s;
+}
+
+absl::Status SimCore::Replay(const persist::JournalRecord& record) {
+  while (solid_->steps() < record.step()) {
+    if (!WantsStep()) {
+      return absl::DataLossError(absl::StrCat(
+          "journal record of client ", record.client_id(), " seq ", record.seq(), " at step ",
+          record.step(), ": the replayed session is paused at step ", solid_->steps()));
+    }
+    // A failed step is part of the history (it pauses the session).
+    (void)StepOnce();
+  }
+  if (solid_->steps() != record.step()) {
+    return absl::DataLossError(absl::StrCat("journal record of client ", record.client_id(),
+                                            " seq ", record.seq(), " is for step ",
+                                            record.step(), ", already past (step ",
+                                            solid_->steps(), ")"));
+  }
+  CommandRequest request;
+  request.set_client_id(record.client_id());
+  request.set_seq(record.seq());
+  *request.mutable_command() = record.command();
+  CommandReply reply;
+  const Outcome outcome = Process(request, &reply);
+  save_requested_ = false;  // a replayed Save has no snapshot to write
+  const CommandReply& want = record.reply();
+  if (outcome == Outcome::kDuplicate || outcome == Outcome::kUnknown ||
+      reply.code() != want.code() || reply.load_id() != want.load_id() ||
+      reply.constraint_id() != want.constraint_id()) {
+    return absl::DataLossError(absl::StrCat(
+        "replaying client ", record.client_id(), " seq ", record.seq(), " at step ",
+        record.step(), " gave code ", reply.code(), " (", reply.message(),
+        ") where the journal has code ", want.code(), " (", want.message(), ")"));
+  }
+  return absl::OkStatus();
+}
+
+void SimCore::SaveTo(persist::Snapshot* snapshot) const {
+  snapshot->set_step(solid_->steps());
+  persist::LoopState* loop = snapshot->mutable_loop();
+  loop->set_paused(paused_);
+  loop->set_steps_remaining(steps_remaining_);
+  loop->set_last_error(last_error_);
+  loop->set_fields_version(fields_version_);
+  loop->set_commands_applied(applied_);
+  loop->set_commands_rejected(rejected_);
+  // Clients in id order: the same state gives the same bytes.
+  std::vector<const std::pair<const std::string, Client>*> sorted;
+  for (const auto& entry : clients_) sorted.push_back(&entry);
+  std::sort(sorted.begin(), sorted.end(),
+            [](const auto* a, const auto* b) { return a->first < b->first; });
+  for (const auto* entry : sorted) {
+    persist::ClientAnswers* c = snapshot->add_clients();
+    c->set_client_id(entry->first);
+    c->set_last_seq(entry->second.last_seq);
+    for (const CommandReply& r : entry->second.replies) *c->add_replies() = r;
+  }
+}
+
+absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
+  if (absl::Status s = solid_->RestoreState(snapshot.solid_state()); !s.ok()) return s;
+  if (solid_->steps() != snapshot.step()) {
+    return absl::DataLossError(absl::StrCat("snapshot says step ", snapshot.step(),
+                                            ", its solid state is at step ", solid_->steps()));
+  }
+  const persist::LoopState& loop = snapshot.loop();
+  paused_ = loop.paused();
+  steps_remaining_ = loop.steps_remaining();
+  last_error_ = loop.last_error();
+  fields_version_ = loop.fields_version();
+  applied_ = loop.commands_applied();
+  rejected_ = loop.commands_rejected();
+  clients_.clear();
+  for (const persist::ClientAnswers& c : snapshot.clients()) {
+    Client& client = clients_[c.client_id()];
+    client.last_seq = c.last_seq();
+    for (const CommandReply& r : c.replies()) client.replies.push_back(r);
+  }
+  topology_.reset();
+  return absl::OkStatus();
+}
+
+std::shared_ptr<const SurfaceTopology> SimCore::Topology() {
+  if (topology_ == nullptr || topology_->version != solid_->topology_version()) {
+    auto t = std::make_shared<SurfaceTopology>();
+    const solid::Solid::Surface& s = solid_->BoundarySurface();
+    t->version = solid_->topology_version();
+    t->vertex_count = static_cast<int32_t>(s.nodes.size());
+    t->nodes = s.nodes;
+    t->quads.reserve(4 * s.quads.size());
+    for (const auto& q : s.quads) t->quads.insert(t->quads.end(), q.begin(), q.end());
+    topology_ = std::move(t);
+  }
+  return topology_;
+}
+
+std::shared_ptr<const SurfaceSnapshot> SimCore::MakeSnapshot(bool with_fields) {
+  auto snap = std::make_shared<SurfaceSnapshot>();
+  snap->step = solid_->steps();
+  snap->time = solid_->time();
+  snap->fields_version = fields_version_;
+  snap->topology = Topology();
+  const Points p = solid_->SurfacePositions();
+  snap->positions.assign(p.data(), p.data() + p.size());
+  if (with_fields) {
+    solid::Solid::SurfaceFields f = solid_->ComputeSurfaceFields();
+    snap->displacement = std::move(f.displacement);
+    snap->strain = std::move(f.strain);
+    snap->stiffness = std::move(f.stiffness);
+  }
+  return snap;
+}
+
+}  // namespace dynsolid::server

@@ -1,0 +1,117 @@
+// The deterministic heart of a session: a solid::Solid plus what decides
+// its future besides the solid itself (paused / steps remaining, the
+// per-client answer caches). It applies commands and steps; it knows no
+// clock, thread, gRPC or file, so the live simulation loop and the
+// journal replay after a crash run exactly the same code and reach the
+// same bits.
+//
+// Not thread-safe: owned and used by one thread (the session's simulation
+// thread, or the recovery code before that thread starts).
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <string>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/status.h"
+#include "dynsolid/journal.pb.h"
+#include "dynsolid/service.pb.h"
+#include "server/surface_codec.h"
+#include "solver/solid/solid.h"
+
+namespace dynsolid::server {
+
+struct CoreOptions {
+  // Answers remembered per client for resends (the most recent ones).
+  int answer_cache = 256;
+  // Whether Save can work (the session has a data directory).
+  bool can_save = false;
+};
+
+class SimCore {
+ public:
+  SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused);
+  SimCore(const SimCore&) = delete;
+  SimCore& operator=(const SimCore&) = delete;
+
+  enum class Outcome {
+    kApplied,    // accepted and applied: record it
+    kRejected,   // refused with a reason, nothing changed: record it
+    kDuplicate,  // (client_id, seq) answered before: reply is that answer
+    kUnknown,    // an old seq with no answer kept: not recorded
+  };
+
+  // Applies (or refuses) one command at the current step boundary and fills
+  // `reply` (applied_step = steps()). client_id and seq must already be
+  // valid (CheckCommandEnvelope). Deterministic.
+  Outcome Process(const CommandRequest& request, CommandReply* reply);
+
+  // Whether the loop should take a step now: running, or a Step count left.
+  bool WantsStep() const { return !paused_ || steps_remaining_ > 0; }
+  // One Solid::Step and the loop bookkeeping (a Step count running out
+  // pauses; a failed step pauses and sets last_error). Returns the step's
+  // status.
+  absl::Status StepOnce();
+
+  // ---- Replay of a journal record: steps until the record's step (each
+  // of which must be wanted, or DataLoss), then processes the command and
+  // checks the outcome matches the journaled reply (DataLoss otherwise).
+  absl::Status Replay(const persist::JournalRecord& record);
+
+  // ---- Snapshots: the loop state and answer caches (the solid's state is
+  // solid().SaveState(), stored beside them).
+  void SaveTo(persist::Snapshot* snapshot) const;
+  // Restores what SaveTo wrote (and the solid from snapshot.solid_state).
+  // On error nothing changed.
+  absl::Status RestoreFrom(const persist::Snapshot& snapshot);
+
+  solid::Solid& solid() { return *solid_; }
+  const solid::Solid& solid() const { return *solid_; }
+  int64_t steps() const { return solid_->steps(); }
+  bool paused() const { return paused_; }
+  int64_t steps_remaining() const { return steps_remaining_; }
+  const std::string& last_error() const { return last_error_; }
+  int64_t fields_version() const { return fields_version_; }
+  int64_t commands_applied() const { return applied_; }
+  int64_t commands_rejected() const { return rejected_; }
+  // Set by a Save command; the loop writes the snapshot and clears it.
+  bool TakeSaveRequest() {
+    const bool s = save_requested_;
+    save_requested_ = false;
+    return s;
+  }
+
+  // The surface connectivity (rebuilt when the solid's topology changes).
+  std::shared_ptr<const SurfaceTopology> Topology();
+  // A snapshot of the surface at the current step; fields only if asked.
+  std::shared_ptr<const SurfaceSnapshot> MakeSnapshot(bool with_fields);
+
+ private:
+  struct Client {
+    uint64_t last_seq = 0;
+    std::deque<CommandReply> replies;  // most recent last
+  };
+  absl::Status Apply(const Command& command, CommandReply* reply);
+  void Remember(Client& client, const CommandReply& reply);
+
+  std::shared_ptr<solid::Solid> solid_;
+  const CoreOptions options_;
+  bool paused_;
+  int64_t steps_remaining_ = 0;
+  std::string last_error_;
+  int64_t fields_version_ = 0;
+  int64_t applied_ = 0;
+  int64_t rejected_ = 0;
+  bool save_requested_ = false;
+  absl::flat_hash_map<std::string, Client> clients_;
+  std::shared_ptr<const SurfaceTopology> topology_;
+};
+
+// Stateless checks of a command's envelope, done when it arrives:
+// client_id 1..64 characters without control characters, seq >= 1.
+// InvalidArgument naming the field.
+absl::Status CheckCommandEnvelope(const CommandRequest& request);
+
+}  // namespace dynsolid::server

@@ -1,0 +1,250 @@
+// kill -9 during a scripted session: the real dynsolid-server binary with
+// --data_dir is killed while it steps, restarted on the same directory, and
+// the session continues; its positions must equal, bit for bit, those of a
+// server that ran the same script without interruption. Also a torn journal
+// tail (bytes of a record that was never acknowledged) is dropped.
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "dynsolid/service.grpc.pb.h"
+#include "live_client.h"
+
+namespace dynsolid {
+namespace {
+
+using testing::BitIdentical;
+using testing::CommandStream;
+using testing::Deadline;
+using testing::ForceCommand;
+using testing::InspectAt;
+using testing::StepCommand;
+
+std::string ServerBinary() {
+  const char* dir = std::getenv("DYNSOLID_BINARY_DIR");
+  return absl::StrCat(dir != nullptr ? dir : "build/release", "/server/dynsolid-server");
+}
+
+// A dynsolid-server child process.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& data_dir, const std::string& log) {
+    int out[2];
+    if (::pipe(out) != 0) return;
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      ::dup2(out[1], 1);
+      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
+      ::dup2(err, 2);
+      ::close(out[0]);
+      const std::string binary = ServerBinary();
+      const std::string dir_flag = "--data_dir=" + data_dir;
+      ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", dir_flag.c_str(),
+              "--snapshot_every_steps=40", static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    ::close(out[1]);
+    // The first line: "listening on HOST:PORT".
+    std::string line;
+    pollfd p{out[0], POLLIN, 0};
+    while (line.find('\n') == std::string::npos && ::poll(&p, 1, 120000) > 0) {
+      char c;
+      if (::read(out[0], &c, 1) != 1) break;
+      line.push_back(c);
+    }
+    ::close(out[0]);
+    if (absl::StartsWith(line, "listening on ")) {
+      address_ = line.substr(13, line.size() - 14);
+    }
+  }
+  ~ServerProcess() {
+    if (pid_ > 0) Signal(SIGTERM);
+  }
+  // Sends `signal` and reaps the process; returns its wait status.
+  int Signal(int signal) {
+    ::kill(pid_, signal);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+    return status;
+  }
+  const std::string& address() const { return address_; }
+  std::unique_ptr<Sessions::Stub> Stub() const {
+    return Sessions::NewStub(grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()));
+  }
+
+ private:
+  pid_t pid_ = -1;
+  std::string address_;
+};
+
+class TempDir {
+ public:
+  TempDir() {
+    std::string t = ::testing::TempDir() + "dynsolid_kill9_XXXXXX";
+    path_ = ::mkdtemp(t.data());
+  }
+  ~TempDir() { std::system(absl::StrCat("rm -rf '", path_, "'").c_str()); }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+Session CreatePaused(Sessions::Stub& stub) {
+  CreateSessionRequest r;
+  r.set_builtin_scene("block3");
+  r.set_levels_override(1);
+  r.set_start_paused(true);
+  grpc::ClientContext context;
+  context.set_deadline(Deadline());
+  Session s;
+  const grpc::Status status = stub.CreateSession(&context, r, &s);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return s;
+}
+
+// The scripted session: (command, step to wait for before the next one).
+std::vector<std::pair<Command, int64_t>> Script() {
+  std::vector<std::pair<Command, int64_t>> s;
+  s.emplace_back(ForceCommand(1.5, 1.5, 3, 2e4, 0, 0), 0);
+  s.emplace_back(StepCommand(60), 60);
+  Command fix;
+  fix.mutable_fix_region()->mutable_box()->mutable_min()->set_x(2.9);
+  fix.mutable_fix_region()->mutable_box()->mutable_max()->set_x(3.1);
+  fix.mutable_fix_region()->mutable_box()->mutable_max()->set_y(3);
+  fix.mutable_fix_region()->mutable_box()->mutable_max()->set_z(3);
+  s.emplace_back(fix, 60);
+  Command pressure;
+  pressure.mutable_add_pressure()->mutable_region()->mutable_sphere()->mutable_center()->set_z(3);
+  pressure.mutable_add_pressure()->mutable_region()->mutable_sphere()->set_radius(1.5);
+  pressure.mutable_add_pressure()->set_pascals(2000);
+  s.emplace_back(pressure, 60);
+  s.emplace_back(StepCommand(60), 120);
+  Command paint;
+  paint.mutable_paint_material()->mutable_region()->mutable_sphere()->mutable_center()->set_x(1.5);
+  paint.mutable_paint_material()->mutable_region()->mutable_sphere()->mutable_center()->set_y(1.5);
+  paint.mutable_paint_material()->mutable_region()->mutable_sphere()->mutable_center()->set_z(2);
+  paint.mutable_paint_material()->mutable_region()->mutable_sphere()->set_radius(1);
+  paint.mutable_paint_material()->mutable_material()->set_young_modulus(3e5);
+  paint.mutable_paint_material()->set_strength(1);
+  s.emplace_back(paint, 120);
+  Command gravity;
+  gravity.mutable_set_gravity()->set_z(-9.81);
+  s.emplace_back(gravity, 120);
+  // The server is killed while this runs (after step 150).
+  s.emplace_back(StepCommand(100), 150);
+  return s;
+}
+constexpr int64_t kEnd = 220;
+
+TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
+  TempDir dir;
+  const std::string log = dir.path() + "/server.log";
+  const auto script = Script();
+
+  // The uninterrupted run.
+  std::string ref_control, ref_surface;
+  InspectReply ref_end, ref_final;
+  {
+    ServerProcess server(dir.path() + "/reference", log);
+    ASSERT_FALSE(server.address().empty()) << "the server did not start; see " << log;
+    auto stub = server.Stub();
+    const Session s = CreatePaused(*stub);
+    CommandStream c(*stub, s, "scripted");
+    for (size_t i = 0; i < script.size(); ++i) {
+      ASSERT_EQ(c.Send(i + 1, script[i].first).code(), 0) << i;
+      InspectAt(*stub, s, script[i].second, false, false);
+    }
+    ref_end = InspectAt(*stub, s, kEnd);
+    ASSERT_EQ(ref_end.step(), kEnd);
+    ASSERT_EQ(c.Send(script.size() + 1, ForceCommand(0.5, 0.5, 3, 0, -1e4, 0)).code(), 0);
+    ASSERT_EQ(c.Send(script.size() + 2, StepCommand(30)).code(), 0);
+    ref_final = InspectAt(*stub, s, kEnd + 30);
+  }
+
+  // The interrupted run.
+  const std::string data = dir.path() + "/killed";
+  Session s;
+  CommandReply last;
+  {
+    ServerProcess server(data, log);
+    ASSERT_FALSE(server.address().empty());
+    auto stub = server.Stub();
+    s = CreatePaused(*stub);
+    CommandStream c(*stub, s, "scripted");
+    for (size_t i = 0; i < script.size(); ++i) {
+      last = c.Send(i + 1, script[i].first);
+      ASSERT_EQ(last.code(), 0) << i;
+      InspectAt(*stub, s, script[i].second, false, false);
+    }
+    const InspectReply at_kill = InspectAt(*stub, s, 0, false, false);
+    EXPECT_LT(at_kill.step(), kEnd) << "the run ended before the kill; nothing was interrupted";
+    const int status = server.Signal(SIGKILL);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  }
+  // A torn record at the end, as if the kill hit a write: never acknowledged.
+  {
+    const std::string journal = data + "/sessions/" + s.id() + "/journal";
+    const int fd = ::open(journal.c_str(), O_WRONLY | O_APPEND);
+    ASSERT_GE(fd, 0);
+    const char torn[] = {42, 0, 0, 0, 1, 2};
+    ASSERT_EQ(::write(fd, torn, sizeof(torn)), static_cast<ssize_t>(sizeof(torn)));
+    ::close(fd);
+  }
+  {
+    ServerProcess server(data, log);
+    ASSERT_FALSE(server.address().empty()) << "the server did not restart; see " << log;
+    auto stub = server.Stub();
+    const InspectReply end = InspectAt(*stub, s, kEnd);
+    EXPECT_EQ(end.step(), kEnd);
+    EXPECT_TRUE(end.paused());
+    EXPECT_TRUE(BitIdentical(end.control_positions(), ref_end.control_positions()));
+    EXPECT_TRUE(BitIdentical(end.surface_positions(), ref_end.surface_positions()));
+    CommandStream c(*stub, s, "scripted");
+    // The last command, resent after the crash: answered, not applied again.
+    const CommandReply again = c.Send(script.size(), script.back().first);
+    EXPECT_TRUE(again.duplicate());
+    EXPECT_EQ(again.applied_step(), last.applied_step());
+    ASSERT_EQ(c.Send(script.size() + 1, ForceCommand(0.5, 0.5, 3, 0, -1e4, 0)).code(), 0);
+    ASSERT_EQ(c.Send(script.size() + 2, StepCommand(30)).code(), 0);
+    const InspectReply final_state = InspectAt(*stub, s, kEnd + 30);
+    EXPECT_EQ(final_state.step(), kEnd + 30);
+    EXPECT_TRUE(BitIdentical(final_state.control_positions(), ref_final.control_positions()));
+    EXPECT_TRUE(BitIdentical(final_state.surface_positions(), ref_final.surface_positions()));
+    // The solid did move over the run (the comparison is not vacuous).
+    EXPECT_FALSE(BitIdentical(final_state.control_positions(), end.control_positions()));
+    grpc::ClientContext context;
+    SessionStats stats;
+    ASSERT_TRUE(stub->GetStats(&context, testing::RefOf(s), &stats).ok());
+    EXPECT_EQ(stats.commands_applied(), static_cast<int64_t>(script.size()) + 2);
+  }
+  // Recovery restored a periodic snapshot, replayed the journal after it
+  // and dropped the torn tail (the server's log says so).
+  std::string text;
+  {
+    const int fd = ::open(log.c_str(), O_RDONLY);
+    char buf[4096];
+    ssize_t n;
+    while ((n = ::read(fd, buf, sizeof(buf))) > 0) text.append(buf, static_cast<size_t>(n));
+    ::close(fd);
+  }
+  EXPECT_THAT(text, ::testing::HasSubstr(absl::StrCat("session ", s.id(), " recovered: snapshot at step")));
+  EXPECT_THAT(text, ::testing::HasSubstr("dropped 6 bytes of unacknowledged tail"));
+}
+
+}  // namespace
+}  // namespace dynsolid

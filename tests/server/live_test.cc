@@ -1,0 +1,888 @@
+// The live session over loopback gRPC against an in-process server: the
+// simulation loop, Watch (keyframes + quantized deltas, slow watchers),
+// Commands (every invalid kind, exactly-once resends, rate limits),
+// tokens, stats, persistence across a restart, and TLS.
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <gmock/gmock.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
+#include "dynsolid/service.grpc.pb.h"
+#include "live_client.h"
+#include "server/journal.h"
+#include "server/server.h"
+#include "server/surface_codec.h"
+
+namespace dynsolid::server {
+namespace {
+
+using ::dynsolid::testing::BitIdentical;
+using ::dynsolid::testing::CommandStream;
+using ::dynsolid::testing::Deadline;
+using ::dynsolid::testing::ForceCommand;
+using ::dynsolid::testing::InspectAt;
+using ::dynsolid::testing::RefOf;
+using ::dynsolid::testing::SpinningSceneText;
+using ::dynsolid::testing::StatsOf;
+using ::dynsolid::testing::StepCommand;
+using ::testing::HasSubstr;
+using ::testing::StartsWith;
+
+class LiveTest : public ::testing::Test {
+ protected:
+  void SetUp() override { Start(Options()); }
+
+  static ServerOptions Options() {
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    o.max_sessions = 8;
+    return o;
+  }
+
+  void Start(const ServerOptions& options) {
+    stub_.reset();
+    server_.reset();
+    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = *std::move(server);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    stub_ = Sessions::NewStub(channel_);
+  }
+
+  Session Create(const std::string& builtin, int levels, bool paused) {
+    CreateSessionRequest r;
+    r.set_builtin_scene(builtin);
+    r.set_levels_override(levels);
+    r.set_start_paused(paused);
+    return CreateFrom(r);
+  }
+  Session CreateText(const std::string& text, bool paused) {
+    CreateSessionRequest r;
+    r.set_scene_text(text);
+    r.set_start_paused(paused);
+    return CreateFrom(r);
+  }
+  Session CreateFrom(const CreateSessionRequest& r) {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    Session s;
+    const grpc::Status status = stub_->CreateSession(&context, r, &s);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return s;
+  }
+
+  std::unique_ptr<Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<Sessions::Stub> stub_;
+};
+
+// Reads frames into a decoder until one at `step` arrives.
+::testing::AssertionResult ReadUntilStep(grpc::ClientReader<Frame>& reader,
+                                         SurfaceDecoder& decoder, int64_t step,
+                                         std::vector<Frame>* frames = nullptr) {
+  Frame f;
+  while (decoder.step() != step || !decoder.has_keyframe()) {
+    if (!reader.Read(&f)) return ::testing::AssertionFailure() << "stream ended before step " << step;
+    const absl::Status s = decoder.Apply(f);
+    if (!s.ok()) return ::testing::AssertionFailure() << "frame at step " << f.step() << ": " << s;
+    if (frames != nullptr) frames->push_back(f);
+    if (f.step() > step) return ::testing::AssertionFailure() << "passed step " << step;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// Largest |decoded - server| / bound over every coordinate.
+double WorstRatio(const SurfaceDecoder& d, const InspectReply& server) {
+  const std::vector<double> p = d.Positions();
+  EXPECT_EQ(static_cast<int>(p.size()), server.surface_positions_size());
+  const double bound[3] = {d.error_bound().x(), d.error_bound().y(), d.error_bound().z()};
+  double worst = 0;
+  for (int i = 0; i < server.surface_positions_size() && i < static_cast<int>(p.size()); ++i) {
+    worst = std::max(worst, std::abs(p[i] - server.surface_positions(i)) / bound[i % 3]);
+  }
+  return worst;
+}
+
+TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBound) {
+  const Session s = Create("block3", 1, /*paused=*/true);
+  EXPECT_DOUBLE_EQ(s.time_step(), 1e-3);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(120));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  wr.set_displacement(true);
+  auto reader = stub_->Watch(&wc, wr);
+  SurfaceDecoder decoder;
+  std::vector<Frame> frames;
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
+  ASSERT_TRUE(frames[0].has_keyframe());
+  const int vertices = frames[0].keyframe().vertex_count();
+  EXPECT_EQ(vertices, 6 * 6 * 6 + 2);  // the boundary of a 6^3 grid of cells
+  EXPECT_EQ(frames[0].keyframe().quads_size(), 4 * 6 * 36);
+
+  CommandStream commands(*stub_, s, "reconstruct");
+  // Pull the top sideways: the block sways.
+  CommandReply r = commands.Send(1, ForceCommand(1.5, 1.5, 3, 3e4, 0, 0));
+  ASSERT_EQ(r.code(), 0) << r.message();
+  EXPECT_EQ(r.applied_step(), 0);
+  int moved_total = 0;
+  for (int k = 1; k <= 6; ++k) {
+    r = commands.Send(1 + k, StepCommand(25));
+    ASSERT_EQ(r.code(), 0) << r.message();
+    const InspectReply server = InspectAt(*stub_, s, 25 * k);
+    ASSERT_EQ(server.step(), 25 * k);
+    ASSERT_TRUE(server.paused());
+    ASSERT_TRUE(ReadUntilStep(*reader, decoder, 25 * k, &frames)) << "k = " << k;
+    const double worst = WorstRatio(decoder, server);
+    EXPECT_LE(worst, 1.0 + 1e-9) << "at step " << 25 * k;
+    EXPECT_GT(worst, 0.0);  // quantized, not exact
+    // And the block did move, by more than the bound.
+    double largest_motion = 0;
+    const std::vector<double> now = decoder.Positions();
+    (void)now;
+    for (const Frame& f : frames) {
+      if (f.has_delta()) moved_total += f.delta().moved();
+    }
+    frames.clear();
+    (void)largest_motion;
+  }
+  EXPECT_GT(moved_total, vertices) << "deltas listed too few moved vertices";
+  EXPECT_EQ(static_cast<int>(decoder.displacement().size()), vertices);
+  wc.TryCancel();
+}
+
+TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
+  // The default scene at its two levels, pulled at the top corner: every
+  // delta frame of a 60 Hz watcher against 12 bytes per vertex.
+  const Session s = Create("block3", 2, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(120));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, wr);
+  SurfaceDecoder decoder;
+  std::vector<Frame> frames;
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
+  const int vertices = frames[0].keyframe().vertex_count();
+  EXPECT_EQ(vertices, 6 * 12 * 12 + 2);
+  CommandStream c(*stub_, s, "pull");
+  ASSERT_EQ(c.Send(1, ForceCommand(3, 3, 3, 2e4, 1e4, 0)).code(), 0);
+  ASSERT_EQ(c.Send(2, StepCommand(300)).code(), 0);
+  const InspectReply server = InspectAt(*stub_, s, 300);
+  frames.clear();
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 300, &frames));
+  EXPECT_LE(WorstRatio(decoder, server), 1.0 + 1e-9);
+  size_t delta_bytes = 0, deltas = 0, largest = 0;
+  int64_t moved = 0;
+  for (const Frame& f : frames) {
+    if (!f.has_delta()) continue;
+    ++deltas;
+    delta_bytes += f.ByteSizeLong();
+    largest = std::max(largest, f.ByteSizeLong());
+    moved += f.delta().moved();
+  }
+  const double raw = 12.0 * vertices;
+  ASSERT_GT(deltas, 3u);
+  EXPECT_GT(moved, 0);
+  const double mean_ratio = delta_bytes / (deltas * raw);
+  RecordProperty("delta_frames", static_cast<int>(deltas));
+  RecordProperty("mean_delta_over_raw_percent", static_cast<int>(100 * mean_ratio));
+  RecordProperty("largest_delta_over_raw_percent", static_cast<int>(100 * largest / raw));
+  std::printf("block3: %zu delta frames, mean %.1f %% and largest %.1f %% of a raw float32 "
+              "frame (%.0f bytes), %.0f moved vertices per delta\n",
+              deltas, 100 * mean_ratio, 100 * largest / raw, raw,
+              static_cast<double>(moved) / deltas);
+  EXPECT_LE(mean_ratio, 0.25);
+  wc.TryCancel();
+}
+
+TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsistently) {
+  ServerOptions o = Options();
+  o.loop.max_watch_hz = 1000;
+  Start(o);
+  const Session s = CreateText(SpinningSceneText(), /*paused=*/true);
+
+  // The stalled watcher's channel has a small receive window, so its
+  // server-side writes block once it stops reading.
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  args.SetInt("grpc.http2.lookahead_bytes", 8192);
+  auto slow_channel = grpc::CreateCustomChannel(server_->address(),
+                                                grpc::InsecureChannelCredentials(), args);
+  auto slow_stub = Sessions::NewStub(slow_channel);
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  wr.set_rate_hz(1000);
+  wr.set_displacement(true);
+  wr.set_strain(true);
+  wr.set_stiffness(true);
+  grpc::ClientContext slow_context, fast_context;
+  slow_context.set_deadline(Deadline(120));
+  fast_context.set_deadline(Deadline(120));
+  auto slow = slow_stub->Watch(&slow_context, wr);
+  auto fast = stub_->Watch(&fast_context, wr);
+
+  // The fast watcher reads everything on its own thread.
+  absl::Mutex mu;
+  SurfaceDecoder fast_decoder;
+  int64_t fast_frames = 0, fast_last_step = -1;
+  bool fast_ok = true;
+  std::thread fast_reader([&] {
+    Frame f;
+    while (fast->Read(&f)) {
+      absl::MutexLock lock(&mu);
+      if (!fast_decoder.Apply(f).ok() || f.step() < fast_last_step) fast_ok = false;
+      ++fast_frames;
+      fast_last_step = f.step();
+    }
+  });
+
+  CommandStream commands(*stub_, s, "slow-watch");
+  ASSERT_EQ(commands.Send(1, StepCommand(1'000'000)).code(), 0);  // spin on
+
+  // Wait (by counts) until the slow watcher's write is stuck and it skips.
+  SessionStats st;
+  WatcherStats slow_stats;
+  for (int i = 0; i < 600; ++i) {
+    st = StatsOf(*stub_, s);
+    for (const WatcherStats& w : st.watcher_details()) {
+      if (w.watcher_id() == 1) slow_stats = w;
+    }
+    if (slow_stats.write_pending() && slow_stats.frames_skipped() > 10) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(slow_stats.write_pending()) << "the slow watcher never blocked";
+  ASSERT_GT(slow_stats.frames_skipped(), 10);
+
+  // While it stays blocked, the loop keeps stepping and the fast watcher
+  // keeps getting frames that follow the session step for step.
+  const int64_t step0 = st.step();
+  const int64_t slow_sent0 = slow_stats.frames_sent();
+  int64_t fast0;
+  {
+    absl::MutexLock lock(&mu);
+    fast0 = fast_frames;
+  }
+  const InspectReply later = InspectAt(*stub_, s, step0 + 1500, false, false);
+  EXPECT_GE(later.step(), step0 + 1500);
+  for (int i = 0; i < 600; ++i) {
+    absl::MutexLock lock(&mu);
+    if (fast_last_step >= step0 + 1500) break;
+    mu.Unlock();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    mu.Lock();
+  }
+  st = StatsOf(*stub_, s);
+  for (const WatcherStats& w : st.watcher_details()) {
+    if (w.watcher_id() == 1) slow_stats = w;
+  }
+  {
+    absl::MutexLock lock(&mu);
+    EXPECT_TRUE(fast_ok);
+    EXPECT_GE(fast_last_step, step0 + 1500) << "the fast watcher fell behind the loop";
+    EXPECT_GT(fast_frames - fast0, 20) << "the fast watcher got too few frames";
+  }
+  EXPECT_EQ(slow_stats.frames_sent(), slow_sent0) << "the blocked watcher was not blocked";
+  EXPECT_TRUE(slow_stats.write_pending());
+  EXPECT_GE(st.frames_published(), st.watcher_details(1).frames_sent());
+
+  // Pause and let the slow watcher read again: everything it gets decodes
+  // against what it got before, the resumed frame reports what it skipped,
+  // and it ends at the session's positions.
+  ASSERT_EQ(commands.Send(2, Command()).code(), 3);  // (an empty command: rejected)
+  Command pause;
+  pause.mutable_pause();
+  const CommandReply paused = commands.Send(3, pause);
+  ASSERT_EQ(paused.code(), 0);
+  const InspectReply server = InspectAt(*stub_, s, 0);
+  ASSERT_TRUE(server.paused());
+  SurfaceDecoder slow_decoder;
+  Frame f;
+  int64_t reported_skips = 0;
+  while (slow_decoder.step() != server.step()) {
+    ASSERT_TRUE(slow->Read(&f));
+    ASSERT_TRUE(slow_decoder.Apply(f).ok()) << "frame at step " << f.step();
+    reported_skips += f.skipped();
+  }
+  EXPECT_GT(reported_skips, 10);
+  EXPECT_LE(WorstRatio(slow_decoder, server), 1.0 + 1e-9);
+
+  slow_context.TryCancel();
+  fast_context.TryCancel();
+  fast_reader.join();
+}
+
+TEST_F(LiveTest, InvalidCommandsOfEveryKindAreRejectedWithTheirMessageAndChangeNothing) {
+  // Session a gets every invalid command between valid ones; session b only
+  // the valid ones, at the same steps. Their states must stay bit-identical.
+  const Session a = Create("block3", 1, true);
+  const Session b = Create("block3", 1, true);
+  CommandStream ca(*stub_, a, "invalid");
+  CommandStream cb(*stub_, b, "invalid");
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+
+  ASSERT_EQ(ca.Send(1, ForceCommand(1.5, 1.5, 3, 1e4, 0, 0)).code(), 0);
+  ASSERT_EQ(cb.Send(1, ForceCommand(1.5, 1.5, 3, 1e4, 0, 0)).code(), 0);
+  ASSERT_EQ(ca.Send(2, StepCommand(10)).code(), 0);
+  ASSERT_EQ(cb.Send(2, StepCommand(10)).code(), 0);
+  ASSERT_EQ(InspectAt(*stub_, a, 10).step(), 10);
+  ASSERT_EQ(InspectAt(*stub_, b, 10).step(), 10);
+
+  struct Case {
+    std::string what;
+    Command command;
+    int code;
+    std::string message;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"force outside the solid", ForceCommand(10, 10, 10, 1, 0, 0), 3,
+                   "command.add_point_force.position"});
+  cases.push_back({"nan force", ForceCommand(1, 1, 1, nan, 0, 0), 3,
+                   "command.add_point_force.force.x: must be finite, got nan"});
+  {
+    Command c;
+    c.mutable_add_pressure()->mutable_region()->mutable_sphere()->mutable_center()->set_x(50);
+    c.mutable_add_pressure()->mutable_region()->mutable_sphere()->set_radius(0.1);
+    c.mutable_add_pressure()->set_pascals(100);
+    cases.push_back({"pressure selecting no face", c, 3, "command.add_pressure"});
+    Command z;
+    z.mutable_add_pressure()->mutable_region()->mutable_sphere()->set_radius(10);
+    cases.push_back({"zero pressure", z, 3, "command.add_pressure.pascals must be non-zero"});
+  }
+  {
+    Command c;
+    c.mutable_set_gravity()->set_z(-inf);
+    cases.push_back({"infinite gravity", c, 3, "command.set_gravity.z: must be finite, got -inf"});
+  }
+  {
+    Command c;
+    c.mutable_remove_load()->set_load_id(999);
+    cases.push_back({"unknown load", c, 5, "command.remove_load.load_id: load id 999 not found"});
+  }
+  {
+    Command c;
+    c.mutable_fix_region()->mutable_sphere()->mutable_center()->set_z(-40);
+    c.mutable_fix_region()->mutable_sphere()->set_radius(0.5);
+    cases.push_back({"fix selecting nothing", c, 3, "command.fix_region selects no control point"});
+    Command n;
+    n.mutable_fix_region()->mutable_box()->mutable_max()->set_y(nan);
+    cases.push_back({"nan fix box", n, 3, "command.fix_region.box.max.y: must be finite, got nan"});
+  }
+  {
+    Command c;
+    c.mutable_unfix()->set_constraint_id(77);
+    cases.push_back({"unknown constraint", c, 5,
+                     "command.unfix.constraint_id: constraint id 77 not found"});
+  }
+  {
+    Command c;
+    c.mutable_paint_material()->mutable_region()->mutable_sphere()->set_radius(1);
+    c.mutable_paint_material()->mutable_material()->set_young_modulus(2e5);
+    c.mutable_paint_material()->set_strength(0);
+    cases.push_back({"paint strength 0", c, 3,
+                     "command.paint_material.strength must be in (0, 1], got 0"});
+    Command m;
+    m.mutable_paint_material()->mutable_region()->mutable_sphere()->set_radius(1);
+    m.mutable_paint_material()->set_strength(1);
+    cases.push_back({"paint setting nothing", m, 3, "command.paint_material.material sets no field"});
+  }
+  cases.push_back({"step 0", StepCommand(0), 3, "command.step.count: must be in [1, 1000000], got 0"});
+  cases.push_back({"step too many", StepCommand(2'000'000), 3, "command.step.count"});
+  {
+    Command c;
+    c.mutable_save();
+    cases.push_back({"save without a data dir", c, 9, "command.save: this server runs without"});
+  }
+  cases.push_back({"no kind", Command(), 3, "command: no command kind is set"});
+  // (pause and resume have no invalid form.)
+
+  uint64_t seq = 3;
+  std::vector<std::pair<uint64_t, CommandReply>> rejected;
+  for (const Case& c : cases) {
+    const CommandReply r = ca.Send(seq, c.command);
+    EXPECT_EQ(r.code(), c.code) << c.what << ": " << r.message();
+    EXPECT_THAT(r.message(), StartsWith(c.message)) << c.what;
+    EXPECT_EQ(r.applied_step(), 10) << c.what;
+    EXPECT_FALSE(r.duplicate());
+    rejected.emplace_back(seq, r);
+    ++seq;
+  }
+  // Envelope errors are answered on arrival and never recorded.
+  {
+    CommandRequest bad;
+    bad.set_seq(seq);
+    *bad.mutable_command() = StepCommand(1);
+    ASSERT_TRUE(ca.WriteRaw(bad));
+    CommandReply r;
+    ASSERT_TRUE(ca.Read(&r));
+    EXPECT_EQ(r.code(), 3);
+    EXPECT_EQ(r.message(), "client_id: must have 1 to 64 characters, got 0");
+    EXPECT_EQ(r.applied_step(), -1);
+    bad.set_client_id("invalid");
+    bad.set_seq(0);
+    ASSERT_TRUE(ca.WriteRaw(bad));
+    ASSERT_TRUE(ca.Read(&r));
+    EXPECT_EQ(r.message(), "seq: must be >= 1, got 0");
+  }
+  // A resent rejection is answered the same, not re-evaluated.
+  const CommandReply again = ca.Send(rejected[0].first, cases[0].command);
+  EXPECT_TRUE(again.duplicate());
+  EXPECT_EQ(again.code(), rejected[0].second.code());
+  EXPECT_EQ(again.message(), rejected[0].second.message());
+  EXPECT_EQ(again.applied_step(), 10);
+
+  const SessionStats stats = StatsOf(*stub_, a);
+  EXPECT_EQ(stats.commands_rejected(), static_cast<int64_t>(cases.size()));
+  EXPECT_EQ(stats.commands_applied(), 2);
+  EXPECT_EQ(stats.commands_duplicate(), 1);
+
+  const InspectReply ia = InspectAt(*stub_, a, 10), ib = InspectAt(*stub_, b, 10);
+  EXPECT_TRUE(BitIdentical(ia.control_positions(), ib.control_positions()));
+  // The same future: the next valid commands get the same ids and steps.
+  const CommandReply fa = ca.Send(seq, ForceCommand(1.5, 1.5, 3, 0, 1e4, 0));
+  const CommandReply fb = cb.Send(3, ForceCommand(1.5, 1.5, 3, 0, 1e4, 0));
+  EXPECT_EQ(fa.load_id(), fb.load_id());
+  EXPECT_EQ(fa.applied_step(), fb.applied_step());
+  ASSERT_EQ(ca.Send(seq + 1, StepCommand(40)).code(), 0);
+  ASSERT_EQ(cb.Send(4, StepCommand(40)).code(), 0);
+  const InspectReply ea = InspectAt(*stub_, a, 50), eb = InspectAt(*stub_, b, 50);
+  EXPECT_EQ(ea.step(), 50);
+  EXPECT_TRUE(BitIdentical(ea.control_positions(), eb.control_positions()));
+  EXPECT_TRUE(BitIdentical(ea.surface_positions(), eb.surface_positions()));
+  EXPECT_FALSE(BitIdentical(ea.control_positions(), ia.control_positions()));  // it moved
+}
+
+TEST_F(LiveTest, AResendAfterADroppedConnectionIsAppliedExactlyOnce) {
+  // Paused sessions: every command below applies at step 0, whatever the
+  // timing, so a reference session can get the same history.
+  const Session s = Create("block3", 1, true);
+  const Session ref = Create("block3", 1, true);
+  Command gravity;
+  gravity.mutable_set_gravity()->set_y(-3);
+  Command fix;
+  fix.mutable_fix_region()->mutable_sphere()->mutable_center()->set_x(3);
+  fix.mutable_fix_region()->mutable_sphere()->mutable_center()->set_z(3);
+  fix.mutable_fix_region()->mutable_sphere()->set_radius(0.2);
+  std::vector<Command> script = {ForceCommand(1.5, 1.5, 3, 1e4, 0, 0), gravity,
+                                 ForceCommand(0.5, 1.5, 3, 0, 1e4, 0), fix,
+                                 ForceCommand(2.5, 1.5, 3, 0, 0, -1e4),
+                                 ForceCommand(1.5, 0.5, 2, 0, 5e3, 0)};
+  std::vector<CommandReply> first(script.size());
+  {
+    CommandStream c(*stub_, s, "resender");
+    for (size_t i = 0; i < script.size(); ++i) ASSERT_TRUE(c.Write(i + 1, script[i]));
+    // Read only half the answers, then the connection "breaks".
+    for (size_t i = 0; i < 3; ++i) ASSERT_TRUE(c.Read(&first[i]));
+    c.Cancel();
+  }
+  // The client does not know what happened to 4..6: it resends everything.
+  CommandStream c(*stub_, s, "resender");
+  std::vector<CommandReply> second;
+  for (size_t i = 0; i < script.size(); ++i) second.push_back(c.Send(i + 1, script[i]));
+  for (size_t i = 0; i < script.size(); ++i) {
+    EXPECT_EQ(second[i].code(), 0) << i << ": " << second[i].message();
+    EXPECT_EQ(second[i].applied_step(), 0) << i;
+  }
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_TRUE(second[i].duplicate()) << i;
+    EXPECT_EQ(second[i].load_id(), first[i].load_id()) << i;
+  }
+  // Ids are handed out once per applied command: distinct and increasing.
+  EXPECT_LT(second[0].load_id(), second[2].load_id());
+  EXPECT_LT(second[2].load_id(), second[3].constraint_id());
+  EXPECT_LT(second[3].constraint_id(), second[4].load_id());
+  EXPECT_LT(second[4].load_id(), second[5].load_id());
+  // And resending once more changes nothing either.
+  for (size_t i = 0; i < script.size(); ++i) {
+    const CommandReply third = c.Send(i + 1, script[i]);
+    EXPECT_TRUE(third.duplicate());
+    EXPECT_EQ(third.applied_step(), second[i].applied_step());
+    EXPECT_EQ(third.load_id(), second[i].load_id());
+    EXPECT_EQ(third.constraint_id(), second[i].constraint_id());
+  }
+  const SessionStats stats = StatsOf(*stub_, s);
+  EXPECT_EQ(stats.commands_applied(), 6);
+  EXPECT_GE(stats.commands_duplicate(), 9);
+  ASSERT_EQ(c.Send(7, StepCommand(15)).code(), 0);
+
+  // The reference session gets each command once.
+  CommandStream cr(*stub_, ref, "reference");
+  for (size_t i = 0; i < script.size(); ++i) {
+    const CommandReply r = cr.Send(i + 1, script[i]);
+    EXPECT_EQ(r.applied_step(), 0) << i;
+    EXPECT_EQ(r.load_id(), second[i].load_id()) << i;
+    EXPECT_EQ(r.constraint_id(), second[i].constraint_id()) << i;
+  }
+  ASSERT_EQ(cr.Send(7, StepCommand(15)).code(), 0);
+  const InspectReply a = InspectAt(*stub_, s, 15), b = InspectAt(*stub_, ref, 15);
+  EXPECT_EQ(a.step(), 15);
+  EXPECT_TRUE(BitIdentical(a.control_positions(), b.control_positions()));
+  EXPECT_TRUE(BitIdentical(a.surface_positions(), b.surface_positions()));
+  // A seq below the last one whose answer is not kept: OUT_OF_RANGE.
+  ServerOptions small = Options();
+  small.loop.core.answer_cache = 2;
+  Start(small);
+  const Session t = Create("block3", 1, true);
+  CommandStream ct(*stub_, t, "forgetful");
+  for (uint64_t i = 1; i <= 4; ++i) ASSERT_EQ(ct.Send(i, StepCommand(1)).code(), 0);
+  const CommandReply old = ct.Send(1, StepCommand(1));
+  EXPECT_EQ(old.code(), 11);
+  EXPECT_EQ(old.applied_step(), -1);
+  EXPECT_THAT(old.message(), HasSubstr("keeps the last 2 per client"));
+  EXPECT_TRUE(ct.Send(4, StepCommand(1)).duplicate());
+}
+
+TEST_F(LiveTest, WrongOrMissingTokensAreRefusedOnEveryCall) {
+  const Session s = Create("block3", 1, true);
+  Session wrong = s;
+  wrong.set_token(std::string(32, '0'));
+  Session missing = s;
+  missing.clear_token();
+  for (const Session& bad : {wrong, missing}) {
+    SCOPED_TRACE(bad.token().empty() ? "missing" : "wrong");
+    {
+      grpc::ClientContext context;
+      context.set_deadline(Deadline());
+      SessionStats stats;
+      EXPECT_EQ(stub_->GetStats(&context, RefOf(bad), &stats).error_code(),
+                grpc::StatusCode::PERMISSION_DENIED);
+    }
+    {
+      grpc::Status status;
+      InspectAt(*stub_, bad, 0, true, true, &status);
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+    }
+    {
+      grpc::ClientContext context;
+      context.set_deadline(Deadline());
+      WatchRequest r;
+      *r.mutable_session() = RefOf(bad);
+      auto reader = stub_->Watch(&context, r);
+      Frame f;
+      EXPECT_FALSE(reader->Read(&f));
+      const grpc::Status status = reader->Finish();
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+      EXPECT_THAT(status.error_message(), HasSubstr("token"));
+    }
+    {
+      CommandStream c(*stub_, bad, "intruder");
+      ASSERT_TRUE(c.Write(1, StepCommand(5)));
+      CommandReply r;
+      EXPECT_FALSE(c.Read(&r));
+      EXPECT_EQ(c.Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
+    }
+  }
+  // A stream opened with the right token cannot switch to a wrong one.
+  CommandStream c(*stub_, s, "switcher");
+  ASSERT_EQ(c.Send(1, StepCommand(1)).code(), 0);
+  CommandRequest r;
+  *r.mutable_session() = RefOf(wrong);
+  r.set_client_id("switcher");
+  r.set_seq(2);
+  *r.mutable_command() = StepCommand(1);
+  ASSERT_TRUE(c.WriteRaw(r));
+  CommandReply reply;
+  EXPECT_FALSE(c.Read(&reply));
+  EXPECT_EQ(c.Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  // Nothing was applied by the refused calls.
+  EXPECT_EQ(StatsOf(*stub_, s).commands_applied(), 1);
+}
+
+TEST_F(LiveTest, CommandsBeyondTheRateLimitAreRefusedAndCanBeResent) {
+  ServerOptions o = Options();
+  o.loop.commands_per_second = 5;
+  Start(o);
+  const Session s = Create("block3", 1, true);
+  CommandStream c(*stub_, s, "hasty");
+  int ok = 0, limited = 0;
+  uint64_t first_limited = 0;
+  for (uint64_t i = 1; i <= 20; ++i) {
+    const CommandReply r = c.Send(i, StepCommand(1));
+    if (r.code() == 0) ++ok;
+    if (r.code() == 8) {
+      ++limited;
+      if (first_limited == 0) first_limited = i;
+      EXPECT_EQ(r.applied_step(), -1);
+      EXPECT_THAT(r.message(), HasSubstr("--max_commands_per_second"));
+    }
+  }
+  EXPECT_GE(ok, 5);
+  EXPECT_GE(limited, 10);
+  EXPECT_EQ(StatsOf(*stub_, s).commands_rate_limited(), limited);
+  EXPECT_EQ(StatsOf(*stub_, s).commands_applied(), ok);
+  // A refused command was not consumed: the same seq is applied later.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  const CommandReply later = c.Send(21, StepCommand(1));
+  EXPECT_EQ(later.code(), 0);
+  EXPECT_FALSE(later.duplicate());
+}
+
+TEST_F(LiveTest, NonFiniteWatchRatesAndTooManyWatchersAreRefused) {
+  ServerOptions o = Options();
+  o.loop.max_watchers = 1;
+  Start(o);
+  const Session s = Create("block3", 1, true);
+  {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    WatchRequest r;
+    *r.mutable_session() = RefOf(s);
+    r.set_rate_hz(std::numeric_limits<double>::quiet_NaN());
+    auto reader = stub_->Watch(&context, r);
+    Frame f;
+    EXPECT_FALSE(reader->Read(&f));
+    const grpc::Status st = reader->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(st.error_message(), "rate_hz: must be finite, got nan");
+  }
+  grpc::ClientContext first;
+  first.set_deadline(Deadline());
+  WatchRequest r;
+  *r.mutable_session() = RefOf(s);
+  auto one = stub_->Watch(&first, r);
+  Frame f;
+  ASSERT_TRUE(one->Read(&f));
+  EXPECT_TRUE(f.has_keyframe());
+  EXPECT_EQ(f.watcher_id(), 1);
+  grpc::ClientContext second;
+  second.set_deadline(Deadline());
+  auto two = stub_->Watch(&second, r);
+  EXPECT_FALSE(two->Read(&f));
+  const grpc::Status st = two->Finish();
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_THAT(st.error_message(), HasSubstr("maximum of 1 watchers"));
+  first.TryCancel();
+}
+
+TEST_F(LiveTest, StatsReportStepTimesPhasesAndCounts) {
+  const Session s = Create("block3", 1, true);
+  CommandStream c(*stub_, s, "stats");
+  ASSERT_EQ(c.Send(1, StepCommand(30)).code(), 0);
+  ASSERT_EQ(c.Send(2, StepCommand(0)).code(), 3);
+  InspectAt(*stub_, s, 30, false, false);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 30);
+  EXPECT_TRUE(st.paused());
+  EXPECT_DOUBLE_EQ(st.time_step(), 1e-3);
+  EXPECT_NEAR(st.time(), 0.030, 1e-12);
+  EXPECT_EQ(st.steps_measured(), 30);
+  EXPECT_GT(st.step_ms_median(), 0);
+  EXPECT_GE(st.step_ms_p99(), st.step_ms_median());
+  EXPECT_EQ(st.commands_applied(), 1);
+  EXPECT_EQ(st.commands_rejected(), 1);
+  EXPECT_GE(st.overruns(), 0);
+  std::vector<std::string> names;
+  for (const PhaseTime& p : st.phases()) {
+    names.push_back(p.name());
+    EXPECT_GE(p.median_ms(), 0) << p.name();
+  }
+  // block3 (local frame, central difference): the measure and the solve run.
+  EXPECT_THAT(names, ::testing::IsSupersetOf({"measure", "solve"}));
+  EXPECT_EQ(st.watchers(), 0);
+  EXPECT_EQ(st.journal_records(), 0);  // no data dir
+}
+
+TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {
+  // h = 10 microseconds: no machine steps this block in real time, so every
+  // step overruns. The loop must count that and re-anchor its clock rather
+  // than owe ever more steps (counts only; no wall time is asserted).
+  const Session s = CreateText(R"(
+    name: "tiny_step"
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 } }
+    constraints { fixed { box { min { z: -0.01 } max { x: 3 y: 3 z: 0.01 } } } }
+    solver { time_step: 1e-5 }
+  )", /*paused=*/true);
+  CommandStream c(*stub_, s, "overrun");
+  ASSERT_EQ(c.Send(1, StepCommand(200)).code(), 0);
+  InspectAt(*stub_, s, 200, false, false);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 200);
+  EXPECT_GT(st.overruns(), 0);
+  EXPECT_GT(st.steps_dropped(), 0);
+  // Each overrun drops the lag of that one step: the lag reported is the
+  // last step's, not an accumulated debt.
+  EXPECT_LE(st.steps_behind(), st.steps_dropped());
+}
+
+TEST_F(LiveTest, ClosingASessionFinishesItsStreams) {
+  const Session s = Create("block3", 1, false);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline());
+  WatchRequest r;
+  *r.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, r);
+  Frame f;
+  ASSERT_TRUE(reader->Read(&f));
+  CommandStream c(*stub_, s, "closer");
+  ASSERT_EQ(c.Send(1, StepCommand(3)).code(), 0);
+  {
+    grpc::ClientContext context;
+    google::protobuf::Empty e;
+    ASSERT_TRUE(stub_->CloseSession(&context, RefOf(s), &e).ok());
+  }
+  while (reader->Read(&f)) {
+  }
+  const grpc::Status ws = reader->Finish();
+  EXPECT_EQ(ws.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(ws.error_message(), HasSubstr("was closed"));
+  CommandReply reply;
+  EXPECT_FALSE(c.Read(&reply));
+  EXPECT_EQ(c.Finish().error_code(), grpc::StatusCode::UNAVAILABLE);
+}
+
+class TempDir {
+ public:
+  TempDir() {
+    std::string t = ::testing::TempDir() + "dynsolid_live_XXXXXX";
+    path_ = ::mkdtemp(t.data());
+  }
+  ~TempDir() { std::system(absl::StrCat("rm -rf '", path_, "'").c_str()); }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+TEST_F(LiveTest, SessionsSurviveARestartWithTheirTokensStateAndAnswers) {
+  TempDir dir;
+  ServerOptions o = Options();
+  o.data_dir = dir.path();
+  o.loop.snapshot_every_steps = 7;  // snapshots and journal replay both
+  Start(o);
+  const Session s = Create("block3", 1, true);
+  const Session ref = Create("block3", 1, true);
+  // force, step 10, save, step 10: each step count is waited for, so the
+  // commands apply at steps 0, 0, 10, 10.
+  Command save;
+  save.mutable_save();
+  const std::vector<std::pair<Command, int64_t>> script = {
+      {ForceCommand(1.5, 1.5, 3, 1e4, 0, 0), 0}, {StepCommand(10), 10}, {save, 10},
+      {StepCommand(10), 20}};
+  std::vector<CommandReply> replies;
+  {
+    CommandStream c(*stub_, s, "persist");
+    for (size_t i = 0; i < script.size(); ++i) {
+      replies.push_back(c.Send(i + 1, script[i].first));
+      InspectAt(*stub_, s, script[i].second, false, false);
+    }
+    c.Finish();
+  }
+  EXPECT_EQ(replies[2].code(), 0) << replies[2].message();
+  EXPECT_EQ(replies[2].saved().step(), 10);
+  EXPECT_GT(replies[2].saved().bytes(), 0);
+  const InspectReply before = InspectAt(*stub_, s, 20);
+  const SessionStats stats = StatsOf(*stub_, s);
+  EXPECT_EQ(stats.journal_records(), 4);
+  EXPECT_GE(stats.snapshots(), 2);
+
+  server_->Shutdown(absl::Seconds(2));
+  Start(o);  // same data dir
+  EXPECT_EQ(server_->recovered_sessions(), 2);
+  const InspectReply after = InspectAt(*stub_, s, 0);
+  EXPECT_EQ(after.step(), 20);
+  EXPECT_TRUE(after.paused());
+  EXPECT_TRUE(BitIdentical(after.control_positions(), before.control_positions()));
+  EXPECT_TRUE(BitIdentical(after.surface_positions(), before.surface_positions()));
+  // The answers survived: a resend is a duplicate with the original step.
+  CommandStream c(*stub_, s, "persist");
+  const CommandReply dup = c.Send(3, save);
+  EXPECT_TRUE(dup.duplicate());
+  EXPECT_EQ(dup.applied_step(), 10);
+  EXPECT_EQ(dup.saved().step(), 10);
+  // And it continues exactly like a session that never restarted.
+  ASSERT_EQ(c.Send(5, StepCommand(15)).code(), 0);
+  CommandStream cr(*stub_, ref, "persist");
+  for (size_t i = 0; i < script.size(); ++i) {
+    if (script[i].first.has_save()) continue;
+    cr.Send(i + 1, script[i].first);
+    InspectAt(*stub_, ref, script[i].second, false, false);
+  }
+  cr.Send(5, StepCommand(15));
+  const InspectReply x = InspectAt(*stub_, s, 35), y = InspectAt(*stub_, ref, 35);
+  EXPECT_EQ(x.step(), 35);
+  EXPECT_TRUE(BitIdentical(x.control_positions(), y.control_positions()));
+  // A wrong token is still refused after the restart.
+  Session wrong = s;
+  wrong.set_token(std::string(32, 'f'));
+  grpc::Status status;
+  InspectAt(*stub_, wrong, 0, false, false, &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  // Closing deletes the session's directory.
+  grpc::ClientContext context;
+  google::protobuf::Empty e;
+  ASSERT_TRUE(stub_->CloseSession(&context, RefOf(s), &e).ok());
+  EXPECT_FALSE(ReadWholeFile(dir.path() + "/sessions/" + s.id() + "/manifest.binpb").ok());
+}
+
+TEST_F(LiveTest, TlsServesClientsThatTrustItsCertificateOnly) {
+  TempDir dir;
+  const std::string cert = dir.path() + "/cert.pem", key = dir.path() + "/key.pem";
+  const std::string cmd = absl::StrCat(
+      "openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=localhost "
+      "-addext subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout '", key, "' -out '", cert,
+      "' >/dev/null 2>&1");
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << "openssl could not make a certificate";
+  ServerOptions o = Options();
+  o.tls_cert_file = cert;
+  o.tls_key_file = key;
+  Start(o);
+  grpc::SslCredentialsOptions ssl;
+  ssl.pem_root_certs = *ReadWholeFile(cert);
+  grpc::ChannelArguments args;
+  args.SetSslTargetNameOverride("localhost");
+  auto tls = Sessions::NewStub(grpc::CreateCustomChannel(
+      absl::StrCat("localhost:", server_->port()), grpc::SslCredentials(ssl), args));
+  CreateSessionRequest r;
+  r.set_builtin_scene("block3");
+  r.set_levels_override(1);
+  r.set_start_paused(true);
+  Session s;
+  {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    const grpc::Status st = tls->CreateSession(&context, r, &s);
+    ASSERT_TRUE(st.ok()) << st.error_message();
+  }
+  CommandStream c(*tls, s, "tls");
+  EXPECT_EQ(c.Send(1, StepCommand(2)).code(), 0);
+  EXPECT_EQ(InspectAt(*tls, s, 2).step(), 2);
+  // A plaintext client cannot talk to it.
+  {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline(5));
+    Session ignored;
+    EXPECT_FALSE(stub_->CreateSession(&context, r, &ignored).ok());
+  }
+  // Nor a TLS client that does not trust the certificate.
+  {
+    grpc::SslCredentialsOptions other;
+    other.pem_root_certs = "";
+    auto untrusting = Sessions::NewStub(grpc::CreateCustomChannel(
+        absl::StrCat("localhost:", server_->port()), grpc::SslCredentials(other), args));
+    grpc::ClientContext context;
+    context.set_deadline(Deadline(5));
+    Session ignored;
+    EXPECT_FALSE(untrusting->CreateSession(&context, r, &ignored).ok());
+  }
+  // Both TLS files or neither.
+  ServerOptions half = Options();
+  half.tls_cert_file = cert;
+  EXPECT_EQ(Server::Start(half).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace dynsolid::server

@@ -170,6 +170,7 @@ absl::StatusOr<int64_t> SessionLoop::AddWatcher(std::shared_ptr<WatchSink> sink)
         " watchers (--max_watchers_per_session)"));
   }
   const int64_t id = next_watcher_id_++;
+  sink->set_watcher_id(id);
   WatchSink* key = sink.get();
   watchers_.emplace(key, WatcherEntry{std::move(sink), id});
   publish_requested_ = true;  // its first frame now, not at the next tick
@@ -264,7 +265,9 @@ void SessionLoop::Run() {
       }
       if (now >= next_step) {
         const Clock::time_point t0 = Clock::now();
-        (void)core_->StepOnce();
+        if (absl::Status s = core_->StepOnce(); !s.ok()) {
+          SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
+        }
         const Clock::time_point t1 = Clock::now();
         RecordStep(duration<double, std::milli>(t1 - t0).count());
         UpdateCounters();
@@ -353,7 +356,7 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands) {
       reply.mutable_saved()->set_bytes(static_cast<int64_t>(batch.snapshot.size()));
     }
     if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
-      ServerLog().debug("session {}: client {} seq {} at step {}: code {} {}", id_,
+      SessionLog().debug("session {}: client {} seq {} at step {}: code {} {}", id_,
                         reply.client_id(), reply.seq(), reply.applied_step(), reply.code(),
                         reply.message());
     }
@@ -492,8 +495,11 @@ void SessionLoop::Persist() {
       batch = std::move(persist_queue_.front());
       persist_queue_.pop_front();
     }
-    absl::Status s;
-    if (!batch.framed.empty()) {
+    // After a failed write nothing more is written (a record after a torn
+    // one would be unreachable on recovery) and nothing more is
+    // acknowledged: the session's commands fail until it is recovered.
+    absl::Status s = persist_error_;
+    if (s.ok() && !batch.framed.empty()) {
       s = journal_->Append(batch.framed);
       if (s.ok()) s = journal_->Sync();
     }
@@ -502,12 +508,19 @@ void SessionLoop::Persist() {
     }
     if (!s.ok()) {
       // Nothing is acknowledged that is not durable.
-      ServerLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      if (persist_error_.ok()) {
+        JournalLog().error("session {}: persistence failed: {}", id_, s.ToString());
+      }
+      persist_error_ = s;
       for (auto& [sink, reply] : batch.replies) {
         sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
                                                     s.message())));
       }
       continue;
+    }
+    if (!batch.snapshot.empty()) {
+      JournalLog().debug("session {}: snapshot at step {} ({} bytes)", id_, batch.snapshot_step,
+                         batch.snapshot.size());
     }
     {
       absl::MutexLock lock(&stats_mu_);

@@ -56,6 +56,8 @@ class WatchSink {
   virtual void Offer(std::shared_ptr<const SurfaceSnapshot> snapshot) = 0;
   virtual void Stop(const absl::Status& status) = 0;
   virtual WatcherStats Stats() const = 0;
+  // Its id, set by AddWatcher before the first Offer.
+  virtual void set_watcher_id(int64_t id) = 0;
   virtual const FieldChoice& fields() const = 0;
   virtual double rate_hz() const = 0;
 };
@@ -119,6 +121,8 @@ class SessionLoop {
 
   SessionStats Stats() const;
   double time_step() const { return time_step_; }
+  // Shared by this session's watchers' encoders.
+  const std::shared_ptr<EncodeCache>& encode_cache() const { return encode_cache_; }
 
  private:
   SessionLoop(std::string session_id, std::unique_ptr<SimCore> core, LoopOptions options,
@@ -160,6 +164,7 @@ class SessionLoop {
   const std::string dir_;
   const double time_step_;
   std::unique_ptr<SimCore> core_;  // simulation thread only (after Start)
+  const std::shared_ptr<EncodeCache> encode_cache_ = std::make_shared<EncodeCache>();
 
   // Queues and membership.
   mutable absl::Mutex mu_;
@@ -198,6 +203,7 @@ class SessionLoop {
   std::deque<PersistBatch> persist_queue_ ABSL_GUARDED_BY(persist_mu_);
   bool persist_stop_ ABSL_GUARDED_BY(persist_mu_) = false;
   std::thread persist_thread_;
+  absl::Status persist_error_;  // persistence thread only
 
   // Stats (written by the simulation and persistence threads).
   mutable absl::Mutex stats_mu_;

@@ -69,9 +69,12 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
   auto core = std::make_unique<SimCore>(solid->solid, core_options, request.start_paused());
   absl::Status error;
   std::shared_ptr<const SolidSession> session =
-      OpenLocked(std::move(id), std::move(token), scene->scene.name(), created, *std::move(solid),
-                 std::move(core), Recovered{}, std::move(dir), &error);
-  if (session == nullptr) return error;
+      OpenLocked(id, std::move(token), scene->scene.name(), created, *std::move(solid),
+                 std::move(core), Recovered{}, dir, &error);
+  if (session == nullptr) {
+    if (!dir.empty()) (void)RemoveDirTree(dir);
+    return error;
+  }
   return session;
 }
 
@@ -100,7 +103,7 @@ int SessionRegistry::RecoverAll() {
     core_options.can_save = true;
     absl::StatusOr<RecoveredSession> r = RecoverSession(dir, options_.build, core_options);
     if (!r.ok()) {
-      ServerLog().error("cannot recover the session in {}: {}", dir, r.status().ToString());
+      SessionLog().error("cannot recover the session in {}: {}", dir, r.status().ToString());
       continue;
     }
     const persist::Manifest& m = r->manifest;
@@ -117,7 +120,7 @@ int SessionRegistry::RecoverAll() {
       ServerLog().error("cannot reopen the session in {}: {}", dir, error.ToString());
       continue;
     }
-    ServerLog().info("session {} recovered: {}", m.id(), r->summary);
+    SessionLog().info("session {} recovered: {}", m.id(), r->summary);
     ++opened;
   }
   return opened;

@@ -20,11 +20,11 @@ namespace {
 class WatchState final : public WatchSink, public std::enable_shared_from_this<WatchState> {
  public:
   WatchState(grpc::ServerWriteReactor<Frame>* reactor, WorkQueue& encoders, FieldChoice fields,
-             double rate_hz)
+             double rate_hz, std::shared_ptr<EncodeCache> cache)
       : reactor_(reactor), encoders_(encoders), fields_(fields), rate_hz_(rate_hz),
-        encoder_(fields) {}
+        encoder_(fields, std::move(cache)) {}
 
-  void set_id(int64_t id) {
+  void set_watcher_id(int64_t id) override {
     absl::MutexLock lock(&mu_);
     id_ = id;
   }
@@ -147,7 +147,7 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
       return;
     }
     // Only the holder of busy_ touches the encoder and frame_.
-    const bool key = encoder_.Encode(*snap, &frame_);
+    const bool key = encoder_.Encode(snap, &frame_);
     frame_.set_skipped(skipped);
     frame_.set_watcher_id(id);
     {
@@ -206,15 +206,15 @@ class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
     }
     session_ = *std::move(session);
     FieldChoice fields{request.displacement(), request.strain(), request.stiffness()};
-    state_ = std::make_shared<WatchState>(this, encoders, fields, rate);
+    state_ = std::make_shared<WatchState>(this, encoders, fields, rate,
+                                          session_->loop().encode_cache());
     absl::StatusOr<int64_t> id = session_->loop().AddWatcher(state_);
     if (!id.ok()) {
       state_.reset();
       Finish(ToGrpcStatus(id.status()));
       return;
     }
-    state_->set_id(*id);
-    ServerLog().info("session {}: watcher {} joined at {:.0f} Hz", session_->id(), *id, rate);
+    WatchLog().info("session {}: watcher {} joined at {:.0f} Hz", session_->id(), *id, rate);
   }
 
   void OnWriteDone(bool ok) override { state_->OnWriteDone(ok); }
@@ -222,7 +222,14 @@ class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
     if (state_ != nullptr) state_->OnCancel();
   }
   void OnDone() override {
-    if (state_ != nullptr) session_->loop().RemoveWatcher(state_.get());
+    if (state_ != nullptr) {
+      const WatcherStats w = state_->Stats();
+      WatchLog().info("session {}: watcher {} left after {} frames ({} keyframes, {} bytes), {} "
+                      "skipped",
+                      session_->id(), w.watcher_id(), w.frames_sent(), w.keyframes_sent(),
+                      w.bytes_sent(), w.frames_skipped());
+      session_->loop().RemoveWatcher(state_.get());
+    }
     delete this;
   }
 
@@ -392,7 +399,7 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
         session_.reset();
         return r;
       }
-      ServerLog().info("session {}: command stream from {}", session_->id(), context_->peer());
+      SessionLog().info("session {}: command stream from {}", session_->id(), context_->peer());
     } else if (request_.has_session()) {
       if (request_.session().id() != session_->id()) {
         return absl::InvalidArgumentError(absl::StrCat(

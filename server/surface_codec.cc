@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 
@@ -66,6 +67,42 @@ class BitReader {
   size_t at_ = 0;
 };
 
+// Rice code (service.proto Delta): u = z >> k ones, a zero, k low bits;
+// u >= 16 escapes to 16 ones and 17 raw bits.
+constexpr int kMaxRiceK = 16;
+constexpr uint32_t kRiceEscape = 16;
+
+size_t RiceBits(uint32_t z, int k) {
+  const uint32_t u = z >> k;
+  return u < kRiceEscape ? u + 1 + k : kRiceEscape + 17;
+}
+
+void PutRice(BitWriter& w, uint32_t z, int k) {
+  const uint32_t u = z >> k;
+  if (u < kRiceEscape) {
+    for (uint32_t i = 0; i < u; ++i) w.Put(1, 1);
+    w.Put(0, 1);
+    w.Put(z & ((1u << k) - 1), k);
+  } else {
+    for (uint32_t i = 0; i < kRiceEscape; ++i) w.Put(1, 1);
+    w.Put(z, 17);
+  }
+}
+
+bool GetRice(BitReader& r, int k, uint32_t* z) {
+  uint32_t u = 0;
+  for (;;) {
+    uint32_t bit = 0;
+    if (!r.Get(1, &bit)) return false;
+    if (bit == 0) break;
+    if (++u == kRiceEscape) return r.Get(17, z);
+  }
+  uint32_t low = 0;
+  if (!r.Get(k, &low)) return false;
+  *z = (u << k) | low;
+  return true;
+}
+
 void SetVec3(const std::array<double, 3>& a, Vec3* v) {
   v->set_x(a[0]);
   v->set_y(a[1]);
@@ -111,146 +148,224 @@ Grid GridFor(const std::vector<double>& positions) {
   return g;
 }
 
-void SurfaceEncoder::EncodeKeyframe(const SurfaceSnapshot& s, const std::vector<uint16_t>* codes,
-                                    Frame* frame) {
+bool GridFits(const Grid& g, const std::vector<double>& positions) {
+  const size_t n = positions.size() / 3;
+  std::array<double, 3> lo{}, hi{};
+  for (size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      const double x = positions[3 * i + a];
+      if (i == 0 || x < lo[a]) lo[a] = x;
+      if (i == 0 || x > hi[a]) hi[a] = x;
+      if (Quantize(g, a, x) < 0) return false;
+    }
+  }
+  int big = 0;
+  for (int a = 1; a < 3; ++a) {
+    if (g.step[a] > g.step[big]) big = a;
+  }
+  return (hi[big] - lo[big]) >= 0.25 * g.step[big] * kMaxCode;
+}
+
+std::shared_ptr<const EncodeCache::Result> EncodeCache::Find(const Key& key) {
+  absl::MutexLock lock(&mu_);
+  for (auto it = entries_.rbegin(); it != entries_.rend(); ++it) {
+    if (it->first == key) {
+      ++hits_;
+      return it->second;
+    }
+  }
+  ++misses_;
+  return nullptr;
+}
+
+void EncodeCache::Insert(const Key& key, std::shared_ptr<const Result> result) {
+  std::shared_ptr<const Result> dropped;  // freed after the lock
+  absl::MutexLock lock(&mu_);
+  entries_.emplace_back(key, std::move(result));
+  if (entries_.size() > kMaxEntries) {
+    dropped = std::move(entries_.front().second);
+    entries_.pop_front();
+  }
+}
+
+std::pair<int64_t, Grid> EncodeCache::KeyGrid(const std::vector<double>& positions) {
+  absl::MutexLock lock(&mu_);
+  if (grid_id_ == 0 || !GridFits(grid_, positions)) {
+    grid_ = GridFor(positions);
+    ++grid_id_;
+  }
+  return {grid_id_, grid_};
+}
+
+int64_t EncodeCache::hits() const {
+  absl::MutexLock lock(&mu_);
+  return hits_;
+}
+int64_t EncodeCache::misses() const {
+  absl::MutexLock lock(&mu_);
+  return misses_;
+}
+
+void SurfaceEncoder::MakeKeyframe(const SurfaceSnapshot& s, EncodeCache::Result* r) const {
   const SurfaceTopology& topo = *s.topology;
   const size_t n = static_cast<size_t>(topo.vertex_count);
-  if (codes == nullptr) {
-    grid_ = GridFor(s.positions);
-    codes_.assign(3 * n, 0);
-    for (size_t i = 0; i < 3 * n; ++i) {
-      const int64_t q = Quantize(grid_, static_cast<int>(i % 3), s.positions[i]);
-      codes_[i] = static_cast<uint16_t>(std::clamp<int64_t>(q, 0, kMaxCode));
-    }
+  if (cache_ != nullptr) {
+    std::tie(r->grid_id, r->grid) = cache_->KeyGrid(s.positions);
   } else {
-    codes_ = *codes;
+    r->grid_id = grid_id_ + 1;
+    r->grid = GridFor(s.positions);
   }
-  Keyframe* k = frame->mutable_keyframe();
+  auto codes = std::make_shared<std::vector<uint16_t>>(3 * n);
+  for (size_t i = 0; i < 3 * n; ++i) {
+    const int64_t q = Quantize(r->grid, static_cast<int>(i % 3), s.positions[i]);
+    (*codes)[i] = static_cast<uint16_t>(std::clamp<int64_t>(q, 0, kMaxCode));
+  }
+  r->keyframe = true;
+  r->frame.clear_delta();
+  Keyframe* k = r->frame.mutable_keyframe();
   k->set_topology_version(topo.version);
   k->set_vertex_count(topo.vertex_count);
   k->mutable_quads()->Assign(topo.quads.begin(), topo.quads.end());
   k->mutable_nodes()->Assign(topo.nodes.begin(), topo.nodes.end());
-  SetVec3(grid_.origin, k->mutable_grid()->mutable_origin());
-  SetVec3(grid_.step, k->mutable_grid()->mutable_step());
-  SetBound(grid_, k->mutable_error_bound());
+  SetVec3(r->grid.origin, k->mutable_grid()->mutable_origin());
+  SetVec3(r->grid.step, k->mutable_grid()->mutable_step());
+  SetBound(r->grid, k->mutable_error_bound());
   std::string* bytes = k->mutable_codes();
   bytes->resize(6 * n);
   for (size_t i = 0; i < 3 * n; ++i) {
-    (*bytes)[2 * i] = static_cast<char>(codes_[i] & 0xff);
-    (*bytes)[2 * i + 1] = static_cast<char>(codes_[i] >> 8);
+    (*bytes)[2 * i] = static_cast<char>((*codes)[i] & 0xff);
+    (*bytes)[2 * i + 1] = static_cast<char>((*codes)[i] >> 8);
   }
   SurfaceFields* f = k->mutable_fields();
   if (fields_.displacement) f->mutable_displacement()->Assign(s.displacement.begin(), s.displacement.end());
   if (fields_.strain) f->mutable_strain()->Assign(s.strain.begin(), s.strain.end());
   if (fields_.stiffness) f->mutable_stiffness()->Assign(s.stiffness.begin(), s.stiffness.end());
   if (!fields_.any()) k->clear_fields();
+  r->codes = std::move(codes);
 }
 
-bool SurfaceEncoder::Encode(const SurfaceSnapshot& s, Frame* frame) {
-  frame->Clear();
-  frame->set_step(s.step);
-  frame->set_time(s.time);
+std::shared_ptr<EncodeCache::Result> SurfaceEncoder::Compute(const SurfaceSnapshot& s) const {
+  auto r = std::make_shared<EncodeCache::Result>();
+  r->frame.set_step(s.step);
+  r->frame.set_time(s.time);
   const SurfaceTopology& topo = *s.topology;
   const size_t n = static_cast<size_t>(topo.vertex_count);
 
-  bool key = !has_base_ || topo.version != topology_version_ ||
-             (fields_.any() && s.fields_version != fields_version_) || codes_.size() != 3 * n;
-  std::vector<uint16_t> codes;
+  bool key = base_ == nullptr || topo.version != base_->topology->version ||
+             (fields_.any() && s.fields_version != base_->fields_version) ||
+             codes_ == nullptr || codes_->size() != 3 * n || !GridFits(grid_, s.positions);
   if (!key) {
-    // Quantize on the watcher's grid; a vertex off the grid, or a solid
-    // that shrank below a quarter of the grid, asks for a new keyframe.
-    codes.resize(3 * n);
-    std::array<double, 3> lo{}, hi{};
-    for (size_t i = 0; i < n && !key; ++i) {
-      for (int a = 0; a < 3; ++a) {
-        const double x = s.positions[3 * i + a];
-        if (i == 0 || x < lo[a]) lo[a] = x;
-        if (i == 0 || x > hi[a]) hi[a] = x;
-        const int64_t q = Quantize(grid_, a, x);
-        if (q < 0) {
-          key = true;
-          break;
-        }
-        codes[3 * i + a] = static_cast<uint16_t>(q);
-      }
+    const std::vector<uint16_t>& old = *codes_;
+    auto codes = std::make_shared<std::vector<uint16_t>>(3 * n);
+    for (size_t i = 0; i < 3 * n; ++i) {
+      (*codes)[i] = static_cast<uint16_t>(Quantize(grid_, static_cast<int>(i % 3), s.positions[i]));
     }
-    if (!key) {
-      int big = 0;
-      for (int a = 1; a < 3; ++a) {
-        if (grid_.step[a] > grid_.step[big]) big = a;
-      }
-      if ((hi[big] - lo[big]) < 0.25 * grid_.step[big] * kMaxCode) key = true;
-    }
-  }
-
-  if (!key) {
-    // Runs of moved vertices and the largest code difference.
-    Delta* d = frame->mutable_delta();
+    const std::vector<uint16_t>& now = *codes;
+    const auto moved_at = [&](size_t i) {
+      return now[3 * i] != old[3 * i] || now[3 * i + 1] != old[3 * i + 1] ||
+             now[3 * i + 2] != old[3 * i + 2];
+    };
+    // Runs of moved vertices, the largest code difference, Rice costs.
     std::vector<uint32_t> runs;
     uint32_t max_zigzag = 0;
     int32_t moved = 0;
     bool taking = false;
     uint32_t run = 0;
+    std::array<std::array<size_t, kMaxRiceK + 1>, 3> cost{};
     for (size_t i = 0; i < n; ++i) {
-      const bool m = codes[3 * i] != codes_[3 * i] || codes[3 * i + 1] != codes_[3 * i + 1] ||
-                     codes[3 * i + 2] != codes_[3 * i + 2];
+      const bool m = moved_at(i);
       if (m != taking) {
         runs.push_back(run);
         run = 0;
         taking = m;
       }
       ++run;
-      if (m) {
-        ++moved;
-        for (int a = 0; a < 3; ++a) {
-          const int32_t diff = static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a];
-          max_zigzag = std::max(max_zigzag, ZigZag(diff));
-        }
+      if (!m) continue;
+      ++moved;
+      for (int a = 0; a < 3; ++a) {
+        const uint32_t z = ZigZag(static_cast<int32_t>(now[3 * i + a]) - old[3 * i + a]);
+        max_zigzag = std::max(max_zigzag, z);
+        for (int k = 0; k <= kMaxRiceK; ++k) cost[a][k] += RiceBits(z, k);
       }
     }
     if (taking) runs.push_back(run);
     if (moved == 0) runs.clear();
     const int bits = std::max(1, BitWidth(max_zigzag));
-    size_t delta_bytes = (static_cast<size_t>(moved) * 3 * bits + 7) / 8;
-    for (uint32_t r : runs) delta_bytes += VarintSize(r);
+    std::array<int, 3> rice_k{0, 0, 0};
+    size_t rice_bits = 0;
+    for (int a = 0; a < 3; ++a) {
+      for (int k = 1; k <= kMaxRiceK; ++k) {
+        if (cost[a][k] < cost[a][rice_k[a]]) rice_k[a] = k;
+      }
+      rice_bits += cost[a][rice_k[a]];
+    }
+    const size_t fixed_bits = static_cast<size_t>(moved) * 3 * bits;
+    const bool rice = rice_bits < fixed_bits;
+    size_t delta_bytes = ((rice ? rice_bits : fixed_bits) + 7) / 8;
+    for (uint32_t x : runs) delta_bytes += VarintSize(x);
     const int field_count = fields_.displacement + fields_.strain + fields_.stiffness;
     delta_bytes += static_cast<size_t>(moved) * 4 * field_count;
     const size_t key_bytes = 6 * n + 4 * n * field_count;
     if (delta_bytes > key_bytes) {
       key = true;  // a stale watcher: a fresh keyframe is smaller
-      frame->clear_delta();
     } else {
-      d->set_base_step(base_step_);
+      Delta* d = r->frame.mutable_delta();
+      d->set_base_step(base_->step);
       d->mutable_runs()->Assign(runs.begin(), runs.end());
-      d->set_bits(static_cast<uint32_t>(bits));
+      if (rice) {
+        d->set_bits(0);
+        d->mutable_rice_k()->Add(rice_k.begin(), rice_k.end());
+      } else {
+        d->set_bits(static_cast<uint32_t>(bits));
+      }
       d->set_moved(moved);
       SetBound(grid_, d->mutable_error_bound());
       std::string* packed = d->mutable_packed();
-      packed->reserve((static_cast<size_t>(moved) * 3 * bits + 7) / 8);
+      packed->reserve(delta_bytes);
       BitWriter w(packed);
       SurfaceFields* f = d->mutable_fields();
       for (size_t i = 0; i < n; ++i) {
-        if (codes[3 * i] == codes_[3 * i] && codes[3 * i + 1] == codes_[3 * i + 1] &&
-            codes[3 * i + 2] == codes_[3 * i + 2]) {
-          continue;
-        }
+        if (!moved_at(i)) continue;
         for (int a = 0; a < 3; ++a) {
-          w.Put(ZigZag(static_cast<int32_t>(codes[3 * i + a]) - codes_[3 * i + a]), bits);
+          const uint32_t z = ZigZag(static_cast<int32_t>(now[3 * i + a]) - old[3 * i + a]);
+          if (rice) {
+            PutRice(w, z, rice_k[a]);
+          } else {
+            w.Put(z, bits);
+          }
         }
         if (fields_.displacement) f->add_displacement(s.displacement[i]);
         if (fields_.strain) f->add_strain(s.strain[i]);
         if (fields_.stiffness) f->add_stiffness(s.stiffness[i]);
       }
       if (!fields_.any()) d->clear_fields();
-      codes_.swap(codes);
+      r->grid_id = grid_id_;
+      r->grid = grid_;
+      r->codes = std::move(codes);
     }
   }
-  if (key) EncodeKeyframe(s, nullptr, frame);
-  has_base_ = true;
-  base_step_ = s.step;
-  topology_version_ = topo.version;
-  fields_version_ = s.fields_version;
-  return key;
+  if (key) MakeKeyframe(s, r.get());
+  return r;
+}
+
+bool SurfaceEncoder::Encode(std::shared_ptr<const SurfaceSnapshot> s, Frame* frame) {
+  const EncodeCache::Key key{s.get(), base_.get(), base_ != nullptr ? grid_id_ : -1,
+                             fields_.displacement + 2 * fields_.strain + 4 * fields_.stiffness};
+  std::shared_ptr<const EncodeCache::Result> r =
+      cache_ != nullptr ? cache_->Find(key) : nullptr;
+  if (r == nullptr) {
+    std::shared_ptr<EncodeCache::Result> fresh = Compute(*s);
+    fresh->snapshot = s;
+    fresh->base = base_;
+    r = fresh;
+    if (cache_ != nullptr) cache_->Insert(key, r);
+  }
+  frame->CopyFrom(r->frame);
+  grid_id_ = r->grid_id;
+  grid_ = r->grid;
+  codes_ = r->codes;
+  base_ = std::move(s);
+  return r->keyframe;
 }
 
 absl::Status SurfaceDecoder::Apply(const Frame& frame) {
@@ -288,6 +403,12 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
   const size_t n = codes_.size() / 3;
   BitReader r(d.packed());
   const int bits = static_cast<int>(d.bits());
+  const bool rice = d.rice_k_size() > 0;
+  if (rice ? (d.rice_k_size() != 3 || d.rice_k(0) > kMaxRiceK || d.rice_k(1) > kMaxRiceK ||
+              d.rice_k(2) > kMaxRiceK)
+           : (d.moved() > 0 && (bits < 1 || bits > 17))) {
+    return absl::InvalidArgumentError("delta: bad bits or rice_k");
+  }
   size_t at = 0;
   int32_t listed = 0;
   for (int i = 0; i < d.runs_size(); ++i) {
@@ -297,7 +418,9 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
       for (size_t v = at; v < at + len; ++v) {
         for (int a = 0; a < 3; ++a) {
           uint32_t z = 0;
-          if (!r.Get(bits, &z)) return absl::InvalidArgumentError("delta.packed is too short");
+          if (!(rice ? GetRice(r, static_cast<int>(d.rice_k(a)), &z) : r.Get(bits, &z))) {
+            return absl::InvalidArgumentError("delta.packed is too short");
+          }
           const int64_t q = static_cast<int64_t>(codes_[3 * v + a]) + UnZigZag(z);
           if (q < 0 || q > kMaxCode) return absl::InvalidArgumentError("delta code out of range");
           codes_[3 * v + a] = static_cast<uint32_t>(q);

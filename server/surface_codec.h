@@ -13,7 +13,12 @@
 #include <memory>
 #include <vector>
 
+#include <deque>
+#include <utility>
+
+#include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
+#include "absl/synchronization/mutex.h"
 #include "dynsolid/service.pb.h"
 
 namespace dynsolid::server {
@@ -58,27 +63,90 @@ inline constexpr uint32_t kMaxCode = 65535;
 // a point), 65535 steps across.
 Grid GridFor(const std::vector<double>& positions);
 
+// Whether every position quantizes on `grid` and the positions span at
+// least a quarter of the grid on its largest axis (else a keyframe with a
+// new grid is due).
+bool GridFits(const Grid& grid, const std::vector<double>& positions);
+
+// Shares encoding work between the watchers of one session. A watcher's
+// state is a function of (its grid, the snapshot of its last frame): its
+// codes are that snapshot quantized on that grid. Watchers in the same
+// state that encode the same snapshot therefore produce the same frame
+// body, which the first one computes and the others copy. The cache also
+// keeps the session's current keyframe grid, so watchers that key at
+// different times converge on one grid (and then share work).
+// Thread-safe.
+class EncodeCache {
+ public:
+  struct Key {
+    const SurfaceSnapshot* snapshot = nullptr;
+    const SurfaceSnapshot* base = nullptr;  // nullptr: no base (keyframe)
+    int64_t grid_id = -1;
+    int fields = 0;  // FieldChoice bits
+    bool operator==(const Key& o) const {
+      return snapshot == o.snapshot && base == o.base && grid_id == o.grid_id &&
+             fields == o.fields;
+    }
+  };
+  struct Result {
+    Frame frame;  // step, time, body (no skipped / watcher_id)
+    bool keyframe = false;
+    int64_t grid_id = 0;
+    Grid grid;
+    std::shared_ptr<const std::vector<uint16_t>> codes;
+    // Keeps the snapshots named by the key alive (their addresses are the key).
+    std::shared_ptr<const SurfaceSnapshot> snapshot, base;
+  };
+
+  EncodeCache() = default;
+  EncodeCache(const EncodeCache&) = delete;
+  EncodeCache& operator=(const EncodeCache&) = delete;
+
+  std::shared_ptr<const Result> Find(const Key& key);
+  void Insert(const Key& key, std::shared_ptr<const Result> result);
+  // The grid for a keyframe of `positions`: the current one while it fits
+  // (GridFits), else a new GridFor(positions), which becomes current.
+  std::pair<int64_t, Grid> KeyGrid(const std::vector<double>& positions);
+
+  int64_t hits() const;
+  int64_t misses() const;
+
+ private:
+  static constexpr size_t kMaxEntries = 512;
+  mutable absl::Mutex mu_;
+  std::deque<std::pair<Key, std::shared_ptr<const Result>>> entries_ ABSL_GUARDED_BY(mu_);
+  int64_t grid_id_ ABSL_GUARDED_BY(mu_) = 0;  // 0: none yet
+  Grid grid_ ABSL_GUARDED_BY(mu_);
+  int64_t hits_ ABSL_GUARDED_BY(mu_) = 0;
+  int64_t misses_ ABSL_GUARDED_BY(mu_) = 0;
+};
+
 class SurfaceEncoder {
  public:
-  explicit SurfaceEncoder(FieldChoice fields) : fields_(fields) {}
+  // `cache` may be null (no sharing).
+  explicit SurfaceEncoder(FieldChoice fields, std::shared_ptr<EncodeCache> cache = nullptr)
+      : fields_(fields), cache_(std::move(cache)) {}
   SurfaceEncoder(const SurfaceEncoder&) = delete;
   SurfaceEncoder& operator=(const SurfaceEncoder&) = delete;
 
   // Fills `frame` (step, time, body) with `snapshot` encoded against the
   // previous frame this encoder produced, which the caller promises was
   // delivered (the write completed). Returns whether it is a keyframe.
-  bool Encode(const SurfaceSnapshot& snapshot, Frame* frame);
+  bool Encode(std::shared_ptr<const SurfaceSnapshot> snapshot, Frame* frame);
 
  private:
-  void EncodeKeyframe(const SurfaceSnapshot& s, const std::vector<uint16_t>* codes, Frame* frame);
+  // The frame for `s` from this encoder's state; changes no member.
+  std::shared_ptr<EncodeCache::Result> Compute(const SurfaceSnapshot& s) const;
+  void MakeKeyframe(const SurfaceSnapshot& s, EncodeCache::Result* r) const;
 
   const FieldChoice fields_;
-  bool has_base_ = false;
-  int64_t base_step_ = 0;
-  int64_t topology_version_ = 0;
-  int64_t fields_version_ = 0;
+  const std::shared_ptr<EncodeCache> cache_;
+  // The last frame's snapshot, grid and codes (3 per vertex: what the
+  // watcher holds).
+  std::shared_ptr<const SurfaceSnapshot> base_;
+  int64_t grid_id_ = -1;
   Grid grid_;
-  std::vector<uint16_t> codes_;  // 3 per vertex: what the watcher holds
+  std::shared_ptr<const std::vector<uint16_t>> codes_;
 };
 
 // Rebuilds positions from a watcher's frames.

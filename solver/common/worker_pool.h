@@ -4,6 +4,7 @@
 // results joined in chunk order are deterministic. No allocation per Run.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <type_traits>
 #include <mutex>
@@ -37,11 +38,13 @@ class WorkerPool {
   std::vector<std::thread> workers_;
   std::mutex mu_;
   std::condition_variable start_cv_, done_cv_;
+  // fn_ and ctx_ are written before generation_ is released and read after
+  // it is acquired. Workers spin briefly, then sleep on start_cv_.
   void (*fn_)(void*, int) = nullptr;
   void* ctx_ = nullptr;
-  uint64_t generation_ = 0;
-  int pending_ = 0;
-  bool stop_ = false;
+  std::atomic<uint64_t> generation_{0};
+  std::atomic<int> pending_{0};
+  std::atomic<bool> stop_{false};
 };
 
 }  // namespace dynsolid

@@ -83,7 +83,7 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
   }
   work_.resize(kForceParts);
-  schedule_ = ScheduleElements(layout, kBatch, kForceParts);
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
   int max_nodes = 0;
   for (const ElementBlock& block : layout.blocks) {
     if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
@@ -92,6 +92,7 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     w.g.setZero(num_nodes_, 3);
     w.u.setZero(3 * max_nodes, kBatch);
     w.y.setZero(3 * max_nodes, kBatch);
+    part_buffers_.push_back(&w.g);
   }
 }
 
@@ -99,15 +100,15 @@ void CorotationalModel::ResetFrames() {
   for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
 }
 
-void CorotationalModel::RunBatches(size_t begin, size_t end, const Points& x, Frames* update,
+void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
                                    Workspace& w) const {
   using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
   using NodeMap = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
   NodeBlock pos, x0;
   std::array<Eigen::Matrix3d, kBatch> rot;
-  w.g.setZero();
+  ClearPartRows(schedule_, part, w.g);
   w.energy = 0;
-  for (size_t bi = begin; bi < end; ++bi) {
+  for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
     const ElementGroup& grp = block.groups[batch.group];
@@ -168,16 +169,11 @@ double CorotationalModel::Forces(const Points& d, Points& g) {
   // Parts t, t + T, ... on thread t, each into its own buffer, summed in part
   // order: the same bits for any thread count.
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) {
-      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], d, &frames_, work_[k]);
-    }
+    for (int k = t; k < parts; k += threads) RunBatches(k, d, &frames_, work_[k]);
   });
-  g = work_[0].g;
-  double energy = work_[0].energy;
-  for (int k = 1; k < parts; ++k) {
-    g += work_[k].g;
-    energy += work_[k].energy;
-  }
+  SumParts(g);
+  double energy = 0;
+  for (int k = 0; k < parts; ++k) energy += work_[k].energy;
   const auto t1 = std::chrono::steady_clock::now();
   timing_.measure_ms = -1;
   timing_.elements_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -188,12 +184,19 @@ void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
   const int parts = static_cast<int>(work_.size());
   const int threads = pool_.size();
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) {
-      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], v, nullptr, work_[k]);
-    }
+    for (int k = t; k < parts; k += threads) RunBatches(k, v, nullptr, work_[k]);
   });
-  out = work_[0].g;
-  for (int k = 1; k < parts; ++k) out += work_[k].g;
+  SumParts(out);
+}
+
+void CorotationalModel::SumParts(Points& out) const {
+  out.resize(num_nodes_, 3);
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    const int64_t n = num_nodes_;
+    SumPartRows(schedule_, part_buffers_.data(), static_cast<int32_t>(n * t / threads),
+                static_cast<int32_t>(n * (t + 1) / threads), out);
+  });
 }
 
 int64_t CorotationalModel::shared_matrix_bytes() const {

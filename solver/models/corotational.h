@@ -85,7 +85,8 @@ class CorotationalModel final : public InternalForceModel {
   // frames are extracted into *update and u = R^T (d - dbar) - (x0 - x0bar).
   // Without (ApplyLinearized): x = v, the frames are read from frames_ and
   // u = R^T (v - vbar).
-  void RunBatches(size_t begin, size_t end, const Points& x, Frames* update, Workspace& w) const;
+  void RunBatches(int part, const Points& x, Frames* update, Workspace& w) const;
+  void SumParts(Points& out) const;  // out = sum of the parts' buffers
 
   const ElementLayout& layout_;
   WorkerPool& pool_;
@@ -98,6 +99,7 @@ class CorotationalModel final : public InternalForceModel {
   // Per-part scratch, allocated at construction (mutable for the const
   // ApplyLinearized).
   mutable std::vector<Workspace> work_;
+  std::vector<const Points*> part_buffers_;
   Timing timing_;
 };
 

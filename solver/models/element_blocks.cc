@@ -26,7 +26,8 @@ int64_t PerElementBytes(const ElementLayout& layout) {
   return count > 0 ? bytes / count : 0;
 }
 
-ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts) {
+ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
+                                 int32_t num_nodes) {
   ElementSchedule out;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
@@ -55,7 +56,45 @@ ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size
   while (out.part_start.size() <= static_cast<size_t>(parts)) {
     out.part_start.push_back(out.batches.size());
   }
+  out.node_parts.assign(num_nodes, 0);
+  out.part_nodes.resize(parts);
+  for (int k = 0; k < parts; ++k) {
+    const uint8_t bit = static_cast<uint8_t>(1u << k);
+    for (size_t bi = out.part_start[k]; bi < out.part_start[k + 1]; ++bi) {
+      const ElementBatch& batch = out.batches[bi];
+      const ElementBlock& block = layout.blocks[batch.kind];
+      for (int32_t b = 0; b < batch.count; ++b) {
+        const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+        for (int i = 0; i < block.nodes; ++i) out.node_parts[ids[i]] |= bit;
+      }
+    }
+    for (int32_t v = 0; v < num_nodes; ++v) {
+      if (out.node_parts[v] & bit) out.part_nodes[k].push_back(v);
+    }
+  }
   return out;
+}
+
+void ClearPartRows(const ElementSchedule& schedule, int k, Points& buffer) {
+  double* b = buffer.data();
+  for (int32_t v : schedule.part_nodes[k]) b[3 * v] = b[3 * v + 1] = b[3 * v + 2] = 0;
+}
+
+void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, int32_t begin,
+                 int32_t end, Points& out) {
+  double* o = out.data();
+  for (int32_t v = begin; v < end; ++v) {
+    double x = 0, y = 0, z = 0;
+    for (uint32_t mask = schedule.node_parts[v]; mask != 0; mask &= mask - 1) {
+      const double* b = buffers[__builtin_ctz(mask)]->data() + 3 * static_cast<int64_t>(v);
+      x += b[0];
+      y += b[1];
+      z += b[2];
+    }
+    o[3 * v] = x;
+    o[3 * v + 1] = y;
+    o[3 * v + 2] = z;
+  }
 }
 
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,

@@ -76,11 +76,28 @@ struct ElementBatch {
 // cost (an element of n nodes costs about n^2): part k runs batches
 // [part_start[k], part_start[k+1]). Fixed for a layout, whatever the
 // number of threads.
+//
+// Each part adds its elements' forces into a buffer of its own; only the
+// nodes a part touches are cleared and summed: part_nodes[k] lists them
+// (ascending) and node_parts[v] has bit k set when part k touches node v
+// (parts <= 8).
 struct ElementSchedule {
   std::vector<ElementBatch> batches;
   std::vector<size_t> part_start;
+  std::vector<std::vector<int32_t>> part_nodes;
+  std::vector<uint8_t> node_parts;
 };
-ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts);
+ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
+                                 int32_t num_nodes);
+
+// Clears the rows of `buffer` that part k touches (before it adds into it).
+void ClearPartRows(const ElementSchedule& schedule, int k, Points& buffer);
+
+// out rows [begin, end) = the sum of the parts' buffers, added in part
+// order: the same bits whatever the number of threads or the node range
+// split. Rows no part touches become zero.
+void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, int32_t begin,
+                 int32_t end, Points& out);
 
 // Bytes a model keeps per element beyond the mesh: node ids, group id, the
 // element's place in by_group, and its warm-started frame (a quaternion).

@@ -44,57 +44,119 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       }
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
+    centre_gradient_[kind].resize(block.groups.size());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      centre_gradient_[kind][gi] = block.groups[gi].centre_gradient;  // to column-major
+    }
   }
   work_.resize(kForceParts);
-  schedule_ = ScheduleElements(layout, kBatch, kForceParts);
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_, 3);
+    part_buffers_.push_back(&w.g);
     for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
-      m->resize(fem::kCubicNodes, kBatch);
+      m->setZero(fem::kCubicNodes, kBatch);
     }
   }
   delta_.setZero(num_nodes_, 3);
+  y_.setZero(num_nodes_, 3);
 }
 
 void LocalFrameModel::ResetFrames() {
   for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
 }
 
-void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Workspace& w) {
-  using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::ColMajor, fem::kCubicNodes, 3>;
-  NodeBlock pos, del, loc;
+namespace {
+
+// One element's frame and local deformation: F = sum_i x_i grad_i^T at the
+// centre (grad: n x 3 column-major), R_e its rotation (warm started in q),
+// and the columns dhat = R_e^T delta_i split by axis into dx, dy, dz.
+// kN > 0 fixes the node count at compile time (cubic 64, linear 8).
+template <int kN>
+void LocalDeformation(int n_dyn, const double* d, const double* delta, const int32_t* ids,
+                      const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, double* dx,
+                      double* dy, double* dz) {
+  const int n = kN > 0 ? kN : n_dyn;
+  constexpr int kRows = (kN > 0) ? kN : Eigen::Dynamic;
+  using Vec = Eigen::Matrix<double, kRows, 1, 0, (kN > 0 ? kN : fem::kCubicNodes), 1>;
+  using CMap = Eigen::Map<const Eigen::Matrix<double, kRows, 1>>;
+  using Map = Eigen::Map<Eigen::Matrix<double, kRows, 1>>;
+  Vec px(n), py(n), pz(n), qx(n), qy(n), qz(n);
+  for (int i = 0; i < n; ++i) {
+    const double* a = d + 3 * static_cast<int64_t>(ids[i]);
+    const double* b = delta + 3 * static_cast<int64_t>(ids[i]);
+    px[i] = a[0];
+    py[i] = a[1];
+    pz[i] = a[2];
+    qx[i] = b[0];
+    qy[i] = b[1];
+    qz[i] = b[2];
+  }
+  Eigen::Matrix3d f;
+  for (int c = 0; c < 3; ++c) {
+    const CMap gc(grad + static_cast<int64_t>(c) * n, n);
+    f(0, c) = px.dot(gc);
+    f(1, c) = py.dot(gc);
+    f(2, c) = pz.dot(gc);
+  }
+  ExtractRotation(f, q);
+  r = q.toRotationMatrix();
+  Map(dx, n) = r(0, 0) * qx + r(1, 0) * qy + r(2, 0) * qz;
+  Map(dy, n) = r(0, 1) * qx + r(1, 1) * qy + r(2, 1) * qz;
+  Map(dz, n) = r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz;
+}
+
+// g_i += R_e (yx_i, yy_i, yz_i) for the element's nodes.
+template <int kN>
+void RotateBackAndAdd(int n_dyn, const Eigen::Matrix3d& r, const double* yx, const double* yy,
+                      const double* yz, const int32_t* ids, double* g) {
+  const int n = kN > 0 ? kN : n_dyn;
+  constexpr int kRows = (kN > 0) ? kN : Eigen::Dynamic;
+  using Vec = Eigen::Matrix<double, kRows, 1, 0, (kN > 0 ? kN : fem::kCubicNodes), 1>;
+  using CMap = Eigen::Map<const Eigen::Matrix<double, kRows, 1>>;
+  const CMap ax(yx, n), ay(yy, n), az(yz, n);
+  const Vec gx = r(0, 0) * ax + r(0, 1) * ay + r(0, 2) * az;
+  const Vec gy = r(1, 0) * ax + r(1, 1) * ay + r(1, 2) * az;
+  const Vec gz = r(2, 0) * ax + r(2, 1) * ay + r(2, 2) * az;
+  for (int i = 0; i < n; ++i) {
+    double* o = g + 3 * static_cast<int64_t>(ids[i]);
+    o[0] += gx[i];
+    o[1] += gy[i];
+    o[2] += gz[i];
+  }
+}
+
+}  // namespace
+
+void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
   std::array<Eigen::Matrix3d, kBatch> rot;
-  w.g.setZero();
+  ClearPartRows(schedule_, part, w.g);
   w.energy = 0;
-  for (size_t bi = begin; bi < end; ++bi) {
+  const int ld = fem::kCubicNodes;  // leading dimension of the batch columns
+  for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
-    const ElementGroup& grp = block.groups[batch.group];
     const int n = block.nodes;
-    pos.resize(n, 3);
-    del.resize(n, 3);
-    auto dx = w.dx.topLeftCorner(n, batch.count);
-    auto dy = w.dy.topLeftCorner(n, batch.count);
-    auto dz = w.dz.topLeftCorner(n, batch.count);
+    const double* grad = centre_gradient_[batch.kind][batch.group].data();
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
-      for (int i = 0; i < n; ++i) {
-        pos.row(i) = d.row(ids[i]);
-        del.row(i) = delta_.row(ids[i]);
-      }
-      // Deformation gradient at the centre, then its rotation R_e.
-      const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
       Eigen::Quaterniond& q = frames_[batch.kind][e];
-      ExtractRotation(f, q);
-      rot[b] = q.toRotationMatrix();
-      // dhat = R_e^T delta, node by node: rows of delta times R_e.
-      loc.noalias() = del.lazyProduct(rot[b]);
-      dx.col(b) = loc.col(0);
-      dy.col(b) = loc.col(1);
-      dz.col(b) = loc.col(2);
+      double* cx = w.dx.data() + b * ld;
+      double* cy = w.dy.data() + b * ld;
+      double* cz = w.dz.data() + b * ld;
+      if (n == fem::kCubicNodes) {
+        LocalDeformation<fem::kCubicNodes>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+      } else if (n == 8) {
+        LocalDeformation<8>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+      } else {
+        LocalDeformation<-1>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+      }
     }
     const auto& k = k_[batch.kind][batch.group];
+    auto dx = w.dx.topLeftCorner(n, batch.count);
+    auto dy = w.dy.topLeftCorner(n, batch.count);
+    auto dz = w.dz.topLeftCorner(n, batch.count);
     auto yx = w.yx.topLeftCorner(n, batch.count);
     auto yy = w.yy.topLeftCorner(n, batch.count);
     auto yz = w.yz.topLeftCorner(n, batch.count);
@@ -106,53 +168,50 @@ void LocalFrameModel::RunBatches(size_t begin, size_t end, const Points& d, Work
                          dz.col(b).dot(yz.col(b)));
     }
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t e = block.by_group[batch.first + b];
-      const int32_t* ids = block.element_nodes(e);
-      // g += R_e (K dhat), node by node: rows of (K dhat) times R_e^T.
-      del.col(0) = yx.col(b);
-      del.col(1) = yy.col(b);
-      del.col(2) = yz.col(b);
-      loc.noalias() = del.lazyProduct(rot[b].transpose());
-      for (int i = 0; i < n; ++i) w.g.row(ids[i]) += loc.row(i);
+      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      const double* ax = w.yx.data() + b * ld;
+      const double* ay = w.yy.data() + b * ld;
+      const double* az = w.yz.data() + b * ld;
+      if (n == fem::kCubicNodes) {
+        RotateBackAndAdd<fem::kCubicNodes>(n, rot[b], ax, ay, az, ids, w.g.data());
+      } else if (n == 8) {
+        RotateBackAndAdd<8>(n, rot[b], ax, ay, az, ids, w.g.data());
+      } else {
+        RotateBackAndAdd<-1>(n, rot[b], ax, ay, az, ids, w.g.data());
+      }
     }
   }
 }
 
 double LocalFrameModel::Forces(const Points& d, Points& g) {
-  // The measure in fixed parts (threads take parts t, t + T, ...), summed
-  // in part order.
+  // Fixed parts; threads take parts t, t + T, ...; every sum is taken in an
+  // order fixed by the parts alone (see measure.h and ElementSchedule).
   const auto t0 = std::chrono::steady_clock::now();
-  const int parts = static_cast<int>(work_.size());
+  const int parts = kForceParts;
   const int threads = pool_.size();
+  const int measure_parts = measure_.parts();
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) measure_.ApplyPart(d, k, parts, work_[k].delta);
+    for (int k = t; k < measure_parts; k += threads) measure_.ForwardPart(d, k, delta_);
   });
-  delta_ = work_[0].delta;
-  for (int k = 1; k < parts; ++k) delta_ += work_[k].delta;
   const auto t1 = std::chrono::steady_clock::now();
-  // Batches in contiguous chunks per thread, each with its own force
-  // buffer, summed in chunk order: the same bits whatever the timing.
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) {
-      RunBatches(schedule_.part_start[k], schedule_.part_start[k + 1], d, work_[k]);
-    }
+    for (int k = t; k < parts; k += threads) RunBatches(k, d, work_[k]);
   });
-  // y = dE/d delta = sum_e R_e K dhat; the force is its pull-back through
-  // the measure: g = (d delta / d d)^T y (the gradient of the energy).
-  y_ = work_[0].g;
-  double energy = work_[0].energy;
-  for (int k = 1; k < parts; ++k) {
-    y_ += work_[k].g;
-    energy += work_[k].energy;
-  }
+  // y = dE/d delta = sum_e R_e K dhat, summed over the parts' buffers.
+  pool_.Run([&](int t) {
+    const int32_t n = num_nodes_;
+    SumPartRows(schedule_, part_buffers_.data(), static_cast<int32_t>(int64_t{n} * t / threads),
+                static_cast<int32_t>(int64_t{n} * (t + 1) / threads), y_);
+  });
+  double energy = 0;
+  for (int k = 0; k < parts; ++k) energy += work_[k].energy;
   const auto t2 = std::chrono::steady_clock::now();
+  // The force is y's pull-back through the measure: g = (d delta / d d)^T y
+  // (the gradient of the energy).
+  g.resize(num_nodes_, 3);
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) {
-      measure_.ApplyTransposePart(d, y_, k, parts, work_[k].delta);
-    }
+    for (int k = t; k < measure_parts; k += threads) measure_.TransposePart(y_, k, g);
   });
-  g = work_[0].delta;
-  for (int k = 1; k < parts; ++k) g += work_[k].delta;
   const auto t3 = std::chrono::steady_clock::now();
   // The measure's phase holds both its passes (forward and transpose).
   timing_.measure_ms = std::chrono::duration<double, std::milli>((t1 - t0) + (t3 - t2)).count();

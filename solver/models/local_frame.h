@@ -67,12 +67,11 @@ class LocalFrameModel final : public InternalForceModel {
 
  private:
   struct Workspace {
-    Points g;
-    Points delta;  // this chunk's part of the deformation measure
-    Eigen::MatrixXd dx, dy, dz, yx, yy, yz;
+    Points g;  // this part's sum of R_e K dhat (rows of its nodes only)
+    Eigen::MatrixXd dx, dy, dz, yx, yy, yz;  // 64 x batch columns
     double energy = 0;
   };
-  void RunBatches(size_t begin, size_t end, const Points& d, Workspace& w);
+  void RunBatches(int part, const Points& d, Workspace& w);
 
   const ElementLayout& layout_;
   WorkerPool& pool_;
@@ -81,6 +80,9 @@ class LocalFrameModel final : public InternalForceModel {
   // k_[kind][group][axis]: n x n.
   std::array<std::vector<std::array<Eigen::MatrixXd, 3>>, 3> k_;
   std::array<std::vector<Eigen::Quaterniond>, 3> frames_;  // per element
+  // Per group, the physical gradients at the element centre, n x 3 column-major.
+  std::array<std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>, 3> centre_gradient_;
+  std::vector<const Points*> part_buffers_;
   ElementSchedule schedule_;  // batches and their fixed parts
   std::vector<Workspace> work_;
   Points delta_, y_;

@@ -21,7 +21,8 @@ void DeformationMeasure::AddCorner(int32_t n, int32_t a, int32_t b, const Points
 }
 
 DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
-                                       const fem::ElementSet& elements, const Points& rest) {
+                                       const fem::ElementSet& elements, const Points& rest,
+                                       int parts) {
   edges_.reserve(mesh.num_edges());
   for (int32_t e = 0; e < mesh.num_edges(); ++e) {
     const auto& ev = mesh.edge_vertices(e);
@@ -52,124 +53,346 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
       AddCorner(b, q[4], a, rest);
     }
   }
+
+  // Ownership: cells in `parts` contiguous ranges; a node goes to the part
+  // of its lowest-numbered cell.
+  parts = std::clamp(parts, 1, 255);
+  const int32_t nodes = static_cast<int32_t>(rest.rows());
+  const int64_t cells = std::max(1, mesh.num_cells());
+  auto part_of_cell = [&](int32_t c) { return static_cast<uint8_t>(c * parts / cells); };
+  owner_.assign(nodes, 0);
+  for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+    int32_t lowest = cells;
+    for (int32_t c : mesh.vertex_cells(v)) lowest = std::min(lowest, c);
+    owner_[v] = lowest < cells ? part_of_cell(lowest) : 0;
+  }
+  for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
+    owner_[elements.num_mesh_vertices + v] = part_of_cell(elements.virtual_node_cell[v]);
+  }
+  parts_.assign(parts, Part{});
+  for (int32_t v = 0; v < nodes; ++v) parts_[owner_[v]].nodes.push_back(v);
+  // Each edge and corner is listed once for every distinct part owning one
+  // of its nodes.
+  auto distinct = [](const int* ks, int t) {
+    for (int u = 0; u < t; ++u) {
+      if (ks[u] == ks[t]) return false;
+    }
+    return true;
+  };
+  for (const Edge& edge : edges_) {
+    const int ks[2] = {owner_[edge.i], owner_[edge.j]};
+    for (int t = 0; t < 2; ++t) {
+      if (!distinct(ks, t)) continue;
+      Part& p = parts_[ks[t]];
+      p.ei.push_back(edge.i);
+      p.ej.push_back(edge.j);
+      p.e_rest.push_back(edge.rest_length);
+      p.e_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0));
+    }
+  }
+  for (const Corner& c : corners_) {
+    const int ks[3] = {owner_[c.a], owner_[c.b], owner_[c.n]};
+    for (int t = 0; t < 3; ++t) {
+      if (!distinct(ks, t)) continue;
+      Part& p = parts_[ks[t]];
+      p.cn.push_back(c.n);
+      p.ca.push_back(c.a);
+      p.cb.push_back(c.b);
+      p.cos0.push_back(c.cos0);
+      p.sin0.push_back(c.sin0);
+      p.c_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0) |
+                         (ks[2] == ks[t] ? 4 : 0));
+    }
+  }
+  for (Part& p : parts_) {
+    const size_t ne = p.ei.size(), nc = p.cn.size();
+    for (auto* v : {&p.rx, &p.ry, &p.rz, &p.l, &p.fx, &p.fy, &p.fz}) v->assign(ne, 0.0);
+    for (auto* v : {&p.ahx, &p.ahy, &p.ahz, &p.bhx, &p.bhy, &p.bhz, &p.la, &p.lb, &p.cs,
+                    &p.inv_s, &p.alpha, &p.beta, &p.dalpha, &p.dbeta, &p.tax, &p.tay, &p.taz,
+                    &p.tbx, &p.tby, &p.tbz}) {
+      v->assign(nc, 0.0);
+    }
+  }
+}
+
+int64_t DeformationMeasure::terms_per_pass() const {
+  int64_t n = 0;
+  for (const Part& p : parts_) n += static_cast<int64_t>(p.ei.size() + p.cn.size());
+  return n;
 }
 
 namespace {
 
-// A corner's current geometry and the rotation that restores its angle:
-// with phi = (theta - theta0) / 2, C = cos(phi), S = sin(phi), rotating a by
-// +phi and b by -phi about n gives delta_a = alpha ra - beta la b^ and
-// delta_b = alpha rb - beta lb a^, alpha = 1 - C + c S / s, beta = S / s
-// (c, s the cosine and sine of the current angle).
-struct CornerState {
-  Eigen::Vector3d ra, rb, ah, bh;
-  double la, lb, c, s, cap_c, cap_s, alpha, beta;
-};
+// The geometry loops below take their arrays as restrict-qualified
+// parameters, which is what lets GCC run them in SIMD lanes (gathers of
+// the node rows, square roots, divisions and selects four at a time).
+#define R __restrict
 
-// False for a degenerate corner (a zero side, collinear sides, or an angle
-// half a turn from its rest value): it contributes nothing.
-inline bool EvaluateCorner(const Points& d, int32_t n, int32_t a, int32_t b, double cos0,
-                           double sin0, CornerState& k) {
-  k.ra = d.row(a) - d.row(n);
-  k.rb = d.row(b) - d.row(n);
-  k.la = k.ra.norm();
-  k.lb = k.rb.norm();
-  if (k.la <= 0 || k.lb <= 0) return false;
-  k.ah = k.ra / k.la;
-  k.bh = k.rb / k.lb;
-  k.c = k.ah.dot(k.bh);
-  k.s = k.ah.cross(k.bh).norm();
-  if (k.s <= 1e-300) return false;
-  // phi in (-pi/2, pi/2) by half-angle formulas.
-  const double cos_d = k.c * cos0 + k.s * sin0;
-  const double sin_d = k.s * cos0 - k.c * sin0;
-  k.cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
-  if (k.cap_c < 1e-12) return false;
-  k.cap_s = sin_d / (2.0 * k.cap_c);
-  k.beta = k.cap_s / k.s;
-  k.alpha = 1.0 - k.cap_c + k.c * k.beta;
-  return true;
-}
-
-}  // namespace
-
-void DeformationMeasure::ApplyPart(const Points& d, int k, int parts, Points& delta) const {
-  delta.setZero(d.rows(), 3);
-  const size_t ne = edges_.size(), nk = corners_.size();
-  for (size_t i = ne * k / parts; i < ne * (k + 1) / parts; ++i) {
-    const Edge& e = edges_[i];
-    const Eigen::Vector3d r = d.row(e.j) - d.row(e.i);
-    const double l = r.norm();
-    if (l <= 0) continue;
-    const Eigen::Vector3d s = (0.5 * (l - e.rest_length) / l) * r;
-    delta.row(e.i) -= s.transpose();
-    delta.row(e.j) += s.transpose();
-  }
-  CornerState g;
-  for (size_t i = nk * k / parts; i < nk * (k + 1) / parts; ++i) {
-    const Corner& c = corners_[i];
-    if (!EvaluateCorner(d, c.n, c.a, c.b, c.cos0, c.sin0, g)) continue;
-    delta.row(c.a) += (g.alpha * g.ra - (g.beta * g.la) * g.bh).transpose();
-    delta.row(c.b) += (g.alpha * g.rb - (g.beta * g.lb) * g.ah).transpose();
+// Edge (i, j): r = d_j - d_i, l = |r| and the stretch term f r with
+// f = (l - l0) / (2 l) (zero for a zero-length edge).
+void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
+                 const double* R rest, double* R rx, double* R ry, double* R rz, double* R l,
+                 double* R fx, double* R fy, double* R fz, int64_t ne) {
+  for (int64_t q = 0; q < ne; ++q) {
+    const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
+    const double x = pd[j] - pd[i], y = pd[j + 1] - pd[i + 1], z = pd[j + 2] - pd[i + 2];
+    const double len = std::sqrt(x * x + y * y + z * z);
+    const double f_any = 0.5 * (len - rest[q]) / (len > 0 ? len : 1.0);
+    const double f = len > 0 ? f_any : 0.0;
+    rx[q] = x;
+    ry[q] = y;
+    rz[q] = z;
+    l[q] = len;
+    fx[q] = f * x;
+    fy[q] = f * y;
+    fz[q] = f * z;
   }
 }
 
-}  // namespace dynsolid::models
-
-namespace dynsolid::models {
+// Corner (n; a, b): with phi = (theta - theta0) / 2, C = cos(phi),
+// S = sin(phi), rotating a by +phi and b by -phi about n gives
+// delta_a = alpha ra - beta la b^ and delta_b = alpha rb - beta lb a^,
+// alpha = 1 - C + c S / s, beta = S / s (c, s the cosine and sine of the
+// current angle). A degenerate corner (a zero side, collinear sides, or an
+// angle half a turn from its rest value) contributes nothing: its alpha,
+// beta and their derivatives in theta are zero and its other state finite.
+void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
+                   const int32_t* R cb, const double* R cos0, const double* R sin0,
+                   double* R ahx, double* R ahy, double* R ahz, double* R bhx, double* R bhy,
+                   double* R bhz, double* R la, double* R lb, double* R cs, double* R inv_s,
+                   double* R alpha, double* R beta, double* R dalpha, double* R dbeta,
+                   double* R tax, double* R tay, double* R taz, double* R tbx, double* R tby,
+                   double* R tbz, int64_t nc) {
+  for (int64_t q = 0; q < nc; ++q) {
+    const int64_t n = 3 * static_cast<int64_t>(cn[q]);
+    const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
+    const double rax = pd[a] - pd[n], ray = pd[a + 1] - pd[n + 1], raz = pd[a + 2] - pd[n + 2];
+    const double rbx = pd[b] - pd[n], rby = pd[b + 1] - pd[n + 1], rbz = pd[b + 2] - pd[n + 2];
+    const double lra = std::sqrt(rax * rax + ray * ray + raz * raz);
+    const double lrb = std::sqrt(rbx * rbx + rby * rby + rbz * rbz);
+    // Validity as 0/1 doubles (bool lanes keep GCC from vectorizing).
+    const double sides = std::min(lra, lrb) > 0 ? 1.0 : 0.0;
+    const double ia_any = 1.0 / (sides > 0 ? lra : 1.0), ib_any = 1.0 / (sides > 0 ? lrb : 1.0);
+    const double ia = sides > 0 ? ia_any : 0.0, ib = sides > 0 ? ib_any : 0.0;
+    const double ax = rax * ia, ay = ray * ia, az = raz * ia;
+    const double bx = rbx * ib, by = rby * ib, bz = rbz * ib;
+    const double c = ax * bx + ay * by + az * bz;
+    const double x0 = ay * bz - az * by, x1 = az * bx - ax * bz, x2 = ax * by - ay * bx;
+    const double sn = std::sqrt(x0 * x0 + x1 * x1 + x2 * x2);
+    // phi in (-pi/2, pi/2) by half-angle formulas.
+    const double cos_d = c * cos0[q] + sn * sin0[q];
+    const double sin_d = sn * cos0[q] - c * sin0[q];
+    const double cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
+    const double ok_s = sn > 1e-300 ? sides : 0.0;
+    const double okf = cap_c >= 1e-12 ? ok_s : 0.0;
+    const double s_safe = okf > 0 ? sn : 1.0, c_safe = okf > 0 ? cap_c : 1.0;
+    const double is = 1.0 / s_safe;
+    const double cap_s = sin_d / (2.0 * c_safe);
+    const double bt_any = cap_s * is;
+    const double al_any = 1.0 - c_safe + c * bt_any;
+    const double dal_any = -0.5 * cap_s + c * c_safe * 0.5 * is - c * c * cap_s * is * is;
+    const double dbt_any = c_safe * 0.5 * is - cap_s * c * is * is;
+    const double bt = okf > 0 ? bt_any : 0.0, al = okf > 0 ? al_any : 0.0;
+    const double dal = okf > 0 ? dal_any : 0.0, dbt = okf > 0 ? dbt_any : 0.0;
+    ahx[q] = ax;
+    ahy[q] = ay;
+    ahz[q] = az;
+    bhx[q] = bx;
+    bhy[q] = by;
+    bhz[q] = bz;
+    la[q] = sides > 0 ? lra : 1.0;
+    lb[q] = sides > 0 ? lrb : 1.0;
+    cs[q] = c;
+    inv_s[q] = is;
+    alpha[q] = al;
+    beta[q] = bt;
+    dalpha[q] = dal;
+    dbeta[q] = dbt;
+    const double bla = bt * lra, blb = bt * lrb;
+    tax[q] = al * rax - bla * bx;
+    tay[q] = al * ray - bla * by;
+    taz[q] = al * raz - bla * bz;
+    tbx[q] = al * rbx - blb * ax;
+    tby[q] = al * rby - blb * ay;
+    tbz[q] = al * rbz - blb * az;
+  }
+}
 
 // Edge (i, j): c = 1/2 (1 - l0 / l) r with r = d_j - d_i adds to delta_j and
 // subtracts from delta_i, so d/dr of (y_j - y_i) . c is
 // J (y_j - y_i) with J = 1/2 [(1 - l0/l) I + (l0 / l^3) r r^T].
-//
+void EdgeTranspose(const double* R py, const int32_t* R ei, const int32_t* R ej,
+                   const double* R rest, const double* R rx, const double* R ry,
+                   const double* R rz, const double* R l, double* R fx, double* R fy,
+                   double* R fz, int64_t ne) {
+  for (int64_t q = 0; q < ne; ++q) {
+    const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
+    const double dx = py[j] - py[i], dy = py[j + 1] - py[i + 1], dz = py[j + 2] - py[i + 2];
+    const bool ok = l[q] > 0;
+    const double il = 1.0 / (ok ? l[q] : 1.0);
+    const double rdy = rx[q] * dx + ry[q] * dy + rz[q] * dz;
+    const double c1_any = 0.5 * (1.0 - rest[q] * il);
+    const double c2_any = 0.5 * rest[q] * il * il * il * rdy;
+    const double c1 = ok ? c1_any : 0.0, c2 = ok ? c2_any : 0.0;
+    fx[q] = c1 * dx + c2 * rx[q];
+    fy[q] = c1 * dy + c2 * ry[q];
+    fz[q] = c1 * dz + c2 * rz[q];
+  }
+}
+
 // Corner (n; a, b): with ra = a - n, rb = b - n, c = cos(theta),
 // s = sin(theta), phi = (theta - theta0)/2, C = cos(phi), S = sin(phi), the
 // rotations give delta_a = alpha ra - beta la b^, delta_b = alpha rb - beta lb a^
 // with alpha = 1 - C + c S / s and beta = S / s. For F = ya.delta_a + yb.delta_b
 // = alpha P - beta Q (P = ya.ra + yb.rb, Q = la ya.b^ + lb yb.a^) and
 // dtheta/dra = -ta / la, dtheta/drb = -tb / lb (ta, tb the in-plane unit
-// vectors perpendicular to a^ and b^ towards each other):
+// vectors perpendicular to a^ and b^ towards each other, s ta = b^ - c a^):
 //   dF/dra = (P alpha' - Q beta') (-ta / la) + alpha ya
 //            - beta [(ya.b^) a^ + (lb / la)(yb - (yb.a^) a^)],
 // and symmetrically for rb; n gets minus both.
-void DeformationMeasure::ApplyTransposePart(const Points& d, const Points& y, int k, int parts,
-                                            Points& out) const {
-  out.setZero(d.rows(), 3);
-  const size_t ne = edges_.size(), nk = corners_.size();
-  for (size_t i = ne * k / parts; i < ne * (k + 1) / parts; ++i) {
-    const Edge& e = edges_[i];
-    const Eigen::Vector3d r = d.row(e.j) - d.row(e.i);
-    const double l = r.norm();
-    if (l <= 0) continue;
-    const Eigen::Vector3d dy = (y.row(e.j) - y.row(e.i)).transpose();
-    const Eigen::Vector3d w =
-        0.5 * ((1.0 - e.rest_length / l) * dy + (e.rest_length / (l * l * l)) * r.dot(dy) * r);
-    out.row(e.j) += w.transpose();
-    out.row(e.i) -= w.transpose();
+void CornerTranspose(const double* R py, const int32_t* R ca, const int32_t* R cb,
+                     const double* R ahx, const double* R ahy, const double* R ahz,
+                     const double* R bhx, const double* R bhy, const double* R bhz,
+                     const double* R la, const double* R lb, const double* R cs,
+                     const double* R inv_s, const double* R alpha, const double* R beta,
+                     const double* R dalpha, const double* R dbeta, double* R tax,
+                     double* R tay, double* R taz, double* R tbx, double* R tby, double* R tbz,
+                     int64_t nc) {
+  for (int64_t q = 0; q < nc; ++q) {
+    const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
+    const double yax = py[a], yay = py[a + 1], yaz = py[a + 2];
+    const double ybx = py[b], yby = py[b + 1], ybz = py[b + 2];
+    const double ax = ahx[q], ay = ahy[q], az = ahz[q], bx = bhx[q], by = bhy[q], bz = bhz[q];
+    const double lra = la[q], lrb = lb[q], c = cs[q];
+    const double al = alpha[q], bt = beta[q];
+    const double yab = yax * bx + yay * by + yaz * bz;
+    const double yba = ybx * ax + yby * ay + ybz * az;
+    const double pp =
+        lra * (yax * ax + yay * ay + yaz * az) + lrb * (ybx * bx + yby * by + ybz * bz);
+    const double qq = lra * yab + lrb * yba;
+    const double coef = pp * dalpha[q] - qq * dbeta[q];
+    const double ka = -coef * inv_s[q] / lra, kb = -coef * inv_s[q] / lrb;
+    const double lba = lrb / lra, lab = lra / lrb;
+    tax[q] = ka * (bx - c * ax) + al * yax - bt * (yab * ax + lba * (ybx - yba * ax));
+    tay[q] = ka * (by - c * ay) + al * yay - bt * (yab * ay + lba * (yby - yba * ay));
+    taz[q] = ka * (bz - c * az) + al * yaz - bt * (yab * az + lba * (ybz - yba * az));
+    tbx[q] = kb * (ax - c * bx) + al * ybx - bt * (yba * bx + lab * (yax - yab * bx));
+    tby[q] = kb * (ay - c * by) + al * yby - bt * (yba * by + lab * (yay - yab * by));
+    tbz[q] = kb * (az - c * bz) + al * ybz - bt * (yba * bz + lab * (yaz - yab * bz));
   }
-  CornerState g;
-  for (size_t i = nk * k / parts; i < nk * (k + 1) / parts; ++i) {
-    const Corner& cn = corners_[i];
-    if (!EvaluateCorner(d, cn.n, cn.a, cn.b, cn.cos0, cn.sin0, g)) continue;
-    const Eigen::Vector3d &ra = g.ra, &rb = g.rb, &ah = g.ah, &bh = g.bh;
-    const double la = g.la, lb = g.lb, c = g.c, s = g.s, C = g.cap_c, S = g.cap_s;
-    const double alpha = g.alpha, beta = g.beta;
-    const double dalpha = -0.5 * S + c * C / (2.0 * s) - c * c * S / (s * s);
-    const double dbeta = C / (2.0 * s) - S * c / (s * s);
-    const Eigen::Vector3d ya = y.row(cn.a).transpose(), yb = y.row(cn.b).transpose();
-    const double p = ya.dot(ra) + yb.dot(rb);
-    const double yab = ya.dot(bh), yba = yb.dot(ah);
-    const double q = la * yab + lb * yba;
-    const double dtheta_coef = p * dalpha - q * dbeta;
-    const Eigen::Vector3d ta = (bh - c * ah) / s, tb = (ah - c * bh) / s;
-    const Eigen::Vector3d ga = dtheta_coef * (-ta / la) + alpha * ya -
-                               beta * (yab * ah + (lb / la) * (yb - yba * ah));
-    const Eigen::Vector3d gb = dtheta_coef * (-tb / lb) + alpha * yb -
-                               beta * (yba * bh + (la / lb) * (ya - yab * bh));
-    out.row(cn.a) += ga.transpose();
-    out.row(cn.b) += gb.transpose();
-    out.row(cn.n) -= (ga + gb).transpose();
+}
+
+#undef R
+
+}  // namespace
+
+void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) {
+  Part& p = parts_[k];
+  double* out = delta.data();
+  const int64_t ne = static_cast<int64_t>(p.ei.size());
+  const int64_t nc = static_cast<int64_t>(p.cn.size());
+  EdgeForward(d.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
+              p.rz.data(), p.l.data(), p.fx.data(), p.fy.data(), p.fz.data(), ne);
+  CornerForward(d.data(), p.cn.data(), p.ca.data(), p.cb.data(), p.cos0.data(), p.sin0.data(),
+                p.ahx.data(), p.ahy.data(), p.ahz.data(), p.bhx.data(), p.bhy.data(),
+                p.bhz.data(), p.la.data(), p.lb.data(), p.cs.data(), p.inv_s.data(),
+                p.alpha.data(), p.beta.data(), p.dalpha.data(), p.dbeta.data(), p.tax.data(),
+                p.tay.data(), p.taz.data(), p.tbx.data(), p.tby.data(), p.tbz.data(), nc);
+  // Adds into the part's own nodes, in ascending term order.
+  for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
+  for (int64_t q = 0; q < ne; ++q) {
+    const uint8_t owns = p.e_owns[q];
+    if (owns & 1) {
+      double* o = out + 3 * static_cast<int64_t>(p.ei[q]);
+      o[0] -= p.fx[q];
+      o[1] -= p.fy[q];
+      o[2] -= p.fz[q];
+    }
+    if (owns & 2) {
+      double* o = out + 3 * static_cast<int64_t>(p.ej[q]);
+      o[0] += p.fx[q];
+      o[1] += p.fy[q];
+      o[2] += p.fz[q];
+    }
   }
+  for (int64_t q = 0; q < nc; ++q) {
+    const uint8_t owns = p.c_owns[q];
+    if (owns & 1) {
+      double* o = out + 3 * static_cast<int64_t>(p.ca[q]);
+      o[0] += p.tax[q];
+      o[1] += p.tay[q];
+      o[2] += p.taz[q];
+    }
+    if (owns & 2) {
+      double* o = out + 3 * static_cast<int64_t>(p.cb[q]);
+      o[0] += p.tbx[q];
+      o[1] += p.tby[q];
+      o[2] += p.tbz[q];
+    }
+  }
+}
+
+void DeformationMeasure::TransposePart(const Points& y, int k, Points& out_points) {
+  Part& p = parts_[k];
+  double* out = out_points.data();
+  const int64_t ne = static_cast<int64_t>(p.ei.size());
+  const int64_t nc = static_cast<int64_t>(p.cn.size());
+  EdgeTranspose(y.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
+                p.rz.data(), p.l.data(), p.fx.data(), p.fy.data(), p.fz.data(), ne);
+  CornerTranspose(y.data(), p.ca.data(), p.cb.data(), p.ahx.data(), p.ahy.data(), p.ahz.data(),
+                  p.bhx.data(), p.bhy.data(), p.bhz.data(), p.la.data(), p.lb.data(),
+                  p.cs.data(), p.inv_s.data(), p.alpha.data(), p.beta.data(), p.dalpha.data(),
+                  p.dbeta.data(), p.tax.data(), p.tay.data(), p.taz.data(), p.tbx.data(),
+                  p.tby.data(), p.tbz.data(), nc);
+  for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
+  for (int64_t q = 0; q < ne; ++q) {
+    const uint8_t owns = p.e_owns[q];
+    if (owns & 2) {
+      double* o = out + 3 * static_cast<int64_t>(p.ej[q]);
+      o[0] += p.fx[q];
+      o[1] += p.fy[q];
+      o[2] += p.fz[q];
+    }
+    if (owns & 1) {
+      double* o = out + 3 * static_cast<int64_t>(p.ei[q]);
+      o[0] -= p.fx[q];
+      o[1] -= p.fy[q];
+      o[2] -= p.fz[q];
+    }
+  }
+  for (int64_t q = 0; q < nc; ++q) {
+    const uint8_t owns = p.c_owns[q];
+    if (owns & 1) {
+      double* o = out + 3 * static_cast<int64_t>(p.ca[q]);
+      o[0] += p.tax[q];
+      o[1] += p.tay[q];
+      o[2] += p.taz[q];
+    }
+    if (owns & 2) {
+      double* o = out + 3 * static_cast<int64_t>(p.cb[q]);
+      o[0] += p.tbx[q];
+      o[1] += p.tby[q];
+      o[2] += p.tbz[q];
+    }
+    if (owns & 4) {
+      double* o = out + 3 * static_cast<int64_t>(p.cn[q]);
+      o[0] -= p.tax[q] + p.tbx[q];
+      o[1] -= p.tay[q] + p.tby[q];
+      o[2] -= p.taz[q] + p.tbz[q];
+    }
+  }
+}
+
+void DeformationMeasure::Apply(const Points& d, Points& delta) {
+  delta.resize(d.rows(), 3);
+  for (int k = 0; k < parts(); ++k) ForwardPart(d, k, delta);
+}
+
+void DeformationMeasure::ApplyTranspose(const Points& d, const Points& y, Points& out) {
+  Points scratch(d.rows(), 3);
+  for (int k = 0; k < parts(); ++k) ForwardPart(d, k, scratch);
+  out.resize(y.rows(), 3);
+  for (int k = 0; k < parts(); ++k) TransposePart(y, k, out);
 }
 
 }  // namespace dynsolid::models

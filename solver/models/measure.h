@@ -9,6 +9,17 @@
 // Edges and faces are those of the level-L mesh plus, for pyramid
 // elements, the edges from the virtual centre node to its cell's vertices
 // and the triangles it spans with the cell's face edges.
+//
+// Parallel layout ("owner computes"): the level-L cells are split into
+// `parts` contiguous ranges; a node belongs to the part of its
+// lowest-numbered cell (a virtual node to its cell's part). Part k visits,
+// in ascending order, every edge and corner that touches one of its nodes
+// and adds their terms to its own nodes only. Each node's sum is therefore
+// taken in one global order (its edges ascending, then its corners
+// ascending) whatever the number of parts or threads, no part writes
+// another's rows, and there are no per-thread buffers to clear and add.
+// Terms of edges and corners on a boundary between parts are computed by
+// each part they touch (a few percent of the work on large meshes).
 #pragma once
 
 #include <array>
@@ -24,22 +35,30 @@ class DeformationMeasure {
  public:
   DeformationMeasure() = default;
   DeformationMeasure(const mesh::CellComplex& mesh, const fem::ElementSet& elements,
-                     const Points& rest);
+                     const Points& rest, int parts);
 
-  // delta (#nodes by 3) for node positions d. Overwrites delta.
-  void Apply(const Points& d, Points& delta) const { ApplyPart(d, 0, 1, delta); }
+  int parts() const { return static_cast<int>(parts_.size()); }
 
-  // Part k of `parts` (edges and corners split in fixed ranges): summing the
-  // parts' deltas in order gives Apply's result (to rounding of the sum).
-  void ApplyPart(const Points& d, int k, int parts, Points& delta) const;
+  // delta (#nodes by 3) for node positions d: part k writes the rows of its
+  // nodes (all of them, zeros included) and keeps the geometry it computed
+  // for TransposePart. `delta` must already have d.rows() rows.
+  void ForwardPart(const Points& d, int k, Points& delta);
 
-  // The transpose of the measure's Jacobian applied to y (#nodes by 3):
-  // out = (d delta / d d)^T y, so that for an energy E(delta), the force is
-  // dE/dd = ApplyTranspose(dE/d delta). Part k of `parts` as in ApplyPart.
-  void ApplyTransposePart(const Points& d, const Points& y, int k, int parts, Points& out) const;
+  // out = (d delta / d d)^T y at the positions of the last ForwardPart of
+  // the same part (the transpose of the measure's Jacobian): for an energy
+  // E(delta), the force is dE/dd = (d delta / d d)^T dE/d delta. Part k
+  // writes the rows of its nodes; `out` must have y.rows() rows.
+  void TransposePart(const Points& y, int k, Points& out);
+
+  // Whole-measure conveniences (tests): all parts in turn, resizing outputs.
+  void Apply(const Points& d, Points& delta);
+  void ApplyTranspose(const Points& d, const Points& y, Points& out);
 
   int64_t num_edges() const { return static_cast<int64_t>(edges_.size()); }
   int64_t num_corners() const { return static_cast<int64_t>(corners_.size()); }
+  // Edge and corner terms computed per pass, counting those computed by
+  // two or more parts once for each (>= num_edges() + num_corners()).
+  int64_t terms_per_pass() const;
 
  private:
   struct Edge {
@@ -50,11 +69,38 @@ class DeformationMeasure {
     int32_t n, a, b;
     double cos0, sin0;  // of the rest angle
   };
+  // A part's edges and corners in structure-of-arrays form, so the
+  // geometry loops run in SIMD lanes (gathers in, per-term results out),
+  // and the adds into the part's own nodes follow as a scalar loop in
+  // ascending term order. `owns` bits: 1 the first node (edge i, corner a),
+  // 2 the second (edge j, corner b), 4 the corner's centre n.
+  struct Part {
+    std::vector<int32_t> nodes;  // owned, ascending
+    // Edges touching an owned node, ascending.
+    std::vector<int32_t> ei, ej;
+    std::vector<double> e_rest;
+    std::vector<uint8_t> e_owns;
+    // Corners touching an owned node, ascending.
+    std::vector<int32_t> cn, ca, cb;
+    std::vector<double> cos0, sin0;
+    std::vector<uint8_t> c_owns;
+    // Forward-pass state. Edges: r = d_j - d_i, l, and the term f r.
+    std::vector<double> rx, ry, rz, l, fx, fy, fz;
+    // Corners: the unit sides a^, b^, their lengths, cos and 1/sin of the
+    // angle, alpha, beta and their derivatives in theta (all zero for a
+    // degenerate corner), then the terms on a and b (forward) or on a and
+    // b in the transpose (n gets minus both).
+    std::vector<double> ahx, ahy, ahz, bhx, bhy, bhz, la, lb, cs, inv_s;
+    std::vector<double> alpha, beta, dalpha, dbeta;
+    std::vector<double> tax, tay, taz, tbx, tby, tbz;
+  };
   void AddEdge(int32_t i, int32_t j, const Points& rest);
   void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest);
 
   std::vector<Edge> edges_;
   std::vector<Corner> corners_;
+  std::vector<uint8_t> owner_;  // node -> part
+  std::vector<Part> parts_;
 };
 
 }  // namespace dynsolid::models

@@ -1,6 +1,8 @@
 // The local-frame model's element matrices and deformation measure.
 #include "solver/models/local_frame.h"
 
+#include <cmath>
+
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
@@ -33,7 +35,7 @@ std::unique_ptr<Fixture> Build(const std::string& name, int levels) {
   };
   f->layout = BuildElementLayout(f->d.elements, f->rest, f->d.hierarchy.control_cell, sampler);
   f->model = std::make_unique<LocalFrameModel>(
-      f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest),
+      f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest, kForceParts),
       f->d.elements.num_nodes(), f->pool);
   return f;
 }
@@ -72,7 +74,7 @@ TEST(LocalFrameTest, GroupsShareMatricesOnRegularGrids) {
 
 TEST(LocalFrameTest, MeasureIsZeroForRigidMotionAndCatchesStretchAndShear) {
   auto f = Build("block3", 1);
-  DeformationMeasure m(f->d.fine(), f->d.elements, f->rest);
+  DeformationMeasure m(f->d.fine(), f->d.elements, f->rest, kForceParts);
   Points delta;
   const Eigen::Matrix3d r = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, -1, 0.2).normalized()).toRotationMatrix();
   const Points moved = (f->rest * r.transpose()).rowwise() + Eigen::RowVector3d(1, 2, 3);
@@ -88,6 +90,37 @@ TEST(LocalFrameTest, MeasureIsZeroForRigidMotionAndCatchesStretchAndShear) {
   sheared.col(0) += 0.01 * f->rest.col(1);
   m.Apply(sheared, delta);
   EXPECT_GT(delta.cwiseAbs().maxCoeff(), 1e-4);
+}
+
+// Owner-computes: each node's sum is taken in one global order, so the
+// measure and its transpose give the same bits however the nodes are split
+// into parts (and so for any thread count), on a mesh with pyramids too.
+TEST(LocalFrameTest, MeasureGivesTheSameBitsForAnyPartCount) {
+  for (const char* name : {"block3", "mixed"}) {
+    auto f = Build(name, 1);
+    Points d = f->rest;
+    Points y = f->rest;
+    for (int64_t i = 0; i < d.rows(); ++i) {
+      for (int c = 0; c < 3; ++c) {
+        d(i, c) += 0.02 * std::sin(1.7 * i + 0.9 * c);
+        y(i, c) = std::cos(0.37 * i - 1.3 * c);
+      }
+    }
+    Points delta1, out1;
+    DeformationMeasure one(f->d.fine(), f->d.elements, f->rest, 1);
+    one.Apply(d, delta1);
+    one.ApplyTranspose(d, y, out1);
+    ASSERT_GT(delta1.cwiseAbs().maxCoeff(), 1e-4) << name;
+    for (int parts : {2, 3, 5, 8}) {
+      DeformationMeasure m(f->d.fine(), f->d.elements, f->rest, parts);
+      EXPECT_GE(m.terms_per_pass(), m.num_edges() + m.num_corners());
+      Points delta, out;
+      m.Apply(d, delta);
+      m.ApplyTranspose(d, y, out);
+      EXPECT_TRUE(delta == delta1) << name << ": " << parts << " parts";
+      EXPECT_TRUE(out == out1) << name << ": " << parts << " parts";
+    }
+  }
 }
 
 }  // namespace

@@ -75,7 +75,7 @@ TEST(SurfaceCodecTest, KeyframeThenDeltasReconstructWithinTheStatedBound) {
   int keyframes = 0;
   for (int k = 0; k < 60; ++k) {
     auto snap = Wave(topo, 10 * k, 0.2, 0.05 * k);
-    keyframes += enc.Encode(*snap, &frame);
+    keyframes += enc.Encode(snap, &frame);
     ASSERT_TRUE(dec.Apply(frame).ok()) << "frame " << k;
     EXPECT_EQ(dec.step(), 10 * k);
     // Half a step of 65535 across the grid, plus rounding of the decode.
@@ -90,7 +90,7 @@ TEST(SurfaceCodecTest, TheBoundIsHalfAGridStepOfTheWidenedBox) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
   Frame frame;
-  enc.Encode(*Wave(topo, 0, 0.2, 0), &frame);
+  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   ASSERT_TRUE(frame.has_keyframe());
   const Keyframe& k = frame.keyframe();
   // x spans [0, 2]: widened by 25 % each side -> 3 m over 65535 steps.
@@ -105,9 +105,9 @@ TEST(SurfaceCodecTest, UnmovedSurfaceSendsAnEmptyDelta) {
   SurfaceEncoder enc(FieldChoice{});
   SurfaceDecoder dec;
   Frame frame;
-  enc.Encode(*Wave(topo, 0, 0.2, 0), &frame);
+  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   ASSERT_TRUE(dec.Apply(frame).ok());
-  enc.Encode(*Wave(topo, 5, 0.2, 0), &frame);
+  enc.Encode(Wave(topo, 5, 0.2, 0), &frame);
   ASSERT_TRUE(frame.has_delta());
   EXPECT_EQ(frame.delta().moved(), 0);
   EXPECT_EQ(frame.delta().runs_size(), 0);
@@ -120,11 +120,11 @@ TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
   auto topo = GridTopology(40);
   SurfaceEncoder enc(FieldChoice{});
   Frame frame;
-  enc.Encode(*Wave(topo, 0, 0.2, 0), &frame);
+  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   // Every vertex moves a little each frame (a wobbling surface).
   size_t worst = 0;
   for (int k = 1; k < 20; ++k) {
-    enc.Encode(*Wave(topo, k, 0.2, 0.002 * k), &frame);
+    enc.Encode(Wave(topo, k, 0.2, 0.002 * k), &frame);
     ASSERT_TRUE(frame.has_delta());
     worst = std::max(worst, frame.ByteSizeLong());
   }
@@ -132,24 +132,68 @@ TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
   EXPECT_LE(worst * 4, raw) << "delta " << worst << " bytes, raw float32 " << raw;
 }
 
+TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
+  auto topo = GridTopology();
+  SurfaceEncoder enc(FieldChoice{});
+  SurfaceDecoder dec;
+  Frame frame;
+  auto base = Wave(topo, 0, 0.2, 0);
+  enc.Encode(base, &frame);
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  // Small moves everywhere and one large outlier: Rice is shorter.
+  auto mixed = std::make_shared<SurfaceSnapshot>(*base);
+  mixed->step = 1;
+  for (size_t i = 0; i < mixed->positions.size(); ++i) mixed->positions[i] += 1e-4 * (i % 7);
+  mixed->positions[0] += 0.3;
+  enc.Encode(mixed, &frame);
+  ASSERT_TRUE(frame.has_delta());
+  EXPECT_EQ(frame.delta().rice_k_size(), 3);
+  EXPECT_EQ(frame.delta().bits(), 0u);
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  EXPECT_LE(WorstRatio(dec, *mixed), 1.0 + 1e-9);
+  // Every vertex moved by the same 5 codes on every axis: fixed width
+  // (4 bits each) is shorter than any Rice code.
+  Frame key;
+  SurfaceEncoder enc2(FieldChoice{});
+  SurfaceDecoder dec2;
+  enc2.Encode(base, &key);
+  ASSERT_TRUE(dec2.Apply(key).ok());
+  const Keyframe& k = key.keyframe();
+  const double sx = k.grid().step().x(), sy = k.grid().step().y(), sz = k.grid().step().z();
+  auto shifted = std::make_shared<SurfaceSnapshot>(*base);
+  shifted->step = 1;
+  const std::vector<double> start = dec2.Positions();
+  for (size_t i = 0; i < start.size(); i += 3) {
+    shifted->positions[i] = start[i] + 5 * sx;
+    shifted->positions[i + 1] = start[i + 1] + 5 * sy;
+    shifted->positions[i + 2] = start[i + 2] + 5 * sz;
+  }
+  enc2.Encode(shifted, &key);
+  ASSERT_TRUE(key.has_delta());
+  EXPECT_EQ(key.delta().rice_k_size(), 0);
+  EXPECT_EQ(key.delta().bits(), 4u);
+  ASSERT_TRUE(dec2.Apply(key).ok());
+  EXPECT_LE(WorstRatio(dec2, *shifted), 1.0 + 1e-9);
+}
+
 TEST(SurfaceCodecTest, LeavingTheGridOrChangingTopologyGivesAKeyframe) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
   SurfaceDecoder dec;
   Frame frame;
-  EXPECT_TRUE(enc.Encode(*Wave(topo, 0, 0.2, 0), &frame));
+  EXPECT_TRUE(enc.Encode(Wave(topo, 0, 0.2, 0), &frame));
   ASSERT_TRUE(dec.Apply(frame).ok());
   // Translate by a whole box: off the grid.
   auto moved = Wave(topo, 1, 0.2, 0);
   for (size_t i = 0; i < moved->positions.size(); i += 3) moved->positions[i] += 5.0;
-  EXPECT_TRUE(enc.Encode(*moved, &frame));
+  EXPECT_TRUE(enc.Encode(moved, &frame));
   ASSERT_TRUE(dec.Apply(frame).ok());
   EXPECT_LE(WorstRatio(dec, *moved), 1.0 + 1e-9);
   auto retopo = std::make_shared<SurfaceTopology>(*topo);
   retopo->version = 1;
   auto again = Wave(retopo, 2, 0.2, 0);
   for (size_t i = 0; i < again->positions.size(); i += 3) again->positions[i] += 5.0;
-  EXPECT_TRUE(enc.Encode(*again, &frame));
+  EXPECT_TRUE(enc.Encode(again, &frame));
   EXPECT_EQ(frame.keyframe().topology_version(), 1);
 }
 
@@ -160,10 +204,10 @@ TEST(SurfaceCodecTest, AWatcherThatSkippedManyFramesResumesConsistently) {
   SurfaceEncoder enc(FieldChoice{});
   SurfaceDecoder dec;
   Frame frame;
-  enc.Encode(*Wave(topo, 0, 0.2, 0), &frame);
+  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   ASSERT_TRUE(dec.Apply(frame).ok());
   auto later = Wave(topo, 500, 0.2, 2.5);  // everything moved a lot
-  enc.Encode(*later, &frame);
+  enc.Encode(later, &frame);
   ASSERT_TRUE(dec.Apply(frame).ok());
   EXPECT_LE(WorstRatio(dec, *later), 1.0 + 1e-9);
   EXPECT_EQ(dec.step(), 500);
@@ -178,7 +222,7 @@ TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   a->displacement.assign(16, 0.5f);
   a->strain.assign(16, 0.25f);
   a->stiffness.assign(16, 1e5f);
-  enc.Encode(*a, &frame);
+  enc.Encode(a, &frame);
   EXPECT_EQ(frame.keyframe().fields().displacement_size(), 16);
   EXPECT_EQ(frame.keyframe().fields().strain_size(), 0);
   ASSERT_TRUE(dec.Apply(frame).ok());
@@ -186,7 +230,7 @@ TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   b->displacement.assign(16, 0.75f);
   b->strain.assign(16, 0.25f);
   b->stiffness.assign(16, 1e5f);
-  enc.Encode(*b, &frame);
+  enc.Encode(b, &frame);
   ASSERT_TRUE(frame.has_delta());
   EXPECT_EQ(frame.delta().fields().displacement_size(), frame.delta().moved());
   ASSERT_TRUE(dec.Apply(frame).ok());
@@ -196,9 +240,46 @@ TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   c->displacement = b->displacement;
   c->strain = b->strain;
   c->stiffness.assign(16, 2e5f);
-  EXPECT_TRUE(enc.Encode(*c, &frame));
+  EXPECT_TRUE(enc.Encode(c, &frame));
   ASSERT_TRUE(dec.Apply(frame).ok());
   EXPECT_EQ(dec.stiffness(), std::vector<float>(16, 2e5f));
+}
+
+TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGrid) {
+  auto topo = GridTopology();
+  auto cache = std::make_shared<EncodeCache>();
+  SurfaceEncoder a(FieldChoice{}, cache), b(FieldChoice{}, cache), alone(FieldChoice{});
+  SurfaceDecoder da, db, dalone;
+  Frame fa, fb, f;
+  // a joins at step 0, b at step 1: b keys on a's grid (it still fits).
+  auto s0 = Wave(topo, 0, 0.2, 0), s1 = Wave(topo, 1, 0.2, 0.01);
+  a.Encode(s0, &fa);
+  ASSERT_TRUE(da.Apply(fa).ok());
+  alone.Encode(s0, &f);
+  ASSERT_TRUE(dalone.Apply(f).ok());
+  a.Encode(s1, &fa);
+  b.Encode(s1, &fb);
+  ASSERT_TRUE(da.Apply(fa).ok());
+  ASSERT_TRUE(db.Apply(fb).ok());
+  EXPECT_EQ(fb.keyframe().grid().origin().x(), 0 - 0.5);  // s0's grid
+  EXPECT_EQ(db.Positions(), da.Positions());
+  // From now on both are in the same state: one encoding serves both.
+  const int64_t misses = cache->misses();
+  for (int k = 2; k < 12; ++k) {
+    auto snap = Wave(topo, k, 0.2, 0.01 * k);
+    a.Encode(snap, &fa);
+    b.Encode(snap, &fb);
+    alone.Encode(snap, &f);
+    EXPECT_EQ(fa.SerializeAsString(), fb.SerializeAsString()) << k;
+    ASSERT_TRUE(da.Apply(fa).ok());
+    ASSERT_TRUE(db.Apply(fb).ok());
+    ASSERT_TRUE(dalone.Apply(f).ok());
+    EXPECT_LE(WorstRatio(db, *snap), 1.0 + 1e-9);
+  }
+  EXPECT_EQ(cache->misses() - misses, 10);  // one computation per snapshot
+  EXPECT_GE(cache->hits(), 10);
+  // Sharing changes no bit of what a watcher decodes.
+  EXPECT_EQ(da.Positions(), dalone.Positions());
 }
 
 TEST(SurfaceCodecTest, DecoderRefusesADeltaAgainstAnotherBase) {
@@ -206,8 +287,8 @@ TEST(SurfaceCodecTest, DecoderRefusesADeltaAgainstAnotherBase) {
   SurfaceEncoder enc(FieldChoice{});
   SurfaceDecoder dec;
   Frame first, second;
-  enc.Encode(*Wave(topo, 0, 0.2, 0), &first);
-  enc.Encode(*Wave(topo, 1, 0.2, 0.1), &second);
+  enc.Encode(Wave(topo, 0, 0.2, 0), &first);
+  enc.Encode(Wave(topo, 1, 0.2, 0.1), &second);
   EXPECT_EQ(dec.Apply(second).code(), absl::StatusCode::kFailedPrecondition);
   ASSERT_TRUE(dec.Apply(first).ok());
   Frame bad = second;

@@ -4,6 +4,7 @@
 // tokens, stats, persistence across a restart, and TLS.
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <memory>
@@ -17,6 +18,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
+#include "dynsolid/journal.pb.h"
 #include "dynsolid/service.grpc.pb.h"
 #include "live_client.h"
 #include "server/journal.h"
@@ -158,6 +160,51 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
   }
   EXPECT_GT(moved_total, vertices) << "deltas listed too few moved vertices";
   EXPECT_EQ(static_cast<int>(decoder.displacement().size()), vertices);
+  wc.TryCancel();
+}
+
+TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
+  // The default scene at its two levels, pulled at the top corner: every
+  // delta frame of a 60 Hz watcher against 12 bytes per vertex.
+  const Session s = Create("block3", 2, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(120));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, wr);
+  SurfaceDecoder decoder;
+  std::vector<Frame> frames;
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
+  const int vertices = frames[0].keyframe().vertex_count();
+  EXPECT_EQ(vertices, 6 * 12 * 12 + 2);
+  CommandStream c(*stub_, s, "pull");
+  ASSERT_EQ(c.Send(1, ForceCommand(3, 3, 3, 2e4, 1e4, 0)).code(), 0);
+  ASSERT_EQ(c.Send(2, StepCommand(300)).code(), 0);
+  const InspectReply server = InspectAt(*stub_, s, 300);
+  frames.clear();
+  ASSERT_TRUE(ReadUntilStep(*reader, decoder, 300, &frames));
+  EXPECT_LE(WorstRatio(decoder, server), 1.0 + 1e-9);
+  size_t delta_bytes = 0, deltas = 0, largest = 0;
+  int64_t moved = 0;
+  for (const Frame& f : frames) {
+    if (!f.has_delta()) continue;
+    ++deltas;
+    delta_bytes += f.ByteSizeLong();
+    largest = std::max(largest, f.ByteSizeLong());
+    moved += f.delta().moved();
+  }
+  const double raw = 12.0 * vertices;
+  ASSERT_GT(deltas, 3u);
+  EXPECT_GT(moved, 0);
+  const double mean_ratio = delta_bytes / (deltas * raw);
+  RecordProperty("delta_frames", static_cast<int>(deltas));
+  RecordProperty("mean_delta_over_raw_percent", static_cast<int>(100 * mean_ratio));
+  RecordProperty("largest_delta_over_raw_percent", static_cast<int>(100 * largest / raw));
+  std::printf("block3: %zu delta frames, mean %.1f %% and largest %.1f %% of a raw float32 "
+              "frame (%.0f bytes), %.0f moved vertices per delta\n",
+              deltas, 100 * mean_ratio, 100 * largest / raw, raw,
+              static_cast<double>(moved) / deltas);
+  EXPECT_LE(mean_ratio, 0.25);
   wc.TryCancel();
 }
 
@@ -648,6 +695,30 @@ TEST_F(LiveTest, StatsReportStepTimesPhasesAndCounts) {
   EXPECT_EQ(st.journal_records(), 0);  // no data dir
 }
 
+TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {
+  // h = 10 microseconds: no machine steps this block in real time, so every
+  // step overruns. The loop must count that and re-anchor its clock rather
+  // than owe ever more steps (counts only; no wall time is asserted).
+  const Session s = CreateText(R"(
+    name: "tiny_step"
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 } }
+    constraints { fixed { box { min { z: -0.01 } max { x: 3 y: 3 z: 0.01 } } } }
+    solver { time_step: 1e-5 }
+  )", /*paused=*/true);
+  CommandStream c(*stub_, s, "overrun");
+  ASSERT_EQ(c.Send(1, StepCommand(200)).code(), 0);
+  InspectAt(*stub_, s, 200, false, false);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 200);
+  EXPECT_GT(st.overruns(), 0);
+  EXPECT_GT(st.steps_dropped(), 0);
+  // Each overrun drops the lag of that one step: the lag reported is the
+  // last step's, not an accumulated debt.
+  EXPECT_LE(st.steps_behind(), st.steps_dropped());
+}
+
 TEST_F(LiveTest, ClosingASessionFinishesItsStreams) {
   const Session s = Create("block3", 1, false);
   grpc::ClientContext wc;
@@ -756,6 +827,79 @@ TEST_F(LiveTest, SessionsSurviveARestartWithTheirTokensStateAndAnswers) {
   google::protobuf::Empty e;
   ASSERT_TRUE(stub_->CloseSession(&context, RefOf(s), &e).ok());
   EXPECT_FALSE(ReadWholeFile(dir.path() + "/sessions/" + s.id() + "/manifest.binpb").ok());
+}
+
+TEST_F(LiveTest, ShutdownFinishesEveryStreamWithAStatusAndWritesALastSnapshot) {
+  TempDir dir;
+  ServerOptions o = Options();
+  o.data_dir = dir.path();
+  Start(o);
+  const Session s = Create("block3", 1, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline());
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, wr);
+  Frame f;
+  ASSERT_TRUE(reader->Read(&f));
+  CommandStream c(*stub_, s, "shutdown");
+  ASSERT_EQ(c.Send(1, StepCommand(12)).code(), 0);
+  InspectAt(*stub_, s, 12, false, false);
+  // An inspection waiting for a step the paused session never reaches.
+  grpc::Status waiting;
+  std::thread inspect([&] { InspectAt(*stub_, s, 1000, false, false, &waiting); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+
+  server_->Shutdown(absl::Seconds(5));
+  inspect.join();
+  EXPECT_EQ(waiting.error_code(), grpc::StatusCode::UNAVAILABLE);
+  while (reader->Read(&f)) {
+  }
+  const grpc::Status ws = reader->Finish();
+  EXPECT_EQ(ws.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(ws.error_message(), HasSubstr("shutting down"));
+  CommandReply r;
+  EXPECT_FALSE(c.Read(&r));
+  EXPECT_EQ(c.Finish().error_code(), grpc::StatusCode::UNAVAILABLE);
+
+  // The last snapshot is at step 12: a restart replays nothing.
+  Start(o);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 12);
+  EXPECT_EQ(st.last_snapshot_step(), 12);
+}
+
+TEST_F(LiveTest, AJournalThatDoesNotReplayToItsOutcomesIsNotOpened) {
+  TempDir dir;
+  ServerOptions o = Options();
+  o.data_dir = dir.path();
+  Start(o);
+  const Session s = Create("block3", 1, /*paused=*/true);
+  {
+    CommandStream c(*stub_, s, "tamper");
+    ASSERT_EQ(c.Send(1, ForceCommand(1.5, 1.5, 3, 1e4, 0, 0)).code(), 0);
+    c.Finish();
+  }
+  server_->Shutdown(absl::Seconds(2));
+  server_.reset();
+  // Rewrite the record (with a valid CRC) as if the command had been
+  // rejected, and drop the snapshot so the journal is replayed.
+  const std::string sdir = dir.path() + "/sessions/" + s.id();
+  absl::StatusOr<JournalContents> journal = ReadJournal(sdir + "/journal", 0);
+  ASSERT_TRUE(journal.ok());
+  ASSERT_EQ(journal->records.size(), 1u);
+  persist::JournalRecord record;
+  ASSERT_TRUE(record.ParseFromString(journal->records[0]));
+  record.mutable_reply()->set_code(3);
+  ASSERT_TRUE(WriteFileAtomically(sdir, "journal", FrameRecord(record.SerializeAsString())).ok());
+  ASSERT_EQ(std::remove((sdir + "/snapshot.binpb").c_str()), 0);
+  Start(o);
+  EXPECT_EQ(server_->recovered_sessions(), 0);
+  grpc::Status status;
+  InspectAt(*stub_, s, 0, false, false, &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  // Left on disk, untouched, for a person to look at.
+  EXPECT_TRUE(ReadWholeFile(sdir + "/manifest.binpb").ok());
 }
 
 TEST_F(LiveTest, TlsServesClientsThatTrustItsCertificateOnly) {

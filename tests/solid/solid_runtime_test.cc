@@ -196,6 +196,37 @@ TEST(SolidRuntimeTest, PressureOnOneFaceHasResultantPressureTimesArea) {
   EXPECT_GT(got.x(), 0);
 }
 
+TEST(SolidRuntimeTest, ScenePressuresAreLoadsWithIdsAndAreValidated) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e4 density: 100 damping: 200 } }
+    loads {
+      point_forces { position { x: 1 y: 1 z: 1 } force { x: 1 } }
+      pressures { region { box { min { x: -1 y: -1 z: -1 } max { x: 3 y: 3 z: 3 } } } pascals: 300 }
+    }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  EXPECT_EQ(s->load_ids(), (std::vector<int64_t>{1, 2})) << "point forces, then pressures";
+  const double v0 = EnclosedVolume(*s);
+  for (int i = 0; i < 200; ++i) ASSERT_OK(s->Step());
+  EXPECT_GT(EnclosedVolume(*s), v0 * 1.001);
+  ASSERT_OK(s->RemoveLoad(2));
+  EXPECT_EQ(s->load_ids(), (std::vector<int64_t>{1}));
+  EXPECT_THAT(scene::ParseScene(R"pb(
+                mesh { block { nx: 1 ny: 1 nz: 1 } }
+                loads { pressures { region { sphere { radius: 0 } } pascals: 1 } }
+              )pb", "t"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("loads.pressures[0].region.sphere.radius must be > 0 metres")));
+  EXPECT_THAT(scene::ParseScene(R"pb(
+                mesh { block { nx: 1 ny: 1 nz: 1 } }
+                loads { pressures { region { control_cells: 0 } } }
+              )pb", "t"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("loads.pressures[0].pascals must be non-zero")));
+}
+
 const char* kBeam = R"pb(
   mesh { beam { length: 1 width: 0.1 height: 0.1 cells_along: 6 cells_across: 1 } }
   subdivision { levels: 1 }
@@ -237,6 +268,33 @@ TEST(SolidRuntimeTest, FixHoldsPointsWhereTheyAreAndUnfixReleasesThem) {
   EXPECT_EQ(s->rollbacks(), 0) << "fixing and unfixing never fire the energy guard";
   EXPECT_THAT(s->Unfix(*id), StatusIs(absl::StatusCode::kNotFound,
                                       HasSubstr(absl::StrCat("constraint id ", *id, " not found"))));
+}
+
+TEST(SolidRuntimeTest, UnfixingTheScenesClampFreesTheSolid) {
+  std::string text(kBeam);
+  text.replace(text.find(" damping: 3000"), 14, "");
+  auto s = Make(text);
+  ASSERT_NE(s, nullptr);
+  for (int i = 0; i < 50; ++i) ASSERT_OK(s->Step());
+  ASSERT_EQ(s->constraint_ids().size(), 1u);
+  ASSERT_OK(s->Unfix(s->constraint_ids()[0]));
+  EXPECT_EQ(s->build_report().fixed_control_points, 0);
+  EXPECT_TRUE(s->constraint_ids().empty());
+  // Free under gravity (no damping): the centre of mass falls at g, its
+  // second difference per step g h^2 (central differences are exact for a
+  // constant acceleration, with or without sub-steps).
+  const double h = s->time_step();
+  Eigen::Vector3d c0 = Centre(*s), c1;
+  ASSERT_OK(s->Step());
+  c1 = Centre(*s);
+  for (int i = 0; i < 60; ++i) {
+    ASSERT_OK(s->Step());
+    const Eigen::Vector3d c2 = Centre(*s);
+    EXPECT_NEAR((c2 - 2 * c1 + c0).z(), -9.81 * h * h, 1e-12) << "step " << i;
+    c0 = c1;
+    c1 = c2;
+  }
+  EXPECT_EQ(s->rollbacks(), 0);
 }
 
 TEST(SolidRuntimeTest, PaintingStiffnessOnHalfTheBeamChangesTheStaticDeflection) {

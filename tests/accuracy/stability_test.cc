@@ -143,6 +143,33 @@ TEST(StabilityCasesTest, InvertingLoadInvertsCells) {
   FAIL() << "no inverting_load case";
 }
 
+// Penalty springs of 1e9 N/m need about 2000 explicit sub-steps per 1/30 s
+// step: with a cap of 100 Create refuses, naming the field, the count and
+// the stable step; backward Euler takes the same scene.
+TEST(StabilityCasesTest, ExplicitStepsAboveTheCapAreRefusedWithTheReason) {
+  for (const Case& base : Cases()) {
+    if (base.name != "penalty_1e9") continue;
+    Case c = base;
+    c.h = 1.0 / 30;
+    RunOptions o;
+    o.steps = 3;
+    o.max_substeps = 100;
+    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+    EXPECT_THAT(cd.create,
+                testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                  ::testing::AllOf(HasSubstr("solver.time_step"),
+                                                   HasSubstr("explicit sub-steps (stable step"),
+                                                   HasSubstr("max_substeps is 100"))));
+    EXPECT_EQ(cd.steps_done, 0);
+    const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
+    EXPECT_OK(be.create);
+    EXPECT_TRUE(be.completed());
+    EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
+    return;
+  }
+  FAIL() << "no penalty_1e9 case";
+}
+
 // The 180-degree twist: released with strain energy, no loads; backward
 // Euler only loses it; the central-difference run (sub-stepped) stays
 // finite and its energy does not keep growing.

@@ -82,7 +82,9 @@ TEST_P(StabilityTest, BackwardEulerStaysBounded) {
     EXPECT_LT(o.late_growth_ratio, 1.0) << Describe(o);
     EXPECT_LT(o.final_energy_ratio, o.energy_ratio) << Describe(o);
   } else {
-    EXPECT_LE(o.energy_ratio, 1 + kEnergyTolerance) << "energy grew: " << Describe(o);
+    // Tighter than the report's verdict tolerance: backward Euler's H never
+    // rises above H(0) here except by ~2e-6 on the spin at 1 ms.
+    EXPECT_LE(o.energy_ratio, 1 + 1e-5) << "energy grew: " << Describe(o);
   }
 }
 

@@ -1,32 +1,109 @@
 #!/usr/bin/env bash
-# The main job: builds dynsolid, then for the built-in default scene (block3)
-# and every other built-in scene builds the subdivision solid and runs it for
-# STEPS time steps (default 200) with the scene's model and integrator,
-# writing out/main/<scene>/ (stats.json, trace.csv, boundary.obj,
-# boundary.ply, volume.vtu, frames/) and out/main/summary.md, a Table-1
-# style summary. A scene whose model or integrator this build does not have
-# yet is exported without stepping, and the summary says so.
+# The main job: builds dynsolid, starts dynsolid-server on a free port with a
+# temporary --data_dir, runs the scripted sculpting session of
+# clients/scripts/sculpt_block3.txt on the default scene (block3) with
+# dynsolid-client (pull, inflate, paint, pin, pause/resume/step, save),
+# recording frames, then stops the server with SIGTERM and checks that it
+# exits 0. Writes under out/main/ (OUT=...):
+#   session/report.json     the client's report (commands, latency, frames, stats)
+#   session/frames/         snapshots (pulled, inflated, pinned, after_realtime,
+#                           final) and every RECORD_EVERY-th frame, .obj + .vtu
+#   session/client.txt      the client's summary lines
+#   session/server.log      the server's log
+#   offline/<scene>/        dynsolid-sim of every built-in scene for STEPS (20)
+#                           steps: the Table-1 style table (OFFLINE=0: skip;
+#                           about a minute on two cores)
+#   summary.md              the session summary and the Table-1 style table
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/build.sh dynsolid-sim
-SIM=build/${PRESET:-release}/solver/tools/dynsolid-sim
+PRESET="${PRESET:-release}"
 OUT=${OUT:-out/main}
-STEPS=${STEPS:-100}
-mkdir -p "$OUT"
-SCENES="block3 block4 chair bridge nozzle torus mixed beam"
-for s in $SCENES; do
-  rm -rf "${OUT:?}/$s"
-  if ! "$SIM" --scene "$s" --steps "$STEPS" --frames 50 --out "$OUT/$s" 2> "$OUT/$s.err"; then
-    if grep -q "not available in this build" "$OUT/$s.err"; then
-      echo "$s: $(cat "$OUT/$s.err") -- exporting without stepping" >&2
-      "$SIM" --scene "$s" --out "$OUT/$s"
-    else
-      cat "$OUT/$s.err" >&2
-      exit 1
-    fi
+OFFLINE=${OFFLINE:-1}
+STEPS=${STEPS:-20}
+RECORD_EVERY=${RECORD_EVERY:-10}
+TARGETS="dynsolid-server dynsolid-client"
+if [ "$OFFLINE" != 0 ]; then TARGETS="$TARGETS dynsolid-sim"; fi
+# shellcheck disable=SC2086
+bash scripts/build.sh $TARGETS
+BIN=build/$PRESET
+SERVER=$BIN/server/dynsolid-server
+CLIENT=$BIN/clients/cli/dynsolid-client
+
+S="$OUT/session"
+rm -rf "$S"
+mkdir -p "$S/frames"
+DATA=$(mktemp -d "${TMPDIR:-/tmp}/dynsolid_main_XXXXXX")
+SERVER_PID=""
+cleanup() {
+  if [ -n "$SERVER_PID" ] && kill -0 "$SERVER_PID" 2>/dev/null; then
+    kill -TERM "$SERVER_PID" 2>/dev/null || true
+    wait "$SERVER_PID" 2>/dev/null || true
   fi
-  cat "$OUT/$s.err" >&2
-  rm -f "$OUT/$s.err"
+  rm -rf "$DATA"
+}
+trap cleanup EXIT
+
+"$SERVER" --listen 127.0.0.1:0 --data_dir "$DATA" > "$S/server.out" 2> "$S/server.log" &
+SERVER_PID=$!
+ADDR=""
+for _ in $(seq 600); do
+  if [ -s "$S/server.out" ]; then
+    ADDR=$(sed -n '1s/^listening on //p' "$S/server.out")
+    break
+  fi
+  if ! kill -0 "$SERVER_PID" 2>/dev/null; then break; fi
+  sleep 0.1
 done
-/usr/bin/python3 scripts/summarize.py "$OUT" $SCENES > "$OUT/summary.md"
+if [ -z "$ADDR" ]; then
+  echo "run_main: dynsolid-server did not start (see $S/server.log)" >&2
+  cat "$S/server.log" >&2
+  exit 1
+fi
+echo "run_main: dynsolid-server listening on $ADDR" >&2
+
+"$CLIENT" --server "$ADDR" run --script clients/scripts/sculpt_block3.txt \
+  --scene block3 --start_paused \
+  --frames_dir "$S/frames" --format obj,vtu --record_every "$RECORD_EVERY" \
+  --fields displacement,strain,stiffness \
+  --json "$S/report.json" | tee "$S/client.txt"
+
+kill -TERM "$SERVER_PID"
+SERVER_EXIT=0
+wait "$SERVER_PID" || SERVER_EXIT=$?
+SERVER_PID=""
+if [ "$SERVER_EXIT" != 0 ]; then
+  echo "run_main: dynsolid-server exited $SERVER_EXIT after SIGTERM (see $S/server.log)" >&2
+  exit 1
+fi
+echo "run_main: dynsolid-server stopped cleanly (exit 0)" >&2
+
+SCENES="block3 block4 chair bridge nozzle torus mixed beam"
+if [ "$OFFLINE" != 0 ]; then
+  SIM=$BIN/solver/tools/dynsolid-sim
+  mkdir -p "$OUT/offline"
+  for s in $SCENES; do
+    rm -rf "${OUT:?}/offline/$s"
+    if ! "$SIM" --scene "$s" --steps "$STEPS" --out "$OUT/offline/$s" 2> "$OUT/offline/$s.err"; then
+      if grep -q "not available in this build" "$OUT/offline/$s.err"; then
+        echo "$s: $(cat "$OUT/offline/$s.err") -- exporting without stepping" >&2
+        "$SIM" --scene "$s" --out "$OUT/offline/$s"
+      else
+        cat "$OUT/offline/$s.err" >&2
+        exit 1
+      fi
+    fi
+    rm -f "$OUT/offline/$s.err"
+  done
+fi
+
+{
+  /usr/bin/python3 scripts/summarize_session.py "$S/report.json" --server-exit "$SERVER_EXIT"
+  if [ "$OFFLINE" != 0 ]; then
+    echo
+    echo "## Offline: every built-in scene, $STEPS steps with dynsolid-sim (Table-1 style)"
+    echo
+    # shellcheck disable=SC2086
+    /usr/bin/python3 scripts/summarize.py "$OUT/offline" $SCENES
+  fi
+} > "$OUT/summary.md"
 cat "$OUT/summary.md"

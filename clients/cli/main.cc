@@ -5,13 +5,25 @@
 //   dynsolid-client [--server HOST:PORT] get --id ID --token TOKEN
 //   dynsolid-client [--server HOST:PORT] list
 //   dynsolid-client [--server HOST:PORT] close --id ID --token TOKEN
+//   dynsolid-client [--server HOST:PORT] stats --id ID --token TOKEN
+//   dynsolid-client [--server HOST:PORT] run --script FILE
+//       (--scene NAME | --scene_file FILE | --id ID --token TOKEN)
+//       [--frames_dir DIR] [--format obj,vtu] [--record_every N]
+//       [--fields displacement,strain,stiffness] [--json FILE] ...
+//   dynsolid-client check --script FILE
 //
-// Prints the result as JSON on stdout (the proto3 JSON mapping of the reply,
-// field names as in service.proto). Exit codes: 0 done; 1 bad command line;
-// 2 the call failed (stderr: "dynsolid-client: CODE: message").
+// create/get/list/close/stats print the result as JSON on stdout (the proto3 JSON
+// mapping of the reply, field names as in service.proto). `run` runs a
+// script of commands against a new or joined session while watching it
+// (docs/client.md), prints latency and frame rate, and with --json writes
+// the full report. `check` only parses a script. Exit codes: 0 done; 1 bad
+// command line or script (stderr: "FILE:LINE: ..."); 2 a call failed
+// (stderr: "dynsolid-client: CODE: message"); 3 the script ran but
+// stopped early (a rejected command, a wait that timed out).
 //
 // --scene_file reads a scene on this machine and sends its text; the
 // server rejects scenes that name a mesh file.
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -26,28 +38,65 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "clients/lib/script.h"
+#include "clients/lib/session_runner.h"
 #include "dynsolid/service.grpc.pb.h"
 
 ABSL_FLAG(std::string, server, "127.0.0.1:50051", "dynsolid-server address, HOST:PORT");
-ABSL_FLAG(std::string, scene, "", "create: a built-in scene name (block3, chair, ...)");
-ABSL_FLAG(std::string, scene_file, "", "create: a local scene file (.textproto) to send");
-ABSL_FLAG(int, levels, -1, "create: subdivision levels 0-4; -1 keeps the scene's");
-ABSL_FLAG(std::string, id, "", "get, close: the session id");
-ABSL_FLAG(std::string, token, "", "get, close: the session token");
-ABSL_FLAG(double, timeout_seconds, 120, "Deadline of each call, in seconds");
+ABSL_FLAG(std::string, tls_ca, "",
+          "PEM file of the root certificates to trust: connect with TLS (empty: plaintext)");
+ABSL_FLAG(std::string, scene, "", "create, run: a built-in scene name (block3, chair, ...)");
+ABSL_FLAG(std::string, scene_file, "", "create, run: a local scene file (.textproto) to send");
+ABSL_FLAG(int, levels, -1, "create, run: subdivision levels 0-4; -1 keeps the scene's");
+ABSL_FLAG(bool, start_paused, false,
+          "create, run: open the session paused at step 0 (it moves on step/resume)");
+ABSL_FLAG(std::string, id, "", "get, close, run: the session id (run: join it)");
+ABSL_FLAG(std::string, token, "", "get, close, run: the session token");
+ABSL_FLAG(double, timeout_seconds, 120, "Deadline of each call and of each wait line, seconds");
 ABSL_FLAG(int, max_message_bytes, 4 << 20, "Largest message received, in bytes");
+ABSL_FLAG(std::string, script, "", "run, check: the script file (docs/client.md)");
+ABSL_FLAG(std::string, client_id, "",
+          "run: the client id of the commands (empty: a random one); keep it to resend");
+ABSL_FLAG(bool, watch, true, "run: watch the surface (--nowatch: commands only)");
+ABSL_FLAG(double, watch_hz, 0, "run: frames per second asked for (0: the server's default)");
+ABSL_FLAG(std::string, fields, "",
+          "run: per-vertex fields to watch and record, comma separated: displacement, strain, "
+          "stiffness");
+ABSL_FLAG(std::string, frames_dir, "",
+          "run: directory for recorded frames and snapshots (created if missing)");
+ABSL_FLAG(std::string, format, "obj", "run: frame file formats, comma separated: obj, vtu");
+ABSL_FLAG(int, record_every, 0,
+          "run: record every N-th frame received as frame_<step>.<format> (0: only snapshots)");
+ABSL_FLAG(std::string, json, "", "run: write the report as JSON to this file");
+ABSL_FLAG(bool, close, true,
+          "run: close the session at the end (a joined session: only with --close given)");
+ABSL_FLAG(bool, keep_going, false, "run: continue after a rejected command");
+ABSL_FLAG(int, break_every, 0,
+          "run, testing: drop the command stream after every N-th command (0: never) to "
+          "exercise reconnect and resend");
+ABSL_FLAG(bool, verbose, false, "run: print each script line and every reconnect on stderr");
+ABSL_FLAG(double, reconnect_seconds, 30,
+          "run: give up when no stream has worked for this long");
 
 namespace {
 
 constexpr int kUsageError = 1;
 constexpr int kCallFailed = 2;
+constexpr int kScriptStopped = 3;
 
 const char kUsage[] =
     "dynsolid-client [--server HOST:PORT] COMMAND [flags]\n"
-    "  create --scene NAME | --scene_file FILE [--levels L]\n"
+    "  create --scene NAME | --scene_file FILE [--levels L] [--start_paused]\n"
     "  get --id ID --token TOKEN\n"
     "  list\n"
-    "  close --id ID --token TOKEN";
+    "  close --id ID --token TOKEN\n"
+    "  stats --id ID --token TOKEN\n"
+    "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
+    "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
+    "      [--json FILE] [--start_paused] [--levels L] [--noclose] [--keep_going]\n"
+    "  check --script FILE";
 
 int UsageError(const std::string& message) {
   std::cerr << "dynsolid-client: " << message << "\nusage: " << kUsage << "\n";
@@ -99,14 +148,30 @@ int Report(const grpc::Status& status, const google::protobuf::Message& reply) {
   return 0;
 }
 
+bool ReadFile(const std::string& path, std::string* text) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::stringstream s;
+  s << in.rdbuf();
+  *text = s.str();
+  return true;
+}
+
 class Client {
  public:
-  explicit Client(const std::string& address) {
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(absl::GetFlag(FLAGS_max_message_bytes));
-    stub_ = dynsolid::Sessions::NewStub(
-        grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args));
+  explicit Client(bool close_given) : close_given_(close_given) {
+    dynsolid::client::ChannelOptions options;
+    options.address = absl::GetFlag(FLAGS_server);
+    options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
+    const std::string ca = absl::GetFlag(FLAGS_tls_ca);
+    if (!ca.empty() && !ReadFile(ca, &options.tls_root_certs)) {
+      ca_error_ = absl::StrCat("cannot read --tls_ca ", ca);
+    }
+    channels_ = dynsolid::client::ChannelFactoryFor(options);
+    stub_ = dynsolid::Sessions::NewStub(channels_());
   }
+
+  const std::string& ca_error() const { return ca_error_; }
 
   int Create() {
     const std::string name = absl::GetFlag(FLAGS_scene);
@@ -118,15 +183,14 @@ class Client {
     if (!name.empty()) {
       request.set_builtin_scene(name);
     } else {
-      std::ifstream in(file);
-      if (!in) return UsageError(absl::StrCat("cannot read --scene_file ", file));
-      std::stringstream text;
-      text << in.rdbuf();
-      request.set_scene_text(text.str());
+      std::string text;
+      if (!ReadFile(file, &text)) return UsageError(absl::StrCat("cannot read --scene_file ", file));
+      request.set_scene_text(text);
     }
     if (absl::GetFlag(FLAGS_levels) != -1) {
       request.set_levels_override(absl::GetFlag(FLAGS_levels));
     }
+    request.set_start_paused(absl::GetFlag(FLAGS_start_paused));
     dynsolid::Session reply;
     auto context = NewContext();
     return Report(stub_->CreateSession(context.get(), request, &reply), reply);
@@ -155,6 +219,117 @@ class Client {
     return Report(stub_->CloseSession(context.get(), ref, &reply), reply);
   }
 
+  int Stats() {
+    dynsolid::SessionRef ref;
+    if (int e = ReadRef(ref); e != 0) return e;
+    dynsolid::SessionStats reply;
+    auto context = NewContext();
+    return Report(stub_->GetStats(context.get(), ref, &reply), reply);
+  }
+
+  int Run(const dynsolid::client::Script& script) {
+    namespace dc = dynsolid::client;
+    dc::RunOptions o;
+    const std::string name = absl::GetFlag(FLAGS_scene);
+    const std::string file = absl::GetFlag(FLAGS_scene_file);
+    const std::string id = absl::GetFlag(FLAGS_id);
+    if (int(!name.empty()) + int(!file.empty()) + int(!id.empty()) != 1) {
+      return UsageError("run needs exactly one of --scene NAME, --scene_file FILE, --id ID");
+    }
+    o.builtin_scene = name;
+    if (!file.empty() && !ReadFile(file, &o.scene_text)) {
+      return UsageError(absl::StrCat("cannot read --scene_file ", file));
+    }
+    if (!id.empty()) {
+      o.join.set_id(id);
+      o.join.set_token(absl::GetFlag(FLAGS_token));
+    }
+    o.levels = absl::GetFlag(FLAGS_levels);
+    o.start_paused = absl::GetFlag(FLAGS_start_paused);
+    o.client_id = absl::GetFlag(FLAGS_client_id);
+    o.watch = absl::GetFlag(FLAGS_watch);
+    o.watcher.rate_hz = absl::GetFlag(FLAGS_watch_hz);
+    for (absl::string_view f : absl::StrSplit(absl::GetFlag(FLAGS_fields), ',', absl::SkipEmpty())) {
+      if (f == "displacement") {
+        o.watcher.displacement = true;
+      } else if (f == "strain") {
+        o.watcher.strain = true;
+      } else if (f == "stiffness") {
+        o.watcher.stiffness = true;
+      } else {
+        return UsageError(absl::StrCat("--fields: unknown field \"", f,
+                                       "\" (displacement, strain, stiffness)"));
+      }
+    }
+    o.write_obj = o.write_vtu = false;
+    for (absl::string_view f : absl::StrSplit(absl::GetFlag(FLAGS_format), ',', absl::SkipEmpty())) {
+      if (f == "obj") {
+        o.write_obj = true;
+      } else if (f == "vtu") {
+        o.write_vtu = true;
+      } else {
+        return UsageError(absl::StrCat("--format: unknown format \"", f, "\" (obj, vtu)"));
+      }
+    }
+    o.watcher.record_every = absl::GetFlag(FLAGS_record_every);
+    if (o.watcher.record_every < 0) return UsageError("--record_every must be >= 0");
+    o.frames_dir = absl::GetFlag(FLAGS_frames_dir);
+    if (o.watcher.record_every > 0 && o.frames_dir.empty()) {
+      return UsageError("--record_every needs --frames_dir");
+    }
+    if (!o.frames_dir.empty()) {
+      std::error_code ec;
+      std::filesystem::create_directories(o.frames_dir, ec);
+      if (ec) return UsageError(absl::StrCat("cannot create --frames_dir ", o.frames_dir, ": ",
+                                             ec.message()));
+    }
+    // A joined session stays open unless --close is given explicitly.
+    o.close_at_end = absl::GetFlag(FLAGS_close);
+    if (!id.empty() && !close_given_) o.close_at_end = false;
+    o.keep_going = absl::GetFlag(FLAGS_keep_going);
+    const absl::Duration timeout = absl::Seconds(absl::GetFlag(FLAGS_timeout_seconds));
+    o.wait_timeout = o.call_timeout = timeout;
+    o.commands.break_every = absl::GetFlag(FLAGS_break_every);
+    o.commands.reconnect_timeout = absl::Seconds(absl::GetFlag(FLAGS_reconnect_seconds));
+    o.watcher.reconnect_timeout = o.commands.reconnect_timeout;
+
+    if (absl::GetFlag(FLAGS_verbose)) {
+      const auto start = std::chrono::steady_clock::now();
+      o.log = [start](const std::string& message) {
+        const double t =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        std::cerr << absl::StrFormat("[%8.3f s] %s\n", t, message);
+      };
+    }
+    absl::StatusOr<dc::RunReport> report = dc::RunScript(channels_, script, o);
+    if (!report.ok()) {
+      std::cerr << "dynsolid-client: "
+                << CodeName(static_cast<grpc::StatusCode>(report.status().code())) << ": "
+                << report.status().message() << "\n";
+      return kCallFailed;
+    }
+    std::cout << dc::ReportText(*report);
+    if (report->created && !report->closed) {
+      // Whoever created it may join it again (run --id ID --token TOKEN).
+      std::cout << "session " << report->session.id() << " left open, token " << report->token
+                << "\n";
+    }
+    const std::string json = absl::GetFlag(FLAGS_json);
+    if (!json.empty()) {
+      std::ofstream out(json, std::ios::trunc);
+      out << dc::ReportJson(*report);
+      if (!out) {
+        std::cerr << "dynsolid-client: cannot write --json " << json << "\n";
+        return kCallFailed;
+      }
+    }
+    if (!report->status.ok()) {
+      std::cerr << "dynsolid-client: " << report->status.message() << "\n";
+      return kScriptStopped;
+    }
+    return 0;
+  }
+
  private:
   static std::unique_ptr<grpc::ClientContext> NewContext() {
     auto context = std::make_unique<grpc::ClientContext>();
@@ -172,20 +347,58 @@ class Client {
     return 0;
   }
 
+  dynsolid::client::ChannelFactory channels_;
   std::unique_ptr<dynsolid::Sessions::Stub> stub_;
+  std::string ca_error_;
+  const bool close_given_;
 };
+
+// Reads and parses --script; prints the errors (exit code 1) or returns 0.
+int LoadScript(dynsolid::client::Script* script) {
+  const std::string path = absl::GetFlag(FLAGS_script);
+  if (path.empty()) return UsageError("--script FILE is required");
+  std::string text;
+  if (!ReadFile(path, &text)) return UsageError(absl::StrCat("cannot read --script ", path));
+  absl::StatusOr<dynsolid::client::Script> parsed = dynsolid::client::ParseScript(text, path);
+  if (!parsed.ok()) {
+    std::cerr << parsed.status().message() << "\n";
+    return kUsageError;
+  }
+  *script = std::move(*parsed);
+  return 0;
+}
 
 }  // namespace
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage(kUsage);
+  bool close_given = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a.rfind("--close", 0) == 0 || a.rfind("--noclose", 0) == 0) close_given = true;
+  }
   const std::vector<char*> args = absl::ParseCommandLine(argc, argv);
-  if (args.size() != 2) return UsageError("expected one command: create, get, list or close");
+  if (args.size() != 2) {
+    return UsageError("expected one command: create, get, list, close, stats, run or check");
+  }
   const std::string command = args[1];
-  Client client(absl::GetFlag(FLAGS_server));
+  if (command == "check") {
+    dynsolid::client::Script script;
+    if (int e = LoadScript(&script); e != 0) return e;
+    std::cout << script.file << ": " << script.lines.size() << " lines OK\n";
+    return 0;
+  }
+  Client client(close_given);
+  if (!client.ca_error().empty()) return UsageError(client.ca_error());
   if (command == "create") return client.Create();
   if (command == "get") return client.Get();
   if (command == "list") return client.List();
   if (command == "close") return client.Close();
+  if (command == "stats") return client.Stats();
+  if (command == "run") {
+    dynsolid::client::Script script;
+    if (int e = LoadScript(&script); e != 0) return e;
+    return client.Run(script);
+  }
   return UsageError(absl::StrCat("unknown command \"", command, "\""));
 }

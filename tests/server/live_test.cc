@@ -18,6 +18,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
+#include "dynsolid/journal.pb.h"
 #include "dynsolid/service.grpc.pb.h"
 #include "live_client.h"
 #include "server/journal.h"
@@ -826,6 +827,79 @@ TEST_F(LiveTest, SessionsSurviveARestartWithTheirTokensStateAndAnswers) {
   google::protobuf::Empty e;
   ASSERT_TRUE(stub_->CloseSession(&context, RefOf(s), &e).ok());
   EXPECT_FALSE(ReadWholeFile(dir.path() + "/sessions/" + s.id() + "/manifest.binpb").ok());
+}
+
+TEST_F(LiveTest, ShutdownFinishesEveryStreamWithAStatusAndWritesALastSnapshot) {
+  TempDir dir;
+  ServerOptions o = Options();
+  o.data_dir = dir.path();
+  Start(o);
+  const Session s = Create("block3", 1, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline());
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  auto reader = stub_->Watch(&wc, wr);
+  Frame f;
+  ASSERT_TRUE(reader->Read(&f));
+  CommandStream c(*stub_, s, "shutdown");
+  ASSERT_EQ(c.Send(1, StepCommand(12)).code(), 0);
+  InspectAt(*stub_, s, 12, false, false);
+  // An inspection waiting for a step the paused session never reaches.
+  grpc::Status waiting;
+  std::thread inspect([&] { InspectAt(*stub_, s, 1000, false, false, &waiting); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+
+  server_->Shutdown(absl::Seconds(5));
+  inspect.join();
+  EXPECT_EQ(waiting.error_code(), grpc::StatusCode::UNAVAILABLE);
+  while (reader->Read(&f)) {
+  }
+  const grpc::Status ws = reader->Finish();
+  EXPECT_EQ(ws.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(ws.error_message(), HasSubstr("shutting down"));
+  CommandReply r;
+  EXPECT_FALSE(c.Read(&r));
+  EXPECT_EQ(c.Finish().error_code(), grpc::StatusCode::UNAVAILABLE);
+
+  // The last snapshot is at step 12: a restart replays nothing.
+  Start(o);
+  const SessionStats st = StatsOf(*stub_, s);
+  EXPECT_EQ(st.step(), 12);
+  EXPECT_EQ(st.last_snapshot_step(), 12);
+}
+
+TEST_F(LiveTest, AJournalThatDoesNotReplayToItsOutcomesIsNotOpened) {
+  TempDir dir;
+  ServerOptions o = Options();
+  o.data_dir = dir.path();
+  Start(o);
+  const Session s = Create("block3", 1, /*paused=*/true);
+  {
+    CommandStream c(*stub_, s, "tamper");
+    ASSERT_EQ(c.Send(1, ForceCommand(1.5, 1.5, 3, 1e4, 0, 0)).code(), 0);
+    c.Finish();
+  }
+  server_->Shutdown(absl::Seconds(2));
+  server_.reset();
+  // Rewrite the record (with a valid CRC) as if the command had been
+  // rejected, and drop the snapshot so the journal is replayed.
+  const std::string sdir = dir.path() + "/sessions/" + s.id();
+  absl::StatusOr<JournalContents> journal = ReadJournal(sdir + "/journal", 0);
+  ASSERT_TRUE(journal.ok());
+  ASSERT_EQ(journal->records.size(), 1u);
+  persist::JournalRecord record;
+  ASSERT_TRUE(record.ParseFromString(journal->records[0]));
+  record.mutable_reply()->set_code(3);
+  ASSERT_TRUE(WriteFileAtomically(sdir, "journal", FrameRecord(record.SerializeAsString())).ok());
+  ASSERT_EQ(std::remove((sdir + "/snapshot.binpb").c_str()), 0);
+  Start(o);
+  EXPECT_EQ(server_->recovered_sessions(), 0);
+  grpc::Status status;
+  InspectAt(*stub_, s, 0, false, false, &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  // Left on disk, untouched, for a person to look at.
+  EXPECT_TRUE(ReadWholeFile(sdir + "/manifest.binpb").ok());
 }
 
 TEST_F(LiveTest, TlsServesClientsThatTrustItsCertificateOnly) {

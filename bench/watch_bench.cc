@@ -1,0 +1,416 @@
+// watch_bench: a session's simulation step rate with no watchers and with
+// N watchers (default 64 at 60 Hz), and what the frames cost on the wire.
+//
+//   watch_bench [--server_binary PATH] [--scene block3] [--levels L]
+//               [--watchers 64] [--hz 60] [--seconds 5] [--rounds 2]
+//               [--decode=true] [--shake_ms 250] [--shake_newtons 2e4]
+//
+// Starts dynsolid-server (port 0), creates a running session of the scene,
+// and keeps the solid moving by swapping a sideways point force on its top
+// every --shake_ms (otherwise the block3 scene sits still and every delta
+// is empty). Then alternates, --rounds times, a phase without watchers and
+// a phase with --watchers Watch streams, each on its own connection and
+// decoding every frame (SurfaceDecoder). Step counts come from the
+// server's GetStats (step, at the start and end of each phase); rates are
+// steps per second of wall time. Prints figures; asserts nothing about time.
+//
+// Delta bytes are compared with what the same frames would take as raw
+// float32 positions (12 bytes per surface vertex).
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <sstream>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/synchronization/mutex.h"
+#include "clients/lib/session_runner.h"
+#include "clients/lib/surface.h"
+#include "dynsolid/service.grpc.pb.h"
+
+ABSL_FLAG(std::string, server_binary, "",
+          "dynsolid-server to start (default: ../server/dynsolid-server next to this binary)");
+ABSL_FLAG(std::string, scene, "block3", "Built-in scene");
+ABSL_FLAG(int, levels, -1, "Subdivision levels (-1: the scene's)");
+ABSL_FLAG(int, watchers, 64, "Watch streams in the loaded phases");
+ABSL_FLAG(double, hz, 60, "Frames per second each watcher asks for");
+ABSL_FLAG(double, seconds, 5, "Length of each measured phase, seconds");
+ABSL_FLAG(int, rounds, 2, "Pairs of (no watchers, watchers) phases");
+ABSL_FLAG(bool, decode, true, "Watchers decode every frame (as a real client does)");
+ABSL_FLAG(int, shake_ms, 250, "Swap the sideways force every this many ms (0: no force)");
+ABSL_FLAG(double, shake_newtons, 2e4, "Magnitude of the sideways force, newtons");
+ABSL_FLAG(std::string, server_log, "/dev/null", "Where the server's log (stderr) goes");
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace dc = dynsolid::client;
+
+std::string DefaultServerBinary(const char* argv0) {
+  std::error_code ec;
+  std::filesystem::path self = std::filesystem::canonical("/proc/self/exe", ec);
+  if (ec) self = argv0;
+  return (self.parent_path().parent_path() / "server" / "dynsolid-server").string();
+}
+
+// The server child process.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& binary, int max_watchers, const std::string& log) {
+    int out[2];
+    if (::pipe(out) != 0) return;
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      ::dup2(out[1], 1);
+      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
+      if (err >= 0) ::dup2(err, 2);
+      ::close(out[0]);
+      const std::string watchers = absl::StrCat("--max_watchers_per_session=", max_watchers);
+      ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", watchers.c_str(),
+              "--max_watch_hz=1000", static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    ::close(out[1]);
+    std::string line;
+    char c;
+    while (::read(out[0], &c, 1) == 1 && c != '\n') line.push_back(c);
+    ::close(out[0]);
+    const std::string prefix = "listening on ";
+    if (line.rfind(prefix, 0) == 0) address_ = line.substr(prefix.size());
+  }
+  ~ServerProcess() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGTERM);
+      int status = 0;
+      ::waitpid(pid_, &status, 0);
+    }
+  }
+  const std::string& address() const { return address_; }
+  pid_t pid() const { return pid_; }
+
+ private:
+  pid_t pid_ = -1;
+  std::string address_;
+};
+
+struct WatcherResult {
+  int64_t frames = 0, keyframes = 0, skipped = 0;
+  int64_t delta_frames = 0, delta_bytes = 0, delta_raw_bytes = 0, moved = 0;
+  int64_t key_bytes = 0, key_raw_bytes = 0;
+  int64_t decode_errors = 0;
+  std::string error;
+};
+
+// One Watch stream on its own connection, until stopped.
+class BenchWatcher {
+ public:
+  BenchWatcher(const std::string& address, const dynsolid::SessionRef& ref, double hz,
+               bool decode) {
+    grpc::ChannelArguments args;
+    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // a connection of its own
+    args.SetMaxReceiveMessageSize(64 << 20);
+    auto channel = grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+    stub_ = dynsolid::Sessions::NewStub(channel);
+    dynsolid::WatchRequest request;
+    *request.mutable_session() = ref;
+    request.set_rate_hz(hz);
+    thread_ = std::thread([this, request, decode] {
+      auto reader = stub_->Watch(&context_, request);
+      dynsolid::Frame frame;
+      dc::SurfaceDecoder decoder;
+      int64_t vertices = 0;
+      while (reader->Read(&frame)) {
+        absl::MutexLock lock(&mu_);
+        ++r_.frames;
+        r_.skipped += frame.skipped();
+        const int64_t bytes = static_cast<int64_t>(frame.ByteSizeLong());
+        if (frame.has_keyframe()) {
+          ++r_.keyframes;
+          vertices = frame.keyframe().vertex_count();
+          r_.key_bytes += bytes;
+          r_.key_raw_bytes += 12 * vertices;
+        } else {
+          ++r_.delta_frames;
+          r_.delta_bytes += bytes;
+          r_.delta_raw_bytes += 12 * vertices;
+          r_.moved += frame.delta().moved();
+        }
+        if (decode && !decoder.Apply(frame).ok()) ++r_.decode_errors;
+      }
+      const grpc::Status s = reader->Finish();
+      absl::MutexLock lock(&mu_);
+      if (!s.ok() && s.error_code() != grpc::StatusCode::CANCELLED) r_.error = s.error_message();
+    });
+  }
+  ~BenchWatcher() {
+    context_.TryCancel();
+    if (thread_.joinable()) thread_.join();
+  }
+  WatcherResult Take() {
+    absl::MutexLock lock(&mu_);
+    return r_;
+  }
+
+ private:
+  std::unique_ptr<dynsolid::Sessions::Stub> stub_;
+  grpc::ClientContext context_;
+  absl::Mutex mu_;
+  WatcherResult r_ ABSL_GUARDED_BY(mu_);
+  std::thread thread_;
+};
+
+dynsolid::SessionStats Stats(dynsolid::Sessions::Stub& stub, const dynsolid::SessionRef& ref) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  dynsolid::SessionStats stats;
+  const grpc::Status s = stub.GetStats(&context, ref, &stats);
+  if (!s.ok()) {
+    std::cerr << "watch_bench: GetStats: " << s.error_message() << "\n";
+    std::exit(1);
+  }
+  return stats;
+}
+
+// CPU seconds (user + system) a process has used so far, from
+// /proc/PID/stat (fields 14 and 15, in clock ticks).
+double CpuSeconds(pid_t pid) {
+  std::ifstream in(absl::StrCat("/proc/", pid, "/stat"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t close = text.rfind(')');
+  if (close == std::string::npos) return 0;
+  std::istringstream fields(text.substr(close + 2));
+  std::string f;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && fields >> f; ++i) {
+    if (i == 14) utime = std::stod(f);
+    if (i == 15) stime = std::stod(f);
+  }
+  return (utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
+struct Phase {
+  int watchers = 0;
+  int64_t steps = 0;
+  double seconds = 0;
+  double step_ms_median = 0, step_ms_p99 = 0;
+  int64_t overruns = 0;
+  double server_cpu = 0, bench_cpu = 0;  // CPU seconds used in the phase
+  std::vector<WatcherResult> results;
+  double rate() const { return seconds > 0 ? steps / seconds : 0; }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  absl::ParseCommandLine(argc, argv);
+  std::string binary = absl::GetFlag(FLAGS_server_binary);
+  if (binary.empty()) binary = DefaultServerBinary(argv[0]);
+  const int n_watchers = absl::GetFlag(FLAGS_watchers);
+  const double hz = absl::GetFlag(FLAGS_hz);
+  const auto phase_length = std::chrono::duration<double>(absl::GetFlag(FLAGS_seconds));
+  ServerProcess server(binary, std::max(n_watchers, 1), absl::GetFlag(FLAGS_server_log));
+  if (server.address().empty()) {
+    std::cerr << "watch_bench: " << binary << " did not start\n";
+    return 1;
+  }
+  dc::ChannelOptions channel_options;
+  channel_options.address = server.address();
+  const dc::ChannelFactory channels = dc::ChannelFactoryFor(channel_options);
+  auto stub = dynsolid::Sessions::NewStub(channels());
+
+  dynsolid::CreateSessionRequest create;
+  create.set_builtin_scene(absl::GetFlag(FLAGS_scene));
+  if (absl::GetFlag(FLAGS_levels) >= 0) create.set_levels_override(absl::GetFlag(FLAGS_levels));
+  dynsolid::Session session;
+  {
+    grpc::ClientContext context;
+    const grpc::Status s = stub->CreateSession(&context, create, &session);
+    if (!s.ok()) {
+      std::cerr << "watch_bench: CreateSession: " << s.error_message() << "\n";
+      return 1;
+    }
+  }
+  dynsolid::SessionRef ref;
+  ref.set_id(session.id());
+  ref.set_token(session.token());
+  const dynsolid::SolidStats& solid = session.stats();
+  std::cout << absl::StrFormat(
+      "scene %s: %d cells, %d surface vertices, %d surface quads, h = %g s (real time: %g "
+      "steps/s at most)\n",
+      session.scene_name(), solid.cells(), solid.boundary_vertices(), solid.boundary_faces(),
+      session.time_step(), 1 / session.time_step());
+
+  // Keep the solid moving: swap a sideways force on the top every shake_ms.
+  std::atomic<bool> stop_shaking{false};
+  dc::CommandChannel commands(channels, ref, "watch_bench");
+  std::thread shaker([&] {
+    const int ms = absl::GetFlag(FLAGS_shake_ms);
+    if (ms <= 0) return;
+    double sign = 1;
+    uint64_t previous = 0;
+    while (!stop_shaking) {
+      dynsolid::Command add;
+      auto* f = add.mutable_add_point_force();
+      f->mutable_position()->set_x(1.5);
+      f->mutable_position()->set_y(1.5);
+      f->mutable_position()->set_z(3);
+      f->mutable_force()->set_x(sign * absl::GetFlag(FLAGS_shake_newtons));
+      auto seq = commands.Send(add, "shake");
+      if (previous != 0) {
+        auto old = commands.Wait(previous, absl::Seconds(10));
+        if (old.ok() && old->code() == 0) {
+          dynsolid::Command remove;
+          remove.mutable_remove_load()->set_load_id(old->load_id());
+          (void)commands.Send(remove, "unshake");
+        }
+      }
+      previous = seq.ok() ? *seq : 0;
+      sign = -sign;
+      std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+    }
+  });
+
+  auto run_phase = [&](int watchers) {
+    Phase p;
+    p.watchers = watchers;
+    std::vector<std::unique_ptr<BenchWatcher>> ws;
+    for (int i = 0; i < watchers; ++i) {
+      ws.push_back(std::make_unique<BenchWatcher>(server.address(), ref, hz,
+                                                  absl::GetFlag(FLAGS_decode)));
+    }
+    std::this_thread::sleep_for(std::chrono::seconds(1));  // settle: keyframes, connections
+    std::vector<WatcherResult> before;
+    for (auto& w : ws) before.push_back(w->Take());
+    const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
+    const dynsolid::SessionStats s0 = Stats(*stub, ref);
+    const Clock::time_point t0 = Clock::now();
+    std::this_thread::sleep_for(phase_length);
+    const dynsolid::SessionStats s1 = Stats(*stub, ref);
+    const Clock::time_point t1 = Clock::now();
+    p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
+    p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
+    for (size_t i = 0; i < ws.size(); ++i) {
+      WatcherResult a = ws[i]->Take();
+      const WatcherResult& b = before[i];
+      a.frames -= b.frames;
+      a.keyframes -= b.keyframes;
+      a.skipped -= b.skipped;
+      a.delta_frames -= b.delta_frames;
+      a.delta_bytes -= b.delta_bytes;
+      a.delta_raw_bytes -= b.delta_raw_bytes;
+      a.moved -= b.moved;
+      a.key_bytes -= b.key_bytes;
+      a.key_raw_bytes -= b.key_raw_bytes;
+      p.results.push_back(a);
+    }
+    p.steps = s1.step() - s0.step();
+    p.seconds = std::chrono::duration<double>(t1 - t0).count();
+    p.step_ms_median = s1.step_ms_median();
+    p.step_ms_p99 = s1.step_ms_p99();
+    p.overruns = s1.overruns() - s0.overruns();
+    ws.clear();
+    return p;
+  };
+
+  std::vector<Phase> phases;
+  for (int r = 0; r < absl::GetFlag(FLAGS_rounds); ++r) {
+    phases.push_back(run_phase(0));
+    phases.push_back(run_phase(n_watchers));
+  }
+  stop_shaking = true;
+  shaker.join();
+  (void)commands.Close(absl::Seconds(10));
+
+  std::cout << "\n| phase | watchers | steps | seconds | steps/s | step ms median | step ms p99 "
+               "| overruns | server CPU s | server CPU ms/step | bench CPU s "
+               "| frames/watcher (min..max) | frames/s/watcher | skipped/watcher "
+               "| keyframes | delta bytes / raw float32 | moved/delta |\n"
+               "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+               "| --- | ---: | ---: | ---: | ---: | ---: |\n";
+  double rate0 = 0, rate_n = 0;
+  int n0 = 0, nn = 0;
+  int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
+  for (size_t i = 0; i < phases.size(); ++i) {
+    const Phase& p = phases[i];
+    int64_t fmin = INT64_MAX, fmax = 0, frames = 0, skipped = 0, keys = 0, delta = 0, raw = 0,
+            moved = 0, deltas = 0;
+    for (const WatcherResult& w : p.results) {
+      fmin = std::min(fmin, w.frames);
+      fmax = std::max(fmax, w.frames);
+      frames += w.frames;
+      skipped += w.skipped;
+      keys += w.keyframes;
+      delta += w.delta_bytes;
+      raw += w.delta_raw_bytes;
+      moved += w.moved;
+      deltas += w.delta_frames;
+      all_key += w.key_bytes;
+      all_key_raw += w.key_raw_bytes;
+      errors += w.decode_errors;
+      if (!w.error.empty()) std::cerr << "watcher error: " << w.error << "\n";
+    }
+    all_delta += delta;
+    all_raw += raw;
+    const double nw = std::max<size_t>(p.results.size(), 1);
+    if (p.watchers == 0) {
+      rate0 += p.rate();
+      ++n0;
+    } else {
+      rate_n += p.rate();
+      ++nn;
+    }
+    std::cout << absl::StrFormat(
+        "| %d | %d | %d | %.2f | %.1f | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %s | %s | %s | %d "
+        "| %s | %s |\n",
+        i + 1, p.watchers, p.steps, p.seconds, p.rate(), p.step_ms_median, p.step_ms_p99,
+        p.overruns, p.server_cpu, p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0, p.bench_cpu,
+        p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
+        p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
+        p.watchers ? absl::StrFormat("%.1f", skipped / nw) : "-", keys,
+        raw > 0 ? absl::StrFormat("%.1f %%", 100.0 * delta / raw) : "-",
+        deltas > 0 ? absl::StrFormat("%.0f", double(moved) / deltas) : "-");
+  }
+  rate0 /= std::max(n0, 1);
+  rate_n /= std::max(nn, 1);
+  double cpu0 = 0, cpu_n = 0;
+  int64_t steps0 = 0, steps_n = 0;
+  for (const Phase& p : phases) {
+    (p.watchers == 0 ? cpu0 : cpu_n) += p.server_cpu;
+    (p.watchers == 0 ? steps0 : steps_n) += p.steps;
+  }
+  std::cout << absl::StrFormat(
+      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers (frames "
+      "encoded and sent: %+.2f ms per step); %d cores online, shared with this benchmark's "
+      "watchers\n",
+      steps0 ? 1000 * cpu0 / steps0 : 0.0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
+      (steps_n ? 1000 * cpu_n / steps_n : 0.0) - (steps0 ? 1000 * cpu0 / steps0 : 0.0),
+      ::sysconf(_SC_NPROCESSORS_ONLN));
+  std::cout << absl::StrFormat(
+      "\nsim step rate: %.1f steps/s without watchers, %.1f with %d watchers at %g Hz: "
+      "%+.2f %% (target: within 5 %%)\n",
+      rate0, rate_n, n_watchers, hz, rate0 > 0 ? 100.0 * (rate_n - rate0) / rate0 : 0.0);
+  std::cout << absl::StrFormat(
+      "delta frames: %d bytes for frames worth %d bytes as raw float32 positions: %.2f %% "
+      "(target: <= 25 %%); keyframes: %.1f %% of raw; decode errors: %d\n",
+      all_delta, all_raw, all_raw > 0 ? 100.0 * all_delta / all_raw : 0.0,
+      all_key_raw > 0 ? 100.0 * all_key / all_key_raw : 0.0, errors);
+  return 0;
+}

@@ -1,0 +1,458 @@
+#include "clients/lib/script.h"
+
+#include <cmath>
+#include <map>
+#include <optional>
+#include <set>
+
+#include "absl/status/status.h"
+#include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+
+namespace dynsolid::client {
+namespace {
+
+constexpr int kMaxErrors = 20;
+constexpr int64_t kMaxStepCount = 1'000'000;
+constexpr double kMaxSleepSeconds = 3600;
+
+// What a verb accepts.
+struct VerbSpec {
+  const char* verb;
+  std::vector<std::string> keys;  // key=value keys it accepts
+  const char* positional;         // the key a bare value stands for, or nullptr
+};
+
+const std::vector<std::string> kRegionKeys = {"box", "sphere", "cells"};
+
+std::vector<std::string> Cat(std::vector<std::string> a, const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+const std::vector<VerbSpec>& Verbs() {
+  static const std::vector<VerbSpec>* verbs = new std::vector<VerbSpec>{
+      {"force", {"at", "f", "name"}, nullptr},
+      {"pressure", Cat(kRegionKeys, {"pa", "name"}), nullptr},
+      {"gravity", {"g"}, "g"},
+      {"remove", {"load"}, "load"},
+      {"fix", Cat(kRegionKeys, {"name"}), nullptr},
+      {"unfix", {"constraint"}, "constraint"},
+      {"paint", Cat(kRegionKeys, {"E", "nu", "density", "damping", "strength"}), nullptr},
+      {"pause", {}, nullptr},
+      {"resume", {}, nullptr},
+      {"step", {"count"}, "count"},
+      {"save", {}, nullptr},
+      {"wait", {"steps"}, "steps"},
+      {"wait_until", {"step"}, "step"},
+      {"sleep", {"seconds"}, "seconds"},
+      {"snapshot", {"name"}, "name"},
+  };
+  return *verbs;
+}
+
+std::string VerbList() {
+  std::vector<std::string> names;
+  for (const VerbSpec& v : Verbs()) names.push_back(v.verb);
+  return absl::StrJoin(names, ", ");
+}
+
+// A name given with name=, or referenced by remove / unfix.
+bool ValidName(absl::string_view s) {
+  if (s.empty() || s.size() > 64) return false;
+  if (!absl::ascii_isalpha(s[0]) && s[0] != '_') return false;
+  for (char c : s) {
+    if (!absl::ascii_isalnum(c) && c != '_' && c != '-' && c != '.') return false;
+  }
+  return true;
+}
+
+// One line being parsed: its key=value arguments and the error, if any.
+class LineParser {
+ public:
+  LineParser(const VerbSpec& spec, std::map<std::string, std::string> args)
+      : spec_(spec), args_(std::move(args)) {}
+
+  bool Has(const std::string& key) const { return args_.count(key) > 0; }
+  const std::string& Value(const std::string& key) const { return args_.at(key); }
+  const std::string& error() const { return error_; }
+  bool ok() const { return error_.empty(); }
+
+  // "key=value" as the user wrote it (a positional value is shown bare).
+  std::string Token(const std::string& key) const {
+    auto it = args_.find(key);
+    if (it == args_.end()) return key;
+    if (spec_.positional != nullptr && key == spec_.positional && positional_) {
+      return it->second;
+    }
+    return absl::StrCat(key, "=", it->second);
+  }
+  void set_positional(bool p) { positional_ = p; }
+
+  void Fail(std::string message) {
+    if (error_.empty()) error_ = absl::StrCat(spec_.verb, ": ", message);
+  }
+
+  // Numbers of key (comma separated); `count` of them, each finite.
+  std::optional<std::vector<double>> Numbers(const std::string& key, int count) {
+    if (!ok()) return std::nullopt;
+    const std::string& value = args_.at(key);
+    std::vector<std::string> parts = absl::StrSplit(value, ',');
+    if (static_cast<int>(parts.size()) != count) {
+      Fail(absl::StrCat("\"", Token(key), "\" needs ", count, count == 1 ? " number" : " numbers",
+                        ", got ", parts.size()));
+      return std::nullopt;
+    }
+    std::vector<double> out;
+    for (const std::string& p : parts) {
+      double v = 0;
+      if (p.empty() || !absl::SimpleAtod(p, &v) || p != absl::StripAsciiWhitespace(p)) {
+        Fail(absl::StrCat("bad number \"", p, "\" in \"", Token(key), "\""));
+        return std::nullopt;
+      }
+      if (!std::isfinite(v)) {
+        Fail(absl::StrCat("\"", p, "\" in \"", Token(key), "\" is not a finite number"));
+        return std::nullopt;
+      }
+      out.push_back(v);
+    }
+    return out;
+  }
+  std::optional<double> Number(const std::string& key) {
+    auto v = Numbers(key, 1);
+    if (!v) return std::nullopt;
+    return (*v)[0];
+  }
+  std::optional<int64_t> Integer(const std::string& key, int64_t lo, int64_t hi) {
+    if (!ok()) return std::nullopt;
+    const std::string& value = args_.at(key);
+    int64_t v = 0;
+    if (value.empty() || !absl::SimpleAtoi(value, &v) || v < lo || v > hi) {
+      Fail(absl::StrCat("\"", Token(key), "\" must be an integer in [", lo, ", ", hi, "]"));
+      return std::nullopt;
+    }
+    return v;
+  }
+  void Require(const std::string& key, const char* what) {
+    if (ok() && !Has(key)) Fail(absl::StrCat("missing ", key, "=", what));
+  }
+  static void SetVec(Vec3* out, const std::vector<double>& v, int at = 0) {
+    out->set_x(v[at]);
+    out->set_y(v[at + 1]);
+    out->set_z(v[at + 2]);
+  }
+
+  // box= / sphere= / cells= into `region`; `required`: one must be given.
+  void ParseRegion(Region* region) {
+    if (!ok()) return;
+    if (!Has("box") && !Has("sphere") && !Has("cells")) {
+      Fail("needs a region: box=X0,Y0,Z0,X1,Y1,Z1, sphere=X,Y,Z,R and/or cells=I,J,...");
+      return;
+    }
+    if (Has("box") && Has("sphere")) {
+      Fail(absl::StrCat("\"", Token("box"), "\" and \"", Token("sphere"),
+                        "\": a region has one shape (box or sphere)"));
+      return;
+    }
+    if (Has("box")) {
+      auto v = Numbers("box", 6);
+      if (!v) return;
+      static const char* kAxis[] = {"x", "y", "z"};
+      for (int a = 0; a < 3; ++a) {
+        if ((*v)[a] > (*v)[a + 3]) {
+          Fail(absl::StrCat("\"", Token("box"), "\": min exceeds max on ", kAxis[a], " (",
+                            (*v)[a], " > ", (*v)[a + 3], ")"));
+          return;
+        }
+      }
+      SetVec(region->mutable_box()->mutable_min(), *v, 0);
+      SetVec(region->mutable_box()->mutable_max(), *v, 3);
+    }
+    if (Has("sphere")) {
+      auto v = Numbers("sphere", 4);
+      if (!v) return;
+      if ((*v)[3] <= 0) {
+        Fail(absl::StrCat("\"", Token("sphere"), "\": the radius must be > 0, got ", (*v)[3]));
+        return;
+      }
+      SetVec(region->mutable_sphere()->mutable_center(), *v, 0);
+      region->mutable_sphere()->set_radius((*v)[3]);
+    }
+    if (Has("cells")) {
+      const std::string& value = args_.at("cells");
+      for (absl::string_view p : absl::StrSplit(value, ',')) {
+        int32_t c = 0;
+        if (p.empty() || !absl::SimpleAtoi(p, &c) || c < 0) {
+          Fail(absl::StrCat("bad cell index \"", p, "\" in \"", Token("cells"),
+                            "\" (integers >= 0)"));
+          return;
+        }
+        region->add_control_cells(c);
+      }
+    }
+  }
+
+ private:
+  const VerbSpec& spec_;
+  std::map<std::string, std::string> args_;
+  bool positional_ = false;
+  std::string error_;
+};
+
+struct NameInfo {
+  int line;
+  bool is_load;  // a load (force, pressure) or a constraint (fix)
+};
+
+// Parses the words of one line (verb first) into `out`; returns the error
+// message ("" when fine). `names`: names bound by earlier lines.
+std::string ParseLine(const std::vector<std::string>& words,
+                      std::map<std::string, NameInfo>& names, ScriptLine& out) {
+  const std::string& verb = words[0];
+  const VerbSpec* spec = nullptr;
+  for (const VerbSpec& v : Verbs()) {
+    if (verb == v.verb) spec = &v;
+  }
+  if (spec == nullptr) {
+    return absl::StrCat("unknown command \"", verb, "\" (commands: ", VerbList(), ")");
+  }
+  out.verb = verb;
+
+  std::map<std::string, std::string> args;
+  bool positional = false;
+  for (size_t i = 1; i < words.size(); ++i) {
+    const std::string& w = words[i];
+    const size_t eq = w.find('=');
+    std::string key, value;
+    if (eq == std::string::npos) {
+      if (spec->positional == nullptr) {
+        return absl::StrCat(verb, ": unexpected argument \"", w, "\"",
+                            spec->keys.empty()
+                                ? " (takes none)"
+                                : absl::StrCat(" (keys: ", absl::StrJoin(spec->keys, ", "), ")"));
+      }
+      if (positional) return absl::StrCat(verb, ": unexpected second value \"", w, "\"");
+      positional = true;
+      key = spec->positional;
+      value = w;
+    } else {
+      key = w.substr(0, eq);
+      value = w.substr(eq + 1);
+      bool known = false;
+      for (const std::string& k : spec->keys) known = known || k == key;
+      if (!known) {
+        return absl::StrCat(verb, ": unknown key \"", key, "\" in \"", w, "\"",
+                            spec->keys.empty()
+                                ? " (takes no arguments)"
+                                : absl::StrCat(" (keys: ", absl::StrJoin(spec->keys, ", "), ")"));
+      }
+    }
+    if (args.count(key) > 0) {
+      return absl::StrCat(verb, ": ", key, " given twice (\"", w, "\")");
+    }
+    args[key] = value;
+  }
+
+  LineParser p(*spec, std::move(args));
+  p.set_positional(positional);
+  Command& c = out.command;
+  out.kind = ScriptLine::Kind::kCommand;
+
+  // name=NAME on force / pressure / fix.
+  auto bind_name = [&](bool is_load) {
+    if (!p.ok() || !p.Has("name")) return;
+    const std::string token = p.Token("name");
+    const std::string name = p.Value("name");
+    if (!ValidName(name)) {
+      p.Fail(absl::StrCat("bad name in \"", token,
+                          "\" (a letter or _, then letters, digits, _ - .; at most 64)"));
+      return;
+    }
+    auto it = names.find(name);
+    if (it != names.end()) {
+      p.Fail(absl::StrCat("name \"", name, "\" already used at line ", it->second.line));
+      return;
+    }
+    out.name = name;
+    names[name] = NameInfo{out.line, is_load};
+  };
+  // load=NAME|ID, constraint=NAME|ID.
+  auto reference = [&](const std::string& key, bool want_load, int64_t* id) {
+    p.Require(key, "NAME|ID");
+    if (!p.ok()) return;
+    const std::string token = p.Token(key);
+    const std::string value = p.Value(key);
+    int64_t n = 0;
+    if (absl::SimpleAtoi(value, &n)) {
+      if (n < 1) p.Fail(absl::StrCat("\"", token, "\": an id is >= 1"));
+      *id = n;
+      return;
+    }
+    auto it = names.find(value);
+    const char* want = want_load ? "load" : "constraint";
+    if (it == names.end()) {
+      p.Fail(absl::StrCat("unknown ", want, " \"", value, "\" in \"", token, "\" (no earlier ",
+                          want_load ? "force or pressure" : "fix", " has name=", value, ")"));
+      return;
+    }
+    if (it->second.is_load != want_load) {
+      p.Fail(absl::StrCat("\"", token, "\" names a ", want_load ? "constraint" : "load",
+                          " (line ", it->second.line, "), not a ", want));
+      return;
+    }
+    out.ref = value;
+  };
+
+  if (verb == "force") {
+    p.Require("at", "X,Y,Z");
+    p.Require("f", "FX,FY,FZ");
+    PointForce* f = c.mutable_add_point_force();
+    if (auto v = p.Numbers("at", 3)) LineParser::SetVec(f->mutable_position(), *v);
+    if (auto v = p.Numbers("f", 3)) LineParser::SetVec(f->mutable_force(), *v);
+    bind_name(true);
+  } else if (verb == "pressure") {
+    Pressure* pr = c.mutable_add_pressure();
+    p.ParseRegion(pr->mutable_region());
+    p.Require("pa", "PASCALS");
+    if (auto v = p.Number("pa")) {
+      if (*v == 0) p.Fail(absl::StrCat("\"", p.Token("pa"), "\": pascals must be non-zero"));
+      pr->set_pascals(*v);
+    }
+    bind_name(true);
+  } else if (verb == "gravity") {
+    p.Require("g", "GX,GY,GZ");
+    if (auto v = p.Numbers("g", 3)) LineParser::SetVec(c.mutable_set_gravity(), *v);
+  } else if (verb == "remove") {
+    int64_t id = 0;
+    reference("load", true, &id);
+    c.mutable_remove_load()->set_load_id(id);
+  } else if (verb == "fix") {
+    p.ParseRegion(c.mutable_fix_region());
+    bind_name(false);
+  } else if (verb == "unfix") {
+    int64_t id = 0;
+    reference("constraint", false, &id);
+    c.mutable_unfix()->set_constraint_id(id);
+  } else if (verb == "paint") {
+    MaterialPaint* paint = c.mutable_paint_material();
+    p.ParseRegion(paint->mutable_region());
+    Material* m = paint->mutable_material();
+    if (p.ok() && !p.Has("E") && !p.Has("nu") && !p.Has("density") && !p.Has("damping")) {
+      p.Fail("needs at least one of E=PASCALS, nu=RATIO, density=KG_M3, damping=KG_M3_S");
+    }
+    auto non_negative = [&](const std::string& key, void (Material::*set)(double)) {
+      if (!p.ok() || !p.Has(key)) return;
+      if (auto v = p.Number(key)) {
+        if (*v < 0) p.Fail(absl::StrCat("\"", p.Token(key), "\" must be >= 0"));
+        (m->*set)(*v);
+      }
+    };
+    non_negative("E", &Material::set_young_modulus);
+    non_negative("density", &Material::set_density);
+    non_negative("damping", &Material::set_damping);
+    if (p.ok() && p.Has("nu")) {
+      if (auto v = p.Number("nu")) {
+        if (*v < 0 || *v >= 0.5) p.Fail(absl::StrCat("\"", p.Token("nu"), "\" must be in [0, 0.5)"));
+        m->set_poisson_ratio(*v);
+      }
+    }
+    paint->set_strength(1);
+    if (p.ok() && p.Has("strength")) {
+      if (auto v = p.Number("strength")) {
+        if (*v <= 0 || *v > 1) {
+          p.Fail(absl::StrCat("\"", p.Token("strength"), "\" must be in (0, 1]"));
+        }
+        paint->set_strength(*v);
+      }
+    }
+  } else if (verb == "pause") {
+    c.mutable_pause();
+  } else if (verb == "resume") {
+    c.mutable_resume();
+  } else if (verb == "step") {
+    p.Require("count", "N");
+    if (auto n = p.Integer("count", 1, kMaxStepCount)) c.mutable_step()->set_count(*n);
+  } else if (verb == "save") {
+    c.mutable_save();
+  } else if (verb == "wait" && !p.Has("steps")) {
+    out.kind = ScriptLine::Kind::kWaitSteps;
+    c.Clear();
+  } else if (verb == "wait" || verb == "wait_until") {
+    const std::string key = verb == "wait" ? "steps" : "step";
+    p.Require(key, "N");
+    out.kind = verb == "wait" ? ScriptLine::Kind::kWait : ScriptLine::Kind::kWaitUntil;
+    c.Clear();
+    if (auto n = p.Integer(key, 0, int64_t{1} << 50)) out.steps = *n;
+  } else if (verb == "sleep") {
+    p.Require("seconds", "SECONDS");
+    out.kind = ScriptLine::Kind::kSleep;
+    c.Clear();
+    if (auto v = p.Number("seconds")) {
+      if (*v < 0 || *v > kMaxSleepSeconds) {
+        p.Fail(absl::StrCat("\"", p.Token("seconds"), "\" must be in [0, ", kMaxSleepSeconds,
+                            "] seconds"));
+      }
+      out.seconds = *v;
+    }
+  } else if (verb == "snapshot") {
+    out.kind = ScriptLine::Kind::kSnapshot;
+    c.Clear();
+    if (p.Has("name")) {
+      const std::string token = p.Token("name");
+      const std::string name = p.Value("name");
+      if (!ValidName(name)) {
+        p.Fail(absl::StrCat("bad name \"", token,
+                            "\" (a letter or _, then letters, digits, _ - .; at most 64)"));
+      }
+      out.name = name;
+    } else {
+      out.name = absl::StrCat("snapshot_line", out.line);
+    }
+  }
+  return p.error();
+}
+
+}  // namespace
+
+std::string Script::Where(const ScriptLine& l) const { return absl::StrCat(file, ":", l.line); }
+
+absl::StatusOr<Script> ParseScript(absl::string_view text, absl::string_view file) {
+  Script script;
+  script.file = std::string(file);
+  std::vector<std::string> errors;
+  std::map<std::string, NameInfo> names;
+  int line_number = 0;
+  for (absl::string_view raw : absl::StrSplit(text, '\n')) {
+    ++line_number;
+    absl::string_view line = raw;
+    const size_t hash = line.find('#');
+    if (hash != absl::string_view::npos) line = line.substr(0, hash);
+    std::vector<std::string> words =
+        absl::StrSplit(line, absl::ByAnyChar(" \t\r\f\v"), absl::SkipEmpty());
+    if (words.empty()) continue;
+    ScriptLine out;
+    out.line = line_number;
+    const std::string error = ParseLine(words, names, out);
+    if (!error.empty()) {
+      if (static_cast<int>(errors.size()) < kMaxErrors) {
+        errors.push_back(absl::StrCat(file, ":", line_number, ": ", error));
+      } else if (static_cast<int>(errors.size()) == kMaxErrors) {
+        errors.push_back(absl::StrCat(file, ": more errors not shown"));
+      }
+      continue;
+    }
+    script.lines.push_back(std::move(out));
+  }
+  if (!errors.empty()) return absl::InvalidArgumentError(absl::StrJoin(errors, "\n"));
+  return script;
+}
+
+std::string CommandKindName(const Command& command) {
+  const auto* field = Command::descriptor()->FindFieldByNumber(command.kind_case());
+  return field == nullptr ? "none" : field->name();
+}
+
+}  // namespace dynsolid::client

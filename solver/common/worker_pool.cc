@@ -10,11 +10,11 @@
 namespace dynsolid {
 namespace {
 
-// Spin this many rounds (a pause each, roughly 10-50 microseconds in all)
+// Spin this many rounds (a pause each, some 10-30 microseconds in all)
 // before sleeping on the condition variable: a step issues several Runs a
 // millisecond apart or less, and a futex wake-up costs more than the work
 // of a small Run.
-constexpr int kSpinRounds = 4000;
+constexpr int kSpinRounds = 1000;
 
 }  // namespace
 

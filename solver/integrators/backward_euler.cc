@@ -84,9 +84,13 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
   CgStats stats;
   v_ = (p - p_prev) / h_;
   Mask(v_);
-  // rhs = h (F - h Kt v).
+  // rhs = h (F - Dt v - h Kt v).
   kt(v_, tmp_);
   rhs_ = h_ * (force - h_ * tmp_);
+  if (dt_ != nullptr) {
+    z_.noalias() = (*dt_) * v_;
+    rhs_ -= h_ * z_;
+  }
   Mask(rhs_);
   const double bnorm = std::sqrt(rhs_.squaredNorm());
   x_.setZero();

@@ -286,9 +286,31 @@ void CornerTranspose(const double* R py, const int32_t* R ca, const int32_t* R c
 
 }  // namespace
 
+void DeformationMeasure::AddTerms(const Part& p, bool centres, double* out) {
+  for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
+  auto add = [out](int32_t v, double sign, double x, double y, double z) {
+    double* o = out + 3 * static_cast<int64_t>(v);
+    o[0] += sign * x;
+    o[1] += sign * y;
+    o[2] += sign * z;
+  };
+  for (size_t q = 0; q < p.ei.size(); ++q) {
+    const uint8_t owns = p.e_owns[q];
+    if (owns & 1) add(p.ei[q], -1.0, p.fx[q], p.fy[q], p.fz[q]);
+    if (owns & 2) add(p.ej[q], 1.0, p.fx[q], p.fy[q], p.fz[q]);
+  }
+  for (size_t q = 0; q < p.cn.size(); ++q) {
+    const uint8_t owns = p.c_owns[q];
+    if (owns & 1) add(p.ca[q], 1.0, p.tax[q], p.tay[q], p.taz[q]);
+    if (owns & 2) add(p.cb[q], 1.0, p.tbx[q], p.tby[q], p.tbz[q]);
+    if (centres && (owns & 4)) {
+      add(p.cn[q], -1.0, p.tax[q] + p.tbx[q], p.tay[q] + p.tby[q], p.taz[q] + p.tbz[q]);
+    }
+  }
+}
+
 void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) {
   Part& p = parts_[k];
-  double* out = delta.data();
   const int64_t ne = static_cast<int64_t>(p.ei.size());
   const int64_t nc = static_cast<int64_t>(p.cn.size());
   EdgeForward(d.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
@@ -298,43 +320,11 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) {
                 p.bhz.data(), p.la.data(), p.lb.data(), p.cs.data(), p.inv_s.data(),
                 p.alpha.data(), p.beta.data(), p.dalpha.data(), p.dbeta.data(), p.tax.data(),
                 p.tay.data(), p.taz.data(), p.tbx.data(), p.tby.data(), p.tbz.data(), nc);
-  // Adds into the part's own nodes, in ascending term order.
-  for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
-  for (int64_t q = 0; q < ne; ++q) {
-    const uint8_t owns = p.e_owns[q];
-    if (owns & 1) {
-      double* o = out + 3 * static_cast<int64_t>(p.ei[q]);
-      o[0] -= p.fx[q];
-      o[1] -= p.fy[q];
-      o[2] -= p.fz[q];
-    }
-    if (owns & 2) {
-      double* o = out + 3 * static_cast<int64_t>(p.ej[q]);
-      o[0] += p.fx[q];
-      o[1] += p.fy[q];
-      o[2] += p.fz[q];
-    }
-  }
-  for (int64_t q = 0; q < nc; ++q) {
-    const uint8_t owns = p.c_owns[q];
-    if (owns & 1) {
-      double* o = out + 3 * static_cast<int64_t>(p.ca[q]);
-      o[0] += p.tax[q];
-      o[1] += p.tay[q];
-      o[2] += p.taz[q];
-    }
-    if (owns & 2) {
-      double* o = out + 3 * static_cast<int64_t>(p.cb[q]);
-      o[0] += p.tbx[q];
-      o[1] += p.tby[q];
-      o[2] += p.tbz[q];
-    }
-  }
+  AddTerms(p, /*centres=*/false, delta.data());
 }
 
 void DeformationMeasure::TransposePart(const Points& y, int k, Points& out_points) {
   Part& p = parts_[k];
-  double* out = out_points.data();
   const int64_t ne = static_cast<int64_t>(p.ei.size());
   const int64_t nc = static_cast<int64_t>(p.cn.size());
   EdgeTranspose(y.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
@@ -344,43 +334,7 @@ void DeformationMeasure::TransposePart(const Points& y, int k, Points& out_point
                   p.cs.data(), p.inv_s.data(), p.alpha.data(), p.beta.data(), p.dalpha.data(),
                   p.dbeta.data(), p.tax.data(), p.tay.data(), p.taz.data(), p.tbx.data(),
                   p.tby.data(), p.tbz.data(), nc);
-  for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
-  for (int64_t q = 0; q < ne; ++q) {
-    const uint8_t owns = p.e_owns[q];
-    if (owns & 2) {
-      double* o = out + 3 * static_cast<int64_t>(p.ej[q]);
-      o[0] += p.fx[q];
-      o[1] += p.fy[q];
-      o[2] += p.fz[q];
-    }
-    if (owns & 1) {
-      double* o = out + 3 * static_cast<int64_t>(p.ei[q]);
-      o[0] -= p.fx[q];
-      o[1] -= p.fy[q];
-      o[2] -= p.fz[q];
-    }
-  }
-  for (int64_t q = 0; q < nc; ++q) {
-    const uint8_t owns = p.c_owns[q];
-    if (owns & 1) {
-      double* o = out + 3 * static_cast<int64_t>(p.ca[q]);
-      o[0] += p.tax[q];
-      o[1] += p.tay[q];
-      o[2] += p.taz[q];
-    }
-    if (owns & 2) {
-      double* o = out + 3 * static_cast<int64_t>(p.cb[q]);
-      o[0] += p.tbx[q];
-      o[1] += p.tby[q];
-      o[2] += p.tbz[q];
-    }
-    if (owns & 4) {
-      double* o = out + 3 * static_cast<int64_t>(p.cn[q]);
-      o[0] -= p.tax[q] + p.tbx[q];
-      o[1] -= p.tay[q] + p.tby[q];
-      o[2] -= p.taz[q] + p.tbz[q];
-    }
-  }
+  AddTerms(p, /*centres=*/true, out_points.data());
 }
 
 void DeformationMeasure::Apply(const Points& d, Points& delta) {

@@ -94,6 +94,11 @@ class DeformationMeasure {
     std::vector<double> alpha, beta, dalpha, dbeta;
     std::vector<double> tax, tay, taz, tbx, tby, tbz;
   };
+  // Clears the part's nodes in `out` (#nodes by 3, row-major) and adds the
+  // part's edge terms (f: -1 on i, +1 on j) and corner terms (ta on a, tb
+  // on b, and with `centres` -(ta + tb) on n) to the nodes it owns, in
+  // ascending term order.
+  static void AddTerms(const Part& p, bool centres, double* out);
   void AddEdge(int32_t i, int32_t j, const Points& rest);
   void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest);
 

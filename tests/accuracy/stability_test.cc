@@ -1,128 +1,243 @@
-// Stiff and extreme cases (issue 4, small sizes): backward Euler stays
-// bounded; the explicit scheme either runs (sub-stepping, guard rollbacks)
-// or says why it cannot; no NaN ever reaches the state.
+// Stiff and extreme cases (issue 4, small sizes; the cases and the energy
+// account are bench/stability_cases.h, which the stability report runs at
+// more steps): backward Euler stays bounded (no energy growth beyond
+// round-off); central difference either runs (sub-stepping) or refuses /
+// rolls back and says why; no NaN ever reaches the state or the outputs.
+#include <cctype>
 #include <cmath>
+#include <ostream>
 #include <string>
 
 #include <gtest/gtest.h>
 
 #include "absl/strings/str_format.h"
-#include "solver/scene/build.h"
-#include "solver/scene/scene_loader.h"
-#include "solver/solid/solid.h"
+#include "bench/stability_cases.h"
 #include "tests/testing/status_matchers.h"
 
-namespace dynsolid::solid {
+namespace dynsolid::stability {
 namespace {
 
-struct Case {
-  std::string name;
-  std::string material;  // Materials body
-  std::string extra;     // loads / constraints / initial
-  double h;
+using ::testing::HasSubstr;
+
+// Each case at a small step (300 steps) and at 1/30 s (the cases'
+// duration, at most 1 s, except the inverting load's 3 s).
+struct Param {
+  Case c;
+  bool large_step;
 };
 
-std::string SceneText(const Case& c, const char* integrator) {
-  return absl::StrFormat(R"pb(
-    name: "%s"
-    mesh { block { nx: 2 ny: 1 nz: 1 } }
-    subdivision { levels: 1 }
-    materials { %s }
-    %s
-    solver { model: COROTATIONAL integrator: %s time_step: %.17g max_substeps: 2000 }
-  )pb", c.name, c.material, c.extra, integrator, c.h);
+void PrintTo(const Param& p, std::ostream* os) {
+  *os << p.c.name << (p.large_step ? " at h = 1/30 s" : " at h = 1e-3 s");
 }
 
-const char* kFixedEnd =
-    "constraints { fixed { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 2 z: 2 } } } }";
-
-std::vector<Case> Cases() {
-  return {
-      {"soft_1e3", "base { young_modulus: 1e3 }", std::string(kFixedEnd) +
-           " loads { gravity { z: -9.81 } }", 1.0 / 30},
-      {"stiff_1e10", "base { young_modulus: 1e10 }", std::string(kFixedEnd) +
-           " loads { point_forces { position { x: 1.9 y: 0.5 z: 0.5 } force { z: -1e6 } } }",
-       1.0 / 30},
-      {"nearly_incompressible", "base { young_modulus: 1e6 poisson_ratio: 0.499 }",
-       std::string(kFixedEnd) + " loads { gravity { z: -9.81 } }", 1e-3},
-      {"penalty_1e9", "base { young_modulus: 1e5 }",
-       "constraints { springs { region { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 2 z: 2 } } } "
-       "stiffness: 1e9 } } loads { gravity { z: -9.81 } }",
-       1e-3},
-      {"inverting_load", "base { young_modulus: 1e3 }",
-       std::string(kFixedEnd) +
-           " loads { point_forces { position { x: 1.9 y: 0.5 z: 0.5 } force { x: -1e5 } } }",
-       1e-3},
-      {"spin_10_rad_s", "base { young_modulus: 1e6 }",
-       "initial { angular_velocity { z: 10 } }", 1e-3},
-      {"density_ratio_1e6",
-       "base { young_modulus: 1e6 density: 1 } regions { region { box { min { x: 1 y: -1 z: -1 } "
-       "max { x: 3 y: 2 z: 2 } } } material { young_modulus: 1e6 density: 1e6 } }",
-       std::string(kFixedEnd) + " loads { gravity { z: -9.81 } }", 1e-3},
-  };
+std::vector<Param> Params() {
+  std::vector<Param> out;
+  for (const Case& c : Cases()) {
+    out.push_back({c, false});
+    out.push_back({c, true});
+  }
+  return out;
 }
 
-class StabilityTest : public ::testing::TestWithParam<Case> {};
+RunOptions OptionsFor(Param& p) {
+  RunOptions o;
+  if (p.large_step) {
+    p.c.h = 1.0 / 30;
+    o.steps = static_cast<int>(std::ceil(p.c.duration * 30 - 1e-9));
+  } else {
+    p.c.h = 1e-3;
+    o.steps = 300;
+  }
+  o.max_substeps = 2000;
+  return o;
+}
 
-std::unique_ptr<Solid> Make(const std::string& text, absl::Status* status) {
-  auto scene = scene::ParseScene(text, "case");
-  EXPECT_OK(scene);
-  auto d = scene::BuildDiscretization(*scene, "", std::nullopt);
-  EXPECT_OK(d);
-  auto s = Solid::Create(*scene, *std::move(d));
-  *status = s.status();
-  return s.ok() ? *std::move(s) : nullptr;
+class StabilityTest : public ::testing::TestWithParam<Param> {};
+
+std::string Describe(const Outcome& o) {
+  return absl::StrFormat(
+      "energy ratio %.6f (central velocity %.6f, final %.6f, late growth %.6f), %d/%d steps, %lld rollbacks, "
+      "sub-steps %d -> %d, min volume ratio %.3g, status: %s",
+      o.energy_ratio, o.central_energy_ratio, o.final_energy_ratio, o.late_growth_ratio, o.steps_done, o.steps,
+      static_cast<long long>(o.rollbacks), o.substeps_start, o.substeps_end, o.min_volume_ratio,
+      o.create.ok() ? o.final_status.ToString() : o.create.ToString());
 }
 
 TEST_P(StabilityTest, BackwardEulerStaysBounded) {
-  const Case& c = GetParam();
-  absl::Status status;
-  auto s = Make(SceneText(c, "BACKWARD_EULER"), &status);
-  ASSERT_OK(status);
-  const int steps = static_cast<int>(std::min(200.0, std::ceil(1.0 / c.h)));
-  double peak = 0;
-  for (int i = 0; i < steps; ++i) {
-    const absl::Status st = s->Step();
-    ASSERT_OK(st) << c.name << " step " << i;
-    ASSERT_TRUE(s->control_positions().allFinite()) << c.name;
-    const Energies e = s->ComputeEnergies();
-    ASSERT_TRUE(std::isfinite(e.kinetic) && std::isfinite(e.strain)) << c.name;
-    peak = std::max(peak, e.kinetic + e.strain);
+  Param p = GetParam();
+  const RunOptions options = OptionsFor(p);
+  const Outcome o = RunCase(p.c, Integrator::kBackwardEuler, options);
+  std::printf("%s h=%.4g backward Euler: %s\n", p.c.name.c_str(), p.c.h, Describe(o).c_str());
+  ASSERT_OK(o.create);
+  EXPECT_TRUE(o.always_finite) << "NaN or inf reached the state";
+  EXPECT_OK(o.final_status);
+  EXPECT_EQ(o.steps_done, o.steps);
+  EXPECT_EQ(o.rollbacks, 0);
+  if (p.c.name == "spin_10_rad_s" && p.large_step) {
+    // Known limitation (reported): the linearized step holds the element
+    // frames fixed over the step, and a 0.33 rad turn per step reads part of
+    // the rotation as strain; the first step gains energy (~29 %), which the
+    // scheme then dissipates. Bounded, and falling after the first half.
+    EXPECT_LT(o.energy_ratio, 1.5) << Describe(o);
+    EXPECT_LT(o.late_growth_ratio, 1.0) << Describe(o);
+    EXPECT_LT(o.final_energy_ratio, o.energy_ratio) << Describe(o);
+  } else {
+    // Tighter than the report's verdict tolerance: backward Euler's H never
+    // rises above H(0) here except by ~2e-6 on the spin at 1 ms.
+    EXPECT_LE(o.energy_ratio, 1 + 1e-5) << "energy grew: " << Describe(o);
   }
-  std::printf("%-24s backward Euler: %d steps of %.4g s, peak energy %.4g J, %lld rollbacks\n",
-              c.name.c_str(), steps, c.h, peak, static_cast<long long>(s->rollbacks()));
 }
 
 TEST_P(StabilityTest, CentralDifferenceRunsOrSaysWhy) {
-  const Case& c = GetParam();
-  absl::Status status;
-  auto s = Make(SceneText(c, "CENTRAL_DIFFERENCE"), &status);
-  if (!status.ok()) {
+  Param p = GetParam();
+  const RunOptions options = OptionsFor(p);
+  const Outcome o = RunCase(p.c, Integrator::kCentralDifference, options);
+  std::printf("%s h=%.4g central difference: %s\n", p.c.name.c_str(), p.c.h, Describe(o).c_str());
+  EXPECT_TRUE(o.always_finite) << "NaN or inf reached the state";
+  if (!o.create.ok()) {
     // Too stiff for explicit steps at this h: a clear refusal, not a blow-up.
-    EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << status;
-    EXPECT_NE(std::string(status.message()).find("sub-steps"), std::string::npos) << status;
-    std::printf("%-24s central difference: refused (%s)\n", c.name.c_str(),
-                std::string(status.message()).c_str());
+    EXPECT_THAT(o.create, testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                            HasSubstr("explicit sub-steps")));
     return;
   }
-  const int steps = static_cast<int>(std::min(100.0, std::ceil(0.2 / c.h)));
-  for (int i = 0; i < steps; ++i) {
-    const absl::Status st = s->Step();
-    ASSERT_TRUE(s->control_positions().allFinite()) << c.name << ": NaN reached the state";
-    if (!st.ok()) {
-      // The guard gave up: it says so and the state is the last good one.
-      EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition) << st;
-      std::printf("%-24s central difference: stopped at step %d (%s)\n", c.name.c_str(), i,
-                  std::string(st.message()).c_str());
-      return;
-    }
+  if (!o.final_status.ok()) {
+    // The guard gave up: it says so, after rolling back, from the last good state.
+    EXPECT_THAT(o.final_status, testing::StatusIs(absl::StatusCode::kFailedPrecondition,
+                                                  HasSubstr("state restored")));
+    EXPECT_GT(o.rollbacks, 0);
+    return;
   }
-  std::printf("%-24s central difference: %d steps, %d sub-steps, %lld rollbacks\n", c.name.c_str(),
-              steps, s->build_report().substeps, static_cast<long long>(s->rollbacks()));
+  EXPECT_EQ(o.steps_done, o.steps);
+  // No sustained growth (central difference's chord-velocity energy
+  // oscillates; an instability grows from one half of the run to the next).
+  EXPECT_LE(o.late_growth_ratio, 1 + kGrowthTolerance) << Describe(o);
+  // Rollbacks, when there were any, left more sub-steps.
+  if (o.rollbacks > 0) {
+    EXPECT_GT(o.substeps_end, o.substeps_start);
+  }
 }
 
-INSTANTIATE_TEST_SUITE_P(Cases, StabilityTest, ::testing::ValuesIn(Cases()),
-                         [](const ::testing::TestParamInfo<Case>& info) { return info.param.name; });
+INSTANTIATE_TEST_SUITE_P(Cases, StabilityTest, ::testing::ValuesIn(Params()),
+                         [](const ::testing::TestParamInfo<Param>& info) {
+                           std::string name = info.param.c.name + (info.param.large_step ? "_h30" : "_h1e3");
+                           for (char& ch : name) {
+                             if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+                           }
+                           return name;
+                         });
+
+// The inverting load does invert cells (a level-1 cell's signed volume
+// changes sign), and both schemes come through with finite states.
+TEST(StabilityCasesTest, InvertingLoadInvertsCells) {
+  for (const Case& base : Cases()) {
+    if (base.name != "inverting_load") continue;
+    Case c = base;
+    c.h = 1.0 / 30;
+    RunOptions o;
+    o.steps = 90;
+    for (Integrator integrator : {Integrator::kBackwardEuler, Integrator::kCentralDifference}) {
+      const Outcome out = RunCase(c, integrator, o);
+      EXPECT_TRUE(out.always_finite) << Name(integrator);
+      EXPECT_LT(out.min_volume_ratio, 0) << Name(integrator) << ": no cell inverted";
+    }
+    return;
+  }
+  FAIL() << "no inverting_load case";
+}
+
+// Penalty springs of 1e9 N/m need about 2000 explicit sub-steps per 1/30 s
+// step: with a cap of 100 Create refuses, naming the field, the count and
+// the stable step; backward Euler takes the same scene.
+TEST(StabilityCasesTest, ExplicitStepsAboveTheCapAreRefusedWithTheReason) {
+  for (const Case& base : Cases()) {
+    if (base.name != "penalty_1e9") continue;
+    Case c = base;
+    c.h = 1.0 / 30;
+    RunOptions o;
+    o.steps = 3;
+    o.max_substeps = 100;
+    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+    EXPECT_THAT(cd.create,
+                testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                  ::testing::AllOf(HasSubstr("solver.time_step"),
+                                                   HasSubstr("explicit sub-steps (stable step"),
+                                                   HasSubstr("max_substeps is 100"))));
+    EXPECT_EQ(cd.steps_done, 0);
+    const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
+    EXPECT_OK(be.create);
+    EXPECT_TRUE(be.completed());
+    EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
+    return;
+  }
+  FAIL() << "no penalty_1e9 case";
+}
+
+// The 180-degree twist: released with strain energy, no loads; backward
+// Euler only loses it; the central-difference run (sub-stepped) stays
+// finite and its energy does not keep growing.
+TEST(StabilityCasesTest, TwistReleasedFromHalfATurn) {
+  for (const Case& base : Cases()) {
+    if (base.name != "twist_180") continue;
+    Case c = base;
+    c.h = 1e-2;
+    RunOptions o;
+    o.steps = 50;
+    const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
+    ASSERT_OK(be.create);
+    EXPECT_GT(be.initial_energy, 0) << "the twisted state holds strain energy";
+    EXPECT_DOUBLE_EQ(be.peak_mechanical, be.initial_energy);
+    EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
+    EXPECT_LT(be.final_energy_ratio, 0.5) << "backward Euler damps the released twist";
+    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+    ASSERT_OK(cd.create);
+    EXPECT_TRUE(cd.always_finite);
+    EXPECT_OK(cd.final_status);
+    EXPECT_LE(cd.late_growth_ratio, 1 + kGrowthTolerance) << Describe(cd);
+    return;
+  }
+  FAIL() << "no twist_180 case";
+}
+
+// Twisted() is a rotation of each cross section: distances to the axis
+// are kept, and the end x = length turns by the full angle.
+TEST(StabilityCasesTest, TwistedTurnsEachSection) {
+  Points rest(3, 3);
+  rest << 0, 0.25, 0.25, 1, 0.25, -0.25, 2, -0.25, 0.25;
+  const Points p = Twisted(rest, M_PI, 2.0, 0, 0);
+  EXPECT_NEAR(p(0, 1), 0.25, 1e-15);
+  EXPECT_NEAR(p(0, 2), 0.25, 1e-15);
+  // x = 1: a quarter turn of (0.25, -0.25) gives (0.25, 0.25).
+  EXPECT_NEAR(p(1, 1), 0.25, 1e-15);
+  EXPECT_NEAR(p(1, 2), 0.25, 1e-15);
+  // x = 2: half a turn.
+  EXPECT_NEAR(p(2, 1), 0.25, 1e-15);
+  EXPECT_NEAR(p(2, 2), -0.25, 1e-15);
+}
+
+// Near-degenerate cells: a control cell 1e-3 m thick is accepted; as an
+// element (0 levels) it governs the stable step (about sqrt(1e-3 / 1) of
+// the neighbours' scale), which subdivision (1 level) smooths away; both
+// run bounded with backward Euler and with explicit sub-steps.
+TEST(StabilityCasesTest, ThinLayerGovernsTheStableStepAtLevelZero) {
+  Outcome l0, l1;
+  for (const Case& base : Cases()) {
+    if (base.name.rfind("thin_layer_L", 0) != 0) continue;
+    Case c = base;
+    c.h = 1e-3;
+    RunOptions o;
+    o.steps = 50;
+    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+    ASSERT_OK(cd.create) << c.name;
+    EXPECT_OK(cd.final_status) << c.name;
+    (c.levels == 0 ? l0 : l1) = cd;
+  }
+  ASSERT_GT(l0.stable_step, 0);
+  ASSERT_GT(l1.stable_step, 0);
+  std::printf("stable step: thin cell as an element %.4g s, subdivided %.4g s\n", l0.stable_step,
+              l1.stable_step);
+  EXPECT_LT(l0.stable_step, 0.2 * l1.stable_step);
+  EXPECT_GT(l0.substeps_start, 1) << "1 ms is above the thin element's stable step";
+}
 
 }  // namespace
-}  // namespace dynsolid::solid
+}  // namespace dynsolid::stability

@@ -51,7 +51,7 @@ CommandChannel::~CommandChannel() {
   if (reader_.joinable()) reader_.join();
 }
 
-CommandRequest CommandChannel::RequestFor(const CommandRecord& r, bool /*first*/) const {
+CommandRequest CommandChannel::RequestFor(const CommandRecord& r) const {
   CommandRequest request;
   // Every request names the session: a resend may open a stream.
   *request.mutable_session() = session_;
@@ -77,7 +77,7 @@ absl::StatusOr<uint64_t> CommandChannel::Send(const Command& command, std::strin
     r.label = std::move(label);
     r.sent = Clock::now();
     ++unanswered_;
-    request = RequestFor(r, false);
+    request = RequestFor(r);
     stream = stream_;
     if (stream != nullptr) ++r.writes;
   }
@@ -106,7 +106,7 @@ std::shared_ptr<CommandChannel::Stream> CommandChannel::Open(bool fresh) {
     stream_ = s;
     for (auto& [seq, r] : records_) {
       if (r.answered) continue;
-      pending.push_back(RequestFor(r, false));
+      pending.push_back(RequestFor(r));
       ++r.writes;
     }
   }
@@ -159,7 +159,7 @@ void CommandChannel::ReaderLoop() {
           if (it == records_.end() || it->second.answered) continue;
           ++it->second.rate_limited;
           ++it->second.writes;
-          again = RequestFor(it->second, false);
+          again = RequestFor(it->second);
         }
         (void)s->rw->Write(again);
         continue;

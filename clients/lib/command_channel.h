@@ -98,7 +98,7 @@ class CommandChannel {
   // Opens a stream and writes every unanswered command (under write_mu_);
   // `fresh`: on a new channel.
   std::shared_ptr<Stream> Open(bool fresh);
-  CommandRequest RequestFor(const CommandRecord& r, bool first) const;
+  CommandRequest RequestFor(const CommandRecord& r) const;
   void HandleReply(const CommandReply& reply);
 
   const ChannelFactory channels_;
@@ -114,7 +114,6 @@ class CommandChannel {
   uint64_t next_seq_ ABSL_GUARDED_BY(mu_) = 1;
   int64_t unanswered_ ABSL_GUARDED_BY(mu_) = 0;
   std::shared_ptr<Stream> stream_ ABSL_GUARDED_BY(mu_);
-  bool first_on_stream_ ABSL_GUARDED_BY(write_mu_) = true;
   bool closing_ ABSL_GUARDED_BY(mu_) = false;
   bool done_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status fatal_ ABSL_GUARDED_BY(mu_);

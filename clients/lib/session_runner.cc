@@ -113,8 +113,9 @@ class Caller {
 class Run {
  public:
   Run(Caller& stub, const Script& script, const RunOptions& options, RunReport& report,
-      CommandChannel& commands, Watcher* watcher)
-      : stub_(stub),
+      CommandChannel& commands, Watcher* watcher, std::string token)
+      : token_(std::move(token)),
+        stub_(stub),
         script_(script),
         options_(options),
         report_(report),
@@ -161,7 +162,6 @@ class Run {
         }
         absl::StatusOr<uint64_t> seq = commands_.Send(command, where);
         if (!seq.ok()) return Annotate(where, seq.status());
-        lines_[*seq] = &line;
         if (!line.name.empty()) named_[line.name] = Named{*seq, line.line};
         return absl::OkStatus();
       }
@@ -293,21 +293,17 @@ class Run {
     return r;
   }
 
- public:
-  std::string token_;
-
- private:
   struct Named {
     uint64_t seq;
     int line;
   };
+  const std::string token_;
   Caller& stub_;
   const Script& script_;
   const RunOptions& options_;
   RunReport& report_;
   CommandChannel& commands_;
   Watcher* watcher_;
-  std::map<uint64_t, const ScriptLine*> lines_;
   std::map<std::string, Named> named_;
   uint64_t checked_seq_ = 0;
   int64_t last_applied_ = 0;
@@ -419,9 +415,17 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
   command_options.log = options.log;
   auto commands = std::make_unique<CommandChannel>(channels, ref, report.client_id,
                                                    command_options);
-  Run run(caller, script, options, report, *commands, watcher.get());
-  run.token_ = token;
-  report.status = run.Execute();
+  if (watcher != nullptr) {
+    // The first frame (a keyframe) before any command: displacements in
+    // the report are measured from where the session was when the run began.
+    absl::StatusOr<Surface> first = watcher->WaitForStep(0, options.wait_timeout);
+    if (!first.ok()) {
+      report.status = first.status();
+      if (options.log) options.log(absl::StrCat("no first frame: ", first.status().ToString()));
+    }
+  }
+  Run run(caller, script, options, report, *commands, watcher.get(), token);
+  if (report.status.ok()) report.status = run.Execute();
 
   if (options.log) options.log(absl::StrCat("script done: ", report.status.ToString()));
   // The end: where the session is, what the watcher holds.

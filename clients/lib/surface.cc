@@ -189,25 +189,64 @@ absl::Status SurfaceDecoder::ApplyDelta(const Frame& frame) {
   }
   std::vector<uint16_t> updated;
   if (!listed.empty()) {
+    const bool rice = d.rice_k_size() > 0;
     const uint32_t bits = d.bits();
-    if (bits < 1 || bits > 17) {
-      return absl::InvalidArgumentError(absl::StrCat("delta.bits: ", bits, " outside [1, 17]"));
-    }
-    const uint64_t total_bits = uint64_t{3} * listed.size() * bits;
-    if (d.packed().size() != (total_bits + 7) / 8) {
-      return absl::InvalidArgumentError(absl::StrCat("delta.packed: ", d.packed().size(),
-                                                     " bytes, expected ", (total_bits + 7) / 8,
-                                                     " for ", listed.size(), " vertices at ",
-                                                     bits, " bits"));
+    if (rice) {
+      if (d.rice_k_size() != 3) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("delta.rice_k: ", d.rice_k_size(), " values, expected 3 (x, y, z)"));
+      }
+      for (int a = 0; a < 3; ++a) {
+        if (d.rice_k(a) > 16) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("delta.rice_k[", a, "]: ", d.rice_k(a), " outside [0, 16]"));
+        }
+      }
+    } else {
+      if (bits < 1 || bits > 17) {
+        return absl::InvalidArgumentError(absl::StrCat("delta.bits: ", bits, " outside [1, 17]"));
+      }
+      const uint64_t total_bits = uint64_t{3} * listed.size() * bits;
+      if (d.packed().size() != (total_bits + 7) / 8) {
+        return absl::InvalidArgumentError(absl::StrCat("delta.packed: ", d.packed().size(),
+                                                       " bytes, expected ", (total_bits + 7) / 8,
+                                                       " for ", listed.size(),
+                                                       " vertices at ", bits, " bits"));
+      }
     }
     const auto* bytes = reinterpret_cast<const unsigned char*>(d.packed().data());
+    const uint64_t size_bits = uint64_t{8} * d.packed().size();
     uint64_t bit = 0;
+    bool overrun = false;
+    // `n` bits, least significant first (0 past the end, noted).
+    auto read = [&](uint32_t n) {
+      uint32_t z = 0;
+      for (uint32_t b = 0; b < n; ++b, ++bit) {
+        if (bit >= size_bits) {
+          overrun = true;
+          return z;
+        }
+        z |= static_cast<uint32_t>((bytes[bit >> 3] >> (bit & 7)) & 1u) << b;
+      }
+      return z;
+    };
     updated.reserve(3 * listed.size());
     for (size_t v = 0; v < listed.size(); ++v) {
       for (int a = 0; a < 3; ++a) {
         uint32_t z = 0;
-        for (uint32_t b = 0; b < bits; ++b, ++bit) {
-          z |= static_cast<uint32_t>((bytes[bit >> 3] >> (bit & 7)) & 1u) << b;
+        if (!rice) {
+          z = read(bits);
+        } else {
+          const uint32_t k = d.rice_k(a);
+          uint32_t ones = 0;
+          while (ones < 16 && read(1) == 1u && !overrun) ++ones;
+          // The loop consumed the terminating zero-bit unless it saw 16 ones.
+          z = ones < 16 ? (ones << k) | read(k) : read(17);
+        }
+        if (overrun) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              "delta.packed: ", d.packed().size(), " bytes end inside vertex ", listed[v],
+              " axis ", a, " (", listed.size(), " vertices listed)"));
         }
         const int64_t diff = (z & 1u) ? -static_cast<int64_t>(z >> 1) - 1 : (z >> 1);
         const int64_t code = codes_[3 * listed[v] + a] + diff;
@@ -218,6 +257,10 @@ absl::Status SurfaceDecoder::ApplyDelta(const Frame& frame) {
         }
         updated.push_back(static_cast<uint16_t>(code));
       }
+    }
+    if (rice && d.packed().size() != (bit + 7) / 8) {
+      return absl::InvalidArgumentError(absl::StrCat("delta.packed: ", d.packed().size(),
+                                                     " bytes, the Rice codes take ", (bit + 7) / 8));
     }
   }
   // Valid: commit.

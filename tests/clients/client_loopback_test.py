@@ -14,6 +14,8 @@
 3. A command the server rejects stops the run with exit code 3 and the
    script's file:line; a bad script is refused before anything is sent.
 4. SIGTERM stops the server with exit code 0.
+5. Over TLS (a self-signed certificate made with openssl): --tls_ca runs a
+   script; without it the client cannot connect.
 
 Usage: client_loopback_test.py --server PATH --client PATH
 """
@@ -51,10 +53,10 @@ def expect_equal(what, got, want):
 
 
 class Server:
-    def __init__(self, binary, data_dir, log, listen="127.0.0.1:0"):
+    def __init__(self, binary, data_dir, log, listen="127.0.0.1:0", extra=()):
         self.log = open(log, "a")
         self.process = subprocess.Popen(
-            [binary, "--listen", listen, "--data_dir", data_dir],
+            [binary, "--listen", listen, "--data_dir", data_dir] + list(extra),
             stdout=subprocess.PIPE, stderr=self.log, text=True)
         line = []
         reader = threading.Thread(target=lambda: line.append(self.process.stdout.readline()))
@@ -327,6 +329,32 @@ def run(args, tmp):
     finally:
         code = server.stop()
     expect_equal("server exit code after SIGTERM", code, 0)
+
+    # ---- 5. TLS ----
+    cert, key = os.path.join(tmp, "cert.pem"), os.path.join(tmp, "key.pem")
+    made = subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes",
+                           "-keyout", key, "-out", cert, "-days", "1", "-subj", "/CN=localhost",
+                           "-addext", "subjectAltName=IP:127.0.0.1,DNS:localhost"],
+                          capture_output=True, text=True)
+    expect(made.returncode == 0, "openssl could not make a certificate: %s" % made.stderr)
+    server = Server(args.server, os.path.join(tmp, "tls_data"), log,
+                    extra=["--tls_cert", cert, "--tls_key", key])
+    try:
+        with open(script, "w") as f:
+            f.write("step 3\nwait\n")
+        report_path = os.path.join(tmp, "tls.json")
+        r = run_client(args.client, server.address, "--tls_ca", cert, "run", "--script", script,
+                       "--scene", "block3", "--levels", "1", "--start_paused",
+                       "--json", report_path)
+        expect(r.returncode == 0, "run over TLS exited %d: %s" % (r.returncode, r.stderr))
+        with open(report_path) as f:
+            check_final_step(json.load(f), 3)
+        r = run_client(args.client, server.address, "--timeout_seconds", "5", "list")
+        expect(r.returncode == 2 and "UNAVAILABLE" in r.stderr,
+               "plaintext client against the TLS server: exit %d, %r" % (r.returncode, r.stderr))
+    finally:
+        code = server.stop()
+    expect_equal("TLS server exit code after SIGTERM", code, 0)
 
 
 if __name__ == "__main__":

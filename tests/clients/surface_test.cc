@@ -26,6 +26,30 @@ std::string Pack(const std::vector<uint32_t>& values, int bits) {
   }
   return out;
 }
+// Rice-codes zigzagged values, axis a of each triple with k[a].
+std::string RicePack(const std::vector<uint32_t>& values, const std::vector<uint32_t>& k) {
+  std::vector<bool> bits;
+  auto put = [&](uint32_t v, uint32_t n) {
+    for (uint32_t b = 0; b < n; ++b) bits.push_back((v >> b) & 1u);
+  };
+  for (size_t i = 0; i < values.size(); ++i) {
+    const uint32_t z = values[i], kk = k[i % 3];
+    const uint32_t u = z >> kk;
+    if (u < 16) {
+      for (uint32_t j = 0; j < u; ++j) bits.push_back(true);
+      bits.push_back(false);
+      put(z, kk);
+    } else {
+      for (int j = 0; j < 16; ++j) bits.push_back(true);
+      put(z, 17);
+    }
+  }
+  std::string out((bits.size() + 7) / 8, '\0');
+  for (size_t i = 0; i < bits.size(); ++i) {
+    if (bits[i]) out[i / 8] = static_cast<char>(out[i / 8] | (1 << (i % 8)));
+  }
+  return out;
+}
 uint32_t ZigZag(int32_t d) { return d >= 0 ? 2u * d : static_cast<uint32_t>(-2 * d - 1); }
 
 // A unit square of 4 vertices on the grid origin (1, 2, 3), steps
@@ -138,6 +162,58 @@ TEST(SurfaceDecoderTest, SmallBitWidthsRoundTrip) {
       EXPECT_EQ(d.surface().positions[i], origin[i % 3] + (30000 + diffs[i]) * steps[i % 3])
           << "bits " << bits << " value " << i;
     }
+  }
+}
+
+TEST(SurfaceDecoderTest, RiceCodedDeltasDecodeIncludingEscapes) {
+  // k = 0 on x (every value unary or escaped), 3 on y, 16 on z (never
+  // escaped: u = z >> 16 <= 1).
+  const std::vector<uint32_t> k = {0, 3, 16};
+  const std::vector<int32_t> diffs = {0,  5,   -30000, 7,    -1,  12000,
+                                      -8, 200, 1,      3000, -64, -29999};
+  {
+    const int vertices_listed = 4;
+    SurfaceDecoder d;
+    ASSERT_TRUE(d.Apply(Key(0, std::vector<uint16_t>(12, 30000))).ok());
+    Frame f;
+    f.set_step(1);
+    Delta* delta = f.mutable_delta();
+    delta->set_base_step(0);
+    delta->add_runs(0);
+    delta->add_runs(vertices_listed);
+    delta->set_moved(vertices_listed);
+    for (uint32_t kk : k) delta->add_rice_k(kk);
+    std::vector<uint32_t> zz;
+    for (int32_t v : diffs) zz.push_back(ZigZag(v));
+    delta->set_packed(RicePack(zz, k));
+    ASSERT_TRUE(d.Apply(f).ok()) << d.Apply(f).message();
+    const double steps[3] = {0.5, 0.25, 2};
+    const double origin[3] = {1, 2, 3};
+    for (int i = 0; i < 12; ++i) {
+      EXPECT_EQ(d.surface().positions[i], origin[i % 3] + (30000 + diffs[i]) * steps[i % 3])
+          << "value " << i;
+    }
+    // Truncated, padded, or malformed parameters: rejected, nothing changes.
+    SurfaceDecoder fresh;
+    ASSERT_TRUE(fresh.Apply(Key(0, std::vector<uint16_t>(12, 30000))).ok());
+    const std::vector<double> before = fresh.surface().positions;
+    Frame bad = f;
+    bad.mutable_delta()->set_packed(f.delta().packed().substr(0, f.delta().packed().size() - 2));
+    EXPECT_EQ(fresh.Apply(bad).code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_THAT(std::string(fresh.Apply(bad).message()),
+                ::testing::MatchesRegex("delta.packed: [0-9]+ bytes end inside vertex 3 axis [0-2] "
+                                        "\\(4 vertices listed\\)"));
+    bad.mutable_delta()->set_packed(f.delta().packed() + std::string(1, '\0'));
+    EXPECT_THAT(std::string(fresh.Apply(bad).message()),
+                ::testing::MatchesRegex("delta.packed: [0-9]+ bytes, the Rice codes take [0-9]+"));
+    bad.mutable_delta()->set_packed(f.delta().packed());
+    bad.mutable_delta()->set_rice_k(1, 17);
+    EXPECT_EQ(fresh.Apply(bad).message(), "delta.rice_k[1]: 17 outside [0, 16]");
+    bad.mutable_delta()->clear_rice_k();
+    bad.mutable_delta()->add_rice_k(1);
+    EXPECT_EQ(fresh.Apply(bad).message(), "delta.rice_k: 1 values, expected 3 (x, y, z)");
+    EXPECT_EQ(fresh.surface().positions, before);
+    EXPECT_EQ(fresh.step(), 0);
   }
 }
 

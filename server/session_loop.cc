@@ -196,11 +196,12 @@ void SessionLoop::RemoveWatcher(WatchSink* sink) {
 }
 
 void SessionLoop::Inspect(const InspectRequest& request,
-                          std::function<void(absl::StatusOr<InspectReply>)> done) {
+                          std::function<void(absl::StatusOr<InspectReply>)> done,
+                          std::function<bool()> cancelled) {
   {
     absl::MutexLock lock(&mu_);
     if (!stop_) {
-      inspects_.push_back(PendingInspect{request, std::move(done)});
+      inspects_.push_back(PendingInspect{request, std::move(done), std::move(cancelled)});
       wake_.Signal();
       return;
     }
@@ -422,7 +423,11 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
       continue;
     }
     if (i.request.wait_for_step() > core_->steps()) {
-      keep.push_back(std::move(i));
+      if (i.cancelled != nullptr && i.cancelled()) {
+        i.done(absl::CancelledError("the client cancelled the inspection"));
+      } else {
+        keep.push_back(std::move(i));
+      }
       continue;
     }
     InspectReply r;

@@ -116,8 +116,11 @@ class SessionLoop {
 
   // ---- Inspection: `done` is called once, from the simulation thread (or
   // from Stop with Unavailable).
+  // `cancelled` (optional) is polled while the inspection waits for its
+  // step; once it returns true, `done` gets Cancelled.
   void Inspect(const InspectRequest& request,
-               std::function<void(absl::StatusOr<InspectReply>)> done);
+               std::function<void(absl::StatusOr<InspectReply>)> done,
+               std::function<bool()> cancelled = nullptr);
 
   SessionStats Stats() const;
   double time_step() const { return time_step_; }
@@ -137,6 +140,7 @@ class SessionLoop {
   struct PendingInspect {
     InspectRequest request;
     std::function<void(absl::StatusOr<InspectReply>)> done;
+    std::function<bool()> cancelled;
   };
   // Work for the persistence thread: records to append and sync, maybe a
   // snapshot to write, then replies to release.

@@ -101,10 +101,13 @@ grpc::ServerUnaryReactor* SessionsService::Inspect(grpc::CallbackServerContext* 
   }
   // Answered by the simulation thread at a step boundary; response and
   // reactor stay valid until Finish.
-  (*session)->loop().Inspect(*request, [reactor, response](absl::StatusOr<InspectReply> r) {
-    if (r.ok()) *response = *std::move(r);
-    reactor->Finish(ToGrpcStatus(r.status()));
-  });
+  (*session)->loop().Inspect(
+      *request,
+      [reactor, response](absl::StatusOr<InspectReply> r) {
+        if (r.ok()) *response = *std::move(r);
+        reactor->Finish(ToGrpcStatus(r.status()));
+      },
+      [context] { return context->IsCancelled(); });
   return reactor;
 }
 

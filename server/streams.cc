@@ -314,12 +314,23 @@ class CommandsState final : public ReplySink {
  private:
   void Enqueue(const CommandReply& reply, bool from_loop) {
     bool write = false;
+    bool finish = false;
+    grpc::Status g;
     {
       absl::MutexLock lock(&mu_);
       if (from_loop) --outstanding_;
       if (done_) return;
-      out_.push_back(reply);
-      if (!writing_) {
+      if (out_.size() >= kMaxQueuedReplies) {
+        // A client that sends but does not read: no unbounded queue.
+        done_ = true;
+        status_ = absl::ResourceExhaustedError(absl::StrCat(
+            kMaxQueuedReplies, " replies are waiting for the client to read them"));
+        out_.clear();
+        finish = TakeFinishLocked(&g);
+      } else {
+        out_.push_back(reply);
+      }
+      if (!done_ && !writing_) {
         current_ = std::move(out_.front());
         out_.pop_front();
         writing_ = true;
@@ -327,7 +338,10 @@ class CommandsState final : public ReplySink {
       }
     }
     if (write) reactor_->StartWrite(&current_);
+    if (finish) reactor_->Finish(g);
   }
+
+  static constexpr size_t kMaxQueuedReplies = 4096;
 
   // Finish when ended (stopped, broken) or when the client half-closed and
   // every reply is written; never with a write in flight.

@@ -266,10 +266,10 @@ TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsis
   ASSERT_TRUE(slow_stats.write_pending()) << "the slow watcher never blocked";
   ASSERT_GT(slow_stats.frames_skipped(), 10);
 
-  // While it stays blocked, the loop keeps stepping and the fast watcher
-  // keeps getting frames that follow the session step for step.
+  // While it does not read, the loop keeps stepping (1500 more steps, by
+  // count) and the fast watcher keeps getting frames that follow the
+  // session step for step.
   const int64_t step0 = st.step();
-  const int64_t slow_sent0 = slow_stats.frames_sent();
   int64_t fast0;
   {
     absl::MutexLock lock(&mu);
@@ -294,9 +294,13 @@ TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsis
     EXPECT_GE(fast_last_step, step0 + 1500) << "the fast watcher fell behind the loop";
     EXPECT_GT(fast_frames - fast0, 20) << "the fast watcher got too few frames";
   }
-  EXPECT_EQ(slow_stats.frames_sent(), slow_sent0) << "the blocked watcher was not blocked";
-  EXPECT_TRUE(slow_stats.write_pending());
-  EXPECT_GE(st.frames_published(), st.watcher_details(1).frames_sent());
+  // The slow watcher never queues: every frame published since it joined
+  // was sent to it once, skipped (replaced in its one-frame slot), or is
+  // still in that slot.
+  EXPECT_LE(slow_stats.frames_sent() + slow_stats.frames_skipped(), st.frames_published());
+  EXPECT_GE(slow_stats.frames_sent() + slow_stats.frames_skipped() + 1,
+            st.frames_published() - 1);  // (the first publication may precede it)
+  EXPECT_GT(slow_stats.frames_skipped(), 10);
 
   // Pause and let the slow watcher read again: everything it gets decodes
   // against what it got before, the resumed frame reports what it skipped,

@@ -1,6 +1,15 @@
 #include "clients/lib/channel.h"
 
+#include "absl/strings/str_cat.h"
+
 namespace dynsolid::client {
+
+absl::Status ToAbslStatus(const grpc::Status& s, absl::string_view call) {
+  if (s.ok()) return absl::OkStatus();
+  const std::string message =
+      call.empty() ? s.error_message() : absl::StrCat(call, ": ", s.error_message());
+  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), message);
+}
 
 std::shared_ptr<grpc::Channel> MakeChannel(const ChannelOptions& options) {
   grpc::ChannelArguments args;

@@ -7,6 +7,9 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "absl/status/status.h"
+#include "absl/strings/string_view.h"
+
 namespace dynsolid::client {
 
 struct ChannelOptions {
@@ -29,6 +32,10 @@ using ChannelFactory = std::function<std::shared_ptr<grpc::Channel>()>;
 
 // Receives progress messages (reconnects, script lines) when verbose.
 using LogFn = std::function<void(const std::string&)>;
+
+// A gRPC status as an Abseil one (same code); a non-empty `call` prefixes
+// the message ("CreateSession: ...").
+absl::Status ToAbslStatus(const grpc::Status& s, absl::string_view call = "");
 
 inline ChannelFactory ChannelFactoryFor(ChannelOptions options) {
   return [options] { return MakeChannel(options); };

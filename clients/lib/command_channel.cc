@@ -25,9 +25,6 @@ bool Fatal(grpc::StatusCode code) {
   }
 }
 
-absl::Status ToAbsl(const grpc::Status& s) {
-  return absl::Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
-}
 
 }  // namespace
 
@@ -178,7 +175,7 @@ void CommandChannel::ReaderLoop() {
     absl::MutexLock lock(&mu_);
     if (done_ || (closing_ && unanswered_ == 0)) break;
     if (Fatal(status.error_code())) {
-      fatal_ = ToAbsl(status);
+      fatal_ = ToAbslStatus(status);
       done_ = true;
       break;
     }

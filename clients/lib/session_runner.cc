@@ -22,11 +22,6 @@ std::chrono::system_clock::time_point DeadlineIn(absl::Duration d) {
   return std::chrono::system_clock::now() + absl::ToChronoNanoseconds(d);
 }
 
-absl::Status ToAbsl(const grpc::Status& s, absl::string_view call) {
-  if (s.ok()) return absl::OkStatus();
-  return absl::Status(static_cast<absl::StatusCode>(s.error_code()),
-                      absl::StrCat(call, ": ", s.error_message()));
-}
 
 std::string RandomClientId() {
   std::random_device rd;
@@ -253,7 +248,7 @@ class Run {
           absl::FormatDuration(options_.wait_timeout),
           " (is it paused? \"step N\" or \"resume\" make it move)"));
     }
-    if (!s.ok()) return Annotate(where, ToAbsl(s, "Inspect"));
+    if (!s.ok()) return Annotate(where, ToAbslStatus(s, "Inspect"));
     return reply;
   }
 
@@ -270,7 +265,7 @@ class Run {
         context.set_deadline(DeadlineIn(options_.call_timeout));
         return stub.GetStats(&context, Ref(), &stats);
       });
-      if (!s.ok()) return Annotate(where, ToAbsl(s, "GetStats"));
+      if (!s.ok()) return Annotate(where, ToAbslStatus(s, "GetStats"));
       if (!stats.last_error().empty()) {
         return absl::AbortedError(absl::StrCat(where, ": the session stopped at step ",
                                                stats.step(), ": ", stats.last_error()));
@@ -377,7 +372,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
       context.set_deadline(DeadlineIn(options.call_timeout));
       return stub.GetSession(&context, options.join, &report.session);
     });
-    if (!s.ok()) return ToAbsl(s, absl::StrCat("GetSession ", options.join.id()));
+    if (!s.ok()) return ToAbslStatus(s, absl::StrCat("GetSession ", options.join.id()));
     token = options.join.token();
   } else {
     CreateSessionRequest request;
@@ -392,7 +387,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
     context.set_deadline(DeadlineIn(options.call_timeout));
     // Not retried: a lost answer would leave a second session behind.
     const grpc::Status s = caller.stub().CreateSession(&context, request, &report.session);
-    if (!s.ok()) return ToAbsl(s, "CreateSession");
+    if (!s.ok()) return ToAbslStatus(s, "CreateSession");
     token = report.session.token();
     report.created = true;
   }
@@ -438,7 +433,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
       context.set_deadline(DeadlineIn(options.call_timeout));
       return stub.Inspect(&context, request, &at_end);
     });
-    if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "Inspect");
+    if (!s.ok() && report.status.ok()) report.status = ToAbslStatus(s, "Inspect");
   }
   if (watcher != nullptr) {
     absl::StatusOr<Surface> last =
@@ -479,7 +474,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
       context.set_deadline(DeadlineIn(options.call_timeout));
       return stub.GetStats(&context, ref, &report.stats);
     });
-    if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "GetStats");
+    if (!s.ok() && report.status.ok()) report.status = ToAbslStatus(s, "GetStats");
   }
   const absl::Status closed = commands->Close(absl::Seconds(30));
   if (!closed.ok() && report.status.ok()) report.status = closed;
@@ -498,7 +493,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
       context.set_deadline(DeadlineIn(options.call_timeout));
       return stub.CloseSession(&context, ref, &empty);
     });
-    if (!s.ok() && report.status.ok()) report.status = ToAbsl(s, "CloseSession");
+    if (!s.ok() && report.status.ok()) report.status = ToAbslStatus(s, "CloseSession");
     report.closed = s.ok();
   }
   report.wall_seconds = std::chrono::duration<double>(Clock::now() - start).count();

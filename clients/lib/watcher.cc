@@ -109,8 +109,7 @@ void Watcher::Loop() {
     context_ = nullptr;
     if (stop_ || bad_frame) break;
     if (Fatal(status.error_code())) {
-      error_ = absl::Status(static_cast<absl::StatusCode>(status.error_code()),
-                            absl::StrCat("Watch: ", status.error_message()));
+      error_ = ToAbslStatus(status, "Watch");
       break;
     }
     const Clock::time_point now = Clock::now();

@@ -10,11 +10,6 @@ namespace {
 
 // Elements per dense product (columns of the 3n x batch block).
 constexpr int32_t kBatch = 64;
-// K is applied in row panels of at most this many rows: Eigen's GEMM keeps
-// its packing buffers on the stack below 128 KB (a 64 x 192 panel and a
-// 192 x 64 block are 96 KB each) and would allocate on the heap for the
-// whole 192 x 192 cubic matrix.
-constexpr int kPanelRows = 64;
 // Iteration cap of ExtractRotation. Its iteration converges linearly (the
 // error shrinks by about 3 per iteration), and u = R^T d - x0 is first order
 // in a frame error: 8 iterations (local_frame's cap) leave spurious forces of
@@ -79,6 +74,7 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
       }
       // Exactly symmetric (a + b == b + a in floating point).
       k = 0.5 * (k + k.transpose()).eval();
+      packed_[kind].emplace_back(k);
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
   }
@@ -88,10 +84,13 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
   for (const ElementBlock& block : layout.blocks) {
     if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
   }
+  // Rows rounded up to the packed matrices' panel height.
+  const int rows = (3 * max_nodes + PackedMatrix::kPanel - 1) / PackedMatrix::kPanel *
+                   PackedMatrix::kPanel;
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_, 3);
-    w.u.setZero(3 * max_nodes, kBatch);
-    w.y.setZero(3 * max_nodes, kBatch);
+    w.u.setZero(rows, kBatch);
+    w.y.setZero(rows, kBatch);
     part_buffers_.push_back(&w.g);
   }
 }
@@ -144,12 +143,9 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
         ub -= x0;
       }
     }
-    // y = K u, in row panels (see kPanelRows).
-    const Eigen::MatrixXd& k = k_[batch.kind][batch.group];
-    for (int r = 0; r < m; r += kPanelRows) {
-      const int rows = std::min(kPanelRows, m - r);
-      y.middleRows(r, rows).noalias() = k.middleRows(r, rows) * u;
-    }
+    // y = K u (K pre-packed; rows padded to the panel height).
+    packed_[batch.kind][batch.group].Apply(w.u.data(), static_cast<int>(w.u.rows()), batch.count,
+                                           w.y.data(), static_cast<int>(w.y.rows()));
     for (int32_t b = 0; b < batch.count; ++b) {
       w.energy += 0.5 * u.col(b).dot(y.col(b));
       const int32_t e = block.by_group[batch.first + b];
@@ -203,6 +199,8 @@ int64_t CorotationalModel::shared_matrix_bytes() const {
   int64_t bytes = 0;
   for (const auto& kind : k_)
     for (const auto& m : kind) bytes += static_cast<int64_t>(m.size()) * 8;
+  for (const auto& kind : packed_)
+    for (const auto& m : kind) bytes += m.bytes();
   return bytes;
 }
 

@@ -37,6 +37,7 @@
 #include "solver/common/worker_pool.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
+#include "solver/models/panel_product.h"
 
 namespace dynsolid::models {
 
@@ -94,6 +95,7 @@ class CorotationalModel final : public InternalForceModel {
   int32_t num_nodes_;
   // k_[kind][group]: 3n x 3n.
   std::array<std::vector<Eigen::MatrixXd>, 3> k_;
+  std::array<std::vector<PackedMatrix>, 3> packed_;  // the same, packed for the products
   Frames frames_;  // per element, by kind; written by Forces only
   ElementSchedule schedule_;  // batches and their fixed parts
   // Per-part scratch, allocated at construction (mutable for the const

@@ -42,6 +42,8 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       for (int axis = 0; axis < 3; ++axis) {
         k_[kind][gi][axis] = b[axis] * b[axis].transpose();
       }
+      packed_[kind].push_back({PackedMatrix(k_[kind][gi][0]), PackedMatrix(k_[kind][gi][1]),
+                               PackedMatrix(k_[kind][gi][2])});
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
     centre_gradient_[kind].resize(block.groups.size());
@@ -153,16 +155,16 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
         LocalDeformation<-1>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
       }
     }
-    const auto& k = k_[batch.kind][batch.group];
+    const auto& k = packed_[batch.kind][batch.group];
+    k[0].Apply(w.dx.data(), ld, batch.count, w.yx.data(), ld);
+    k[1].Apply(w.dy.data(), ld, batch.count, w.yy.data(), ld);
+    k[2].Apply(w.dz.data(), ld, batch.count, w.yz.data(), ld);
     auto dx = w.dx.topLeftCorner(n, batch.count);
     auto dy = w.dy.topLeftCorner(n, batch.count);
     auto dz = w.dz.topLeftCorner(n, batch.count);
     auto yx = w.yx.topLeftCorner(n, batch.count);
     auto yy = w.yy.topLeftCorner(n, batch.count);
     auto yz = w.yz.topLeftCorner(n, batch.count);
-    yx.noalias() = k[0] * dx;
-    yy.noalias() = k[1] * dy;
-    yz.noalias() = k[2] * dz;
     for (int32_t b = 0; b < batch.count; ++b) {
       w.energy += 0.5 * (dx.col(b).dot(yx.col(b)) + dy.col(b).dot(yy.col(b)) +
                          dz.col(b).dot(yz.col(b)));
@@ -224,6 +226,9 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
   for (const auto& kind : k_)
     for (const auto& grp : kind)
       for (const auto& m : grp) bytes += static_cast<int64_t>(m.size()) * 8;
+  for (const auto& kind : packed_)
+    for (const auto& grp : kind)
+      for (const auto& m : grp) bytes += m.bytes();
   return bytes;
 }
 

@@ -39,6 +39,7 @@
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
 #include "solver/models/measure.h"
+#include "solver/models/panel_product.h"
 
 namespace dynsolid::models {
 
@@ -79,6 +80,8 @@ class LocalFrameModel final : public InternalForceModel {
   int32_t num_nodes_;
   // k_[kind][group][axis]: n x n.
   std::array<std::vector<std::array<Eigen::MatrixXd, 3>>, 3> k_;
+  // The same matrices packed for the batched products (panel_product.h).
+  std::array<std::vector<std::array<PackedMatrix, 3>>, 3> packed_;
   std::array<std::vector<Eigen::Quaterniond>, 3> frames_;  // per element
   // Per group, the physical gradients at the element centre, n x 3 column-major.
   std::array<std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>, 3> centre_gradient_;

@@ -1,0 +1,79 @@
+#include "solver/models/panel_product.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace dynsolid::models {
+namespace {
+
+Eigen::MatrixXd Random(int rows, int cols, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::MatrixXd m(rows, cols);
+  for (int j = 0; j < cols; ++j)
+    for (int i = 0; i < rows; ++i) m(i, j) = u(rng);
+  return m;
+}
+
+// Every shape the models use (local-frame n x n for n = 64, 8, 5;
+// corotational 3n x 3n) and batch sizes around the 6-column micro-kernel.
+TEST(PackedMatrixTest, MatchesEigenProductForEveryShapeAndBatchSize) {
+  for (int n : {5, 8, 15, 24, 64, 192}) {
+    const Eigen::MatrixXd k = Random(n, n, 7u + n);
+    const PackedMatrix packed(k);
+    ASSERT_EQ(packed.rows(), n);
+    ASSERT_EQ(packed.padded_rows() % PackedMatrix::kPanel, 0);
+    ASSERT_GE(packed.padded_rows(), n);
+    for (int count : {1, 2, 5, 6, 7, 12, 13, 64}) {
+      const int ld = packed.padded_rows() + 3;  // strides larger than the rows
+      Eigen::MatrixXd x = Random(ld, count, 11u + count);
+      Eigen::MatrixXd y = Eigen::MatrixXd::Constant(ld, count, 99.0);
+      packed.Apply(x.data(), ld, count, y.data(), ld);
+      const Eigen::MatrixXd want = k * x.topRows(n);
+      for (int j = 0; j < count; ++j) {
+        for (int i = 0; i < n; ++i) {
+          EXPECT_NEAR(y(i, j), want(i, j), 1e-13 * n) << "n " << n << " count " << count;
+        }
+        for (int i = n; i < packed.padded_rows(); ++i) EXPECT_EQ(y(i, j), 0.0);
+        for (int i = packed.padded_rows(); i < ld; ++i) EXPECT_EQ(y(i, j), 99.0);
+      }
+    }
+  }
+}
+
+// A column's result has the same bits wherever it sits in a batch and
+// whatever the batch size: each entry is one fma chain in a fixed order.
+TEST(PackedMatrixTest, ColumnBitsDoNotDependOnTheBatch) {
+  const int n = 64;
+  const PackedMatrix packed(Random(n, n, 3));
+  const Eigen::MatrixXd x = Random(n, 17, 5);
+  Eigen::MatrixXd all(n, 17);
+  packed.Apply(x.data(), n, 17, all.data(), n);
+  for (int j = 0; j < 17; ++j) {
+    Eigen::VectorXd one(n);
+    packed.Apply(x.col(j).data(), n, 1, one.data(), n);
+    for (int i = 0; i < n; ++i) ASSERT_EQ(one(i), all(i, j)) << "row " << i << " column " << j;
+  }
+}
+
+// Each entry equals the fma chain over k in ascending order (the
+// documented rounding, shared by the SIMD and the portable paths).
+TEST(PackedMatrixTest, EntriesAreAscendingFmaChains) {
+  const int n = 24;
+  const Eigen::MatrixXd k = Random(n, n, 9), x = Random(n, 3, 10);
+  const PackedMatrix packed(k);
+  Eigen::MatrixXd y(packed.padded_rows(), 3);
+  packed.Apply(x.data(), n, 3, y.data(), packed.padded_rows());
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i < n; ++i) {
+      double acc = 0;
+      for (int c = 0; c < n; ++c) acc = std::fma(k(i, c), x(c, j), acc);
+      ASSERT_EQ(y(i, j), acc);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace dynsolid::models

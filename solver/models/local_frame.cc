@@ -5,6 +5,11 @@
 
 #include "solver/models/rotation.h"
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#define DYNSOLID_LF_AVX2 1
+#endif
+
 namespace dynsolid::models {
 namespace {
 
@@ -54,7 +59,8 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   work_.resize(kForceParts);
   schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
   for (Workspace& w : work_) {
-    w.g.setZero(num_nodes_, 3);
+    // One row of slack for the 4-lane row updates (RotateBackAndAddAvx2).
+    w.g.setZero(num_nodes_ + 1, 3);
     part_buffers_.push_back(&w.g);
     for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
       m->setZero(fem::kCubicNodes, kBatch);
@@ -108,6 +114,109 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
   Map(dz, n) = r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz;
 }
 
+#ifdef DYNSOLID_LF_AVX2
+// The same two steps for n a multiple of 4 (cubic 64, linear 8), four
+// nodes at a time: node rows are loaded whole (x, y, z, masked fourth
+// lane) and transposed in registers, so no scalar copies go through the
+// stack. F's terms are summed per lane over nodes i = 4 t + lane, then the
+// lanes added in a fixed order: the bits depend on the element alone.
+inline __m256d LoadRow(const double* base, int32_t id) {
+  const __m256i mask = _mm256_setr_epi64x(-1, -1, -1, 0);
+  return _mm256_maskload_pd(base + 3 * static_cast<int64_t>(id), mask);
+}
+
+// Rows r0..r3 (x, y, z, 0) to columns x, y, z over the four nodes.
+inline void Transpose3(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x, __m256d& y,
+                       __m256d& z) {
+  const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
+  const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // y0 y1 0 0
+  const __m256d t2 = _mm256_unpacklo_pd(r2, r3);  // x2 x3 z2 z3
+  const __m256d t3 = _mm256_unpackhi_pd(r2, r3);  // y2 y3 0 0
+  x = _mm256_permute2f128_pd(t0, t2, 0x20);
+  y = _mm256_permute2f128_pd(t1, t3, 0x20);
+  z = _mm256_permute2f128_pd(t0, t2, 0x31);
+}
+
+inline double Sum4(__m256d v) {
+  alignas(32) double a[4];
+  _mm256_store_pd(a, v);
+  return (a[0] + a[1]) + (a[2] + a[3]);
+}
+
+void LocalDeformationAvx2(int n, const double* d, const double* delta, const int32_t* ids,
+                          const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r,
+                          double* dx, double* dy, double* dz) {
+  __m256d f[3][3];
+  for (auto& row : f)
+    for (auto& v : row) v = _mm256_setzero_pd();
+  for (int i = 0; i < n; i += 4) {
+    __m256d x, y, z;
+    Transpose3(LoadRow(d, ids[i]), LoadRow(d, ids[i + 1]), LoadRow(d, ids[i + 2]),
+               LoadRow(d, ids[i + 3]), x, y, z);
+    for (int c = 0; c < 3; ++c) {
+      const __m256d g = _mm256_loadu_pd(grad + c * n + i);
+      f[0][c] = _mm256_fmadd_pd(x, g, f[0][c]);
+      f[1][c] = _mm256_fmadd_pd(y, g, f[1][c]);
+      f[2][c] = _mm256_fmadd_pd(z, g, f[2][c]);
+    }
+  }
+  Eigen::Matrix3d fm;
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) fm(a, c) = Sum4(f[a][c]);
+  ExtractRotation(fm, q);
+  r = q.toRotationMatrix();
+  // dhat_i = R^T delta_i: column a of the output is R(:, a) . delta_i.
+  __m256d rr[3][3];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(b, a));
+  double* out[3] = {dx, dy, dz};
+  for (int i = 0; i < n; i += 4) {
+    __m256d x, y, z;
+    Transpose3(LoadRow(delta, ids[i]), LoadRow(delta, ids[i + 1]), LoadRow(delta, ids[i + 2]),
+               LoadRow(delta, ids[i + 3]), x, y, z);
+    for (int a = 0; a < 3; ++a) {
+      const __m256d v =
+          _mm256_fmadd_pd(rr[a][2], z, _mm256_fmadd_pd(rr[a][1], y, _mm256_mul_pd(rr[a][0], x)));
+      _mm256_storeu_pd(out[a] + i, v);
+    }
+  }
+}
+
+// g_i += R (yx_i, yy_i, yz_i), four nodes at a time. g must have one row of
+// slack past its last node: each node's row is updated with a full 4-lane
+// load and store whose fourth lane writes back the next row's x unchanged
+// (g is the calling part's own buffer, so no other thread touches it).
+void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, const double* yy,
+                          const double* yz, const int32_t* ids, double* g) {
+  __m256d rr[3][3];
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(a, b));
+  for (int i = 0; i < n; i += 4) {
+    const __m256d ax = _mm256_loadu_pd(yx + i), ay = _mm256_loadu_pd(yy + i),
+                  az = _mm256_loadu_pd(yz + i);
+    __m256d o[3];
+    for (int a = 0; a < 3; ++a) {
+      o[a] = _mm256_fmadd_pd(rr[a][2], az,
+                             _mm256_fmadd_pd(rr[a][1], ay, _mm256_mul_pd(rr[a][0], ax)));
+    }
+    // Columns gx, gy, gz over four nodes to rows (gx, gy, gz, 0).
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d t0 = _mm256_unpacklo_pd(o[0], o[1]);  // x0 y0 x2 y2
+    const __m256d t1 = _mm256_unpackhi_pd(o[0], o[1]);  // x1 y1 x3 y3
+    const __m256d t2 = _mm256_unpacklo_pd(o[2], zero);  // z0 0 z2 0
+    const __m256d t3 = _mm256_unpackhi_pd(o[2], zero);  // z1 0 z3 0
+    const __m256d row[4] = {_mm256_permute2f128_pd(t0, t2, 0x20),
+                            _mm256_permute2f128_pd(t1, t3, 0x20),
+                            _mm256_permute2f128_pd(t0, t2, 0x31),
+                            _mm256_permute2f128_pd(t1, t3, 0x31)};
+    for (int k = 0; k < 4; ++k) {
+      double* p = g + 3 * static_cast<int64_t>(ids[i + k]);
+      _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), row[k]));
+    }
+  }
+}
+#endif
+
 // g_i += R_e (yx_i, yy_i, yz_i) for the element's nodes.
 template <int kN>
 void RotateBackAndAdd(int n_dyn, const Eigen::Matrix3d& r, const double* yx, const double* yy,
@@ -140,13 +249,29 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
     const ElementBlock& block = layout_.blocks[batch.kind];
     const int n = block.nodes;
     const double* grad = centre_gradient_[batch.kind][batch.group].data();
+    // Elements of a group sit anywhere in the node-id array: fetch the
+    // next elements' ids (n ints each) ahead of their turn.
+    auto prefetch_ids = [&](int32_t b) {
+      if (b >= batch.count) return;
+      const char* p = reinterpret_cast<const char*>(block.element_nodes(block.by_group[batch.first + b]));
+      for (int off = 0; off < n * 4; off += 64) __builtin_prefetch(p + off);
+    };
+    prefetch_ids(0);
+    prefetch_ids(1);
     for (int32_t b = 0; b < batch.count; ++b) {
+      prefetch_ids(b + 2);
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
       Eigen::Quaterniond& q = frames_[batch.kind][e];
       double* cx = w.dx.data() + b * ld;
       double* cy = w.dy.data() + b * ld;
       double* cz = w.dz.data() + b * ld;
+#ifdef DYNSOLID_LF_AVX2
+      if (n % 4 == 0) {
+        LocalDeformationAvx2(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+        continue;
+      }
+#endif
       if (n == fem::kCubicNodes) {
         LocalDeformation<fem::kCubicNodes>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
       } else if (n == 8) {
@@ -174,6 +299,12 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
       const double* ax = w.yx.data() + b * ld;
       const double* ay = w.yy.data() + b * ld;
       const double* az = w.yz.data() + b * ld;
+#ifdef DYNSOLID_LF_AVX2
+      if (n % 4 == 0) {
+        RotateBackAndAddAvx2(n, rot[b], ax, ay, az, ids, w.g.data());
+        continue;
+      }
+#endif
       if (n == fem::kCubicNodes) {
         RotateBackAndAdd<fem::kCubicNodes>(n, rot[b], ax, ay, az, ids, w.g.data());
       } else if (n == 8) {

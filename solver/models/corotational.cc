@@ -57,12 +57,11 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
     const int n = block.nodes;
-    k_[kind].resize(block.groups.size());
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
       const ElementGroup& grp = block.groups[gi];
       const auto& material = layout.materials[grp.material];
       // K = sum_q B_q^T C_q B_q dV_q.
-      Eigen::MatrixXd& k = k_[kind][gi];
+      Eigen::MatrixXd k;
       k.setZero(3 * n, 3 * n);
       for (int q = 0; q < table.points; ++q) {
         const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
@@ -197,8 +196,6 @@ void CorotationalModel::SumParts(Points& out) const {
 
 int64_t CorotationalModel::shared_matrix_bytes() const {
   int64_t bytes = 0;
-  for (const auto& kind : k_)
-    for (const auto& m : kind) bytes += static_cast<int64_t>(m.size()) * 8;
   for (const auto& kind : packed_)
     for (const auto& m : kind) bytes += m.bytes();
   return bytes;

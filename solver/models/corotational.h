@@ -67,7 +67,7 @@ class CorotationalModel final : public InternalForceModel {
 
   // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
   // 2 pyramid): 3n x 3n, node-major, N/m.
-  const Eigen::MatrixXd& K(int kind, int32_t group) const { return k_[kind][group]; }
+  Eigen::MatrixXd K(int kind, int32_t group) const { return packed_[kind][group].Unpack(); }
   // Bytes of the shared group matrices; bytes per element of per-element
   // state (node ids, group id, place in by_group, warm-started frame), as
   // LocalFrameModel counts them. The copy of the rest positions (24 bytes
@@ -93,9 +93,8 @@ class CorotationalModel final : public InternalForceModel {
   WorkerPool& pool_;
   Points rest_;
   int32_t num_nodes_;
-  // k_[kind][group]: 3n x 3n.
-  std::array<std::vector<Eigen::MatrixXd>, 3> k_;
-  std::array<std::vector<PackedMatrix>, 3> packed_;  // the same, packed for the products
+  // packed_[kind][group]: 3n x 3n.
+  std::array<std::vector<PackedMatrix>, 3> packed_;  // packed for the products
   Frames frames_;  // per element, by kind; written by Forces only
   ElementSchedule schedule_;  // batches and their fixed parts
   // Per-part scratch, allocated at construction (mutable for the const

@@ -25,7 +25,6 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
     const int n = block.nodes;
-    k_[kind].resize(block.groups.size());
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
       const ElementGroup& grp = block.groups[gi];
       const auto& material = layout.materials[grp.material];
@@ -44,11 +43,9 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
           }
         }
       }
-      for (int axis = 0; axis < 3; ++axis) {
-        k_[kind][gi][axis] = b[axis] * b[axis].transpose();
-      }
-      packed_[kind].push_back({PackedMatrix(k_[kind][gi][0]), PackedMatrix(k_[kind][gi][1]),
-                               PackedMatrix(k_[kind][gi][2])});
+      packed_[kind].push_back({PackedMatrix(b[0] * b[0].transpose()),
+                               PackedMatrix(b[1] * b[1].transpose()),
+                               PackedMatrix(b[2] * b[2].transpose())});
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
     centre_gradient_[kind].resize(block.groups.size());
@@ -354,9 +351,6 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
 
 int64_t LocalFrameModel::shared_matrix_bytes() const {
   int64_t bytes = 0;
-  for (const auto& kind : k_)
-    for (const auto& grp : kind)
-      for (const auto& m : grp) bytes += static_cast<int64_t>(m.size()) * 8;
   for (const auto& kind : packed_)
     for (const auto& grp : kind)
       for (const auto& m : grp) bytes += m.bytes();

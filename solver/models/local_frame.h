@@ -60,8 +60,8 @@ class LocalFrameModel final : public InternalForceModel {
   Timing last_timing() const override { return timing_; }
 
   // The three matrices of group `group` of kind block `kind` (tests, reports).
-  const Eigen::MatrixXd& K(int kind, int32_t group, int axis) const {
-    return k_[kind][group][axis];
+  Eigen::MatrixXd K(int kind, int32_t group, int axis) const {
+    return packed_[kind][group][axis].Unpack();
   }
   int64_t shared_matrix_bytes() const;
   int64_t per_element_bytes() const;
@@ -78,9 +78,8 @@ class LocalFrameModel final : public InternalForceModel {
   WorkerPool& pool_;
   DeformationMeasure measure_;
   int32_t num_nodes_;
-  // k_[kind][group][axis]: n x n.
-  std::array<std::vector<std::array<Eigen::MatrixXd, 3>>, 3> k_;
-  // The same matrices packed for the batched products (panel_product.h).
+  // packed_[kind][group][axis]: n x n, packed for the batched products
+  // (panel_product.h).
   std::array<std::vector<std::array<PackedMatrix, 3>>, 3> packed_;
   std::array<std::vector<Eigen::Quaterniond>, 3> frames_;  // per element
   // Per group, the physical gradients at the element centre, n x 3 column-major.

@@ -68,6 +68,18 @@ PackedMatrix::PackedMatrix(const Eigen::MatrixXd& k)
   }
 }
 
+Eigen::MatrixXd PackedMatrix::Unpack() const {
+  Eigen::MatrixXd k(rows_, cols_);
+  for (int p = 0; p < panels_; ++p) {
+    for (int j = 0; j < cols_; ++j) {
+      for (int r = 0; r < kPanel && p * kPanel + r < rows_; ++r) {
+        k(p * kPanel + r, j) = data_[(static_cast<size_t>(p) * cols_ + j) * kPanel + r];
+      }
+    }
+  }
+  return k;
+}
+
 void PackedMatrix::Apply(const double* x, int ldx, int count, double* y, int ldy) const {
   const int64_t panel_size = static_cast<int64_t>(cols_) * kPanel;
   for (int j0 = 0; j0 < count; j0 += kColumns) {

@@ -34,6 +34,8 @@ class PackedMatrix {
   // Rows rounded up to the panel height: Y needs this many rows per column.
   int padded_rows() const { return panels_ * kPanel; }
   int64_t bytes() const { return static_cast<int64_t>(data_.size()) * 8; }
+  // K itself (rows x cols), unpacked.
+  Eigen::MatrixXd Unpack() const;
 
   // Y(0 : padded_rows, 0 : count) = K X(0 : cols, 0 : count). Rows past
   // rows() come out zero. x and y must not overlap.

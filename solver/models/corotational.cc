@@ -124,8 +124,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
         // Deformation gradient at the centre, then its rotation R_e.
         const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
         Eigen::Quaterniond& q = (*update)[batch.kind][e];
-        ExtractRotation(f, q, kRotationIterations);
-        rot[b] = q.toRotationMatrix();
+        ExtractRotation(f, q, kRotationIterations, &rot[b]);
       } else {
         rot[b] = frames_[batch.kind][e].toRotationMatrix();
       }

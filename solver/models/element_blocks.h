@@ -73,7 +73,7 @@ struct ElementBatch {
 
 // The batches of every group (at most `batch_size` elements each), and
 // `parts` + 1 boundaries splitting them into contiguous parts of about equal
-// cost (an element of n nodes costs about n^2): part k runs batches
+// cost (an element of n nodes costs about n^2 + 27 n): part k runs batches
 // [part_start[k], part_start[k+1]). Fixed for a layout, whatever the
 // number of threads.
 //

@@ -104,8 +104,7 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
     f(1, c) = py.dot(gc);
     f(2, c) = pz.dot(gc);
   }
-  ExtractRotation(f, q);
-  r = q.toRotationMatrix();
+  ExtractRotation(f, q, 8, &r);
   Map(dx, n) = r(0, 0) * qx + r(1, 0) * qy + r(2, 0) * qz;
   Map(dy, n) = r(0, 1) * qx + r(1, 1) * qy + r(2, 1) * qz;
   Map(dz, n) = r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz;
@@ -160,8 +159,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
   Eigen::Matrix3d fm;
   for (int a = 0; a < 3; ++a)
     for (int c = 0; c < 3; ++c) fm(a, c) = Sum4(f[a][c]);
-  ExtractRotation(fm, q);
-  r = q.toRotationMatrix();
+  ExtractRotation(fm, q, 8, &r);
   // dhat_i = R^T delta_i: column a of the output is R(:, a) . delta_i.
   __m256d rr[3][3];
   for (int a = 0; a < 3; ++a)

@@ -12,9 +12,10 @@
 namespace dynsolid::models {
 
 // Improves `q` towards the rotation closest to F. Deterministic: a fixed
-// iteration cap and a fixed stopping test.
+// iteration cap and a fixed stopping test. With `r_out`, also stores q's
+// rotation matrix (the one the stopping test computed, when it stopped).
 inline void ExtractRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q,
-                            int max_iterations = 8) {
+                            int max_iterations = 8, Eigen::Matrix3d* r_out = nullptr) {
   for (int it = 0; it < max_iterations; ++it) {
     const Eigen::Matrix3d r = q.toRotationMatrix();
     const Eigen::Vector3d num =
@@ -24,10 +25,14 @@ inline void ExtractRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q,
         1e-12;
     const Eigen::Vector3d omega = num / den;
     const double w = omega.norm();
-    if (w < 1e-13) break;
+    if (w < 1e-13) {
+      if (r_out != nullptr) *r_out = r;
+      return;
+    }
     q = Eigen::Quaterniond(Eigen::AngleAxisd(w, omega / w)) * q;
     q.normalize();
   }
+  if (r_out != nullptr) *r_out = q.toRotationMatrix();
 }
 
 }  // namespace dynsolid::models

@@ -1085,6 +1085,16 @@ absl::Status Solid::Impl::CheckControlCells(const Region& r, std::string_view fi
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
                                                      scene::Discretization discretization) {
+  return Create(scene, std::move(discretization), 0);
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
+                                                     scene::Discretization discretization,
+                                                     int threads) {
+  if (threads < 0 || threads > 8) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("threads: ", threads, " is outside 0-8 (0: the hardware's)"));
+  }
   const auto t_build = Clock::now();
   std::unique_ptr<Solid> s(new Solid());
   s->d_ = std::move(discretization);
@@ -1119,7 +1129,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   im.rest_control = control.positions();
   im.rest_nodes = s->d_.node_matrix * im.rest_control;
   const Points& rest = im.rest_nodes;
-  im.pool = std::make_unique<WorkerPool>(BuildThreads());
+  im.pool = std::make_unique<WorkerPool>(threads > 0 ? threads : BuildThreads());
   im.node_matrix_t = s->d_.node_matrix.transpose();
 
   // Materials: base, then painted regions in order.

@@ -86,6 +86,12 @@ class Solid {
   // field at fault (a traced point outside the solid, a bad material...).
   static absl::StatusOr<std::unique_ptr<Solid>> Create(const Scene& scene,
                                                        scene::Discretization discretization);
+  // The same with the number of threads that step it (1-8; 0: BuildThreads(),
+  // the hardware's or DYNSOLID_THREADS). Results are bit-identical for any
+  // number: a server picks it by how many sessions share its cores.
+  static absl::StatusOr<std::unique_ptr<Solid>> Create(const Scene& scene,
+                                                       scene::Discretization discretization,
+                                                       int threads);
 
   // Advances one scene time step h. Stability guard: when the state goes
   // non-finite or the energy H = kinetic + strain + springs - external work

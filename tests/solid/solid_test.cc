@@ -216,6 +216,46 @@ TEST(SolidTest, LoadedCantileverStaysBoundedAndResultsDoNotDependOnThreads) {
   EXPECT_EQ(tips[0], tips[2]) << "1 and 3 threads give the same bits";
 }
 
+// The thread count a server passes to Create changes nothing but speed;
+// out of range it is refused with the field and the range.
+TEST(SolidTest, ExplicitThreadCountGivesTheSameBitsAndIsChecked) {
+  const char* text = R"pb(
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 2 }
+    materials { base { young_modulus: 1e5 density: 1000 damping: 100 } }
+    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 3 y: 3 z: 0.01 } } } }
+    loads { point_forces { position { x: 1 y: 1 z: 2 } force { x: 5000 } } }
+    solver { time_step: 1e-3 }
+  )pb";
+  auto scene = scene::ParseScene(text, "test");
+  ASSERT_OK(scene);
+  std::vector<Points> finals;
+  for (int threads : {1, 2, 5}) {
+    auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
+    ASSERT_OK(d);
+    auto s = Solid::Create(*scene, *std::move(d), threads);
+    ASSERT_OK(s);
+    for (int i = 0; i < 60; ++i) ASSERT_OK((*s)->Step());
+    finals.push_back((*s)->control_positions());
+  }
+  EXPECT_GT((finals[0] - scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(),
+                                                    std::nullopt)
+                            ->control()
+                            .positions())
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-6)
+      << "the load moved it";
+  EXPECT_TRUE(finals[0] == finals[1]) << "1 and 2 threads give the same bits";
+  EXPECT_TRUE(finals[0] == finals[2]) << "1 and 5 threads give the same bits";
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
+  ASSERT_OK(d);
+  auto bad = Solid::Create(*scene, *std::move(d), 9);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.status().message(), "threads: 9 is outside 0-8 (0: the hardware's)");
+}
+
 TEST(SolidTest, StabilityGuardRollsBackAndHalvesTheStep) {
   auto s = Make(R"pb(
     mesh { block { nx: 2 ny: 1 nz: 1 } }

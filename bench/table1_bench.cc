@@ -44,6 +44,8 @@ struct Run {
   int64_t bytes_per_element = 0, shared_bytes = 0;
   double stiffness_flops = 0;  // per step, of the batched element products
   int substeps = 1;
+  double cg_per_step = 0;  // CG iterations per step (all solves), mean
+  int cg_max = 0;          // most in one solve
 };
 
 // Steps `scene` (forced to the local-frame model and central differences,
@@ -85,8 +87,11 @@ Run Measure(dynsolid::Scene scene, int steps) {
     }
     step.push_back(Ms(t0, Clock::now()));
     stiff.push_back(solid.last_phases().stiffness);
+    r.cg_per_step += solid.last_step().cg_iterations;
+    r.cg_max = std::max(r.cg_max, solid.last_step().cg_max_iterations);
   }
   r.ms = Median(step);
+  r.cg_per_step /= std::max(1, steps);
   r.stiffness_ms = Median(stiff) / r.substeps;
   r.ok = true;
   return r;
@@ -181,6 +186,9 @@ int main(int argc, char** argv) {
                     100.0 * m.cubic / m.cells, 100.0 * m.linear / m.cells,
                     100.0 * m.pyramid_cells / m.cells, m.substeps, m.ms, 1000.0 / m.ms,
                     static_cast<int>(310.0 / m.ms));
+        std::printf("|  (pulled block3: CG to 1e-4, %.2f iterations per step, at most %d in one "
+                    "solve) |\n",
+                    m.cg_per_step, m.cg_max);
       }
     }
   }
@@ -200,8 +208,8 @@ int main(int argc, char** argv) {
 
   std::printf("\n# Scaling: n x n x n blocks at 2 levels, uniform material, %d steps\n\n", steps / 2);
   std::printf("| control block | elements | ms/step | us/element/step | steps/s | bytes/element "
-              "| shared matrices MB | build s |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+              "| shared matrices MB | bytes/element with shared | build s |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (int n : {3, 5, 7, 9, 11, 13, 15}) {
     if (64LL * n * n * n > max_elements * 11 / 10) break;
     auto scene = dynsolid::scene::ParseScene(
@@ -214,10 +222,12 @@ int main(int argc, char** argv) {
       std::printf("| %d^3 | failed: %s |\n", n, r.error.c_str());
       continue;
     }
-    std::printf("| %d^3 | %lld | %.3f | %.3f | %.1f | %lld | %.1f | %.2f |\n", n,
+    std::printf("| %d^3 | %lld | %.3f | %.3f | %.1f | %lld | %.1f | %.0f | %.2f |\n", n,
                 static_cast<long long>(r.elements), r.ms, 1000.0 * r.ms / r.elements,
                 1000.0 / r.ms, static_cast<long long>(r.bytes_per_element),
-                r.shared_bytes / 1048576.0, r.build_ms / 1000.0);
+                r.shared_bytes / 1048576.0,
+                r.bytes_per_element + static_cast<double>(r.shared_bytes) / r.elements,
+                r.build_ms / 1000.0);
   }
   return 0;
 }

@@ -49,7 +49,7 @@ Eigen::Matrix<double, 6, 6> Isotropic(double lambda, double mu) {
 }  // namespace
 
 CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
-                                     WorkerPool& pool)
+                                     WorkerPool& pool, const CorotationalModel* previous)
     : layout_(layout), pool_(pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
   fem::NodeMatrixX3 g;
   Eigen::Matrix<double, 6, Eigen::Dynamic> b;
@@ -57,7 +57,15 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
     const int n = block.nodes;
+    const std::vector<int32_t> reuse = previous != nullptr
+                                           ? MatchStiffnessGroups(layout, previous->layout_, kind)
+                                           : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      if (reuse[gi] >= 0) {
+        packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
+        continue;
+      }
+      ++integrated_groups_;
       const ElementGroup& grp = block.groups[gi];
       const auto& material = layout.materials[grp.material];
       // K = sum_q B_q^T C_q B_q dV_q.

@@ -45,7 +45,11 @@ class CorotationalModel final : public InternalForceModel {
  public:
   // `layout` and `pool` must outlive the model; `rest` (#nodes by 3, metres:
   // the FEM nodes at rest, the positions `layout` was built from) is copied.
-  CorotationalModel(const ElementLayout& layout, const Points& rest, WorkerPool& pool);
+  // With `previous` (a model of the same mesh, e.g. before a paint), groups
+  // whose rest shape and stiffness samples it already had take its matrices
+  // (see MatchStiffnessGroups).
+  CorotationalModel(const ElementLayout& layout, const Points& rest, WorkerPool& pool,
+                    const CorotationalModel* previous = nullptr);
   CorotationalModel(const CorotationalModel&) = delete;
   CorotationalModel& operator=(const CorotationalModel&) = delete;
 
@@ -100,6 +104,11 @@ class CorotationalModel final : public InternalForceModel {
   // Per-part scratch, allocated at construction (mutable for the const
   // ApplyLinearized).
   mutable std::vector<Workspace> work_;
+  int32_t integrated_groups_ = 0;
+
+ public:
+  // Groups whose matrices were integrated (not taken over) at construction.
+  int32_t integrated_groups() const { return integrated_groups_; }
   std::vector<const Points*> part_buffers_;
   Timing timing_;
 };

@@ -101,6 +101,58 @@ void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, 
   }
 }
 
+namespace {
+
+// FNV-1a over the bytes of a group's rest shape and stiffness samples.
+uint64_t StiffnessKey(const ElementLayout& layout, const ElementGroup& grp) {
+  uint64_t h = 1469598103934665603ull;
+  auto mix = [&h](const void* data, size_t bytes) {
+    const auto* c = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ull;
+  };
+  mix(grp.rest.data(), static_cast<size_t>(grp.rest.size()) * sizeof(double));
+  for (const MaterialPoint& m : layout.materials[grp.material]) {
+    mix(&m.young, sizeof m.young);
+    mix(&m.poisson, sizeof m.poisson);
+  }
+  return h;
+}
+
+bool SameStiffness(const ElementLayout& a, const ElementGroup& ga, const ElementLayout& b,
+                   const ElementGroup& gb) {
+  if (ga.rest.rows() != gb.rest.rows() || ga.rest != gb.rest) return false;
+  const auto& ma = a.materials[ga.material];
+  const auto& mb = b.materials[gb.material];
+  if (ma.size() != mb.size()) return false;
+  for (size_t q = 0; q < ma.size(); ++q) {
+    if (ma[q].young != mb[q].young || ma[q].poisson != mb[q].poisson) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
+                                          const ElementLayout& previous, int kind) {
+  const ElementBlock& block = layout.blocks[kind];
+  const ElementBlock& old = previous.blocks[kind];
+  std::multimap<uint64_t, int32_t> by_key;
+  for (size_t g = 0; g < old.groups.size(); ++g) {
+    by_key.emplace(StiffnessKey(previous, old.groups[g]), static_cast<int32_t>(g));
+  }
+  std::vector<int32_t> match(block.groups.size(), -1);
+  for (size_t g = 0; g < block.groups.size(); ++g) {
+    const auto range = by_key.equal_range(StiffnessKey(layout, block.groups[g]));
+    for (auto it = range.first; it != range.second; ++it) {
+      if (SameStiffness(layout, block.groups[g], previous, old.groups[it->second])) {
+        match[g] = it->second;
+        break;
+      }
+    }
+  }
+  return match;
+}
+
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler) {
@@ -122,6 +174,13 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
     const int32_t count = block.size();
     block.group.resize(count);
     std::map<std::vector<int64_t>, int32_t> group_index;
+    // Rest shapes up to translation, each with the rest nodes of its first
+    // element: a group's matrices are integrated over its shape's first
+    // element whatever the materials, so they are a function of (shape,
+    // material samples) alone and a rebuild after a paint or a restore
+    // gives the same bits as the build before it.
+    std::map<std::vector<int64_t>, int32_t> shape_index;
+    std::vector<fem::NodeMatrixX3> shape_rest;
     x.resize(n, 3);
     for (int32_t e = 0; e < count; ++e) {
       const int32_t* ids = block.element_nodes(e);
@@ -145,21 +204,25 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
       double size = 0;
       for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
       const double quantum = std::max(size, 1e-300) * 1e-9;
-      shape_key.assign(1, mit->second);
+      shape_key.clear();
       for (int i = 1; i < n; ++i) {
         for (int c = 0; c < 3; ++c) {
           shape_key.push_back(std::llround((x(i, c) - x(0, c)) / quantum));
         }
       }
+      auto [sit, new_shape] =
+          shape_index.try_emplace(shape_key, static_cast<int32_t>(shape_rest.size()));
+      if (new_shape) shape_rest.push_back(x);
+      const std::vector<int64_t> group_key{mit->second, sit->second};
       auto [git, new_group] =
-          group_index.try_emplace(shape_key, static_cast<int32_t>(block.groups.size()));
+          group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
       block.group[e] = git->second;
       if (new_group) {
         ElementGroup grp;
         grp.representative = e;
         grp.material = mit->second;
-        grp.rest = x;
-        fem::PhysicalGradients(table.centre_dn.data(), x, n, grp.centre_gradient);
+        grp.rest = shape_rest[sit->second];
+        fem::PhysicalGradients(table.centre_dn.data(), grp.rest, n, grp.centre_gradient);
         block.groups.push_back(std::move(grp));
       }
     }

@@ -37,7 +37,7 @@ using MaterialSampler = std::function<MaterialPoint(const Eigen::Vector3d& x, in
 struct ElementGroup {
   int32_t representative = 0;         // an element of the group (block index)
   int32_t material = 0;               // material array id
-  fem::NodeMatrixX3 rest;             // n x 3 rest nodes of the representative
+  fem::NodeMatrixX3 rest;             // n x 3 rest nodes of the first element of its shape
   fem::NodeMatrixX3 centre_gradient;  // n x 3 physical gradients at the centre
 };
 
@@ -102,6 +102,14 @@ void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, 
 // Bytes a model keeps per element beyond the mesh: node ids, group id, the
 // element's place in by_group, and its warm-started frame (a quaternion).
 int64_t PerElementBytes(const ElementLayout& layout);
+
+// For each group of kind `kind` in `layout`, a group of the same kind in
+// `previous` with the same rest shape (bit for bit) and the same stiffness
+// samples (Young's modulus and Poisson ratio at every quadrature point),
+// or -1: such groups have the same element stiffness matrices, so a model
+// rebuilt after a paint can take them over instead of integrating again.
+std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
+                                          const ElementLayout& previous, int kind);
 
 // Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
 // `cell_control_cell` maps level-L cells to control cells for the sampler.

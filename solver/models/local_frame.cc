@@ -18,14 +18,23 @@ constexpr int32_t kBatch = 64;
 }  // namespace
 
 LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure,
-                                 int32_t num_nodes, WorkerPool& pool)
+                                 int32_t num_nodes, WorkerPool& pool,
+                                 const LocalFrameModel* previous)
     : layout_(layout), pool_(pool), measure_(std::move(measure)), num_nodes_(num_nodes) {
   fem::NodeMatrixX3 g;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
     const int n = block.nodes;
+    const std::vector<int32_t> reuse = previous != nullptr
+                                           ? MatchStiffnessGroups(layout, previous->layout_, kind)
+                                           : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      if (reuse[gi] >= 0) {
+        packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
+        continue;
+      }
+      ++integrated_groups_;
       const ElementGroup& grp = block.groups[gi];
       const auto& material = layout.materials[grp.material];
       // K_x = sum_q dV [(l + 2m) gx gx^T + m gy gy^T + m gz gz^T] = B_x B_x^T

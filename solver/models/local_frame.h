@@ -49,8 +49,17 @@ inline constexpr double kStiffnessFactor = 1.0;
 class LocalFrameModel final : public InternalForceModel {
  public:
   // `layout` and `pool` must outlive the model.
+  // With `previous` (a model of the same mesh, e.g. before a paint), groups
+  // whose rest shape and stiffness samples it already had take its matrices
+  // (the same bits as integrating them again; see MatchStiffnessGroups).
   LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure, int32_t num_nodes,
-                  WorkerPool& pool);
+                  WorkerPool& pool, const LocalFrameModel* previous = nullptr);
+
+  // The deformation measure (it depends on the mesh alone: a model rebuilt
+  // after a paint copies it).
+  const DeformationMeasure& measure() const { return measure_; }
+  // Groups whose matrices were integrated (not taken over) at construction.
+  int32_t integrated_groups() const { return integrated_groups_; }
 
   double Forces(const Points& d, Points& g) override;
   void ResetFrames() override;
@@ -89,6 +98,7 @@ class LocalFrameModel final : public InternalForceModel {
   std::vector<Workspace> work_;
   Points delta_, y_;
   Timing timing_;
+  int32_t integrated_groups_ = 0;
 };
 
 }  // namespace dynsolid::models

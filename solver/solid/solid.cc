@@ -567,7 +567,18 @@ struct Solid::Impl {
 
   // Material: builds what depends on it from a layout (ResourceExhausted
   // when the element matrices would not fit), and installs a build.
-  absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l) const;
+  // The model, mass and damping for layout `l`. With `reuse` (a new
+  // material on the same mesh: a paint, a restored state), what the current
+  // build already has is taken over where its inputs are unchanged: element
+  // matrices of groups with the same rest shape and stiffness samples, the
+  // deformation measure, and Mt and Dt when no density or damping sample
+  // changed. Each is what integrating again would give, bit for bit.
+  absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l,
+                                              bool reuse = false) const;
+  // True when every element's density and damping samples in `l` equal the
+  // current layout's.
+  bool SameMassAndDamping(const models::ElementLayout& l) const;
+  bool paint_reuse = true;  // tests turn it off for a from-scratch reference
   void InstallMaterial(MaterialBuild b);
   int SubstepsFor(double omega) const;
   // Loads from the lists (in id order), from scratch: f_const (point forces
@@ -888,8 +899,26 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
 Solid::Solid() = default;
 Solid::~Solid() = default;
 
-absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
-    std::unique_ptr<models::ElementLayout> l) const {
+bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& now = layout->blocks[kind];
+    const models::ElementBlock& next = l.blocks[kind];
+    if (now.size() != next.size()) return false;
+    for (int32_t e = 0; e < next.size(); ++e) {
+      const auto& a = layout->materials[now.groups[now.group[e]].material];
+      const auto& b = l.materials[next.groups[next.group[e]].material];
+      if (a.size() != b.size()) return false;
+      for (size_t q = 0; q < a.size(); ++q) {
+        if (a[q].density != b[q].density || a[q].damping != b[q].damping) return false;
+      }
+    }
+  }
+  return true;
+}
+
+absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
+                                                         bool reuse) const {
+  reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
   MaterialBuild b;
   for (const auto& array : l->materials) {
     for (const auto& m : array) b.has_damping |= m.damping > 0;
@@ -911,22 +940,33 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
         " MiB; use fewer subdivision levels or a more regular control mesh"));
   }
   if (corot) {
-    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, *pool);
+    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, *pool,
+                                                         reuse ? corotational : nullptr);
     b.corotational = m.get();
     b.shared_matrix_bytes = m->shared_matrix_bytes();
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   } else {
     // One measure part per thread: its sums do not depend on the split.
-    models::DeformationMeasure measure(d->fine(), d->elements, rest_nodes, pool->size());
+    const auto* previous =
+        reuse ? dynamic_cast<const models::LocalFrameModel*>(model.get()) : nullptr;
+    models::DeformationMeasure measure =
+        previous != nullptr
+            ? previous->measure()
+            : models::DeformationMeasure(d->fine(), d->elements, rest_nodes, pool->size());
     auto m = std::make_unique<models::LocalFrameModel>(*l, std::move(measure),
-                                                        d->elements.num_nodes(), *pool);
+                                                        d->elements.num_nodes(), *pool, previous);
     b.shared_matrix_bytes = m->shared_matrix_bytes();
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
   // Mass (and damping) in control-point space.
-  AssembleControlMatrices(d->node_matrix, *l, b.has_damping, b.mt, b.dt);
+  if (reuse && SameMassAndDamping(*l)) {
+    b.mt = mt;
+    b.dt = dt;
+  } else {
+    AssembleControlMatrices(d->node_matrix, *l, b.has_damping, b.mt, b.dt);
+  }
   b.layout = std::move(l);
   return b;
 }
@@ -1351,6 +1391,8 @@ void Solid::SetAtRest(const Points& p) {
   im.ledger.peak = im.ledger.h_min;
   im.ledger_rebase = false;
 }
+
+void Solid::SetPaintReuseForTesting(bool reuse) { impl_->paint_reuse = reuse; }
 
 void Solid::SetSubstepsForTesting(int substeps) {
   const double old_h = impl_->h_sub;
@@ -1816,7 +1858,7 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
     return absl::InvalidArgumentError(
         "paint.region contains no material sample (quadrature point) of the solid");
   }
-  ASSIGN_OR_RETURN(MaterialBuild build, im.BuildMaterial(std::move(layout)));
+  ASSIGN_OR_RETURN(MaterialBuild build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
   // The stable step: from the bound when it keeps the sub-step count (or
   // the step is implicit), else estimated afresh (power iteration, the
   // costliest part of a paint). Sub-steps never drop on a paint.
@@ -2148,7 +2190,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
     if (!sampler.ok()) {
       return absl::InternalError("solid state: the element layout sampled materials out of order");
     }
-    ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout)));
+    ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
     if (im.use_implicit) {
       const std::vector<Eigen::Triplet<double, int32_t>> t = Impl::StiffnessTriplets(
           d_.node_matrix, *build->layout, *build->corotational, im.spring_point, im.spring_k);

@@ -109,6 +109,9 @@ class Solid {
   // Overrides the sub-step count chosen from the stable-step estimate
   // (tests of the stability guard; stress cases in reports).
   void SetSubstepsForTesting(int substeps);
+  // Off: a paint or restore integrates every element matrix and assembles
+  // Mt and Dt afresh (the reference the reuse path is tested against).
+  void SetPaintReuseForTesting(bool reuse);
   int64_t rollbacks() const { return rollbacks_; }
 
   double time() const { return time_; }

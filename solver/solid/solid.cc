@@ -1430,6 +1430,13 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
   std::vector<Eigen::Triplet<double, int32_t>> t;
   std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
   ElementSupport es;
+  // Control meshes are small: sum into a dense matrix (no triplet per
+  // element entry) unless it would pass 32 MiB.
+  const int64_t dofs = 3 * static_cast<int64_t>(nm.cols());
+  const bool dense = dofs <= 2048;
+  Eigen::MatrixXd sum;
+  if (dense) sum.setZero(dofs, dofs);
+  Eigen::MatrixXd kcd, tcd;
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int n = block.nodes;
@@ -1440,21 +1447,42 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
       const int s = static_cast<int>(support.size());
       auto it = cache.find(es.key);
       if (it == cache.end()) {
-        // E = B (x) I3: node-major element DOFs from control DOFs.
-        Eigen::MatrixXd ex = Eigen::MatrixXd::Zero(3 * n, 3 * s);
-        for (int i = 0; i < n; ++i)
-          for (int a = 0; a < s; ++a)
-            for (int c = 0; c < 3; ++c) ex(3 * i + c, 3 * a + c) = b(i, a);
-        const Eigen::MatrixXd& k = corotational.K(kind, block.group[e]);
-        it = cache.emplace(es.key, Eigen::MatrixXd(ex.transpose() * k * ex)).first;
+        // E^T K E with E = B (x) I3 (node-major element DOFs from control
+        // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
+        const Eigen::MatrixXd k = corotational.K(kind, block.group[e]);
+        Eigen::MatrixXd tk(3 * s, 3 * s);
+        for (int c = 0; c < 3; ++c) {
+          for (int d = 0; d < 3; ++d) {
+            kcd.resize(n, n);
+            for (int j = 0; j < n; ++j)
+              for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + d);
+            tcd.noalias() = b.transpose() * (kcd * b);
+            for (int bb = 0; bb < s; ++bb)
+              for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + d) = tcd(a, bb);
+          }
+        }
+        it = cache.emplace(es.key, std::move(tk)).first;
       }
       const Eigen::MatrixXd& tk = it->second;
-      for (int a = 0; a < 3 * s; ++a) {
-        for (int c = 0; c < 3 * s; ++c) {
-          if (tk(a, c) != 0) t.emplace_back(3 * support[a / 3] + a % 3, 3 * support[c / 3] + c % 3, tk(a, c));
+      for (int c = 0; c < 3 * s; ++c) {
+        const int64_t col = 3 * static_cast<int64_t>(support[c / 3]) + c % 3;
+        for (int a = 0; a < 3 * s; ++a) {
+          if (tk(a, c) == 0) continue;
+          const int64_t row = 3 * static_cast<int64_t>(support[a / 3]) + a % 3;
+          if (dense) {
+            sum(row, col) += tk(a, c);
+          } else {
+            t.emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), tk(a, c));
+          }
         }
       }
     }
+  }
+  if (dense) {
+    for (int64_t c = 0; c < dofs; ++c)
+      for (int64_t r = 0; r < dofs; ++r) {
+        if (sum(r, c) != 0) t.emplace_back(static_cast<int32_t>(r), static_cast<int32_t>(c), sum(r, c));
+      }
   }
   for (size_t k = 0; k < spring_point.size(); ++k) {
     for (int c = 0; c < 3; ++c) {

@@ -27,7 +27,7 @@
 namespace dynsolid::models {
 
 // Improves `q` towards the rotation closest to F. Deterministic: a fixed
-// iteration cap and a fixed stopping test (|omega| < 1e-13). With `r_out`,
+// iteration cap and a fixed stopping test (Mueller's |omega| < 1e-13). With `r_out`,
 // also stores q's rotation matrix.
 inline void ExtractRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q,
                             int max_iterations = 8, Eigen::Matrix3d* r_out = nullptr) {
@@ -36,6 +36,12 @@ inline void ExtractRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q,
     const Eigen::Vector3d num =
         r.col(0).cross(f.col(0)) + r.col(1).cross(f.col(1)) + r.col(2).cross(f.col(2));
     const double tr = r.col(0).dot(f.col(0)) + r.col(1).dot(f.col(1)) + r.col(2).dot(f.col(2));
+    // Stopping test on Mueller's step (cheap; the common case once warm).
+    const double den = std::abs(tr) + 1e-12;
+    if (num.norm() < 1e-13 * den) {
+      if (r_out != nullptr) *r_out = r;
+      return;
+    }
     Eigen::Matrix3d j = -(r * f.transpose());
     j.diagonal().array() += tr;
     const double a = j(0, 0), b = 0.5 * (j(0, 1) + j(1, 0)), e = j(1, 1);
@@ -45,13 +51,9 @@ inline void ExtractRotation(const Eigen::Matrix3d& f, Eigen::Quaterniond& q,
     if (tr > 0 && a > m && a * e - b * b > m * m && js.determinant() > m * m * m) {
       omega = j.inverse() * num;
     } else {
-      omega = num / (std::abs(tr) + 1e-12);
+      omega = num / den;
     }
     const double w = omega.norm();
-    if (w < 1e-13) {
-      if (r_out != nullptr) *r_out = r;
-      return;
-    }
     if (w < 1e-3) {
       const Eigen::Quaterniond dq(0, 0.5 * omega.x(), 0.5 * omega.y(), 0.5 * omega.z());
       q.coeffs() += (dq * q).coeffs();

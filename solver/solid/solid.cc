@@ -1560,6 +1560,7 @@ Energies Solid::ComputeEnergies() const {
   const Points mv = im.mt * v;
   e.kinetic = 0.5 * (v.array() * mv.array()).sum();
   e.strain = im.last_strain_energy;
+  e.springs = im.SpringEnergy(p_);
   return e;
 }
 

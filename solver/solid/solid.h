@@ -74,6 +74,7 @@ struct StepStats {
 struct Energies {
   double kinetic = 0;   // J: 1/2 v^T Mt v with v = (p - p_prev) / h_sub
   double strain = 0;    // J: the model's internal energy at p
+  double springs = 0;   // J: the penalty springs' energy at p (1/2 k |p - anchor|^2)
 };
 
 class Solid {

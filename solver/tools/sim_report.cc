@@ -126,6 +126,7 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
     j.Begin("energy_j")
         .Add("kinetic", run.energies.kinetic)
         .Add("strain", run.energies.strain)
+        .Add("springs", run.energies.springs)
         .End();
   }
   return j.Finish();

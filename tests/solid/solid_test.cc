@@ -256,6 +256,28 @@ TEST(SolidTest, ExplicitThreadCountGivesTheSameBitsAndIsChecked) {
   EXPECT_EQ(bad.status().message(), "threads: 9 is outside 0-8 (0: the hardware's)");
 }
 
+// A stiff unit cube hanging from penalty springs at its four top corners
+// settles where the springs carry its weight: each stretches m g / (4 k)
+// and their energy is (m g)^2 / (8 k).
+TEST(SolidTest, SpringEnergyOfAHangingCube) {
+  auto s = Make(R"pb(
+    mesh { block { nx: 1 ny: 1 nz: 1 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e9 density: 1000 damping: 50000 } }
+    constraints { springs { region { box { min { x: -1 y: -1 z: 0.99 } max { x: 2 y: 2 z: 1.01 } } }
+                            stiffness: 1e5 } }
+    loads { gravity { z: -9.81 } }
+    solver { model: COROTATIONAL integrator: BACKWARD_EULER time_step: 0.01 }
+  )pb");
+  ASSERT_NE(s, nullptr);
+  EXPECT_EQ(s->ComputeEnergies().springs, 0.0) << "at rest the springs are slack";
+  for (int i = 0; i < 400; ++i) ASSERT_OK(s->Step());
+  const double weight = s->total_mass() * 9.81;
+  const double expected = weight * weight / (8 * 1e5);
+  EXPECT_NEAR(s->ComputeEnergies().springs, expected, 0.01 * expected);
+  EXPECT_LT(s->ComputeEnergies().kinetic, 1e-6 * expected) << "settled";
+}
+
 TEST(SolidTest, StabilityGuardRollsBackAndHalvesTheStep) {
   auto s = Make(R"pb(
     mesh { block { nx: 2 ny: 1 nz: 1 } }

@@ -21,6 +21,8 @@ constexpr int kPanelRows = 64;
 // about 1e-9 of a 0.1 % strain under a rotation of 0.01 rad per step, 32 reach
 // the stopping test from rest to a rotation of 1 rad in one call. The
 // iteration stops there, so a slowly turning solid costs few iterations.
+// Forces uses the Newton form (ExtractRotationNewton, same answer, quadratic
+// convergence: 2-4 iterations per step from the warm start instead of ~20).
 constexpr int kRotationIterations = 32;
 
 // The 6 x 3n strain-displacement matrix of gradients g (n x 3): strains
@@ -126,7 +128,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
         // Deformation gradient at the centre, then its rotation R_e.
         const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
         Eigen::Quaterniond& q = (*update)[batch.kind][e];
-        ExtractRotation(f, q, kRotationIterations);
+        ExtractRotationNewton(f, q, kRotationIterations);
         rot[b] = q.toRotationMatrix();
       } else {
         rot[b] = frames_[batch.kind][e].toRotationMatrix();

@@ -102,8 +102,9 @@ void CorotationalModel::ResetFrames() {
   for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
 }
 
-void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
-                                   Workspace& w) const {
+void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Workspace& w,
+                                   bool subtract_rest) const {
+  subtract_rest = subtract_rest || update != nullptr;
   using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
   using NodeMap = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
   NodeBlock pos, x0;
@@ -139,7 +140,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
       const Eigen::RowVector3d xbar = pos.colwise().mean();
       pos.rowwise() -= xbar;
       ub.noalias() = pos.lazyProduct(rot[b]);
-      if (update != nullptr) {
+      if (subtract_rest) {
         for (int i = 0; i < n; ++i) x0.row(i) = rest_.row(ids[i]);
         const Eigen::RowVector3d x0bar = x0.colwise().mean();
         x0.rowwise() -= x0bar;
@@ -179,6 +180,52 @@ double CorotationalModel::Forces(const Points& d, Points& g) {
   const auto t1 = std::chrono::steady_clock::now();
   timing_.measure_ms = -1;
   timing_.elements_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  return energy;
+}
+
+void CorotationalModel::FrameBatches(int part, const Points& d) {
+  using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
+  NodeBlock pos;
+  for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
+    const ElementBatch& batch = schedule_.batches[bi];
+    const ElementBlock& block = layout_.blocks[batch.kind];
+    const ElementGroup& grp = block.groups[batch.group];
+    const int n = block.nodes;
+    pos.resize(n, 3);
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < n; ++i) pos.row(i) = d.row(ids[i]);
+      // As RunBatches with `update`: the same expression, the same bits.
+      const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+      ExtractRotationNewton(f, frames_[batch.kind][e], kRotationIterations);
+    }
+  }
+}
+
+void CorotationalModel::UpdateFrames(const Points& d) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) FrameBatches(k, d);
+  });
+  timing_.measure_ms = -1;
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double CorotationalModel::AffineForces(const Points& x, Points& g) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) RunBatches(k, x, nullptr, work_[k], true);
+  });
+  SumParts(g);
+  double energy = 0;
+  for (int k = 0; k < parts; ++k) energy += work_[k].energy;
+  timing_.measure_ms = -1;
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return energy;
 }
 

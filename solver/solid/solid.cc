@@ -395,6 +395,18 @@ struct Solid::Impl {
   models::CorotationalModel* corotational = nullptr;  // == model when corotational
   Points x_nodes, kx_nodes;
   integrators::BackwardEuler::StiffnessOperator stiffness_op;
+  // Backward Euler's folded right-hand side (the default): F - h Kt v =
+  // f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v, one element pass
+  // with the frames of p (see ImplicitStep). `f` then holds the external
+  // forces f_ext(p) only (point forces, gravity, pressure at p). With
+  // implicit_two_pass (tests: the reference path) `f` holds F as for the
+  // explicit scheme and the rhs takes a Kt product more.
+  bool implicit_two_pass = false;
+  integrators::BackwardEuler::ForceAhead force_ahead;
+  const Points* ahead_from = nullptr;  // p of the step in progress
+  Points ahead, g_ahead;               // p + h v; A^T g_R(A (p + h v))
+  double ahead_energy = 0;             // E_R(p + h v), J
+  double ahead_ms = 0;
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
@@ -509,6 +521,12 @@ struct Solid::Impl {
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+  // Folded implicit path: the frames at p and out = f_ext(p) (constant loads
+  // and pressure at p; no internal or spring forces); with `energy` also the
+  // exact strain energy at p (one element pass more).
+  void ImplicitForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure,
+                      bool energy);
+  bool Folded() const { return use_implicit && !implicit_two_pass; }
 
   // Material: builds what depends on it from a layout (ResourceExhausted
   // when the element matrices would not fit), and installs a build.
@@ -753,6 +771,33 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   }
 }
 
+void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
+                                 Points& pressure, bool energy) {
+  auto t0 = Clock::now();
+  nodes.noalias() = d->node_matrix * p;
+  phases.nodes = MsSince(t0);
+  t0 = Clock::now();
+  if (energy) {
+    last_strain_energy = model->Forces(nodes, g);  // frames and the exact energy
+  } else {
+    corotational->UpdateFrames(nodes);
+  }
+  phases.measure = -1;
+  phases.stiffness = MsSince(t0);
+  phases.project = 0;
+  t0 = Clock::now();
+  if (has_const_force) {
+    out = f_const;
+  } else {
+    out.setZero(p.rows(), 3);
+  }
+  if (has_pressure) {
+    PressureForces(p, pressure);
+    out += pressure;
+  }
+  if (has_const_force || !spring_point.empty() || has_pressure) phases.loads = MsSince(t0);
+}
+
 absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
@@ -769,7 +814,11 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // the first step invalidated them), so that every state's strain energy
   // is checked in the step that produced it.
   if (!forces_valid) {
-    ControlForces(p, f, sub, f_press);
+    if (Folded()) {
+      ImplicitForces(p, f, sub, f_press, /*energy=*/true);
+    } else {
+      ControlForces(p, f, sub, f_press);
+    }
     add(sub);
     forces_valid = true;
   }
@@ -779,12 +828,23 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   }
   for (int k = 0; k < substeps; ++k) {
     const auto t0 = Clock::now();
-    const integrators::CgStats cg =
-        use_implicit ? implicit.Step(p, p_prev, f, stiffness_op, p_next, settings.cg_tolerance(),
-                                     settings.cg_max_iterations())
-                     : integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(),
-                                       settings.cg_max_iterations());
-    sum.solve += MsSince(t0);
+    integrators::CgStats cg;
+    ahead_ms = 0;
+    if (Folded()) {
+      ahead_from = &p;
+      cg = implicit.Step(p, p_prev, force_ahead, stiffness_op, p_next, settings.cg_tolerance(),
+                         settings.cg_max_iterations());
+      ahead_from = nullptr;
+    } else if (use_implicit) {
+      cg = implicit.Step(p, p_prev, f, stiffness_op, p_next, settings.cg_tolerance(),
+                         settings.cg_max_iterations());
+    } else {
+      cg = integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(),
+                           settings.cg_max_iterations());
+    }
+    // The folded rhs's element pass is stiffness, not solve.
+    sum.solve += MsSince(t0) - ahead_ms;
+    sum.stiffness += ahead_ms;
     stats.cg_iterations += cg.iterations;
     stats.cg_max_iterations = std::max(stats.cg_max_iterations, cg.max_iterations);
     stats.cg_relative_residual = std::max(stats.cg_relative_residual, cg.relative_residual);
@@ -793,7 +853,26 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       return absl::InternalError(absl::StrCat("non-finite control points at sub-step ", k));
     }
     // Forces (and strain energy) at the new state, reused by the next sub-step.
-    ControlForces(p_next, f_next, sub, f_press_next);
+    if (Folded()) {
+      // E_R is quadratic in p with gradient A^T g_R and Hessian Kt (frames of
+      // p held): from p + h v to p_next = p + h v + h dv,
+      //   E_R(p_next) = E_R(p + h v) + h dv . A^T g_R(A (p + h v)) + h^2/2 dv . Kt dv,
+      // Kt dv from the CG's own products less the penalty springs (their
+      // energy is counted apart). The strain energy of the new state in the
+      // frames its step was linearized in: no element pass.
+      const Points& dv = implicit.last_dv();
+      double quad = (dv.array() * implicit.last_kt_dv().array()).sum();
+      for (size_t s = 0; s < spring_point.size(); ++s) {
+        quad -= spring_k[s] * dv.row(spring_point[s]).squaredNorm();
+      }
+      const double hs = implicit.h();
+      const double strain = ahead_energy + hs * (dv.array() * g_ahead.array()).sum() +
+                            0.5 * hs * hs * quad;
+      ImplicitForces(p_next, f_next, sub, f_press_next, /*energy=*/false);
+      last_strain_energy = strain;
+    } else {
+      ControlForces(p_next, f_next, sub, f_press_next);
+    }
     add(sub);
     // Energy ledger: H = kinetic + strain + springs - external work.
     velocity = (p_next - p) / h_sub;
@@ -1188,6 +1267,22 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
       }
     };
+    // F - h Kt v = f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v (the
+    // frames of p held: g_R and the springs are affine in the positions).
+    im.force_ahead = [ip](const Points& v, Points& out) {
+      const auto t0 = Clock::now();
+      const Points& p = *ip->ahead_from;
+      ip->ahead = p + ip->implicit.h() * v;
+      ip->x_nodes.noalias() = ip->d->node_matrix * ip->ahead;
+      ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+      ip->g_ahead.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
+      out = ip->f - ip->g_ahead;
+      for (size_t s = 0; s < ip->spring_point.size(); ++s) {
+        const int32_t i = ip->spring_point[s];
+        out.row(i) -= ip->spring_k[s] * (ip->ahead.row(i) - ip->rest_control.row(i));
+      }
+      ip->ahead_ms = MsSince(t0);
+    };
   }
   if (im.use_implicit) {
     const std::vector<Eigen::Triplet<double, int32_t>> t = im.StiffnessTriplets();
@@ -1284,6 +1379,11 @@ void Solid::SetAtRest(const Points& p) {
   im.ledger.h_min = StrainEnergy(p_);
   im.ledger.peak = im.ledger.h_min;
   im.ledger_rebase = false;
+}
+
+void Solid::SetImplicitTwoPassForTesting(bool two_pass) {
+  impl_->implicit_two_pass = two_pass;
+  impl_->forces_valid = false;  // `f` changes meaning
 }
 
 void Solid::SetSubstepsForTesting(int substeps) {

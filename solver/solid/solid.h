@@ -103,6 +103,11 @@ class Solid {
   // Overrides the sub-step count chosen from the stable-step estimate
   // (tests of the stability guard; stress cases in reports).
   void SetSubstepsForTesting(int substeps);
+  // Backward Euler's right-hand side F - h Kt v: folded into one element
+  // pass (default; the frames of p held, the force at p + h v) or, with
+  // true, the two-pass reference (F at p, then a Kt product). Both solve the
+  // same system; results agree to the CG tolerance.
+  void SetImplicitTwoPassForTesting(bool two_pass);
   int64_t rollbacks() const { return rollbacks_; }
 
   double time() const { return time_; }
@@ -139,7 +144,11 @@ class Solid {
   Points ApplyMass(const Points& x) const;
 
   // Kinetic energy from the last sub-step's velocity; strain energy at p
-  // (forces and energy are evaluated at the end of every sub-step).
+  // (forces and energy are evaluated at the end of every sub-step). With
+  // backward Euler the strain energy of p is measured in the element frames
+  // its step was linearized in (those of the step's start; exact from the
+  // step's own products, no extra element pass; StrainEnergy(p) takes p's
+  // own frames: they differ by the frames' change over one step).
   Energies ComputeEnergies() const;
   // Total mass from Mt (kg) and the rest volume of the elements (m^3).
   double total_mass() const { return total_mass_; }

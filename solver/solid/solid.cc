@@ -1397,9 +1397,12 @@ Points Solid::InternalControlForces(const Points& p) {
   Impl& im = *impl_;
   const Points d = d_.node_matrix * p;
   Points g(d.rows(), 3);
+  // Frames found afresh; the solid's own (warm starts, and the frames the
+  // next implicit step is linearized in) are part of its state: kept.
+  const models::InternalForceModel::Frames frames = im.model->frames();
   im.model->ResetFrames();
   im.model->Forces(d, g);
-  im.model->ResetFrames();
+  im.model->set_frames(frames);
   return d_.node_matrix.transpose() * g;
 }
 
@@ -1407,9 +1410,10 @@ double Solid::StrainEnergy(const Points& p) {
   Impl& im = *impl_;
   const Points d = d_.node_matrix * p;
   Points g(d.rows(), 3);
+  const models::InternalForceModel::Frames frames = im.model->frames();  // as above
   im.model->ResetFrames();
   const double e = im.model->Forces(d, g);
-  im.model->ResetFrames();
+  im.model->set_frames(frames);
   return e;
 }
 

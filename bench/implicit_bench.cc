@@ -16,12 +16,17 @@
 //
 // Each case runs --warmup steps, then --steps measured steps, and prints the
 // median and 90th percentile wall time per step, steps per second (1000 /
-// median), CG iterations per step (mean, max), the median of each phase of
-// Solid::last_phases(), and how far the traced top point moved (so a reader
-// can see the motion was real). The thread count is DYNSOLID_THREADS (set to
-// 2 here when unset). Prints; never asserts on time.
+// median), the process CPU time per step (all threads; steadier than wall
+// time on a shared machine), CG iterations per step (mean, max), element
+// product passes and frame-only passes per step (StepStats), the median of
+// each phase of Solid::last_phases(), and how far the traced top point moved
+// (so a reader can see the motion was real). --two_pass runs the unfolded
+// right-hand side (F, then a Kt product; Solid's reference path) for an A/B
+// in one binary. The thread count is DYNSOLID_THREADS (set to 2 here when
+// unset). Prints; never asserts on time.
 //
-//   implicit_bench [--scene block3] [--steps 1000] [--warmup 200]
+//   implicit_bench [--scene block3] [--steps 1000] [--warmup 200] [--two_pass]
+//                  [--cases static,pull,twist,orbit]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -48,6 +53,9 @@ ABSL_FLAG(int, warmup, 200, "steps before measuring");
 ABSL_FLAG(double, force, 1e5, "pull: sideways force at the top centre, newtons");
 ABSL_FLAG(double, twist_degrees, 60, "twist: initial turn of the top about the vertical axis");
 ABSL_FLAG(double, orbit_period, 0.5, "orbit: seconds per turn of the force's direction");
+ABSL_FLAG(bool, two_pass, false,
+          "backward Euler's unfolded right-hand side (F, then a Kt product): the reference "
+          "path Solid keeps for tests, for an A/B in one binary");
 ABSL_FLAG(std::string, cases, "static,pull,twist,orbit", "comma-separated cases to run");
 
 namespace {
@@ -90,7 +98,7 @@ struct Case {
   bool ok = false;
   std::string error;
   double median = 0, p90 = 0, mean = 0, cpu = 0;
-  double cg_mean = 0;
+  double cg_mean = 0, passes_mean = 0, frame_passes_mean = 0;
   int cg_max = 0, cg_min = 0;
   double top_max_disp = 0, top_path = 0;
   double residual_max = 0;
@@ -124,6 +132,7 @@ Case Run(const std::string& name, const dynsolid::Scene& scene) {
     return c;
   }
   Solid& s = **made;
+  if (absl::GetFlag(FLAGS_two_pass)) s.SetImplicitTwoPassForTesting(true);
   // The top centre (just below the top face, inside the solid) and the
   // vertical axis through it.
   const dynsolid::Points& rest = s.control_positions();
@@ -171,7 +180,7 @@ Case Run(const std::string& name, const dynsolid::Scene& scene) {
                                                             : s.TracedPositions()[0];
   Eigen::Vector3d top_prev = top0;
   const int warmup = absl::GetFlag(FLAGS_warmup), steps = absl::GetFlag(FLAGS_steps);
-  std::vector<double> ms, cg;
+  std::vector<double> ms, cg, passes, frame_passes;
   std::vector<PhaseTimes> phases;
   double cpu0 = 0;
   for (int i = 0; i < warmup + steps; ++i) {
@@ -206,6 +215,8 @@ Case Run(const std::string& name, const dynsolid::Scene& scene) {
     if (i < warmup) continue;
     ms.push_back(dt);
     cg.push_back(s.last_step().cg_iterations);
+    passes.push_back(s.last_step().element_passes);
+    frame_passes.push_back(s.last_step().frame_passes);
     c.residual_max = std::max(c.residual_max, s.last_step().cg_relative_residual);
     phases.push_back(s.last_phases());
   }
@@ -214,6 +225,9 @@ Case Run(const std::string& name, const dynsolid::Scene& scene) {
   c.p90 = Percentile(ms, 0.9);
   c.mean = std::accumulate(ms.begin(), ms.end(), 0.0) / ms.size();
   c.cg_mean = std::accumulate(cg.begin(), cg.end(), 0.0) / cg.size();
+  c.passes_mean = std::accumulate(passes.begin(), passes.end(), 0.0) / passes.size();
+  c.frame_passes_mean =
+      std::accumulate(frame_passes.begin(), frame_passes.end(), 0.0) / frame_passes.size();
   c.cg_max = static_cast<int>(*std::max_element(cg.begin(), cg.end()));
   c.cg_min = static_cast<int>(*std::min_element(cg.begin(), cg.end()));
   c.phase.nodes = PhaseMedian(phases, &PhaseTimes::nodes);
@@ -241,14 +255,17 @@ int main(int argc, char** argv) {
   scene.mutable_solver()->set_model(dynsolid::SolverSettings::COROTATIONAL);
   scene.mutable_solver()->set_integrator(dynsolid::SolverSettings::BACKWARD_EULER);
   const dynsolid::SolverSettings settings = dynsolid::scene::ResolvedSolverSettings(scene);
-  std::printf("# %s, corotational model, backward Euler, h = %g s, CG tolerance %g, "
-              "%s threads, %d warm-up + %d measured steps\n\n",
-              scene.name().c_str(), settings.time_step(), settings.cg_tolerance(),
+  std::printf("# %s, corotational model, backward Euler (%s right-hand side), h = %g s, "
+              "CG tolerance %g, %s threads, %d warm-up + %d measured steps\n\n",
+              scene.name().c_str(), absl::GetFlag(FLAGS_two_pass) ? "two-pass" : "folded",
+              settings.time_step(), settings.cg_tolerance(),
               std::getenv("DYNSOLID_THREADS"), absl::GetFlag(FLAGS_warmup),
               absl::GetFlag(FLAGS_steps));
   std::printf("| case | median ms/step | p90 ms/step | steps/s | CPU ms/step | CG it/step mean | "
-              "max | max rel. residual | top moved max m | top path m | rollbacks |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+              "max | element passes/step | frame passes/step | max rel. residual | "
+              "top moved max m | top path m | rollbacks |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+              "| ---: |\n");
   std::vector<Case> done;
   std::string list = absl::GetFlag(FLAGS_cases);
   for (size_t start = 0; start <= list.size();) {
@@ -262,8 +279,10 @@ int main(int argc, char** argv) {
       std::printf("| %s | failed: %s |\n", name.c_str(), c.error.c_str());
       continue;
     }
-    std::printf("| %s | %.3f | %.3f | %.0f | %.3f | %.2f | %d | %.1e | %.3f | %.3f | %lld |\n",
+    std::printf("| %s | %.3f | %.3f | %.0f | %.3f | %.2f | %d | %.2f | %.2f | %.1e | %.3f | %.3f "
+                "| %lld |\n",
                 c.name.c_str(), c.median, c.p90, 1000.0 / c.median, c.cpu, c.cg_mean, c.cg_max,
+                c.passes_mean, c.frame_passes_mean,
                 c.residual_max, c.top_max_disp, c.top_path, static_cast<long long>(c.rollbacks));
     std::fflush(stdout);
     done.push_back(c);

@@ -407,6 +407,7 @@ struct Solid::Impl {
   Points ahead, g_ahead;               // p + h v; A^T g_R(A (p + h v))
   double ahead_energy = 0;             // E_R(p + h v), J
   double ahead_ms = 0;
+  int64_t element_passes = 0, frame_passes = 0;  // counters for StepStats
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
@@ -749,6 +750,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   last_strain_energy = model->Forces(nodes, g);
+  ++element_passes;
   const models::InternalForceModel::Timing timing = model->last_timing();
   phases.measure = timing.measure_ms;
   phases.stiffness = timing.elements_ms;
@@ -779,8 +781,10 @@ void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phase
   t0 = Clock::now();
   if (energy) {
     last_strain_energy = model->Forces(nodes, g);  // frames and the exact energy
+    ++element_passes;
   } else {
     corotational->UpdateFrames(nodes);
+    ++frame_passes;
   }
   phases.measure = -1;
   phases.stiffness = MsSince(t0);
@@ -1262,6 +1266,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     im.stiffness_op = [ip](const Points& x, Points& out) {
       ip->x_nodes.noalias() = ip->d->node_matrix * x;
       ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
       out.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
@@ -1275,6 +1280,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       ip->ahead = p + ip->implicit.h() * v;
       ip->x_nodes.noalias() = ip->d->node_matrix * ip->ahead;
       ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
       ip->g_ahead.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
       out = ip->f - ip->g_ahead;
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
@@ -1335,8 +1341,11 @@ absl::Status Solid::Step() {
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
   const bool rebase_at_start = im.ledger_rebase;
+  const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
   for (int attempt = 0;; ++attempt) {
     const absl::Status st = im.Advance(p_, p_prev_, stats, phases_);
+    stats.element_passes = static_cast<int32_t>(im.element_passes - passes_at_start);
+    stats.frame_passes = static_cast<int32_t>(im.frame_passes - frames_at_start);
     if (st.ok()) break;
     // Stability guard: back to the step's start, halve the sub-step, retry.
     p_ = im.backup_p;

@@ -69,6 +69,12 @@ struct StepStats {
   int32_t cg_iterations = 0;       // summed over sub-steps and components
   int32_t cg_max_iterations = 0;   // largest single solve
   double cg_relative_residual = 0; // largest at exit
+  // Element product passes (each a K product over every element: internal
+  // forces, Kt products of CG and of a right-hand side, the folded
+  // right-hand side), summed over sub-steps and retries; frame-only passes
+  // (the implicit step's UpdateFrames) apart.
+  int32_t element_passes = 0;
+  int32_t frame_passes = 0;
 };
 
 struct Energies {

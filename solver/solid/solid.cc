@@ -528,6 +528,21 @@ struct Solid::Impl {
   void ImplicitForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure,
                       bool energy);
   bool Folded() const { return use_implicit && !implicit_two_pass; }
+  // out = f_ext(p): constant loads and the pressure at p (into `pressure`).
+  void ExternalForces(const Points& p, Points& out, Points& pressure, PhaseTimes& phases);
+  // A load edit (point force, pressure, gravity). The folded implicit path
+  // carries only the external forces in `f`: they are recomputed at the next
+  // step, no element pass (loads_changed; recomputing unchanged loads gives
+  // the same bits, so the flag only saves time and need not be saved). The
+  // other paths recompute all forces.
+  bool loads_changed = false;
+  void LoadsChanged() {
+    if (Folded()) {
+      loads_changed = true;
+    } else {
+      forces_valid = false;
+    }
+  }
 
   // Material: builds what depends on it from a layout (ResourceExhausted
   // when the element matrices would not fit), and installs a build.
@@ -789,7 +804,12 @@ void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phase
   phases.measure = -1;
   phases.stiffness = MsSince(t0);
   phases.project = 0;
-  t0 = Clock::now();
+  ExternalForces(p, out, pressure, phases);
+}
+
+void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
+                                 PhaseTimes& phases) {
+  const auto t0 = Clock::now();
   if (has_const_force) {
     out = f_const;
   } else {
@@ -799,6 +819,7 @@ void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phase
     PressureForces(p, pressure);
     out += pressure;
   }
+  loads_changed = false;
   if (has_const_force || !spring_point.empty() || has_pressure) phases.loads = MsSince(t0);
 }
 
@@ -825,6 +846,9 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     }
     add(sub);
     forces_valid = true;
+  } else if (Folded() && loads_changed) {
+    ExternalForces(p, f, f_press, sub);
+    if (sub.loads >= 0) sum.loads += sub.loads;
   }
   if (ledger_rebase) {
     RebaseLedger(p, p_prev);
@@ -1649,7 +1673,7 @@ absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
   const int64_t id = im.next_id++;
   im.point_loads.push_back({id, f, *at});
   im.RebuildConstantLoads();
-  im.forces_valid = false;
+  im.LoadsChanged();
   report_.point_forces = static_cast<int32_t>(im.point_loads.size());
   return id;
 }
@@ -1667,7 +1691,7 @@ absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
   const int64_t id = im.next_id++;
   im.pressures.push_back({id, p, std::move(quads)});
   im.RebuildPressure();
-  im.forces_valid = false;
+  im.LoadsChanged();
   return id;
 }
 
@@ -1676,7 +1700,7 @@ absl::Status Solid::SetGravity(const Vec3& g) {
   RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
   im.gravity = V(g);
   im.RebuildConstantLoads();
-  im.forces_valid = false;
+  im.LoadsChanged();
   report_.gravity = im.gravity.squaredNorm() > 0;
   return absl::OkStatus();
 }
@@ -1698,7 +1722,7 @@ absl::Status Solid::RemoveLoad(int64_t id) {
   if (pf != im.point_loads.end()) {
     im.point_loads.erase(pf);
     im.RebuildConstantLoads();
-    im.forces_valid = false;
+    im.LoadsChanged();
     report_.point_forces = static_cast<int32_t>(im.point_loads.size());
     return absl::OkStatus();
   }
@@ -1707,7 +1731,7 @@ absl::Status Solid::RemoveLoad(int64_t id) {
   if (pr != im.pressures.end()) {
     im.pressures.erase(pr);
     im.RebuildPressure();
-    im.forces_valid = false;
+    im.LoadsChanged();
     return absl::OkStatus();
   }
   return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
@@ -2231,6 +2255,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   p_prev_ = std::move(p_prev);
   im.f = std::move(f);
   im.forces_valid = forces_valid;
+  im.loads_changed = true;  // not saved: recomputing the loads changes no bit
   im.last_strain_energy = strain;
   im.ledger = ledger;
   im.ledger_rebase = rebase;

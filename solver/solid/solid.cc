@@ -397,7 +397,7 @@ struct Solid::Impl {
   integrators::BackwardEuler::StiffnessOperator stiffness_op;
   // Backward Euler's folded right-hand side (the default): F - h Kt v =
   // f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v, one element pass
-  // with the frames of p (see ImplicitStep). `f` then holds the external
+  // with the frames of p (Advance). `f` then holds the external
   // forces f_ext(p) only (point forces, gravity, pressure at p). With
   // implicit_two_pass (tests: the reference path) `f` holds F as for the
   // explicit scheme and the rhs takes a Kt product more.

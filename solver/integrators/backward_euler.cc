@@ -62,7 +62,7 @@ void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double
   const int64_t n = mt->rows();
   fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
   pre_.Setup(md_, fixed_, Preconditioner::kIncompleteCholesky);
-  for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_}) m->setZero(n, 3);
+  for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_, &kx_}) m->setZero(n, 3);
 }
 
 void BackwardEuler::Mask(Points& m) const {
@@ -81,12 +81,28 @@ void BackwardEuler::Apply(const StiffnessOperator& kt, const Points& x, Points& 
 CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points& force,
                             const StiffnessOperator& kt, Points& p_next, double tolerance,
                             int max_iterations) {
-  CgStats stats;
   v_ = (p - p_prev) / h_;
   Mask(v_);
-  // rhs = h (F - Dt v - h Kt v).
+  // rhs = h (F - h Kt v - Dt v).
   kt(v_, tmp_);
   rhs_ = h_ * (force - h_ * tmp_);
+  return Solve(p, kt, p_next, tolerance, max_iterations);
+}
+
+CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const ForceAhead& force_ahead,
+                            const StiffnessOperator& kt, Points& p_next, double tolerance,
+                            int max_iterations) {
+  v_ = (p - p_prev) / h_;
+  Mask(v_);
+  // rhs = h (F - h Kt v - Dt v), F - h Kt v in one evaluation.
+  force_ahead(v_, tmp_);
+  rhs_ = h_ * tmp_;
+  return Solve(p, kt, p_next, tolerance, max_iterations);
+}
+
+CgStats BackwardEuler::Solve(const Points& p, const StiffnessOperator& kt, Points& p_next,
+                             double tolerance, int max_iterations) {
+  CgStats stats;
   if (dt_ != nullptr) {
     z_.noalias() = (*dt_) * v_;
     rhs_ -= h_ * z_;
@@ -94,6 +110,7 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
   Mask(rhs_);
   const double bnorm = std::sqrt(rhs_.squaredNorm());
   x_.setZero();
+  kx_.setZero();
   r_ = rhs_;
   int it = 0;
   double rr = rhs_.squaredNorm();
@@ -107,6 +124,7 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
       if (pq <= 0) break;
       const double alpha = rz / pq;
       x_ += alpha * p_;
+      kx_ += alpha * tmp_;  // Apply left Kt p_ in tmp_
       r_ -= alpha * q_;
       rr = r_.squaredNorm();
       if (std::sqrt(rr) <= tolerance * bnorm) {

@@ -10,12 +10,10 @@ namespace {
 
 // Elements per dense product (columns of the 3n x batch block).
 constexpr int32_t kBatch = 64;
-// Iteration cap of ExtractRotation. Its iteration converges linearly (the
-// error shrinks by about 3 per iteration), and u = R^T d - x0 is first order
-// in a frame error: 8 iterations (local_frame's cap) leave spurious forces of
-// about 1e-9 of a 0.1 % strain under a rotation of 0.01 rad per step, 32 reach
-// the stopping test from rest to a rotation of 1 rad in one call. The
-// iteration stops there, so a slowly turning solid costs few iterations.
+// Iteration cap of ExtractRotation (rotation.h: Newton steps where safe,
+// 2-4 iterations per step from the warm start). u = R^T d - x0 is first
+// order in a frame error, so the iteration runs to its stopping test; 32
+// also covers a rotation of 1 rad in one call from rest.
 constexpr int kRotationIterations = 32;
 
 // The 6 x 3n strain-displacement matrix of gradients g (n x 3): strains
@@ -106,8 +104,9 @@ void CorotationalModel::ResetFrames() {
   for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
 }
 
-void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
-                                   Workspace& w) const {
+void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Workspace& w,
+                                   bool subtract_rest) const {
+  subtract_rest = subtract_rest || update != nullptr;
   using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
   using NodeMap = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
   NodeBlock pos, x0;
@@ -142,7 +141,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update,
       const Eigen::RowVector3d xbar = pos.colwise().mean();
       pos.rowwise() -= xbar;
       ub.noalias() = pos.lazyProduct(rot[b]);
-      if (update != nullptr) {
+      if (subtract_rest) {
         for (int i = 0; i < n; ++i) x0.row(i) = rest_.row(ids[i]);
         const Eigen::RowVector3d x0bar = x0.colwise().mean();
         x0.rowwise() -= x0bar;
@@ -179,6 +178,52 @@ double CorotationalModel::Forces(const Points& d, Points& g) {
   const auto t1 = std::chrono::steady_clock::now();
   timing_.measure_ms = -1;
   timing_.elements_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+  return energy;
+}
+
+void CorotationalModel::FrameBatches(int part, const Points& d) {
+  using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
+  NodeBlock pos;
+  for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
+    const ElementBatch& batch = schedule_.batches[bi];
+    const ElementBlock& block = layout_.blocks[batch.kind];
+    const ElementGroup& grp = block.groups[batch.group];
+    const int n = block.nodes;
+    pos.resize(n, 3);
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t e = block.by_group[batch.first + b];
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < n; ++i) pos.row(i) = d.row(ids[i]);
+      // As RunBatches with `update`: the same expression, the same bits.
+      const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+      ExtractRotation(f, frames_[batch.kind][e], kRotationIterations);
+    }
+  }
+}
+
+void CorotationalModel::UpdateFrames(const Points& d) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) FrameBatches(k, d);
+  });
+  timing_.measure_ms = -1;
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double CorotationalModel::AffineForces(const Points& x, Points& g) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int parts = static_cast<int>(work_.size());
+  const int threads = pool_.size();
+  pool_.Run([&](int t) {
+    for (int k = t; k < parts; k += threads) RunBatches(k, x, nullptr, work_[k], true);
+  });
+  SumParts(g);
+  double energy = 0;
+  for (int k = 0; k < parts; ++k) energy += work_[k].energy;
+  timing_.measure_ms = -1;
+  timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return energy;
 }
 

@@ -69,6 +69,18 @@ class CorotationalModel final : public InternalForceModel {
   // Like Forces, allocates nothing once `out` has #nodes rows.
   void ApplyLinearized(const Points& v, Points& out) const;
 
+  // Backward Euler's folded right-hand side (frames fixed for a step, the
+  // force is affine in the positions, so g(d) + K_R v h = g_R(d + h v): one
+  // pass instead of two). UpdateFrames extracts the frames at d (#nodes by 3,
+  // metres), exactly as Forces(d) would, without the element products.
+  // AffineForces then gives, with those frames held,
+  //   g (#nodes by 3, N) = sum_e R_e K (R_e^T (x_e - xbar) - (x0_e - x0bar)),
+  // and returns 1/2 sum_e u_e . K u_e (J), the strain energy of x in the
+  // held frames. AffineForces(d) after UpdateFrames(d) equals Forces(d) bit
+  // for bit. Same scratch, allocation and timing rules as Forces.
+  void UpdateFrames(const Points& d);
+  double AffineForces(const Points& x, Points& g);
+
   // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
   // 2 pyramid): 3n x 3n, node-major, N/m.
   Eigen::MatrixXd K(int kind, int32_t group) const { return packed_[kind][group].Unpack(); }
@@ -90,7 +102,10 @@ class CorotationalModel final : public InternalForceModel {
   // frames are extracted into *update and u = R^T (d - dbar) - (x0 - x0bar).
   // Without (ApplyLinearized): x = v, the frames are read from frames_ and
   // u = R^T (v - vbar).
-  void RunBatches(int part, const Points& x, Frames* update, Workspace& w) const;
+  // `subtract_rest` (AffineForces): frames read from frames_, u as in Forces.
+  void RunBatches(int part, const Points& x, Frames* update, Workspace& w,
+                  bool subtract_rest = false) const;
+  void FrameBatches(int part, const Points& d);  // UpdateFrames' part
   void SumParts(Points& out) const;  // out = sum of the parts' buffers
 
   const ElementLayout& layout_;

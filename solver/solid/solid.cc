@@ -446,6 +446,19 @@ struct Solid::Impl {
   models::CorotationalModel* corotational = nullptr;  // == model when corotational
   Points x_nodes, kx_nodes;
   integrators::BackwardEuler::StiffnessOperator stiffness_op;
+  // Backward Euler's folded right-hand side (the default): F - h Kt v =
+  // f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v, one element pass
+  // with the frames of p (Advance). `f` then holds the external
+  // forces f_ext(p) only (point forces, gravity, pressure at p). With
+  // implicit_two_pass (tests: the reference path) `f` holds F as for the
+  // explicit scheme and the rhs takes a Kt product more.
+  bool implicit_two_pass = false;
+  integrators::BackwardEuler::ForceAhead force_ahead;
+  const Points* ahead_from = nullptr;  // p of the step in progress
+  Points ahead, g_ahead;               // p + h v; A^T g_R(A (p + h v))
+  double ahead_energy = 0;             // E_R(p + h v), J
+  double ahead_ms = 0;
+  int64_t element_passes = 0, frame_passes = 0;  // counters for StepStats
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
@@ -564,6 +577,27 @@ struct Solid::Impl {
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+  // Folded implicit path: the frames at p and out = f_ext(p) (constant loads
+  // and pressure at p; no internal or spring forces); with `energy` also the
+  // exact strain energy at p (one element pass more).
+  void ImplicitForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure,
+                      bool energy);
+  bool Folded() const { return use_implicit && !implicit_two_pass; }
+  // out = f_ext(p): constant loads and the pressure at p (into `pressure`).
+  void ExternalForces(const Points& p, Points& out, Points& pressure, PhaseTimes& phases);
+  // A load edit (point force, pressure, gravity). The folded implicit path
+  // carries only the external forces in `f`: they are recomputed at the next
+  // step, no element pass (loads_changed; recomputing unchanged loads gives
+  // the same bits, so the flag only saves time and need not be saved). The
+  // other paths recompute all forces.
+  bool loads_changed = false;
+  void LoadsChanged() {
+    if (Folded()) {
+      loads_changed = true;
+    } else {
+      forces_valid = false;
+    }
+  }
 
   // Material: builds what depends on it from a layout (ResourceExhausted
   // when the element matrices would not fit), and installs a build.
@@ -797,6 +831,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   last_strain_energy = model->Forces(nodes, g);
+  ++element_passes;
   const models::InternalForceModel::Timing timing = model->last_timing();
   phases.measure = timing.measure_ms;
   phases.stiffness = timing.elements_ms;
@@ -819,6 +854,41 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   }
 }
 
+void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
+                                 Points& pressure, bool energy) {
+  auto t0 = Clock::now();
+  nodes.noalias() = d->node_matrix * p;
+  phases.nodes = MsSince(t0);
+  t0 = Clock::now();
+  if (energy) {
+    last_strain_energy = model->Forces(nodes, g);  // frames and the exact energy
+    ++element_passes;
+  } else {
+    corotational->UpdateFrames(nodes);
+    ++frame_passes;
+  }
+  phases.measure = -1;
+  phases.stiffness = MsSince(t0);
+  phases.project = 0;
+  ExternalForces(p, out, pressure, phases);
+}
+
+void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
+                                 PhaseTimes& phases) {
+  const auto t0 = Clock::now();
+  if (has_const_force) {
+    out = f_const;
+  } else {
+    out.setZero(p.rows(), 3);
+  }
+  if (has_pressure) {
+    PressureForces(p, pressure);
+    out += pressure;
+  }
+  loads_changed = false;
+  if (has_const_force || !spring_point.empty() || has_pressure) phases.loads = MsSince(t0);
+}
+
 absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
@@ -835,9 +905,16 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // the first step invalidated them), so that every state's strain energy
   // is checked in the step that produced it.
   if (!forces_valid) {
-    ControlForces(p, f, sub, f_press);
+    if (Folded()) {
+      ImplicitForces(p, f, sub, f_press, /*energy=*/true);
+    } else {
+      ControlForces(p, f, sub, f_press);
+    }
     add(sub);
     forces_valid = true;
+  } else if (Folded() && loads_changed) {
+    ExternalForces(p, f, f_press, sub);
+    if (sub.loads >= 0) sum.loads += sub.loads;
   }
   if (ledger_rebase) {
     RebaseLedger(p, p_prev);
@@ -845,12 +922,23 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   }
   for (int k = 0; k < substeps; ++k) {
     const auto t0 = Clock::now();
-    const integrators::CgStats cg =
-        use_implicit ? implicit.Step(p, p_prev, f, stiffness_op, p_next, settings.cg_tolerance(),
-                                     settings.cg_max_iterations())
-                     : integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(),
-                                       settings.cg_max_iterations());
-    sum.solve += MsSince(t0);
+    integrators::CgStats cg;
+    ahead_ms = 0;
+    if (Folded()) {
+      ahead_from = &p;
+      cg = implicit.Step(p, p_prev, force_ahead, stiffness_op, p_next, settings.cg_tolerance(),
+                         settings.cg_max_iterations());
+      ahead_from = nullptr;
+    } else if (use_implicit) {
+      cg = implicit.Step(p, p_prev, f, stiffness_op, p_next, settings.cg_tolerance(),
+                         settings.cg_max_iterations());
+    } else {
+      cg = integrator.Step(p, p_prev, f, p_next, settings.cg_tolerance(),
+                           settings.cg_max_iterations());
+    }
+    // The folded rhs's element pass is stiffness, not solve.
+    sum.solve += MsSince(t0) - ahead_ms;
+    sum.stiffness += ahead_ms;
     stats.cg_iterations += cg.iterations;
     stats.cg_max_iterations = std::max(stats.cg_max_iterations, cg.max_iterations);
     stats.cg_relative_residual = std::max(stats.cg_relative_residual, cg.relative_residual);
@@ -859,7 +947,26 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       return absl::InternalError(absl::StrCat("non-finite control points at sub-step ", k));
     }
     // Forces (and strain energy) at the new state, reused by the next sub-step.
-    ControlForces(p_next, f_next, sub, f_press_next);
+    if (Folded()) {
+      // E_R is quadratic in p with gradient A^T g_R and Hessian Kt (frames of
+      // p held): from p + h v to p_next = p + h v + h dv,
+      //   E_R(p_next) = E_R(p + h v) + h dv . A^T g_R(A (p + h v)) + h^2/2 dv . Kt dv,
+      // Kt dv from the CG's own products less the penalty springs (their
+      // energy is counted apart). The strain energy of the new state in the
+      // frames its step was linearized in: no element pass.
+      const Points& dv = implicit.last_dv();
+      double quad = (dv.array() * implicit.last_kt_dv().array()).sum();
+      for (size_t s = 0; s < spring_point.size(); ++s) {
+        quad -= spring_k[s] * dv.row(spring_point[s]).squaredNorm();
+      }
+      const double hs = implicit.h();
+      const double strain = ahead_energy + hs * (dv.array() * g_ahead.array()).sum() +
+                            0.5 * hs * hs * quad;
+      ImplicitForces(p_next, f_next, sub, f_press_next, /*energy=*/false);
+      last_strain_energy = strain;
+    } else {
+      ControlForces(p_next, f_next, sub, f_press_next);
+    }
     add(sub);
     // Energy ledger: H = kinetic + strain + springs - external work.
     velocity = (p_next - p) / h_sub;
@@ -1289,10 +1396,28 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     im.stiffness_op = [ip](const Points& x, Points& out) {
       ip->x_nodes.noalias() = ip->d->node_matrix * x;
       ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
       out.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
       }
+    };
+    // F - h Kt v = f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v (the
+    // frames of p held: g_R and the springs are affine in the positions).
+    im.force_ahead = [ip](const Points& v, Points& out) {
+      const auto t0 = Clock::now();
+      const Points& p = *ip->ahead_from;
+      ip->ahead = p + ip->implicit.h() * v;
+      ip->x_nodes.noalias() = ip->d->node_matrix * ip->ahead;
+      ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
+      ip->g_ahead.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
+      out = ip->f - ip->g_ahead;
+      for (size_t s = 0; s < ip->spring_point.size(); ++s) {
+        const int32_t i = ip->spring_point[s];
+        out.row(i) -= ip->spring_k[s] * (ip->ahead.row(i) - ip->rest_control.row(i));
+      }
+      ip->ahead_ms = MsSince(t0);
     };
   }
   if (im.use_implicit) {
@@ -1346,8 +1471,11 @@ absl::Status Solid::Step() {
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
   const bool rebase_at_start = im.ledger_rebase;
+  const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
   for (int attempt = 0;; ++attempt) {
     const absl::Status st = im.Advance(p_, p_prev_, stats, phases_);
+    stats.element_passes = static_cast<int32_t>(im.element_passes - passes_at_start);
+    stats.frame_passes = static_cast<int32_t>(im.frame_passes - frames_at_start);
     if (st.ok()) break;
     // Stability guard: back to the step's start, halve the sub-step, retry.
     p_ = im.backup_p;
@@ -1394,6 +1522,11 @@ void Solid::SetAtRest(const Points& p) {
 
 void Solid::SetPaintReuseForTesting(bool reuse) { impl_->paint_reuse = reuse; }
 
+void Solid::SetImplicitTwoPassForTesting(bool two_pass) {
+  impl_->implicit_two_pass = two_pass;
+  impl_->forces_valid = false;  // `f` changes meaning
+}
+
 void Solid::SetSubstepsForTesting(int substeps) {
   const double old_h = impl_->h_sub;
   impl_->SetSubsteps(std::max(1, substeps), h_);
@@ -1405,9 +1538,12 @@ Points Solid::InternalControlForces(const Points& p) {
   Impl& im = *impl_;
   const Points d = d_.node_matrix * p;
   Points g(d.rows(), 3);
+  // Frames found afresh; the solid's own (warm starts, and the frames the
+  // next implicit step is linearized in) are part of its state: kept.
+  const models::InternalForceModel::Frames frames = im.model->frames();
   im.model->ResetFrames();
   im.model->Forces(d, g);
-  im.model->ResetFrames();
+  im.model->set_frames(frames);
   return d_.node_matrix.transpose() * g;
 }
 
@@ -1415,9 +1551,10 @@ double Solid::StrainEnergy(const Points& p) {
   Impl& im = *impl_;
   const Points d = d_.node_matrix * p;
   Points g(d.rows(), 3);
+  const models::InternalForceModel::Frames frames = im.model->frames();  // as above
   im.model->ResetFrames();
   const double e = im.model->Forces(d, g);
-  im.model->ResetFrames();
+  im.model->set_frames(frames);
   return e;
 }
 
@@ -1673,7 +1810,7 @@ absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
   const int64_t id = im.next_id++;
   im.point_loads.push_back({id, f, *at});
   im.RebuildConstantLoads();
-  im.forces_valid = false;
+  im.LoadsChanged();
   report_.point_forces = static_cast<int32_t>(im.point_loads.size());
   return id;
 }
@@ -1691,7 +1828,7 @@ absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
   const int64_t id = im.next_id++;
   im.pressures.push_back({id, p, std::move(quads)});
   im.RebuildPressure();
-  im.forces_valid = false;
+  im.LoadsChanged();
   return id;
 }
 
@@ -1700,7 +1837,7 @@ absl::Status Solid::SetGravity(const Vec3& g) {
   RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
   im.gravity = V(g);
   im.RebuildConstantLoads();
-  im.forces_valid = false;
+  im.LoadsChanged();
   report_.gravity = im.gravity.squaredNorm() > 0;
   return absl::OkStatus();
 }
@@ -1722,7 +1859,7 @@ absl::Status Solid::RemoveLoad(int64_t id) {
   if (pf != im.point_loads.end()) {
     im.point_loads.erase(pf);
     im.RebuildConstantLoads();
-    im.forces_valid = false;
+    im.LoadsChanged();
     report_.point_forces = static_cast<int32_t>(im.point_loads.size());
     return absl::OkStatus();
   }
@@ -1731,7 +1868,7 @@ absl::Status Solid::RemoveLoad(int64_t id) {
   if (pr != im.pressures.end()) {
     im.pressures.erase(pr);
     im.RebuildPressure();
-    im.forces_valid = false;
+    im.LoadsChanged();
     return absl::OkStatus();
   }
   return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
@@ -2255,6 +2392,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   p_prev_ = std::move(p_prev);
   im.f = std::move(f);
   im.forces_valid = forces_valid;
+  im.loads_changed = true;  // not saved: recomputing the loads changes no bit
   im.last_strain_energy = strain;
   im.ledger = ledger;
   im.ledger_rebase = rebase;

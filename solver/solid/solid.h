@@ -69,6 +69,12 @@ struct StepStats {
   int32_t cg_iterations = 0;       // summed over sub-steps and components
   int32_t cg_max_iterations = 0;   // largest single solve
   double cg_relative_residual = 0; // largest at exit
+  // Element product passes (each a K product over every element: internal
+  // forces, Kt products of CG and of a right-hand side, the folded
+  // right-hand side), summed over sub-steps and retries; frame-only passes
+  // (the implicit step's UpdateFrames) apart.
+  int32_t element_passes = 0;
+  int32_t frame_passes = 0;
 };
 
 struct Energies {
@@ -113,6 +119,11 @@ class Solid {
   // Off: a paint or restore integrates every element matrix and assembles
   // Mt and Dt afresh (the reference the reuse path is tested against).
   void SetPaintReuseForTesting(bool reuse);
+  // Backward Euler's right-hand side F - h Kt v: folded into one element
+  // pass (default; the frames of p held, the force at p + h v) or, with
+  // true, the two-pass reference (F at p, then a Kt product). Both solve the
+  // same system; results agree to the CG tolerance.
+  void SetImplicitTwoPassForTesting(bool two_pass);
   int64_t rollbacks() const { return rollbacks_; }
 
   double time() const { return time_; }
@@ -149,7 +160,11 @@ class Solid {
   Points ApplyMass(const Points& x) const;
 
   // Kinetic energy from the last sub-step's velocity; strain energy at p
-  // (forces and energy are evaluated at the end of every sub-step).
+  // (forces and energy are evaluated at the end of every sub-step). With
+  // backward Euler the strain energy of p is measured in the element frames
+  // its step was linearized in (those of the step's start; exact from the
+  // step's own products, no extra element pass; StrainEnergy(p) takes p's
+  // own frames: they differ by the frames' change over one step).
   Energies ComputeEnergies() const;
   // Total mass from Mt (kg) and the rest volume of the elements (m^3).
   double total_mass() const { return total_mass_; }

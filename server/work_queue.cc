@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <utility>
 
+#include "server/thread_priority.h"
+
 namespace dynsolid::server {
 
-WorkQueue::WorkQueue(int threads) {
-  for (int i = 0; i < std::max(threads, 1); ++i) workers_.emplace_back([this] { Work(); });
+WorkQueue::WorkQueue(int threads, int nice) {
+  for (int i = 0; i < std::max(threads, 1); ++i) {
+    workers_.emplace_back([this, nice] { Work(nice); });
+  }
 }
 
 WorkQueue::~WorkQueue() { Join(); }
@@ -41,7 +45,9 @@ void WorkQueue::Join() {
 
 bool WorkQueue::HasWorkOrStopped() const { return stopped_ || !queue_.empty(); }
 
-void WorkQueue::Work() {
+void WorkQueue::Work(int nice) {
+  // Best effort: a refusal leaves the worker at its creator's priority.
+  (void)LowerThisThreadPriority(nice);
   for (;;) {
     Task task;
     {

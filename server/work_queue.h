@@ -20,7 +20,9 @@ class WorkQueue {
  public:
   using Task = std::function<void(bool run)>;
 
-  explicit WorkQueue(int threads);
+  // `nice` (0..19) is added to each worker's nice value when it starts
+  // (thread_priority.h); 0 leaves them at their creator's priority.
+  explicit WorkQueue(int threads, int nice = 0);
   ~WorkQueue();  // Stop(), then Join()
   WorkQueue(const WorkQueue&) = delete;
   WorkQueue& operator=(const WorkQueue&) = delete;
@@ -36,7 +38,7 @@ class WorkQueue {
   void Join();
 
  private:
-  void Work();
+  void Work(int nice);
   bool HasWorkOrStopped() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   absl::Mutex mu_;

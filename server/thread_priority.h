@@ -1,0 +1,21 @@
+// Lowering the scheduling priority of the calling thread (Linux: the nice
+// value is per thread and inherited by threads it creates). Lowering needs
+// no privilege; raising it back does, so a thread lowered here stays low.
+// The server runs its streaming threads (frame encoding and gRPC's own
+// threads) lower than the simulation threads, so that when the cores are
+// busy frames are skipped instead of steps.
+#pragma once
+
+#include "absl/status/status.h"
+
+namespace dynsolid::server {
+
+// Adds `delta` (0..19) to the calling thread's nice value (capped at 19).
+// InvalidArgument for a delta out of range; Internal (with errno's text)
+// if the system refuses.
+absl::Status LowerThisThreadPriority(int delta);
+
+// The calling thread's nice value.
+int ThisThreadNice();
+
+}  // namespace dynsolid::server

@@ -27,7 +27,10 @@
 // watchers cost competes less with the server; the bench's CPU is reported
 // either way. Server CPU per frame: the server CPU of a watched phase less
 // what its steps cost in the unwatched phases (per step), divided by the
-// frames the watchers received.
+// frames the watchers received. Streaming CPU: the CPU of the server's
+// threads named "encode" and of gRPC's threads (names from
+// /proc/PID/task/TID/comm) in the phase, divided likewise; the rest is the
+// simulation (threads that ended during a phase count as the rest).
 #include <sys/resource.h>
 #include <fcntl.h>
 #include <signal.h>
@@ -222,8 +225,8 @@ std::string LoadAverage() {
   return absl::StrCat(a, " ", b, " ", c);
 }
 
-double CpuSeconds(pid_t pid) {
-  std::ifstream in(absl::StrCat("/proc/", pid, "/stat"));
+double CpuSecondsOf(const std::string& stat_path) {
+  std::ifstream in(stat_path);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const size_t close = text.rfind(')');
   if (close == std::string::npos) return 0;
@@ -237,6 +240,30 @@ double CpuSeconds(pid_t pid) {
   return (utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
 }
 
+double CpuSeconds(pid_t pid) { return CpuSecondsOf(absl::StrCat("/proc/", pid, "/stat")); }
+
+// Whether a server thread streams frames (the encoders and gRPC's threads).
+bool IsStreamingThread(const std::string& comm) {
+  for (const char* prefix : {"encode", "nexting", "default-exec", "grpc", "resolver", "event_engine", "timer_manager"}) {
+    if (comm.rfind(prefix, 0) == 0) return true;
+  }
+  return false;
+}
+
+// CPU seconds the server's streaming threads have used so far.
+double StreamingCpuSeconds(pid_t pid) {
+  double total = 0;
+  std::error_code ec;
+  for (const auto& task :
+       std::filesystem::directory_iterator(absl::StrCat("/proc/", pid, "/task"), ec)) {
+    std::ifstream comm_file(task.path() / "comm");
+    std::string comm;
+    std::getline(comm_file, comm);
+    if (IsStreamingThread(comm)) total += CpuSecondsOf((task.path() / "stat").string());
+  }
+  return total;
+}
+
 struct Phase {
   int watchers = 0;
   int64_t steps = 0;
@@ -244,6 +271,7 @@ struct Phase {
   double step_ms_median = 0, step_ms_p99 = 0;
   int64_t overruns = 0;
   double server_cpu = 0, bench_cpu = 0;  // CPU seconds used in the phase
+  double stream_cpu = 0;                  // of server_cpu: the streaming threads
   std::vector<WatcherResult> results;
   double rate() const { return seconds > 0 ? steps / seconds : 0; }
 };
@@ -351,12 +379,14 @@ int main(int argc, char** argv) {
     std::vector<WatcherResult> before;
     for (auto& w : ws) before.push_back(w->Take());
     const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
+    const double stream_cpu0 = StreamingCpuSeconds(server.pid());
     const dynsolid::SessionStats s0 = Stats(*stub, ref);
     const Clock::time_point t0 = Clock::now();
     std::this_thread::sleep_for(phase_length);
     const dynsolid::SessionStats s1 = Stats(*stub, ref);
     const Clock::time_point t1 = Clock::now();
     p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
+    p.stream_cpu = StreamingCpuSeconds(server.pid()) - stream_cpu0;
     p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
     for (size_t i = 0; i < ws.size(); ++i) {
       WatcherResult a = ws[i]->Take();
@@ -392,16 +422,16 @@ int main(int argc, char** argv) {
 
   const double h = session.time_step();
   std::cout << "\n| phase | watchers | steps | seconds | steps/s | % of real time | step ms median "
-               "| step ms p99 | overruns | server CPU s | server CPU ms/step | bench CPU s "
+               "| step ms p99 | overruns | server CPU s | of which streaming | server CPU ms/step | bench CPU s "
                "| frames/watcher (min..max) | frames/s/watcher | skipped/s/watcher "
                "| keyframes | delta bytes / raw float32 | moved/delta |\n"
                "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-               "| ---: | --- | ---: | ---: | ---: | ---: | ---: |\n";
+               "| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |\n";
   double rate0 = 0, rate_n = 0;
   int n0 = 0, nn = 0;
   int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
   int64_t frames_n = 0, skipped_n = 0;
-  double seconds_n = 0, bench_cpu_n = 0;
+  double seconds_n = 0, bench_cpu_n = 0, stream_cpu_n = 0, stream_cpu0 = 0;
   for (size_t i = 0; i < phases.size(); ++i) {
     const Phase& p = phases[i];
     int64_t fmin = INT64_MAX, fmax = 0, frames = 0, skipped = 0, keys = 0, delta = 0, raw = 0,
@@ -427,6 +457,7 @@ int main(int argc, char** argv) {
     if (p.watchers == 0) {
       rate0 += p.rate();
       ++n0;
+      stream_cpu0 += p.stream_cpu;
     } else {
       rate_n += p.rate();
       ++nn;
@@ -434,12 +465,14 @@ int main(int argc, char** argv) {
       skipped_n += skipped;
       seconds_n += p.seconds;
       bench_cpu_n += p.bench_cpu;
+      stream_cpu_n += p.stream_cpu;
     }
     std::cout << absl::StrFormat(
-        "| %d | %d | %d | %.2f | %.1f | %.1f %% | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %s | %s "
-        "| %s | %d | %s | %s |\n",
+        "| %d | %d | %d | %.2f | %.1f | %.1f %% | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %.2f "
+        "| %s | %s | %s | %d | %s | %s |\n",
         i + 1, p.watchers, p.steps, p.seconds, p.rate(), 100 * p.rate() * h, p.step_ms_median,
-        p.step_ms_p99, p.overruns, p.server_cpu, p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0,
+        p.step_ms_p99, p.overruns, p.server_cpu, p.stream_cpu,
+        p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0,
         p.bench_cpu, p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
         p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
         p.watchers ? absl::StrFormat("%.1f", skipped / nw / p.seconds) : "-", keys,
@@ -458,10 +491,13 @@ int main(int argc, char** argv) {
   const double frame_cpu = cpu_n - per_step0 * static_cast<double>(steps_n);
   std::cout << absl::StrFormat(
       "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers; server CPU "
-      "for frames: %.1f us per frame received (%.3f cores); bench CPU %.3f cores; %d cores "
-      "online; load average %s before, %s after\n",
+      "for frames: %.1f us per frame received by difference (%.3f cores), %.1f us measured on "
+      "the streaming threads (%.3f cores; %.3f s in the unwatched phases); bench CPU %.3f "
+      "cores; %d cores online; load average %s before, %s after\n",
       1000 * per_step0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
       frames_n ? 1e6 * frame_cpu / frames_n : 0.0, seconds_n > 0 ? frame_cpu / seconds_n : 0.0,
+      frames_n ? 1e6 * stream_cpu_n / frames_n : 0.0,
+      seconds_n > 0 ? stream_cpu_n / seconds_n : 0.0, stream_cpu0,
       seconds_n > 0 ? bench_cpu_n / seconds_n : 0.0, ::sysconf(_SC_NPROCESSORS_ONLN), load_before,
       LoadAverage());
   const double nwatch = std::max(n_watchers, 1);

@@ -77,8 +77,8 @@ Server::Server(const ServerOptions& options)
     : options_(options),
       registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}, options.loop,
                                 options.data_dir}),
-      builds_(options.build_threads),
-      encoders_(options.encode_threads, options.stream_nice),
+      builds_(options.build_threads, "build"),
+      encoders_(options.encode_threads, "encode", options.stream_nice),
       service_(registry_, builds_, encoders_,
                StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 

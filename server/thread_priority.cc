@@ -1,5 +1,6 @@
 #include "server/thread_priority.h"
 
+#include <pthread.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -35,6 +36,12 @@ absl::Status LowerThisThreadPriority(int delta) {
         absl::StrCat("setpriority(nice ", target, "): ", std::strerror(errno)));
   }
   return absl::OkStatus();
+}
+
+void NameThisThread(const char* name) {
+  char shortened[16] = {};
+  std::strncpy(shortened, name, sizeof(shortened) - 1);
+  ::pthread_setname_np(::pthread_self(), shortened);
 }
 
 }  // namespace dynsolid::server

@@ -18,4 +18,10 @@ absl::Status LowerThisThreadPriority(int delta);
 // The calling thread's nice value.
 int ThisThreadNice();
 
+// Names the calling thread (at most 15 characters are kept), as `top -H`
+// and /proc/PID/task/TID/comm show it: the server's threads are "sim",
+// "journal", "encode" and "build" (the solver's step workers, started while
+// building, carry "build" too); gRPC names its own.
+void NameThisThread(const char* name);
+
 }  // namespace dynsolid::server

@@ -7,9 +7,9 @@
 
 namespace dynsolid::server {
 
-WorkQueue::WorkQueue(int threads, int nice) {
+WorkQueue::WorkQueue(int threads, const char* name, int nice) {
   for (int i = 0; i < std::max(threads, 1); ++i) {
-    workers_.emplace_back([this, nice] { Work(nice); });
+    workers_.emplace_back([this, name, nice] { Work(name, nice); });
   }
 }
 
@@ -45,7 +45,8 @@ void WorkQueue::Join() {
 
 bool WorkQueue::HasWorkOrStopped() const { return stopped_ || !queue_.empty(); }
 
-void WorkQueue::Work(int nice) {
+void WorkQueue::Work(const char* name, int nice) {
+  NameThisThread(name);
   // Best effort: a refusal leaves the worker at its creator's priority.
   (void)LowerThisThreadPriority(nice);
   for (;;) {

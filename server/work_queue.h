@@ -20,9 +20,10 @@ class WorkQueue {
  public:
   using Task = std::function<void(bool run)>;
 
-  // `nice` (0..19) is added to each worker's nice value when it starts
-  // (thread_priority.h); 0 leaves them at their creator's priority.
-  explicit WorkQueue(int threads, int nice = 0);
+  // Workers are named `name` (thread_priority.h NameThisThread); `nice`
+  // (0..19) is added to each worker's nice value when it starts; 0 leaves
+  // them at their creator's priority.
+  explicit WorkQueue(int threads, const char* name = "work", int nice = 0);
   ~WorkQueue();  // Stop(), then Join()
   WorkQueue(const WorkQueue&) = delete;
   WorkQueue& operator=(const WorkQueue&) = delete;
@@ -38,7 +39,7 @@ class WorkQueue {
   void Join();
 
  private:
-  void Work(int nice);
+  void Work(const char* name, int nice);
   bool HasWorkOrStopped() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   absl::Mutex mu_;

@@ -33,6 +33,7 @@
 // threads named "encode" and of gRPC's threads (names from
 // /proc/PID/task/TID/comm) in the phase, divided likewise; the rest is the
 // simulation (threads that ended during a phase count as the rest).
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <fcntl.h>
 #include <signal.h>
@@ -101,12 +102,12 @@ class ServerProcess {
                 const std::vector<std::string>& extra) {
     int out[2];
     if (::pipe(out) != 0) return;
+    const pid_t parent = ::getpid();
     pid_ = ::fork();
     if (pid_ == 0) {
-      // A session of its own, as a service would run: with the kernel's
-      // autogroups (sched_autogroup_enabled) it is then scheduled as its own
-      // group, apart from this benchmark's watchers.
-      ::setsid();
+      // The server ends with the benchmark, however the benchmark ends.
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (::getppid() != parent) ::_exit(127);
       ::dup2(out[1], 1);
       const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
       if (err >= 0) ::dup2(err, 2);
@@ -303,15 +304,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   // From here on every thread of this process inherits the lowered
-  // priority (the server was forked before). With autogroups the nice
-  // value of this process's group is what counts against the server's
-  // group, so it is raised too (where the kernel has them).
+  // priority (the server was forked before). The server and the benchmark
+  // stay in one session (one scheduling autogroup), so nice values order
+  // the server's simulation, its streaming threads and these watchers.
   if (const int nice = absl::GetFlag(FLAGS_bench_nice); nice > 0) {
     if (::setpriority(PRIO_PROCESS, 0, std::min(19, ::getpriority(PRIO_PROCESS, 0) + nice)) != 0) {
       std::cerr << "watch_bench: setpriority failed; the benchmark keeps its priority\n";
     }
-    std::ofstream autogroup("/proc/self/autogroup");
-    if (autogroup) autogroup << std::min(19, nice) << std::flush;
   }
   std::cout << "server flags:";
   for (const std::string& f : extra) std::cout << " " << f;

@@ -7,7 +7,7 @@
 //                   [--max_commands_per_second 1000] [--watch_hz 60]
 //                   [--max_watch_hz 240] [--answer_cache 256]
 //                   [--snapshot_every_steps 20000] [--build_threads 1]
-//                   [--encode_threads 2] [--stream_nice 10]
+//                   [--encode_threads 2] [--stream_nice 10] [--stream_idle=true]
 //
 // (Abseil flags: --data-dir is spelled --data_dir, --tls-cert --tls_cert,
 // and so on.) With --data_dir every session is journaled and snapshotted
@@ -43,6 +43,9 @@ ABSL_FLAG(int, stream_nice, 10,
           "Added to the nice value of the streaming threads (frame encoders and gRPC's threads, "
           "which also serve commands), 0..19: on busy cores watchers skip frames rather than "
           "the simulation losing steps. 0: one priority for every thread");
+ABSL_FLAG(bool, stream_idle, true,
+          "Run the streaming threads under SCHED_IDLE as well: only CPU the simulation does not "
+          "want, and a waking simulation thread preempts them at once");
 ABSL_FLAG(std::string, data_dir, "",
           "Directory for session journals and snapshots; sessions found there are restored "
           "on start. Empty: sessions live in memory only");
@@ -89,6 +92,7 @@ int main(int argc, char** argv) {
   options.build_threads = absl::GetFlag(FLAGS_build_threads);
   options.encode_threads = absl::GetFlag(FLAGS_encode_threads);
   options.stream_nice = absl::GetFlag(FLAGS_stream_nice);
+  options.stream_idle = absl::GetFlag(FLAGS_stream_idle);
   options.data_dir = absl::GetFlag(FLAGS_data_dir);
   options.tls_cert_file = absl::GetFlag(FLAGS_tls_cert);
   options.tls_key_file = absl::GetFlag(FLAGS_tls_key);

@@ -78,7 +78,7 @@ Server::Server(const ServerOptions& options)
       registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}, options.loop,
                                 options.data_dir}),
       builds_(options.build_threads, "build"),
-      encoders_(options.encode_threads, "encode", options.stream_nice),
+      encoders_(options.encode_threads, "encode", options.stream_nice, options.stream_idle),
       service_(registry_, builds_, encoders_,
                StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 
@@ -108,6 +108,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   absl::Status nice_status;
   std::thread starter([&] {
     nice_status = LowerThisThreadPriority(options.stream_nice);
+    if (nice_status.ok() && options.stream_idle) nice_status = MakeThisThreadIdle();
     std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
     if (!options.tls_cert_file.empty()) {
       grpc::SslServerCredentialsOptions ssl;
@@ -144,9 +145,10 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
   ServerLog().info(
       "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; streaming "
-      "threads at nice +{}; {})",
+      "threads at nice +{}{}; {})",
       server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
       options.max_sessions, options.max_cells, options.max_message_bytes, options.stream_nice,
+      options.stream_idle ? ", SCHED_IDLE" : "",
       options.data_dir.empty() ? std::string("in memory")
                                : absl::StrCat("data in ", options.data_dir, ", ",
                                               server->recovered_, " sessions recovered"));

@@ -42,6 +42,11 @@ struct ServerOptions {
   // threads keep the server's priority, so on busy cores frames are
   // skipped rather than steps. 0..19; 0: everything at one priority.
   int stream_nice = 10;
+  // And run them under SCHED_IDLE (thread_priority.h): they get only CPU
+  // no simulation thread wants, and a waking simulation thread preempts
+  // them at once (a raised nice value alone only shrinks their share:
+  // measured, it does not keep a saturated loop's rate; server/README.md).
+  bool stream_idle = true;
   // How sessions run: watch rates, watchers per session, commands per
   // second per client, answer cache, snapshot period.
   LoopOptions loop;

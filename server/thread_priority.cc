@@ -1,6 +1,7 @@
 #include "server/thread_priority.h"
 
 #include <pthread.h>
+#include <sched.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -17,6 +18,21 @@ namespace {
 id_t ThisThreadId() { return static_cast<id_t>(::syscall(SYS_gettid)); }
 
 }  // namespace
+
+absl::Status MakeThisThreadIdle() {
+  sched_param param{};
+  param.sched_priority = 0;
+  if (const int e = ::pthread_setschedparam(::pthread_self(), SCHED_IDLE, &param); e != 0) {
+    return absl::InternalError(absl::StrCat("SCHED_IDLE: ", std::strerror(e)));
+  }
+  return absl::OkStatus();
+}
+
+bool ThisThreadIsIdle() {
+  int policy = 0;
+  sched_param param{};
+  return ::pthread_getschedparam(::pthread_self(), &policy, &param) == 0 && policy == SCHED_IDLE;
+}
 
 int ThisThreadNice() {
   errno = 0;

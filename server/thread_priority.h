@@ -15,6 +15,17 @@ namespace dynsolid::server {
 // if the system refuses.
 absl::Status LowerThisThreadPriority(int delta);
 
+// Moves the calling thread to the SCHED_IDLE policy: it runs only when no
+// normal thread (of its scheduling group) wants the CPU, and a normal thread
+// that wakes up preempts it at once (a lowered nice value only weighs the
+// share; the kernel may let a niced thread finish its slice first).
+// Needs no privilege; inherited by threads it creates. Internal (with
+// errno's text) if the system refuses.
+absl::Status MakeThisThreadIdle();
+
+// Whether the calling thread runs under SCHED_IDLE.
+bool ThisThreadIsIdle();
+
 // The calling thread's nice value.
 int ThisThreadNice();
 

@@ -7,9 +7,9 @@
 
 namespace dynsolid::server {
 
-WorkQueue::WorkQueue(int threads, const char* name, int nice) {
+WorkQueue::WorkQueue(int threads, const char* name, int nice, bool idle) {
   for (int i = 0; i < std::max(threads, 1); ++i) {
-    workers_.emplace_back([this, name, nice] { Work(name, nice); });
+    workers_.emplace_back([this, name, nice, idle] { Work(name, nice, idle); });
   }
 }
 
@@ -45,10 +45,11 @@ void WorkQueue::Join() {
 
 bool WorkQueue::HasWorkOrStopped() const { return stopped_ || !queue_.empty(); }
 
-void WorkQueue::Work(const char* name, int nice) {
+void WorkQueue::Work(const char* name, int nice, bool idle) {
   NameThisThread(name);
   // Best effort: a refusal leaves the worker at its creator's priority.
   (void)LowerThisThreadPriority(nice);
+  if (idle) (void)MakeThisThreadIdle();
   for (;;) {
     Task task;
     {

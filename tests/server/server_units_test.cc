@@ -232,6 +232,28 @@ TEST(WorkQueueTest, WorkersCarryTheirNameAndTheLoweredPriority) {
   EXPECT_EQ(ThisThreadNice(), base);
 }
 
+TEST(ThreadPriorityTest, IdlePolicyIsPerThreadAndInherited) {
+  ASSERT_FALSE(ThisThreadIsIdle());
+  std::thread([] {
+    ASSERT_TRUE(MakeThisThreadIdle().ok());
+    EXPECT_TRUE(ThisThreadIsIdle());
+    std::thread([] { EXPECT_TRUE(ThisThreadIsIdle()); }).join();
+  }).join();
+  EXPECT_FALSE(ThisThreadIsIdle());
+  // An idle work queue: its workers, not the creator.
+  WorkQueue queue(1, "encode", 0, /*idle=*/true);
+  absl::Notification done;
+  bool idle = false;
+  queue.Post([&](bool run) {
+    idle = run && ThisThreadIsIdle();
+    done.Notify();
+  });
+  done.WaitForNotification();
+  queue.Join();
+  EXPECT_TRUE(idle);
+  EXPECT_FALSE(ThisThreadIsIdle());
+}
+
 TEST(ThreadPriorityTest, LowersOnlyTheCallingThreadWithinRange) {
   const int base = ThisThreadNice();
   std::thread([base] {

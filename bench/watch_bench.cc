@@ -1,21 +1,40 @@
 // watch_bench: a session's simulation step rate with no watchers and with
 // N watchers (default 64 at 60 Hz), and what the frames cost on the wire.
 //
-//   watch_bench [--server_binary PATH] [--scene block3] [--levels L]
+//   watch_bench [--server_binary PATH] [--server_flags "--stream_nice=10"]
+//               [--scene block3] [--levels L]
 //               [--watchers 64] [--hz 60] [--seconds 5] [--rounds 2]
-//               [--decode=true] [--shake_ms 250] [--shake_newtons 2e4]
+//               [--decode=true] [--bench_nice 0]
+//               [--shake_ms 250] [--shake_newtons 2e4]
 //
 // Starts dynsolid-server (port 0), creates a running session of the scene,
 // and keeps the solid moving by swapping a sideways point force on its top
 // every --shake_ms (otherwise the block3 scene sits still and every delta
 // is empty). Then alternates, --rounds times, a phase without watchers and
 // a phase with --watchers Watch streams, each on its own connection and
-// decoding every frame (SurfaceDecoder). Step counts come from the
+// decoding every frame (SurfaceDecoder), and ends with one more phase
+// without watchers; besides the means it prints each watched phase's rate
+// against the mean of the two unwatched phases around it, and their median. Step counts come from the
 // server's GetStats (step, at the start and end of each phase); rates are
 // steps per second of wall time. Prints figures; asserts nothing about time.
 //
 // Delta bytes are compared with what the same frames would take as raw
 // float32 positions (12 bytes per surface vertex).
+//
+// The watchers stand for remote machines but run on the server's cores:
+// each receives every frame's bytes and parses the Frame; with --decode
+// (default) it also applies it to a SurfaceDecoder (the client's full
+// work). --bench_nice lowers the priority of the whole benchmark process
+// (after the server is started, which keeps its own), so that what the
+// watchers cost competes less with the server; the bench's CPU is reported
+// either way. Server CPU per frame: the server CPU of a watched phase less
+// what its steps cost in the unwatched phases (per step), divided by the
+// frames the watchers received. Streaming CPU: the CPU of the server's
+// threads named "encode" and of gRPC's threads (names from
+// /proc/PID/task/TID/comm) in the phase, divided likewise; the rest is the
+// simulation (threads that ended during a phase count as the rest).
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -58,6 +77,11 @@ ABSL_FLAG(bool, decode, true, "Watchers decode every frame (as a real client doe
 ABSL_FLAG(int, shake_ms, 250, "Swap the sideways force every this many ms (0: no force)");
 ABSL_FLAG(double, shake_newtons, 2e4, "Magnitude of the sideways force, newtons");
 ABSL_FLAG(std::string, server_log, "/dev/null", "Where the server's log (stderr) goes");
+ABSL_FLAG(std::string, server_flags, "",
+          "More flags for the server, separated by spaces (e.g. --stream_nice=0)");
+ABSL_FLAG(int, bench_nice, 0,
+          "Nice value added to this benchmark's own threads (the watchers and their gRPC "
+          "threads), 0..19; the server keeps its own");
 
 namespace {
 
@@ -74,18 +98,28 @@ std::string DefaultServerBinary(const char* argv0) {
 // The server child process.
 class ServerProcess {
  public:
-  ServerProcess(const std::string& binary, int max_watchers, const std::string& log) {
+  ServerProcess(const std::string& binary, int max_watchers, const std::string& log,
+                const std::vector<std::string>& extra) {
     int out[2];
     if (::pipe(out) != 0) return;
+    const pid_t parent = ::getpid();
     pid_ = ::fork();
     if (pid_ == 0) {
+      // The server ends with the benchmark, however the benchmark ends.
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (::getppid() != parent) ::_exit(127);
       ::dup2(out[1], 1);
       const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
       if (err >= 0) ::dup2(err, 2);
       ::close(out[0]);
       const std::string watchers = absl::StrCat("--max_watchers_per_session=", max_watchers);
-      ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", watchers.c_str(),
-              "--max_watch_hz=1000", static_cast<char*>(nullptr));
+      std::vector<std::string> args = {binary, "--listen=127.0.0.1:0", watchers,
+                                       "--max_watch_hz=1000"};
+      args.insert(args.end(), extra.begin(), extra.end());
+      std::vector<char*> argv;
+      for (std::string& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      ::execv(binary.c_str(), argv.data());
       ::_exit(127);
     }
     ::close(out[1]);
@@ -191,8 +225,15 @@ dynsolid::SessionStats Stats(dynsolid::Sessions::Stub& stub, const dynsolid::Ses
 
 // CPU seconds (user + system) a process has used so far, from
 // /proc/PID/stat (fields 14 and 15, in clock ticks).
-double CpuSeconds(pid_t pid) {
-  std::ifstream in(absl::StrCat("/proc/", pid, "/stat"));
+std::string LoadAverage() {
+  std::ifstream in("/proc/loadavg");
+  std::string a, b, c;
+  in >> a >> b >> c;
+  return absl::StrCat(a, " ", b, " ", c);
+}
+
+double CpuSecondsOf(const std::string& stat_path) {
+  std::ifstream in(stat_path);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const size_t close = text.rfind(')');
   if (close == std::string::npos) return 0;
@@ -206,6 +247,30 @@ double CpuSeconds(pid_t pid) {
   return (utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
 }
 
+double CpuSeconds(pid_t pid) { return CpuSecondsOf(absl::StrCat("/proc/", pid, "/stat")); }
+
+// Whether a server thread streams frames (the encoders and gRPC's threads).
+bool IsStreamingThread(const std::string& comm) {
+  for (const char* prefix : {"encode", "nexting", "default-exec", "grpc", "resolver", "event_engine", "timer_manager"}) {
+    if (comm.rfind(prefix, 0) == 0) return true;
+  }
+  return false;
+}
+
+// CPU seconds the server's streaming threads have used so far.
+double StreamingCpuSeconds(pid_t pid) {
+  double total = 0;
+  std::error_code ec;
+  for (const auto& task :
+       std::filesystem::directory_iterator(absl::StrCat("/proc/", pid, "/task"), ec)) {
+    std::ifstream comm_file(task.path() / "comm");
+    std::string comm;
+    std::getline(comm_file, comm);
+    if (IsStreamingThread(comm)) total += CpuSecondsOf((task.path() / "stat").string());
+  }
+  return total;
+}
+
 struct Phase {
   int watchers = 0;
   int64_t steps = 0;
@@ -213,6 +278,7 @@ struct Phase {
   double step_ms_median = 0, step_ms_p99 = 0;
   int64_t overruns = 0;
   double server_cpu = 0, bench_cpu = 0;  // CPU seconds used in the phase
+  double stream_cpu = 0;                  // of server_cpu: the streaming threads
   std::vector<WatcherResult> results;
   double rate() const { return seconds > 0 ? steps / seconds : 0; }
 };
@@ -226,11 +292,33 @@ int main(int argc, char** argv) {
   const int n_watchers = absl::GetFlag(FLAGS_watchers);
   const double hz = absl::GetFlag(FLAGS_hz);
   const auto phase_length = std::chrono::duration<double>(absl::GetFlag(FLAGS_seconds));
-  ServerProcess server(binary, std::max(n_watchers, 1), absl::GetFlag(FLAGS_server_log));
+  std::vector<std::string> extra;
+  {
+    std::istringstream in(absl::GetFlag(FLAGS_server_flags));
+    for (std::string f; in >> f;) extra.push_back(f);
+  }
+  const std::string load_before = LoadAverage();
+  ServerProcess server(binary, std::max(n_watchers, 1), absl::GetFlag(FLAGS_server_log), extra);
   if (server.address().empty()) {
     std::cerr << "watch_bench: " << binary << " did not start\n";
     return 1;
   }
+  // From here on every thread of this process inherits the lowered
+  // priority (the server was forked before). The server and the benchmark
+  // stay in one session (one scheduling autogroup), so nice values order
+  // the server's simulation, its streaming threads and these watchers.
+  if (const int nice = absl::GetFlag(FLAGS_bench_nice); nice > 0) {
+    if (::setpriority(PRIO_PROCESS, 0, std::min(19, ::getpriority(PRIO_PROCESS, 0) + nice)) != 0) {
+      std::cerr << "watch_bench: setpriority failed; the benchmark keeps its priority\n";
+    }
+  }
+  std::cout << "server flags:";
+  for (const std::string& f : extra) std::cout << " " << f;
+  std::cout << (extra.empty() ? " (defaults)" : "") << "; benchmark nice +"
+            << absl::GetFlag(FLAGS_bench_nice) << "; watchers "
+            << (absl::GetFlag(FLAGS_decode) ? "parse and decode every frame"
+                                             : "parse every frame (no decoding)")
+            << "\n";
   dc::ChannelOptions channel_options;
   channel_options.address = server.address();
   const dc::ChannelFactory channels = dc::ChannelFactoryFor(channel_options);
@@ -300,12 +388,14 @@ int main(int argc, char** argv) {
     std::vector<WatcherResult> before;
     for (auto& w : ws) before.push_back(w->Take());
     const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
+    const double stream_cpu0 = StreamingCpuSeconds(server.pid());
     const dynsolid::SessionStats s0 = Stats(*stub, ref);
     const Clock::time_point t0 = Clock::now();
     std::this_thread::sleep_for(phase_length);
     const dynsolid::SessionStats s1 = Stats(*stub, ref);
     const Clock::time_point t1 = Clock::now();
     p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
+    p.stream_cpu = StreamingCpuSeconds(server.pid()) - stream_cpu0;
     p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
     for (size_t i = 0; i < ws.size(); ++i) {
       WatcherResult a = ws[i]->Take();
@@ -335,19 +425,23 @@ int main(int argc, char** argv) {
     phases.push_back(run_phase(0));
     phases.push_back(run_phase(n_watchers));
   }
+  phases.push_back(run_phase(0));  // every watched phase between two unwatched ones
   stop_shaking = true;
   shaker.join();
   (void)commands.Close(absl::Seconds(10));
 
-  std::cout << "\n| phase | watchers | steps | seconds | steps/s | step ms median | step ms p99 "
-               "| overruns | server CPU s | server CPU ms/step | bench CPU s "
-               "| frames/watcher (min..max) | frames/s/watcher | skipped/watcher "
+  const double h = session.time_step();
+  std::cout << "\n| phase | watchers | steps | seconds | steps/s | % of real time | step ms median "
+               "| step ms p99 | overruns | server CPU s | of which streaming | server CPU ms/step | bench CPU s "
+               "| frames/watcher (min..max) | frames/s/watcher | skipped/s/watcher "
                "| keyframes | delta bytes / raw float32 | moved/delta |\n"
                "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-               "| --- | ---: | ---: | ---: | ---: | ---: |\n";
+               "| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |\n";
   double rate0 = 0, rate_n = 0;
   int n0 = 0, nn = 0;
   int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
+  int64_t frames_n = 0, skipped_n = 0;
+  double seconds_n = 0, bench_cpu_n = 0, stream_cpu_n = 0, stream_cpu0 = 0;
   for (size_t i = 0; i < phases.size(); ++i) {
     const Phase& p = phases[i];
     int64_t fmin = INT64_MAX, fmax = 0, frames = 0, skipped = 0, keys = 0, delta = 0, raw = 0,
@@ -373,40 +467,72 @@ int main(int argc, char** argv) {
     if (p.watchers == 0) {
       rate0 += p.rate();
       ++n0;
+      stream_cpu0 += p.stream_cpu;
     } else {
       rate_n += p.rate();
       ++nn;
+      frames_n += frames;
+      skipped_n += skipped;
+      seconds_n += p.seconds;
+      bench_cpu_n += p.bench_cpu;
+      stream_cpu_n += p.stream_cpu;
     }
     std::cout << absl::StrFormat(
-        "| %d | %d | %d | %.2f | %.1f | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %s | %s | %s | %d "
-        "| %s | %s |\n",
-        i + 1, p.watchers, p.steps, p.seconds, p.rate(), p.step_ms_median, p.step_ms_p99,
-        p.overruns, p.server_cpu, p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0, p.bench_cpu,
-        p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
+        "| %d | %d | %d | %.2f | %.1f | %.1f %% | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %.2f "
+        "| %s | %s | %s | %d | %s | %s |\n",
+        i + 1, p.watchers, p.steps, p.seconds, p.rate(), 100 * p.rate() * h, p.step_ms_median,
+        p.step_ms_p99, p.overruns, p.server_cpu, p.stream_cpu,
+        p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0,
+        p.bench_cpu, p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
         p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
-        p.watchers ? absl::StrFormat("%.1f", skipped / nw) : "-", keys,
+        p.watchers ? absl::StrFormat("%.1f", skipped / nw / p.seconds) : "-", keys,
         raw > 0 ? absl::StrFormat("%.1f %%", 100.0 * delta / raw) : "-",
         deltas > 0 ? absl::StrFormat("%.0f", double(moved) / deltas) : "-");
   }
   rate0 /= std::max(n0, 1);
   rate_n /= std::max(nn, 1);
+  // Paired: each watched phase against the mean of the unwatched phases
+  // just before and after it (slow changes of the machine's load cancel).
+  std::vector<double> paired;
+  for (size_t i = 1; i + 1 < phases.size(); i += 2) {
+    const double base = (phases[i - 1].rate() + phases[i + 1].rate()) / 2;
+    if (base > 0) paired.push_back(100.0 * (phases[i].rate() - base) / base);
+  }
+  std::sort(paired.begin(), paired.end());
+  std::string paired_text;
+  for (double x : paired) paired_text += absl::StrFormat(" %+.1f", x);
+  const double paired_median =
+      paired.empty() ? 0.0
+                     : (paired[(paired.size() - 1) / 2] + paired[paired.size() / 2]) / 2;
   double cpu0 = 0, cpu_n = 0;
   int64_t steps0 = 0, steps_n = 0;
   for (const Phase& p : phases) {
     (p.watchers == 0 ? cpu0 : cpu_n) += p.server_cpu;
     (p.watchers == 0 ? steps0 : steps_n) += p.steps;
   }
+  const double per_step0 = steps0 ? cpu0 / steps0 : 0.0;
+  const double frame_cpu = cpu_n - per_step0 * static_cast<double>(steps_n);
   std::cout << absl::StrFormat(
-      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers (frames "
-      "encoded and sent: %+.2f ms per step); %d cores online, shared with this benchmark's "
-      "watchers\n",
-      steps0 ? 1000 * cpu0 / steps0 : 0.0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
-      (steps_n ? 1000 * cpu_n / steps_n : 0.0) - (steps0 ? 1000 * cpu0 / steps0 : 0.0),
-      ::sysconf(_SC_NPROCESSORS_ONLN));
+      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers; server CPU "
+      "for frames: %.1f us per frame received by difference (%.3f cores), %.1f us measured on "
+      "the streaming threads (%.3f cores; %.3f s in the unwatched phases); bench CPU %.3f "
+      "cores; %d cores online; load average %s before, %s after\n",
+      1000 * per_step0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
+      frames_n ? 1e6 * frame_cpu / frames_n : 0.0, seconds_n > 0 ? frame_cpu / seconds_n : 0.0,
+      frames_n ? 1e6 * stream_cpu_n / frames_n : 0.0,
+      seconds_n > 0 ? stream_cpu_n / seconds_n : 0.0, stream_cpu0,
+      seconds_n > 0 ? bench_cpu_n / seconds_n : 0.0, ::sysconf(_SC_NPROCESSORS_ONLN), load_before,
+      LoadAverage());
+  const double nwatch = std::max(n_watchers, 1);
   std::cout << absl::StrFormat(
-      "\nsim step rate: %.1f steps/s without watchers, %.1f with %d watchers at %g Hz: "
-      "%+.2f %% (target: within 5 %%)\n",
-      rate0, rate_n, n_watchers, hz, rate0 > 0 ? 100.0 * (rate_n - rate0) / rate0 : 0.0);
+      "\nsim step rate: %.1f steps/s without watchers (%.1f %% of real time), %.1f with %d "
+      "watchers at %g Hz: %+.2f %% (target: within 5 %%); paired per round (%%, sorted):%s, "
+      "median %+.1f %%; each watcher received %.1f frames/s and missed %.1f (skipped by the "
+      "server)\n",
+      rate0, 100 * rate0 * h, rate_n, n_watchers, hz,
+      rate0 > 0 ? 100.0 * (rate_n - rate0) / rate0 : 0.0, paired_text, paired_median,
+      seconds_n > 0 ? frames_n / nwatch / seconds_n : 0.0,
+      seconds_n > 0 ? skipped_n / nwatch / seconds_n : 0.0);
   std::cout << absl::StrFormat(
       "delta frames: %d bytes for frames worth %d bytes as raw float32 positions: %.2f %% "
       "(target: <= 25 %%); keyframes: %.1f %% of raw; decode errors: %d\n",

@@ -1,6 +1,7 @@
 #include "server/server.h"
 
 #include <chrono>
+#include <thread>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -8,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "server/journal.h"
 #include "server/log.h"
+#include "server/thread_priority.h"
 
 namespace dynsolid::server {
 namespace {
@@ -58,6 +60,10 @@ absl::Status CheckOptions(const ServerOptions& o) {
   if (o.tls_cert_file.empty() != o.tls_key_file.empty()) {
     return absl::InvalidArgumentError("tls_cert and tls_key must be given together");
   }
+  if (o.stream_nice < 0 || o.stream_nice > 19) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("stream_nice must be in 0..19, got ", o.stream_nice));
+  }
   if (o.build_threads < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("build_threads must be >= 1, got ", o.build_threads));
@@ -71,41 +77,62 @@ Server::Server(const ServerOptions& options)
     : options_(options),
       registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}, options.loop,
                                 options.data_dir}),
-      builds_(options.build_threads),
-      encoders_(options.encode_threads),
+      builds_(options.build_threads, "build"),
+      encoders_(options.encode_threads, "encode", options.stream_nice, options.stream_idle),
       service_(registry_, builds_, encoders_,
                StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
   if (absl::Status s = CheckOptions(options); !s.ok()) return s;
-  std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+  std::string cert, key;
   if (!options.tls_cert_file.empty()) {
-    absl::StatusOr<std::string> cert = ReadWholeFile(options.tls_cert_file);
-    if (!cert.ok()) return cert.status();
-    absl::StatusOr<std::string> key = ReadWholeFile(options.tls_key_file);
-    if (!key.ok()) return key.status();
-    grpc::SslServerCredentialsOptions ssl;
-    ssl.pem_key_cert_pairs.push_back({*key, *cert});
-    credentials = grpc::SslServerCredentials(ssl);
+    absl::StatusOr<std::string> c = ReadWholeFile(options.tls_cert_file);
+    if (!c.ok()) return c.status();
+    absl::StatusOr<std::string> k = ReadWholeFile(options.tls_key_file);
+    if (!k.ok()) return k.status();
+    cert = *std::move(c);
+    key = *std::move(k);
   }
   if (!options.data_dir.empty()) {
     if (absl::Status s = MakeDirs(options.data_dir + "/sessions"); !s.ok()) return s;
   }
   std::unique_ptr<Server> server(new Server(options));
+  // Recovered sessions' simulation threads start here, at this thread's
+  // priority.
   server->recovered_ = server->registry_.RecoverAll();
 
-  // Both are process-wide switches read when a server is built.
-  grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  // gRPC is started from a thread of lowered priority: the threads it
+  // creates (pollers running the reactors, executor, timers) inherit it.
+  // (Threads gRPC already runs in this process, e.g. for a client made
+  // earlier, keep theirs.)
+  absl::Status nice_status;
+  std::thread starter([&] {
+    nice_status = LowerThisThreadPriority(options.stream_nice);
+    if (nice_status.ok() && options.stream_idle) nice_status = MakeThisThreadIdle();
+    std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+    if (!options.tls_cert_file.empty()) {
+      grpc::SslServerCredentialsOptions ssl;
+      ssl.pem_key_cert_pairs.push_back({key, cert});
+      credentials = grpc::SslServerCredentials(ssl);
+    }
+    // Both are process-wide switches read when a server is built.
+    grpc::EnableDefaultHealthCheckService(true);
+    grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen, credentials, &server->port_);
-  // Fail to start rather than share a port with another process.
-  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
-  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
-  builder.SetMaxSendMessageSize(options.max_message_bytes);
-  builder.RegisterService(&server->service_);
-  server->server_ = builder.BuildAndStart();
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort(options.listen, credentials, &server->port_);
+    // Fail to start rather than share a port with another process.
+    builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+    builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+    builder.SetMaxSendMessageSize(options.max_message_bytes);
+    builder.RegisterService(&server->service_);
+    server->server_ = builder.BuildAndStart();
+  });
+  starter.join();
+  if (!nice_status.ok()) {
+    ServerLog().warn("streaming threads keep the server's priority: {}",
+                     std::string(nice_status.message()));
+  }
   if (server->server_ == nullptr || server->port_ == 0) {
     server->registry_.StopAll(absl::UnavailableError("the server could not start"));
     server->builds_.Join();
@@ -117,9 +144,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
   ServerLog().info(
-      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {})",
+      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; streaming "
+      "threads at nice +{}{}; {})",
       server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
-      options.max_sessions, options.max_cells, options.max_message_bytes,
+      options.max_sessions, options.max_cells, options.max_message_bytes, options.stream_nice,
+      options.stream_idle ? ", SCHED_IDLE" : "",
       options.data_dir.empty() ? std::string("in memory")
                                : absl::StrCat("data in ", options.data_dir, ", ",
                                               server->recovered_, " sessions recovered"));

@@ -35,6 +35,18 @@ struct ServerOptions {
   int build_threads = 1;
   // Threads that encode watch frames (off the simulation threads).
   int encode_threads = 2;
+  // Added to the nice value of the streaming threads: the encoder threads
+  // and the threads gRPC starts (its pollers, which also run the reactors
+  // of every call, and its executor and timer threads; they inherit the
+  // value from the thread that starts the gRPC server). The simulation
+  // threads keep the server's priority, so on busy cores frames are
+  // skipped rather than steps. 0..19; 0: everything at one priority.
+  int stream_nice = 10;
+  // And run them under SCHED_IDLE (thread_priority.h): they get only CPU
+  // no simulation thread wants, and a waking simulation thread preempts
+  // them at once (a raised nice value alone only shrinks their share:
+  // measured, it does not keep a saturated loop's rate; server/README.md).
+  bool stream_idle = true;
   // How sessions run: watch rates, watchers per session, commands per
   // second per client, answer cache, snapshot period.
   LoopOptions loop;

@@ -8,6 +8,7 @@
 #include "absl/time/time.h"
 #include "dynsolid/journal.pb.h"
 #include "server/log.h"
+#include "server/thread_priority.h"
 
 namespace dynsolid::server {
 namespace {
@@ -212,6 +213,7 @@ void SessionLoop::Inspect(const InspectRequest& request,
 // ---- Simulation thread ----
 
 void SessionLoop::Run() {
+  NameThisThread("sim");
   using std::chrono::duration;
   const auto h = std::chrono::duration_cast<Clock::duration>(duration<double>(time_step_));
   Clock::time_point next_step{};
@@ -487,6 +489,7 @@ void SessionLoop::RecordStep(double ms) {
 // ---- Persistence thread ----
 
 void SessionLoop::Persist() {
+  NameThisThread("journal");
   for (;;) {
     PersistBatch batch;
     {

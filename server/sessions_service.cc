@@ -68,8 +68,8 @@ grpc::ServerUnaryReactor* SessionsService::CloseSession(grpc::CallbackServerCont
   return reactor;
 }
 
-grpc::ServerWriteReactor<Frame>* SessionsService::Watch(grpc::CallbackServerContext* context,
-                                                        const WatchRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* SessionsService::Watch(
+    grpc::CallbackServerContext* context, const grpc::ByteBuffer* request) {
   return StartWatch(context, request, registry_, encoders_, stream_options_);
 }
 

@@ -15,7 +15,9 @@
 
 namespace dynsolid::server {
 
-class SessionsService final : public Sessions::CallbackService {
+// Watch is a raw method (streams.h); the others are typed.
+class SessionsService final
+    : public Sessions::WithRawCallbackMethod_Watch<Sessions::CallbackService> {
  public:
   // `registry` and `builds` outlive the service and the gRPC server.
   SessionsService(SessionRegistry& registry, WorkQueue& builds, WorkQueue& encoders,
@@ -36,8 +38,8 @@ class SessionsService final : public Sessions::CallbackService {
   grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context,
                                          const SessionRef* request,
                                          google::protobuf::Empty* response) override;
-  grpc::ServerWriteReactor<Frame>* Watch(grpc::CallbackServerContext* context,
-                                         const WatchRequest* request) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
+                                                    const grpc::ByteBuffer* request) override;
   grpc::ServerBidiReactor<CommandRequest, CommandReply>* Commands(
       grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,

@@ -4,6 +4,8 @@
 #include <string>
 #include <utility>
 
+#include <grpcpp/impl/codegen/proto_utils.h>
+
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
 #include "server/finite_check.h"
@@ -17,10 +19,15 @@ namespace {
 
 // ---------------------------------------------------------------- Watch
 
+// Frees the reference a frame's slice holds on its shared bytes.
+void ReleaseBytes(void* holder) {
+  delete static_cast<std::shared_ptr<const std::string>*>(holder);
+}
+
 class WatchState final : public WatchSink, public std::enable_shared_from_this<WatchState> {
  public:
-  WatchState(grpc::ServerWriteReactor<Frame>* reactor, WorkQueue& encoders, FieldChoice fields,
-             double rate_hz, std::shared_ptr<EncodeCache> cache)
+  WatchState(grpc::ServerWriteReactor<grpc::ByteBuffer>* reactor, WorkQueue& encoders,
+             FieldChoice fields, double rate_hz, std::shared_ptr<EncodeCache> cache)
       : reactor_(reactor), encoders_(encoders), fields_(fields), rate_hz_(rate_hz),
         encoder_(fields, std::move(cache)) {}
 
@@ -146,26 +153,33 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
       if (finish) reactor_->Finish(g);
       return;
     }
-    // Only the holder of busy_ touches the encoder and frame_.
-    const bool key = encoder_.Encode(snap, &frame_);
-    frame_.set_skipped(skipped);
-    frame_.set_watcher_id(id);
+    // Only the holder of busy_ touches the encoder and buffer_. The frame
+    // body is serialized once per state (EncodeCache) and shared by
+    // reference; this watcher's own fields follow it (FrameTrailer).
+    std::shared_ptr<const EncodeCache::Result> r = encoder_.EncodeShared(snap);
+    const std::string trailer = FrameTrailer(skipped, id);
+    const std::string& body = *r->bytes;
+    grpc::Slice slices[2] = {
+        grpc::Slice(const_cast<char*>(body.data()), body.size(), &ReleaseBytes,
+                    new std::shared_ptr<const std::string>(r->bytes)),
+        grpc::Slice(trailer)};
+    buffer_ = grpc::ByteBuffer(slices, trailer.empty() ? 1 : 2);
     {
       absl::MutexLock lock(&mu_);
-      pending_key_ = key;
-      pending_bytes_ = static_cast<int64_t>(frame_.ByteSizeLong());
+      pending_key_ = r->keyframe;
+      pending_bytes_ = static_cast<int64_t>(body.size() + trailer.size());
       pending_step_ = snap->step;
       write_pending_ = true;
     }
-    reactor_->StartWrite(&frame_);
+    reactor_->StartWrite(&buffer_);
   }
 
-  grpc::ServerWriteReactor<Frame>* const reactor_;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* const reactor_;
   WorkQueue& encoders_;
   const FieldChoice fields_;
   const double rate_hz_;
   SurfaceEncoder encoder_;
-  Frame frame_;
+  grpc::ByteBuffer buffer_;  // the write in flight
 
   mutable absl::Mutex mu_;
   int64_t id_ ABSL_GUARDED_BY(mu_) = 0;
@@ -186,11 +200,17 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
   int64_t last_step_ ABSL_GUARDED_BY(mu_) = -1;
 };
 
-class WatchReactor final : public grpc::ServerWriteReactor<Frame> {
+class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
-  WatchReactor(const WatchRequest& request, SessionRegistry& registry, WorkQueue& encoders,
+  WatchReactor(const grpc::ByteBuffer& raw, SessionRegistry& registry, WorkQueue& encoders,
                const StreamOptions& options) {
-    absl::Status s = CheckFinite(request, "");
+    // The method is registered raw (frames go out as shared bytes), so the
+    // request is parsed here.
+    WatchRequest request;
+    grpc::ByteBuffer copy(raw);
+    absl::Status s = grpc::SerializationTraits<WatchRequest>::Deserialize(&copy, &request).ok()
+                         ? CheckFinite(request, "")
+                         : absl::InvalidArgumentError("WatchRequest: not a valid message");
     double rate = request.rate_hz();
     if (s.ok() && (rate < 0 || rate > options.max_watch_hz)) {
       s = absl::InvalidArgumentError(absl::StrCat("rate_hz: must be in (0, ", options.max_watch_hz,
@@ -462,10 +482,11 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
 
 }  // namespace
 
-grpc::ServerWriteReactor<Frame>* StartWatch(grpc::CallbackServerContext* context,
-                                            const WatchRequest* request,
-                                            SessionRegistry& registry, WorkQueue& encoders,
-                                            const StreamOptions& options) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* StartWatch(grpc::CallbackServerContext* context,
+                                                       const grpc::ByteBuffer* request,
+                                                       SessionRegistry& registry,
+                                                       WorkQueue& encoders,
+                                                       const StreamOptions& options) {
   (void)context;
   return new WatchReactor(*request, registry, encoders, options);
 }

@@ -23,10 +23,15 @@ struct StreamOptions {
   double max_watch_hz = 240;
 };
 
-grpc::ServerWriteReactor<Frame>* StartWatch(grpc::CallbackServerContext* context,
-                                            const WatchRequest* request,
-                                            SessionRegistry& registry, WorkQueue& encoders,
-                                            const StreamOptions& options);
+// Watch is registered as a raw method: `request` is a serialized
+// WatchRequest, and frames are written as bytes (one serialized body shared
+// by the watchers in the same state, then each watcher's own fields). On
+// the wire it is the typed method of service.proto.
+grpc::ServerWriteReactor<grpc::ByteBuffer>* StartWatch(grpc::CallbackServerContext* context,
+                                                       const grpc::ByteBuffer* request,
+                                                       SessionRegistry& registry,
+                                                       WorkQueue& encoders,
+                                                       const StreamOptions& options);
 
 grpc::ServerBidiReactor<CommandRequest, CommandReply>* StartCommands(
     grpc::CallbackServerContext* context, SessionRegistry& registry);

@@ -348,24 +348,38 @@ std::shared_ptr<EncodeCache::Result> SurfaceEncoder::Compute(const SurfaceSnapsh
   return r;
 }
 
-bool SurfaceEncoder::Encode(std::shared_ptr<const SurfaceSnapshot> s, Frame* frame) {
+std::shared_ptr<const EncodeCache::Result> SurfaceEncoder::EncodeShared(
+    std::shared_ptr<const SurfaceSnapshot> s) {
   const EncodeCache::Key key{s.get(), base_.get(), base_ != nullptr ? grid_id_ : -1,
                              fields_.displacement + 2 * fields_.strain + 4 * fields_.stiffness};
   std::shared_ptr<const EncodeCache::Result> r =
       cache_ != nullptr ? cache_->Find(key) : nullptr;
   if (r == nullptr) {
     std::shared_ptr<EncodeCache::Result> fresh = Compute(*s);
+    fresh->bytes = std::make_shared<const std::string>(fresh->frame.SerializeAsString());
     fresh->snapshot = s;
     fresh->base = base_;
     r = fresh;
     if (cache_ != nullptr) cache_->Insert(key, r);
   }
-  frame->CopyFrom(r->frame);
   grid_id_ = r->grid_id;
   grid_ = r->grid;
   codes_ = r->codes;
   base_ = std::move(s);
+  return r;
+}
+
+bool SurfaceEncoder::Encode(std::shared_ptr<const SurfaceSnapshot> s, Frame* frame) {
+  std::shared_ptr<const EncodeCache::Result> r = EncodeShared(std::move(s));
+  frame->CopyFrom(r->frame);
   return r->keyframe;
+}
+
+std::string FrameTrailer(int64_t skipped, int64_t watcher_id) {
+  Frame f;
+  f.set_skipped(skipped);
+  f.set_watcher_id(watcher_id);
+  return f.SerializeAsString();
 }
 
 absl::Status SurfaceDecoder::Apply(const Frame& frame) {

@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <deque>
@@ -90,6 +91,9 @@ class EncodeCache {
   };
   struct Result {
     Frame frame;  // step, time, body (no skipped / watcher_id)
+    // `frame` serialized once for every watcher that sends it (fields 1-4
+    // in field order; a watcher appends FrameTrailer).
+    std::shared_ptr<const std::string> bytes;
     bool keyframe = false;
     int64_t grid_id = 0;
     Grid grid;
@@ -133,6 +137,10 @@ class SurfaceEncoder {
   // previous frame this encoder produced, which the caller promises was
   // delivered (the write completed). Returns whether it is a keyframe.
   bool Encode(std::shared_ptr<const SurfaceSnapshot> snapshot, Frame* frame);
+  // The same without a copy: the shared result (frame, keyframe flag and
+  // the frame's bytes), one object for every watcher in the same state.
+  std::shared_ptr<const EncodeCache::Result> EncodeShared(
+      std::shared_ptr<const SurfaceSnapshot> snapshot);
 
  private:
   // The frame for `s` from this encoder's state; changes no member.
@@ -148,6 +156,13 @@ class SurfaceEncoder {
   Grid grid_;
   std::shared_ptr<const std::vector<uint16_t>> codes_;
 };
+
+// The per-watcher fields of a Frame (skipped = 5, watcher_id = 6) in wire
+// format. EncodeCache::Result::bytes followed by these bytes is exactly the
+// serialization of that frame with those fields set (protobuf merges
+// concatenated messages; the fields come in field-number order), so one
+// serialized body serves every watcher.
+std::string FrameTrailer(int64_t skipped, int64_t watcher_id);
 
 // Rebuilds positions from a watcher's frames.
 class SurfaceDecoder {

@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <utility>
 
+#include "server/thread_priority.h"
+
 namespace dynsolid::server {
 
-WorkQueue::WorkQueue(int threads) {
-  for (int i = 0; i < std::max(threads, 1); ++i) workers_.emplace_back([this] { Work(); });
+WorkQueue::WorkQueue(int threads, const char* name, int nice, bool idle) {
+  for (int i = 0; i < std::max(threads, 1); ++i) {
+    workers_.emplace_back([this, name, nice, idle] { Work(name, nice, idle); });
+  }
 }
 
 WorkQueue::~WorkQueue() { Join(); }
@@ -41,7 +45,11 @@ void WorkQueue::Join() {
 
 bool WorkQueue::HasWorkOrStopped() const { return stopped_ || !queue_.empty(); }
 
-void WorkQueue::Work() {
+void WorkQueue::Work(const char* name, int nice, bool idle) {
+  NameThisThread(name);
+  // Best effort: a refusal leaves the worker at its creator's priority.
+  (void)LowerThisThreadPriority(nice);
+  if (idle) (void)MakeThisThreadIdle();
   for (;;) {
     Task task;
     {

@@ -20,7 +20,11 @@ class WorkQueue {
  public:
   using Task = std::function<void(bool run)>;
 
-  explicit WorkQueue(int threads);
+  // Workers are named `name` (thread_priority.h NameThisThread); `nice`
+  // (0..19) is added to each worker's nice value when it starts; 0 leaves
+  // them at their creator's priority.
+  // With `idle` they run under SCHED_IDLE instead (MakeThisThreadIdle).
+  explicit WorkQueue(int threads, const char* name = "work", int nice = 0, bool idle = false);
   ~WorkQueue();  // Stop(), then Join()
   WorkQueue(const WorkQueue&) = delete;
   WorkQueue& operator=(const WorkQueue&) = delete;
@@ -36,7 +40,7 @@ class WorkQueue {
   void Join();
 
  private:
-  void Work();
+  void Work(const char* name, int nice, bool idle);
   bool HasWorkOrStopped() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   absl::Mutex mu_;

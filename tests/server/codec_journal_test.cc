@@ -282,6 +282,52 @@ TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGri
   EXPECT_EQ(da.Positions(), dalone.Positions());
 }
 
+TEST(SurfaceCodecTest, SharedBytesWithATrailerAreExactlyEachWatchersFrame) {
+  auto topo = GridTopology();
+  auto cache = std::make_shared<EncodeCache>();
+  SurfaceEncoder a(FieldChoice{true, false, true}, cache), b(FieldChoice{true, false, true}, cache);
+  SurfaceEncoder alone(FieldChoice{true, false, true});
+  SurfaceDecoder da, db, dalone;
+  for (int k = 0; k < 8; ++k) {
+    auto snap = Wave(topo, k, 0.2, 0.01 * k);
+    snap->displacement.assign(topo->vertex_count, 0.5f * k);
+    snap->stiffness.assign(topo->vertex_count, 1e5f);
+    std::shared_ptr<const EncodeCache::Result> ra = a.EncodeShared(snap);
+    std::shared_ptr<const EncodeCache::Result> rb = b.EncodeShared(snap);
+    Frame f;
+    const bool key = alone.Encode(snap, &f);
+    ASSERT_NE(ra->bytes, nullptr);
+    EXPECT_EQ(ra.get(), rb.get()) << "same state, one shared result, step " << k;
+    EXPECT_EQ(ra->keyframe, key) << k;
+    EXPECT_EQ(key, k == 0) << k;
+    // What two watchers with their own skipped / watcher_id get on the
+    // wire, against the frame encoded for one watcher and serialized whole.
+    for (const auto& [skipped, id] : {std::pair<int64_t, int64_t>{0, 0}, {k, 7}, {3, 1 << 20}}) {
+      const std::string wire = *ra->bytes + FrameTrailer(skipped, id);
+      Frame whole = f;
+      whole.set_skipped(skipped);
+      whole.set_watcher_id(id);
+      EXPECT_EQ(wire, whole.SerializeAsString()) << "step " << k << " skipped " << skipped;
+    }
+    Frame got_a, got_b;
+    ASSERT_TRUE(got_a.ParseFromString(*ra->bytes + FrameTrailer(k, 1)));
+    ASSERT_TRUE(got_b.ParseFromString(*rb->bytes + FrameTrailer(0, 2)));
+    EXPECT_EQ(got_a.skipped(), k);
+    EXPECT_EQ(got_a.watcher_id(), 1);
+    EXPECT_EQ(got_b.watcher_id(), 2);
+    ASSERT_TRUE(da.Apply(got_a).ok()) << k;
+    ASSERT_TRUE(db.Apply(got_b).ok()) << k;
+    ASSERT_TRUE(dalone.Apply(f).ok()) << k;
+    // Bit-identical to the watcher that encoded alone.
+    EXPECT_EQ(da.Positions(), dalone.Positions()) << k;
+    EXPECT_EQ(db.Positions(), dalone.Positions()) << k;
+    EXPECT_EQ(da.displacement(), dalone.displacement()) << k;
+    EXPECT_EQ(da.stiffness(), dalone.stiffness()) << k;
+    EXPECT_LE(WorstRatio(da, *snap), 1.0 + 1e-9) << k;
+  }
+  EXPECT_EQ(FrameTrailer(0, 0), "");
+}
+
 TEST(SurfaceCodecTest, DecoderRefusesADeltaAgainstAnotherBase) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});

@@ -1,6 +1,9 @@
 // Server pieces without a network: status mapping, tokens, the cell
 // estimate behind max_cells, request resolution, the registry and the
 // build work queue.
+#include <pthread.h>
+
+#include <algorithm>
 #include <set>
 #include <string>
 #include <thread>
@@ -9,11 +12,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "absl/synchronization/mutex.h"
 #include "absl/synchronization/notification.h"
 #include "server/grpc_status.h"
 #include "server/session_registry.h"
 #include "server/solid_builder.h"
 #include "server/tokens.h"
+#include "server/thread_priority.h"
 #include "server/work_queue.h"
 #include "solver/scene/scene_loader.h"
 #include "tests/testing/status_matchers.h"
@@ -198,6 +203,76 @@ TEST(WorkQueueTest, RunsEveryTaskOnceAndCancelsQueuedOnesOnStop) {
   release.Notify();
   queue.Join();
   EXPECT_EQ(ran.load(), 1);
+}
+
+TEST(WorkQueueTest, WorkersCarryTheirNameAndTheLoweredPriority) {
+  const int base = ThisThreadNice();
+  WorkQueue queue(2, "encode", 3);
+  absl::Mutex mu;
+  std::vector<std::pair<std::string, int>> seen;  // (thread name, nice) per task
+  for (int i = 0; i < 6; ++i) {
+    queue.Post([&](bool run) {
+      char name[16] = {};
+      pthread_getname_np(pthread_self(), name, sizeof(name));
+      absl::MutexLock lock(&mu);
+      seen.emplace_back(run ? name : "cancelled", ThisThreadNice());
+    });
+  }
+  {
+    absl::MutexLock lock(&mu);
+    mu.Await(absl::Condition(
+        +[](std::vector<std::pair<std::string, int>>* v) { return v->size() == 6; }, &seen));
+  }
+  queue.Join();
+  for (const auto& [name, nice] : seen) {
+    EXPECT_EQ(name, "encode");
+    EXPECT_EQ(nice, std::min(19, base + 3)) << "base nice " << base;
+  }
+  // The creating thread keeps its priority.
+  EXPECT_EQ(ThisThreadNice(), base);
+}
+
+TEST(ThreadPriorityTest, IdlePolicyIsPerThreadAndInherited) {
+  ASSERT_FALSE(ThisThreadIsIdle());
+  std::thread([] {
+    ASSERT_TRUE(MakeThisThreadIdle().ok());
+    EXPECT_TRUE(ThisThreadIsIdle());
+    std::thread([] { EXPECT_TRUE(ThisThreadIsIdle()); }).join();
+  }).join();
+  EXPECT_FALSE(ThisThreadIsIdle());
+  // An idle work queue: its workers, not the creator.
+  WorkQueue queue(1, "encode", 0, /*idle=*/true);
+  absl::Notification done;
+  bool idle = false;
+  queue.Post([&](bool run) {
+    idle = run && ThisThreadIsIdle();
+    done.Notify();
+  });
+  done.WaitForNotification();
+  queue.Join();
+  EXPECT_TRUE(idle);
+  EXPECT_FALSE(ThisThreadIsIdle());
+}
+
+TEST(ThreadPriorityTest, LowersOnlyTheCallingThreadWithinRange) {
+  const int base = ThisThreadNice();
+  std::thread([base] {
+    EXPECT_THAT(LowerThisThreadPriority(20),
+                StatusIs(absl::StatusCode::kInvalidArgument,
+                         "a thread's nice value can be raised by 0..19, got 20"));
+    EXPECT_THAT(LowerThisThreadPriority(-1),
+                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("got -1")));
+    EXPECT_EQ(ThisThreadNice(), base);  // refusals change nothing
+    EXPECT_TRUE(LowerThisThreadPriority(0).ok());
+    EXPECT_EQ(ThisThreadNice(), base);
+    ASSERT_TRUE(LowerThisThreadPriority(2).ok());
+    EXPECT_EQ(ThisThreadNice(), std::min(19, base + 2));
+    ASSERT_TRUE(LowerThisThreadPriority(19).ok());
+    EXPECT_EQ(ThisThreadNice(), 19);  // capped
+    // A thread started from here inherits the value.
+    std::thread([] { EXPECT_EQ(ThisThreadNice(), 19); }).join();
+  }).join();
+  EXPECT_EQ(ThisThreadNice(), base);
 }
 
 }  // namespace

@@ -409,6 +409,48 @@ TEST_F(SessionsServiceTest, ReflectionListsTheServices) {
   EXPECT_THAT(bytes, AllOf(HasSubstr("dynsolid.Sessions"), HasSubstr("grpc.health.v1.Health")));
 }
 
+// Watch is served as a raw method (shared frame bytes): a request that is
+// not a WatchRequest is refused with INVALID_ARGUMENT, and the server goes on.
+TEST_F(SessionsServiceTest, UnparsableWatchRequestIsInvalidArgument) {
+  grpc::GenericStub stub(channel_);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call =
+      stub.PrepareCall(&context, "/dynsolid.Sessions/Watch", &cq);
+  const auto await = [&cq](intptr_t n) {
+    void* tag = nullptr;
+    bool ok = false;
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    EXPECT_EQ(reinterpret_cast<intptr_t>(tag), n);
+    return ok;
+  };
+  call->StartCall(reinterpret_cast<void*>(1));
+  EXPECT_TRUE(await(1));
+  // Field 1 (session) as a length-delimited value claiming 100 bytes: truncated.
+  grpc::Slice request(std::string("\x0a\x64\x01", 3));
+  call->Write(grpc::ByteBuffer(&request, 1), reinterpret_cast<void*>(2));
+  (void)await(2);
+  call->WritesDone(reinterpret_cast<void*>(3));
+  (void)await(3);
+  grpc::ByteBuffer reply;
+  call->Read(&reply, reinterpret_cast<void*>(4));
+  EXPECT_FALSE(await(4));  // no frame
+  grpc::Status status;
+  call->Finish(&status, reinterpret_cast<void*>(5));
+  EXPECT_TRUE(await(5));
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                                   HasSubstr("WatchRequest: not a valid message")));
+  cq.Shutdown();
+  void* tag;
+  bool ok;
+  while (cq.Next(&tag, &ok)) {
+  }
+  // The server still serves.
+  Session s;
+  EXPECT_THAT(CreateBuiltin("block3", &s, 0), GrpcOk());
+}
+
 TEST_F(SessionsServiceTest, ShutdownWithOpenSessionsCompletesAndRefusesNewCalls) {
   Session s;
   ASSERT_THAT(CreateBuiltin("block3", &s, 1), GrpcOk());
@@ -457,6 +499,11 @@ TEST(ServerStartTest, BadOptionsAndUnbindableAddressesAreErrors) {
   options.listen = "127.0.0.1:0";
   options.max_sessions = 0;
   EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.max_sessions = 1;
+  options.stream_nice = 20;
+  EXPECT_EQ(Server::Start(options).status(),
+            absl::InvalidArgumentError("stream_nice must be in 0..19, got 20"));
+  options.stream_nice = 10;
 
   // A port already taken by another server.
   ServerOptions first;

@@ -1,0 +1,11 @@
+#!/bin/bash
+B=/work/wt/server/build/release/bench/watch_bench
+run() { name=$1; shift; echo "=== $name $(date +%T) load $(cat /proc/loadavg)"; $B --watchers 64 --hz 60 --seconds 2 --rounds 6 "$@" 2>&1 | grep -v "^| ---" | tail -24; }
+run old-b0 --server_binary=/tmp/dynsolid-server-old
+run new10-b0
+run new10-b19 --bench_nice=19
+run old-b19 --server_binary=/tmp/dynsolid-server-old --bench_nice=19
+run old-L1-b0 --levels 1 --server_binary=/tmp/dynsolid-server-old
+run new10-L1-b0 --levels 1
+run new10-L1-b19 --levels 1 --bench_nice=19
+echo "=== done $(date +%T) load $(cat /proc/loadavg)"

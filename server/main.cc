@@ -37,6 +37,8 @@ ABSL_FLAG(int, max_sessions, 16, "Most sessions open (or being created) at once"
 ABSL_FLAG(int, max_message_bytes, 4 << 20, "Largest gRPC message received or sent, in bytes");
 ABSL_FLAG(int64_t, max_cells, 1'000'000,
           "Most level-L cells of a session's solid (checked before building)");
+ABSL_FLAG(int, sim_threads, 0,
+          "Threads that step each session's solid (1-8; 0: all cores but one, at least one)");
 ABSL_FLAG(int, build_threads, 1, "Threads that build solids, off the gRPC threads");
 ABSL_FLAG(int, encode_threads, 2, "Threads that encode watch frames, off the simulation threads");
 ABSL_FLAG(int, stream_nice, 10,
@@ -90,6 +92,7 @@ int main(int argc, char** argv) {
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_cells = absl::GetFlag(FLAGS_max_cells);
   options.build_threads = absl::GetFlag(FLAGS_build_threads);
+  options.sim_threads = absl::GetFlag(FLAGS_sim_threads);
   options.encode_threads = absl::GetFlag(FLAGS_encode_threads);
   options.stream_nice = absl::GetFlag(FLAGS_stream_nice);
   options.stream_idle = absl::GetFlag(FLAGS_stream_idle);

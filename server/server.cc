@@ -36,6 +36,10 @@ absl::Status CheckOptions(const ServerOptions& o) {
   if (o.max_cells < 1) {
     return absl::InvalidArgumentError(absl::StrCat("max_cells must be >= 1, got ", o.max_cells));
   }
+  if (o.sim_threads < 0 || o.sim_threads > 8) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("sim_threads must be in 0-8 (0: all cores but one), got ", o.sim_threads));
+  }
   if (o.encode_threads < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("encode_threads must be >= 1, got ", o.encode_threads));
@@ -75,7 +79,7 @@ absl::Status CheckOptions(const ServerOptions& o) {
 
 Server::Server(const ServerOptions& options)
     : options_(options),
-      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells}, options.loop,
+      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells, options.sim_threads}, options.loop,
                                 options.data_dir}),
       builds_(options.build_threads, "build"),
       encoders_(options.encode_threads, "encode", options.stream_nice, options.stream_idle),
@@ -144,10 +148,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
   ServerLog().info(
-      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; streaming "
-      "threads at nice +{}{}; {})",
+      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {} stepping "
+      "threads per session; streaming threads at nice +{}{}; {})",
       server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
-      options.max_sessions, options.max_cells, options.max_message_bytes, options.stream_nice,
+      options.max_sessions, options.max_cells, options.max_message_bytes,
+      SimThreads(options.sim_threads), options.stream_nice,
       options.stream_idle ? ", SCHED_IDLE" : "",
       options.data_dir.empty() ? std::string("in memory")
                                : absl::StrCat("data in ", options.data_dir, ", ",

@@ -31,6 +31,9 @@ struct ServerOptions {
   // max_sessions * max_cells * 1.4 KB. The default admits every built-in
   // scene at 4 levels (bridge, the largest: 631k cells).
   int64_t max_cells = 1'000'000;
+  // Threads that step each session's solid (0: all cores but one, at least
+  // one; see BuildLimits::sim_threads).
+  int sim_threads = 0;
   // Threads that build solids (off the gRPC threads).
   int build_threads = 1;
   // Threads that encode watch frames (off the simulation threads).

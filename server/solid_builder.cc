@@ -1,6 +1,9 @@
 #include "server/solid_builder.h"
 
 #include <algorithm>
+#include <thread>
+
+#include <algorithm>
 #include <chrono>
 #include <utility>
 #include <vector>
@@ -134,6 +137,12 @@ int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, in
   return cells;
 }
 
+int SimThreads(int sim_threads) {
+  if (sim_threads > 0) return sim_threads;
+  const int cores = static_cast<int>(std::thread::hardware_concurrency());
+  return std::clamp(cores - 1, 1, 8);
+}
+
 absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLimits& limits) {
   const auto start = std::chrono::steady_clock::now();
   absl::StatusOr<mesh::MeshInput> control =
@@ -155,7 +164,7 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
   if (!d.ok()) return WithOrigin(d.status(), request.origin);
   SolidStats stats = ComputeStats(*d, 0);
   absl::StatusOr<std::unique_ptr<solid::Solid>> solid =
-      solid::Solid::Create(request.scene, *std::move(d));
+      solid::Solid::Create(request.scene, *std::move(d), SimThreads(limits.sim_threads));
   if (!solid.ok()) return WithOrigin(solid.status(), request.origin);
   const double ms = std::chrono::duration<double, std::milli>(
                         std::chrono::steady_clock::now() - start).count();

@@ -41,7 +41,14 @@ struct BuildLimits {
   // Largest number of level-L cells a solid may have (estimated before
   // subdividing, see EstimateFineCells).
   int64_t max_cells = 1'000'000;
+  // Threads that step each solid (Solid::Create; results do not depend on
+  // it). 0: all cores but one, at least one (the other core is left to
+  // streaming, gRPC and the journal; see server/README.md "Threads").
+  int sim_threads = 0;
 };
+
+// The stepping threads `sim_threads` stands for (0: cores - 1, at least 1).
+int SimThreads(int sim_threads);
 
 // A built solid: its dynamics (solid::Solid, for the session's simulation
 // thread only) and, sharing its lifetime, its read-only discretization.

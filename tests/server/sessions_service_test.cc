@@ -13,6 +13,7 @@
 #include "dynsolid/service.grpc.pb.h"
 #include "health.grpc.pb.h"
 #include "server/server.h"
+#include "server/solid_builder.h"
 
 namespace dynsolid::server {
 namespace {
@@ -504,6 +505,14 @@ TEST(ServerStartTest, BadOptionsAndUnbindableAddressesAreErrors) {
   EXPECT_EQ(Server::Start(options).status(),
             absl::InvalidArgumentError("stream_nice must be in 0..19, got 20"));
   options.stream_nice = 10;
+  options.sim_threads = 9;
+  EXPECT_EQ(Server::Start(options).status(),
+            absl::InvalidArgumentError("sim_threads must be in 0-8 (0: all cores but one), got 9"));
+  options.sim_threads = -1;
+  EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.sim_threads = 0;
+  EXPECT_GE(SimThreads(0), 1);
+  EXPECT_EQ(SimThreads(3), 3);
 
   // A port already taken by another server.
   ServerOptions first;

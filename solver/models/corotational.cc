@@ -5,8 +5,112 @@
 
 #include "solver/models/rotation.h"
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#define DYNSOLID_COROT_AVX2 1
+#endif
+
 namespace dynsolid::models {
 namespace {
+
+#ifdef DYNSOLID_COROT_AVX2
+// Node rows (x, y, z) as 4-lane registers with a zero fourth lane.
+inline __m256d Row(const double* base, int32_t id) {
+  return _mm256_maskload_pd(base + 3 * static_cast<int64_t>(id),
+                            _mm256_setr_epi64x(-1, -1, -1, 0));
+}
+inline double Lane(__m256d v, int k) {
+  alignas(32) double a[4];
+  _mm256_store_pd(a, v);
+  return a[k];
+}
+
+// One element's column of u, AVX2: u_i = (x_i - xbar)^T R [- (x0_i - x0bar)^T]
+// as node rows (3 doubles each, node-major), with F = sum_i x_i grad_i^T at
+// the centre when `f` is given (grad: n x 3 row-major). Sums run over the
+// nodes in order: the bits depend on the element alone.
+void ElementColumn(int n, const double* x, const double* rest, const int32_t* ids,
+                   const double* grad, bool subtract_rest, Eigen::Matrix3d* f,
+                   const Eigen::Matrix3d* r_in, Eigen::Matrix3d& r, Eigen::Quaterniond* q,
+                   int rotation_iterations, double* u) {
+  __m256d sx = _mm256_setzero_pd(), s0 = _mm256_setzero_pd();
+  __m256d f0 = _mm256_setzero_pd(), f1 = _mm256_setzero_pd(), f2 = _mm256_setzero_pd();
+  for (int i = 0; i < n; ++i) {
+    const __m256d p = Row(x, ids[i]);
+    sx = _mm256_add_pd(sx, p);
+    if (f != nullptr) {
+      f0 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i), f0);
+      f1 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 1), f1);
+      f2 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 2), f2);
+    }
+    if (subtract_rest) s0 = _mm256_add_pd(s0, Row(rest, ids[i]));
+  }
+  if (f != nullptr) {
+    for (int a = 0; a < 3; ++a) {
+      (*f)(a, 0) = Lane(f0, a);
+      (*f)(a, 1) = Lane(f1, a);
+      (*f)(a, 2) = Lane(f2, a);
+    }
+    ExtractRotation(*f, *q, rotation_iterations, &r);
+  } else {
+    r = *r_in;
+  }
+  const __m256d inv_n = _mm256_set1_pd(1.0 / n);
+  const __m256d xbar = _mm256_mul_pd(sx, inv_n), x0bar = _mm256_mul_pd(s0, inv_n);
+  // Rows of R with a zero fourth lane: u_i = dx R(0,:) + dy R(1,:) + dz R(2,:).
+  const __m256d r0 = _mm256_setr_pd(r(0, 0), r(0, 1), r(0, 2), 0);
+  const __m256d r1 = _mm256_setr_pd(r(1, 0), r(1, 1), r(1, 2), 0);
+  const __m256d r2 = _mm256_setr_pd(r(2, 0), r(2, 1), r(2, 2), 0);
+  for (int i = 0; i < n; ++i) {
+    const __m256d d = _mm256_sub_pd(Row(x, ids[i]), xbar);
+    __m256d v = _mm256_mul_pd(_mm256_permute4x64_pd(d, 0x00), r0);
+    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0x55), r1, v);
+    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0xAA), r2, v);
+    if (subtract_rest) v = _mm256_sub_pd(v, _mm256_sub_pd(Row(rest, ids[i]), x0bar));
+    if (i + 1 < n) {
+      _mm256_storeu_pd(u + 3 * i, v);  // lane 4 is node i + 1's x, written next
+    } else {
+      _mm256_maskstore_pd(u + 3 * i, _mm256_setr_epi64x(-1, -1, -1, 0), v);
+    }
+  }
+}
+
+// F = sum_i x_i grad_i^T at the centre, summed as ElementColumn sums it.
+Eigen::Matrix3d CentreGradientAvx2(int n, const double* x, const int32_t* ids,
+                                   const double* grad) {
+  __m256d f0 = _mm256_setzero_pd(), f1 = _mm256_setzero_pd(), f2 = _mm256_setzero_pd();
+  for (int i = 0; i < n; ++i) {
+    const __m256d p = Row(x, ids[i]);
+    f0 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i), f0);
+    f1 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 1), f1);
+    f2 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 2), f2);
+  }
+  Eigen::Matrix3d f;
+  for (int a = 0; a < 3; ++a) {
+    f(a, 0) = Lane(f0, a);
+    f(a, 1) = Lane(f1, a);
+    f(a, 2) = Lane(f2, a);
+  }
+  return f;
+}
+
+// g_i += R y_i for the element's nodes (y node-major). g needs one row of
+// slack past its last node (4-lane row updates; the fourth lane adds 0 to
+// the next row's x; g is the calling part's own buffer).
+void RotateBackAvx2(int n, const Eigen::Matrix3d& r, const double* y, const int32_t* ids,
+                    double* g) {
+  const __m256d c0 = _mm256_setr_pd(r(0, 0), r(1, 0), r(2, 0), 0);
+  const __m256d c1 = _mm256_setr_pd(r(0, 1), r(1, 1), r(2, 1), 0);
+  const __m256d c2 = _mm256_setr_pd(r(0, 2), r(1, 2), r(2, 2), 0);
+  for (int i = 0; i < n; ++i) {
+    __m256d v = _mm256_mul_pd(_mm256_broadcast_sd(y + 3 * i), c0);
+    v = _mm256_fmadd_pd(_mm256_broadcast_sd(y + 3 * i + 1), c1, v);
+    v = _mm256_fmadd_pd(_mm256_broadcast_sd(y + 3 * i + 2), c2, v);
+    double* o = g + 3 * static_cast<int64_t>(ids[i]);
+    _mm256_storeu_pd(o, _mm256_add_pd(_mm256_loadu_pd(o), v));
+  }
+}
+#endif
 
 // Elements per dense product (columns of the 3n x batch block).
 constexpr int32_t kBatch = 64;
@@ -93,7 +197,7 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
   const int rows = (3 * max_nodes + PackedMatrix::kPanel - 1) / PackedMatrix::kPanel *
                    PackedMatrix::kPanel;
   for (Workspace& w : work_) {
-    w.g.setZero(num_nodes_, 3);
+    w.g.setZero(num_nodes_ + 1, 3);  // one row of slack (RotateBackAvx2)
     w.u.setZero(rows, kBatch);
     w.y.setZero(rows, kBatch);
     part_buffers_.push_back(&w.g);
@@ -126,6 +230,17 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+#ifdef DYNSOLID_COROT_AVX2
+      {
+        Eigen::Matrix3d f, r_in;
+        if (update == nullptr) r_in = frames_[batch.kind][e].toRotationMatrix();
+        ElementColumn(n, x.data(), rest_.data(), ids, grp.centre_gradient.data(), subtract_rest,
+                      update != nullptr ? &f : nullptr, &r_in, rot[b],
+                      update != nullptr ? &(*update)[batch.kind][e] : nullptr,
+                      kRotationIterations, u.col(b).data());
+        continue;
+      }
+#endif
       for (int i = 0; i < n; ++i) pos.row(i) = x.row(ids[i]);
       if (update != nullptr) {
         // Deformation gradient at the centre, then its rotation R_e.
@@ -155,6 +270,10 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       w.energy += 0.5 * u.col(b).dot(y.col(b));
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+#ifdef DYNSOLID_COROT_AVX2
+      RotateBackAvx2(n, rot[b], y.col(b).data(), ids, w.g.data());
+      continue;
+#endif
       // g_i += R_e y_i: rows of y times R_e^T.
       const NodeMap yb(y.col(b).data(), n, 3);
       pos.noalias() = yb.lazyProduct(rot[b].transpose());
@@ -193,9 +312,13 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+      // As RunBatches with `update`: the same sums, the same bits.
+#ifdef DYNSOLID_COROT_AVX2
+      const Eigen::Matrix3d f = CentreGradientAvx2(n, d.data(), ids, grp.centre_gradient.data());
+#else
       for (int i = 0; i < n; ++i) pos.row(i) = d.row(ids[i]);
-      // As RunBatches with `update`: the same expression, the same bits.
       const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+#endif
       ExtractRotation(f, frames_[batch.kind][e], kRotationIterations);
     }
   }

@@ -37,6 +37,11 @@ using LogFn = std::function<void(const std::string&)>;
 // the message ("CreateSession: ...").
 absl::Status ToAbslStatus(const grpc::Status& s, absl::string_view call = "");
 
+// Stream statuses after which reconnecting cannot help, for any stream:
+// refused tokens, bad or unknown requests, methods the server lacks.
+// Callers add the codes final for their own stream.
+bool IsFinalStreamStatus(grpc::StatusCode code);
+
 inline ChannelFactory ChannelFactoryFor(ChannelOptions options) {
   return [options] { return MakeChannel(options); };
 }

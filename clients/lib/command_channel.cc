@@ -10,19 +10,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Stream statuses after which reconnecting cannot help.
+// Stream statuses after which reconnecting cannot help: the shared ones
+// and FAILED_PRECONDITION.
 bool Fatal(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::PERMISSION_DENIED:
-    case grpc::StatusCode::INVALID_ARGUMENT:
-    case grpc::StatusCode::NOT_FOUND:
-    case grpc::StatusCode::UNAUTHENTICATED:
-    case grpc::StatusCode::UNIMPLEMENTED:
-    case grpc::StatusCode::FAILED_PRECONDITION:
-      return true;
-    default:
-      return false;
-  }
+  return IsFinalStreamStatus(code) || code == grpc::StatusCode::FAILED_PRECONDITION;
 }
 
 

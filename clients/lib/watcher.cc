@@ -11,18 +11,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// Stream statuses after which reconnecting cannot help: the shared ones
+// and RESOURCE_EXHAUSTED (a server limit).
 bool Fatal(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::PERMISSION_DENIED:
-    case grpc::StatusCode::INVALID_ARGUMENT:
-    case grpc::StatusCode::NOT_FOUND:
-    case grpc::StatusCode::UNAUTHENTICATED:
-    case grpc::StatusCode::UNIMPLEMENTED:
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return true;
-    default:
-      return false;
-  }
+  return IsFinalStreamStatus(code) || code == grpc::StatusCode::RESOURCE_EXHAUSTED;
 }
 
 }  // namespace

@@ -7,6 +7,8 @@
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
+
+#include "solver/models/simd_rows.h"
 #define DYNSOLID_COROT_AVX2 1
 #endif
 
@@ -14,73 +16,21 @@ namespace dynsolid::models {
 namespace {
 
 #ifdef DYNSOLID_COROT_AVX2
-// Node rows (x, y, z) as 4-lane registers with a zero fourth lane.
-inline __m256d Row(const double* base, int32_t id) {
-  return _mm256_maskload_pd(base + 3 * static_cast<int64_t>(id),
-                            _mm256_setr_epi64x(-1, -1, -1, 0));
-}
+using simd::LoadRow;
 inline double Lane(__m256d v, int k) {
   alignas(32) double a[4];
   _mm256_store_pd(a, v);
   return a[k];
 }
 
-// One element's column of u, AVX2: u_i = (x_i - xbar)^T R [- (x0_i - x0bar)^T]
-// as node rows (3 doubles each, node-major), with F = sum_i x_i grad_i^T at
-// the centre when `f` is given (grad: n x 3 row-major). Sums run over the
-// nodes in order: the bits depend on the element alone.
-void ElementColumn(int n, const double* x, const double* rest, const int32_t* ids,
-                   const double* grad, bool subtract_rest, Eigen::Matrix3d* f,
-                   const Eigen::Matrix3d* r_in, Eigen::Matrix3d& r, Eigen::Quaterniond* q,
-                   int rotation_iterations, double* u) {
-  __m256d sx = _mm256_setzero_pd(), s0 = _mm256_setzero_pd();
-  __m256d f0 = _mm256_setzero_pd(), f1 = _mm256_setzero_pd(), f2 = _mm256_setzero_pd();
-  for (int i = 0; i < n; ++i) {
-    const __m256d p = Row(x, ids[i]);
-    sx = _mm256_add_pd(sx, p);
-    if (f != nullptr) {
-      f0 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i), f0);
-      f1 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 1), f1);
-      f2 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 2), f2);
-    }
-    if (subtract_rest) s0 = _mm256_add_pd(s0, Row(rest, ids[i]));
-  }
-  if (f != nullptr) {
-    for (int a = 0; a < 3; ++a) {
-      (*f)(a, 0) = Lane(f0, a);
-      (*f)(a, 1) = Lane(f1, a);
-      (*f)(a, 2) = Lane(f2, a);
-    }
-    ExtractRotation(*f, *q, rotation_iterations, &r);
-  } else {
-    r = *r_in;
-  }
-  const __m256d inv_n = _mm256_set1_pd(1.0 / n);
-  const __m256d xbar = _mm256_mul_pd(sx, inv_n), x0bar = _mm256_mul_pd(s0, inv_n);
-  // Rows of R with a zero fourth lane: u_i = dx R(0,:) + dy R(1,:) + dz R(2,:).
-  const __m256d r0 = _mm256_setr_pd(r(0, 0), r(0, 1), r(0, 2), 0);
-  const __m256d r1 = _mm256_setr_pd(r(1, 0), r(1, 1), r(1, 2), 0);
-  const __m256d r2 = _mm256_setr_pd(r(2, 0), r(2, 1), r(2, 2), 0);
-  for (int i = 0; i < n; ++i) {
-    const __m256d d = _mm256_sub_pd(Row(x, ids[i]), xbar);
-    __m256d v = _mm256_mul_pd(_mm256_permute4x64_pd(d, 0x00), r0);
-    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0x55), r1, v);
-    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0xAA), r2, v);
-    if (subtract_rest) v = _mm256_sub_pd(v, _mm256_sub_pd(Row(rest, ids[i]), x0bar));
-    if (i + 1 < n) {
-      _mm256_storeu_pd(u + 3 * i, v);  // lane 4 is node i + 1's x, written next
-    } else {
-      _mm256_maskstore_pd(u + 3 * i, _mm256_setr_epi64x(-1, -1, -1, 0), v);
-    }
-  }
-}
-
-// F = sum_i x_i grad_i^T at the centre, summed as ElementColumn sums it.
+// F = sum_i x_i grad_i^T at the centre (grad: n x 3 row-major), summed over
+// the nodes in order; ElementColumn and FrameBatches both use it, so their
+// frames have the same bits.
 Eigen::Matrix3d CentreGradientAvx2(int n, const double* x, const int32_t* ids,
                                    const double* grad) {
   __m256d f0 = _mm256_setzero_pd(), f1 = _mm256_setzero_pd(), f2 = _mm256_setzero_pd();
   for (int i = 0; i < n; ++i) {
-    const __m256d p = Row(x, ids[i]);
+    const __m256d p = LoadRow(x, ids[i]);
     f0 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i), f0);
     f1 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 1), f1);
     f2 = _mm256_fmadd_pd(p, _mm256_broadcast_sd(grad + 3 * i + 2), f2);
@@ -92,6 +42,43 @@ Eigen::Matrix3d CentreGradientAvx2(int n, const double* x, const int32_t* ids,
     f(a, 2) = Lane(f2, a);
   }
   return f;
+}
+
+// One element's column of u, AVX2: u_i = (x_i - xbar)^T R [- (x0_i - x0bar)^T]
+// as node rows (3 doubles each, node-major). With `q`, R is extracted from
+// F (CentreGradientAvx2) warm-started in *q; else R = *r_in. Sums run over the nodes
+// in order: the bits depend on the element alone.
+void ElementColumn(int n, const double* x, const double* rest, const int32_t* ids,
+                   const double* grad, bool subtract_rest, const Eigen::Matrix3d* r_in, Eigen::Matrix3d& r, Eigen::Quaterniond* q,
+                   int rotation_iterations, double* u) {
+  __m256d sx = _mm256_setzero_pd(), s0 = _mm256_setzero_pd();
+  for (int i = 0; i < n; ++i) {
+    sx = _mm256_add_pd(sx, LoadRow(x, ids[i]));
+    if (subtract_rest) s0 = _mm256_add_pd(s0, LoadRow(rest, ids[i]));
+  }
+  if (q != nullptr) {
+    ExtractRotation(CentreGradientAvx2(n, x, ids, grad), *q, rotation_iterations, &r);
+  } else {
+    r = *r_in;
+  }
+  const __m256d inv_n = _mm256_set1_pd(1.0 / n);
+  const __m256d xbar = _mm256_mul_pd(sx, inv_n), x0bar = _mm256_mul_pd(s0, inv_n);
+  // Rows of R with a zero fourth lane: u_i = dx R(0,:) + dy R(1,:) + dz R(2,:).
+  const __m256d r0 = _mm256_setr_pd(r(0, 0), r(0, 1), r(0, 2), 0);
+  const __m256d r1 = _mm256_setr_pd(r(1, 0), r(1, 1), r(1, 2), 0);
+  const __m256d r2 = _mm256_setr_pd(r(2, 0), r(2, 1), r(2, 2), 0);
+  for (int i = 0; i < n; ++i) {
+    const __m256d d = _mm256_sub_pd(LoadRow(x, ids[i]), xbar);
+    __m256d v = _mm256_mul_pd(_mm256_permute4x64_pd(d, 0x00), r0);
+    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0x55), r1, v);
+    v = _mm256_fmadd_pd(_mm256_permute4x64_pd(d, 0xAA), r2, v);
+    if (subtract_rest) v = _mm256_sub_pd(v, _mm256_sub_pd(LoadRow(rest, ids[i]), x0bar));
+    if (i + 1 < n) {
+      _mm256_storeu_pd(u + 3 * i, v);  // lane 4 is node i + 1's x, written next
+    } else {
+      _mm256_maskstore_pd(u + 3 * i, _mm256_setr_epi64x(-1, -1, -1, 0), v);
+    }
+  }
 }
 
 // g_i += R y_i for the element's nodes (y node-major). g needs one row of
@@ -232,10 +219,10 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       const int32_t* ids = block.element_nodes(e);
 #ifdef DYNSOLID_COROT_AVX2
       {
-        Eigen::Matrix3d f, r_in;
+        Eigen::Matrix3d r_in;
         if (update == nullptr) r_in = frames_[batch.kind][e].toRotationMatrix();
         ElementColumn(n, x.data(), rest_.data(), ids, grp.centre_gradient.data(), subtract_rest,
-                      update != nullptr ? &f : nullptr, &r_in, rot[b],
+                      &r_in, rot[b],
                       update != nullptr ? &(*update)[batch.kind][e] : nullptr,
                       kRotationIterations, u.col(b).data());
         continue;

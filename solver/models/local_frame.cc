@@ -7,6 +7,8 @@
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
+
+#include "solver/models/simd_rows.h"
 #define DYNSOLID_LF_AVX2 1
 #endif
 
@@ -125,10 +127,7 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
 // lane) and transposed in registers, so no scalar copies go through the
 // stack. F's terms are summed per lane over nodes i = 4 t + lane, then the
 // lanes added in a fixed order: the bits depend on the element alone.
-inline __m256d LoadRow(const double* base, int32_t id) {
-  const __m256i mask = _mm256_setr_epi64x(-1, -1, -1, 0);
-  return _mm256_maskload_pd(base + 3 * static_cast<int64_t>(id), mask);
-}
+using simd::LoadRow;
 
 // Rows r0..r3 (x, y, z, 0) to columns x, y, z over the four nodes.
 inline void Transpose3(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x, __m256d& y,

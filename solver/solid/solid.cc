@@ -381,57 +381,6 @@ struct MaterialBuild {
 
 }  // namespace
 
-// out = a x for a row-major sparse a, rows split over the pool's threads by
-// nonzeros. Every row is summed in its own nonzero order whatever the
-// split, so the bits do not depend on the number of threads.
-class RowSplitProduct {
- public:
-  void Apply(const SparseMatrix& a, const Points& x, Points& out, WorkerPool& pool) {
-    const int threads = pool.size();
-    if (bounds_.size() != static_cast<size_t>(threads) + 1 || bounds_.back() != a.rows() ||
-        nnz_ != a.nonZeros()) {
-      Split(a, threads);
-    }
-    out.resize(a.rows(), 3);
-    const int32_t* outer = a.outerIndexPtr();
-    const int32_t* inner = a.innerIndexPtr();
-    const double* val = a.valuePtr();
-    const double* px = x.data();
-    double* po = out.data();
-    pool.Run([&](int t) {
-      for (int32_t r = bounds_[t]; r < bounds_[t + 1]; ++r) {
-        double sx = 0, sy = 0, sz = 0;
-        for (int32_t q = outer[r]; q < outer[r + 1]; ++q) {
-          const double* row = px + 3 * static_cast<int64_t>(inner[q]);
-          sx += val[q] * row[0];
-          sy += val[q] * row[1];
-          sz += val[q] * row[2];
-        }
-        po[3 * static_cast<int64_t>(r)] = sx;
-        po[3 * static_cast<int64_t>(r) + 1] = sy;
-        po[3 * static_cast<int64_t>(r) + 2] = sz;
-      }
-    });
-  }
-
- private:
-  // Row ranges of about equal nonzeros, one per thread.
-  void Split(const SparseMatrix& a, int threads) {
-    nnz_ = a.nonZeros();
-    const int32_t* outer = a.outerIndexPtr();
-    bounds_.assign(1, 0);
-    for (int t = 1; t < threads; ++t) {
-      const int64_t target = nnz_ * t / threads;
-      const int32_t row =
-          static_cast<int32_t>(std::lower_bound(outer, outer + a.rows() + 1, target) - outer);
-      bounds_.push_back(std::clamp(row, bounds_.back(), static_cast<int32_t>(a.rows())));
-    }
-    bounds_.push_back(static_cast<int32_t>(a.rows()));
-  }
-  std::vector<int32_t> bounds_;
-  int64_t nnz_ = -1;
-};
-
 struct Solid::Impl {
   scene::Discretization* d = nullptr;
   SolverSettings settings;
@@ -478,10 +427,6 @@ struct Solid::Impl {
   std::vector<uint8_t> omega_fixed;
   // Per-step buffers.
   Points nodes, g, f, p_next, backup_p, backup_prev;
-  // d = A p and A^T g for the force passes, split over the pool (A^T kept
-  // row-major: its rows are the control points; set with d in Create).
-  SparseMatrix node_matrix_t;
-  RowSplitProduct to_nodes, to_control;
   double last_strain_energy = 0;
   const Solid::Surface* surface = nullptr;  // the solid's boundary surface
   std::pair<uint64_t, uint64_t> fingerprint;
@@ -827,7 +772,7 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
 void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases,
                                 Points& pressure) {
   auto t0 = Clock::now();
-  to_nodes.Apply(d->node_matrix, p, nodes, *pool);
+  nodes.noalias() = d->node_matrix * p;
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   last_strain_energy = model->Forces(nodes, g);
@@ -836,7 +781,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   phases.measure = timing.measure_ms;
   phases.stiffness = timing.elements_ms;
   t0 = Clock::now();
-  to_control.Apply(node_matrix_t, g, out, *pool);
+  out.noalias() = d->node_matrix.transpose() * g;
   out = -out;
   phases.project = MsSince(t0);
   if (has_const_force || !spring_point.empty() || has_pressure) {
@@ -1277,7 +1222,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   im.rest_nodes = s->d_.node_matrix * im.rest_control;
   const Points& rest = im.rest_nodes;
   im.pool = std::make_unique<WorkerPool>(threads > 0 ? threads : BuildThreads());
-  im.node_matrix_t = s->d_.node_matrix.transpose();
 
   // Materials: base, then painted regions in order.
   const models::MaterialPoint base = ToPoint(scene.materials().base());

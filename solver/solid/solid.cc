@@ -513,6 +513,17 @@ struct Solid::Impl {
   std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const {
     return StiffnessTriplets(d->node_matrix, *layout, *corotational, spring_point, spring_k);
   }
+  // The same as a 3 #control square sparse matrix (K0 of the implicit
+  // preconditioner) for layout `l` and its model `m`.
+  Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
+                                              const models::CorotationalModel& m) const {
+    const std::vector<Eigen::Triplet<double, int32_t>> t =
+        StiffnessTriplets(d->node_matrix, l, m, spring_point, spring_k);
+    const Eigen::Index dofs = 3 * d->node_matrix.cols();
+    Eigen::SparseMatrix<double> k(dofs, dofs);
+    k.setFromTriplets(t.begin(), t.end());
+    return k;
+  }
   Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
 
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
@@ -1365,9 +1376,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     };
   }
   if (im.use_implicit) {
-    const std::vector<Eigen::Triplet<double, int32_t>> t = im.StiffnessTriplets();
-    im.k0.resize(3 * nc, 3 * nc);
-    im.k0.setFromTriplets(t.begin(), t.end());
+    im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational);
   }
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -1988,11 +1997,7 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
   }
   Eigen::SparseMatrix<double> k0;
   if (im.use_implicit) {
-    const std::vector<Eigen::Triplet<double, int32_t>> t = Impl::StiffnessTriplets(
-        d_.node_matrix, *build.layout, *build.corotational, im.spring_point, im.spring_k);
-    const int64_t nc = p_.rows();
-    k0.resize(3 * nc, 3 * nc);
-    k0.setFromTriplets(t.begin(), t.end());
+    k0 = im.StiffnessMatrix(*build.layout, *build.corotational);
   }
   // Nothing can fail from here on.
   build.model->set_frames(im.model->frames());
@@ -2302,10 +2307,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
     }
     ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
     if (im.use_implicit) {
-      const std::vector<Eigen::Triplet<double, int32_t>> t = Impl::StiffnessTriplets(
-          d_.node_matrix, *build->layout, *build->corotational, im.spring_point, im.spring_k);
-      k0.resize(3 * nc, 3 * nc);
-      k0.setFromTriplets(t.begin(), t.end());
+      k0 = im.StiffnessMatrix(*build->layout, *build->corotational);
     }
   }
 

@@ -1,5 +1,7 @@
 #include "solver/integrators/backward_euler.h"
 
+#include <algorithm>
+#include <cassert>
 #include <cmath>
 
 #include <Eigen/SparseCholesky>
@@ -62,7 +64,31 @@ void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double
   const int64_t n = mt->rows();
   fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
   pre_.Setup(md_, fixed_, Preconditioner::kIncompleteCholesky);
-  for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_, &kx_}) m->setZero(n, 3);
+  for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_, &kx_, &c_}) m->setZero(n, 3);
+  ResetWarmStart();
+}
+
+void BackwardEuler::ResetWarmStart() {
+  const int64_t n = md_.rows();
+  history_.last.setZero(n, 3);
+  history_.before.setZero(n, 3);
+  history_.steps = 0;
+}
+
+void BackwardEuler::set_history(History h) {
+  assert(h.last.rows() == md_.rows() && h.before.rows() == md_.rows());
+  assert(h.steps >= 0 && h.steps <= 2);
+  Mask(h.last);
+  Mask(h.before);
+  history_ = std::move(h);
+}
+
+void BackwardEuler::WarmStart() {
+  switch (history_.steps) {
+    case 0: x_.setZero(); break;
+    case 1: x_ = history_.last; break;
+    default: x_ = 2.0 * history_.last - history_.before; break;
+  }
 }
 
 void BackwardEuler::Mask(Points& m) const {
@@ -83,9 +109,14 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points&
                             int max_iterations) {
   v_ = (p - p_prev) / h_;
   Mask(v_);
-  // rhs = h (F - h Kt v - Dt v).
+  WarmStart();
+  // rhs = h (F - h Kt v - Dt v) - h^2 Kt dv0; r0 = rhs - (Mt + h Dt) dv0.
   kt(v_, tmp_);
   rhs_ = h_ * (force - h_ * tmp_);
+  if (!x_.isZero(0)) {
+    kt(x_, tmp_);
+    rhs_ -= (h_ * h_) * tmp_;
+  }
   return Solve(p, kt, p_next, tolerance, max_iterations);
 }
 
@@ -94,8 +125,10 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const ForceAh
                             int max_iterations) {
   v_ = (p - p_prev) / h_;
   Mask(v_);
-  // rhs = h (F - h Kt v - Dt v), F - h Kt v in one evaluation.
-  force_ahead(v_, tmp_);
+  WarmStart();
+  // rhs = h (F - h Kt (v + dv0) - Dt v) in one evaluation.
+  z_ = v_ + x_;
+  force_ahead(z_, tmp_);
   rhs_ = h_ * tmp_;
   return Solve(p, kt, p_next, tolerance, max_iterations);
 }
@@ -108,22 +141,41 @@ CgStats BackwardEuler::Solve(const Points& p, const StiffnessOperator& kt, Point
     rhs_ -= h_ * z_;
   }
   Mask(rhs_);
-  const double bnorm = std::sqrt(rhs_.squaredNorm());
-  x_.setZero();
-  kx_.setZero();
   r_ = rhs_;
+  r_.noalias() -= md_ * x_;
+  Mask(r_);
+  double rr = r_.squaredNorm();
+  // The stopping test's scale (see the header).
+  double bnorm = std::sqrt(rhs_.squaredNorm());
+  c_.setZero();
+  kx_.setZero();
+  if (rr > kTrustedStart * kTrustedStart * bnorm * bnorm && !x_.isZero(0)) {
+    // A poor warm start (an abrupt change): b = r0 + S dv0 exactly, one
+    // element pass, and the better of dv0 and zero to start from.
+    ++rechecked_starts_;
+    Apply(kt, x_, q_);  // S dv0; Kt dv0 in tmp_
+    z_ = r_ + q_;
+    const double bb = z_.squaredNorm();
+    if (rr >= bb) {  // zero is the better start: c = dv - dv0 from -dv0
+      c_ = -x_;
+      kx_ = -tmp_;
+      r_ = z_;  // x_ + c_ is zero
+      rr = bb;
+    }
+    bnorm = std::sqrt(bb);
+  }
+  if (bnorm == 0) bnorm = std::sqrt(rr);  // measured against itself
   int it = 0;
-  double rr = rhs_.squaredNorm();
-  if (bnorm > 0) {
+  if (rr > tolerance * tolerance * bnorm * bnorm) {
     Precondition(r_, z_);
     p_ = z_;
     double rz = (r_.array() * z_.array()).sum();
-    for (; it < max_iterations && std::sqrt(rr) > tolerance * bnorm; ++it) {
+    for (; it < max_iterations; ++it) {
       Apply(kt, p_, q_);
       const double pq = (p_.array() * q_.array()).sum();
       if (pq <= 0) break;
       const double alpha = rz / pq;
-      x_ += alpha * p_;
+      c_ += alpha * p_;
       kx_ += alpha * tmp_;  // Apply left Kt p_ in tmp_
       r_ -= alpha * q_;
       rr = r_.squaredNorm();
@@ -137,10 +189,14 @@ CgStats BackwardEuler::Solve(const Points& p, const StiffnessOperator& kt, Point
       rz = rz_new;
     }
   }
+  x_ += c_;
   stats.iterations = it;
   stats.max_iterations = it;
   stats.relative_residual = bnorm > 0 ? std::sqrt(rr) / bnorm : 0.0;
   stats.converged = stats.relative_residual <= tolerance;
+  history_.before.swap(history_.last);
+  history_.last = x_;
+  history_.steps = std::min(history_.steps + 1, 2);
   // v' = v + dv, p' = p + h v'.
   p_next = p + h_ * (v_ + x_);
   for (int64_t i = 0; i < p.rows(); ++i) {

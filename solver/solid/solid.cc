@@ -395,8 +395,9 @@ struct Solid::Impl {
   models::CorotationalModel* corotational = nullptr;  // == model when corotational
   Points x_nodes, kx_nodes;
   integrators::BackwardEuler::StiffnessOperator stiffness_op;
-  // Backward Euler's folded right-hand side (the default): F - h Kt v =
-  // f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v, one element pass
+  // Backward Euler's folded right-hand side (the default): F - h Kt w =
+  // f_ext(p) - A^T g_R(A (p + h w)) - springs at p + h w (w = v + dv0, the
+  // velocity plus the CG's warm start), one element pass
   // with the frames of p (Advance). `f` then holds the external
   // forces f_ext(p) only (point forces, gravity, pressure at p). With
   // implicit_two_pass (tests: the reference path) `f` holds F as for the
@@ -404,8 +405,8 @@ struct Solid::Impl {
   bool implicit_two_pass = false;
   integrators::BackwardEuler::ForceAhead force_ahead;
   const Points* ahead_from = nullptr;  // p of the step in progress
-  Points ahead, g_ahead;               // p + h v; A^T g_R(A (p + h v))
-  double ahead_energy = 0;             // E_R(p + h v), J
+  Points ahead, g_ahead;               // a = p + h w; A^T g_R(A a)
+  double ahead_energy = 0;             // E_R(a), J
   double ahead_ms = 0;
   int64_t element_passes = 0, frame_passes = 0;  // counters for StepStats
   std::vector<uint8_t> fixed;
@@ -905,18 +906,20 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     // Forces (and strain energy) at the new state, reused by the next sub-step.
     if (Folded()) {
       // E_R is quadratic in p with gradient A^T g_R and Hessian Kt (frames of
-      // p held): from p + h v to p_next = p + h v + h dv,
-      //   E_R(p_next) = E_R(p + h v) + h dv . A^T g_R(A (p + h v)) + h^2/2 dv . Kt dv,
-      // Kt dv from the CG's own products less the penalty springs (their
+      // p held). The folded force was evaluated at a = p + h (v + dv0) (dv0
+      // the warm start); p_next = a + h c with c = dv - dv0 the CG's
+      // correction:
+      //   E_R(p_next) = E_R(a) + h c . A^T g_R(A a) + h^2/2 c . Kt c,
+      // Kt c from the CG's own products less the penalty springs (their
       // energy is counted apart). The strain energy of the new state in the
       // frames its step was linearized in: no element pass.
-      const Points& dv = implicit.last_dv();
-      double quad = (dv.array() * implicit.last_kt_dv().array()).sum();
+      const Points& c = implicit.last_correction();
+      double quad = (c.array() * implicit.last_kt_correction().array()).sum();
       for (size_t s = 0; s < spring_point.size(); ++s) {
-        quad -= spring_k[s] * dv.row(spring_point[s]).squaredNorm();
+        quad -= spring_k[s] * c.row(spring_point[s]).squaredNorm();
       }
       const double hs = implicit.h();
-      const double strain = ahead_energy + hs * (dv.array() * g_ahead.array()).sum() +
+      const double strain = ahead_energy + hs * (c.array() * g_ahead.array()).sum() +
                             0.5 * hs * hs * quad;
       ImplicitForces(p_next, f_next, sub, f_press_next, /*energy=*/false);
       last_strain_energy = strain;
@@ -1357,8 +1360,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
       }
     };
-    // F - h Kt v = f_ext(p) - A^T g_R(A (p + h v)) - springs at p + h v (the
-    // frames of p held: g_R and the springs are affine in the positions).
+    // F - h Kt w = f_ext(p) - A^T g_R(A (p + h w)) - springs at p + h w (the
+    // frames of p held: g_R and the springs are affine in the positions);
+    // w = v + dv0, the velocity plus the warm start.
     im.force_ahead = [ip](const Points& v, Points& out) {
       const auto t0 = Clock::now();
       const Points& p = *ip->ahead_from;
@@ -1425,10 +1429,13 @@ absl::Status Solid::Step() {
   const Impl::Ledger ledger_at_start = im.ledger;
   const bool rebase_at_start = im.ledger_rebase;
   const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
+  const int64_t rechecks_at_start = im.implicit.rechecked_starts();
   for (int attempt = 0;; ++attempt) {
     const absl::Status st = im.Advance(p_, p_prev_, stats, phases_);
     stats.element_passes = static_cast<int32_t>(im.element_passes - passes_at_start);
     stats.frame_passes = static_cast<int32_t>(im.frame_passes - frames_at_start);
+    stats.warm_start_rechecks =
+        static_cast<int32_t>(im.implicit.rechecked_starts() - rechecks_at_start);
     if (st.ok()) break;
     // Stability guard: back to the step's start, halve the sub-step, retry.
     p_ = im.backup_p;
@@ -1465,6 +1472,7 @@ void Solid::SetAtRest(const Points& p) {
   }
   p_prev_ = p_;
   im.model->ResetFrames();
+  if (im.use_implicit) im.implicit.ResetWarmStart();
   im.forces_valid = false;
   im.ledger = Impl::Ledger();
   im.ledger.started = true;
@@ -2049,6 +2057,13 @@ std::string Solid::SaveState() const {
   w.Put<uint8_t>(im.has_pressure);
   if (im.has_pressure) w.Matrix(im.f_press);
   w.Matrix(im.hold);
+  w.Put<uint8_t>(im.use_implicit);
+  if (im.use_implicit) {
+    const integrators::BackwardEuler::History& warm = im.implicit.history();
+    w.Put<int32_t>(warm.steps);
+    w.Matrix(warm.last);
+    w.Matrix(warm.before);
+  }
   w.Bytes(std::string_view(reinterpret_cast<const char*>(im.omega_fixed.data()),
                            im.omega_fixed.size()));
   w.Put<int64_t>(im.next_id);
@@ -2149,6 +2164,20 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   Points f_press;
   if (saved_pressure) f_press = r.Matrix("pressure forces", nc);
   Points hold = r.Matrix("held positions", nc);
+  const bool saved_implicit = r.Get<uint8_t>("implicit flag") != 0;
+  if (r.ok() && saved_implicit != im.use_implicit) {
+    r.Fail(absl::StrCat("saved with ", saved_implicit ? "backward Euler" : "central difference",
+                        ", this solid steps with the other integrator"));
+  }
+  integrators::BackwardEuler::History warm;
+  if (saved_implicit) {
+    warm.steps = r.Get<int32_t>("backward Euler warm start");
+    warm.last = r.Matrix("backward Euler warm start", nc);
+    warm.before = r.Matrix("backward Euler warm start", nc);
+    if (r.ok() && (warm.steps < 0 || warm.steps > 2)) {
+      r.Fail(absl::StrCat("backward Euler warm start over ", warm.steps, " steps (0 to 2)"));
+    }
+  }
   const std::string omega_fixed_bytes = r.Bytes("stable-step fixed set");
   if (r.ok() && static_cast<int64_t>(omega_fixed_bytes.size()) != nc) {
     r.Fail(absl::StrCat("stable-step fixed set: ", omega_fixed_bytes.size(), " entries, expected ",
@@ -2334,6 +2363,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   im.stable_step = stable;
   for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
   im.SetSubsteps(substeps, h_);
+  if (im.use_implicit) im.implicit.set_history(std::move(warm));  // checked above
   p_ = std::move(p);
   p_prev_ = std::move(p_prev);
   im.f = std::move(f);

@@ -75,6 +75,9 @@ struct StepStats {
   // (the implicit step's UpdateFrames) apart.
   int32_t element_passes = 0;
   int32_t frame_passes = 0;
+  // Backward Euler steps whose CG warm start was checked against the exact
+  // right-hand side (one Kt product each; see integrators/backward_euler.h).
+  int32_t warm_start_rechecks = 0;
 };
 
 struct Energies {
@@ -255,8 +258,9 @@ class Solid {
   // future steps: p, p_prev, time, steps, sub-step count and stable-step
   // estimate, rollback counter, the forces and energy carried to the next
   // step, the energy ledger, the element frames (warm starts), loads,
-  // constraints and held positions, material samples, the id counter.
-  // (CG keeps no state between solves: it is warm-started from p, p_prev.)
+  // constraints and held positions, material samples, the id counter, and
+  // backward Euler's CG warm start (the last step's velocity change). (The
+  // explicit scheme's CG keeps no state: it is warm-started from p, p_prev.)
   // RestoreState() into a Solid freshly Created from the SAME scene and
   // discretization continues bit-identically. Format: "DSOLIDST", format
   // version (kStateFormatVersion), a 128-bit fingerprint of the scene and
@@ -264,7 +268,7 @@ class Solid {
   // Errors (the state is then unchanged): InvalidArgument for another
   // format, version or scene/discretization (fingerprint mismatch);
   // DataLoss for truncated or corrupted bytes.
-  static constexpr uint32_t kStateFormatVersion = 1;
+  static constexpr uint32_t kStateFormatVersion = 2;  // 2: backward Euler's warm start
   std::string SaveState() const;
   absl::Status RestoreState(std::string_view bytes);
 

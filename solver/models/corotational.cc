@@ -180,14 +180,32 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
   for (const ElementBlock& block : layout.blocks) {
     if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
   }
-  // Rows rounded up to the packed matrices' panel height.
-  const int rows = (3 * max_nodes + PackedMatrix::kPanel - 1) / PackedMatrix::kPanel *
-                   PackedMatrix::kPanel;
+  // Rows rounded up to the packed matrices' panel heights (8 and 16).
+  static_assert(PackedMatrixF::kPanel % PackedMatrix::kPanel == 0);
+  const int rows = (3 * max_nodes + PackedMatrixF::kPanel - 1) / PackedMatrixF::kPanel *
+                   PackedMatrixF::kPanel;
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_ + 1, 3);  // one row of slack (RotateBackAvx2)
     w.u.setZero(rows, kBatch);
     w.y.setZero(rows, kBatch);
     part_buffers_.push_back(&w.g);
+  }
+}
+
+void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
+  single_ = on;
+  for (int kind = 0; kind < 3; ++kind) {
+    packed_f_[kind].clear();
+    if (on) {
+      for (const PackedMatrix& k : packed_[kind]) packed_f_[kind].emplace_back(k);
+    }
+  }
+  for (Workspace& w : work_) {
+    if (on) {
+      w.uf.setZero(w.u.rows(), w.u.cols());
+    } else {
+      w.uf.resize(0, 0);
+    }
   }
 }
 
@@ -250,9 +268,19 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
         ub -= x0;
       }
     }
-    // y = K u (K pre-packed; rows padded to the panel height).
-    packed_[batch.kind][batch.group].Apply(w.u.data(), static_cast<int>(w.u.rows()), batch.count,
-                                           w.y.data(), static_cast<int>(w.y.rows()));
+    // y = K u (K pre-packed; rows padded to the panel height), in float
+    // for ApplyLinearized when asked.
+    if (!subtract_rest && single_) {
+      auto uf = w.uf.topLeftCorner(m, batch.count);
+      uf = u.cast<float>();
+      packed_f_[batch.kind][batch.group].Apply(w.uf.data(), static_cast<int>(w.uf.rows()),
+                                               batch.count, w.y.data(),
+                                               static_cast<int>(w.y.rows()));
+    } else {
+      packed_[batch.kind][batch.group].Apply(w.u.data(), static_cast<int>(w.u.rows()),
+                                             batch.count, w.y.data(),
+                                             static_cast<int>(w.y.rows()));
+    }
     for (int32_t b = 0; b < batch.count; ++b) {
       w.energy += 0.5 * u.col(b).dot(y.col(b));
       const int32_t e = block.by_group[batch.first + b];
@@ -359,6 +387,8 @@ void CorotationalModel::SumParts(Points& out) const {
 int64_t CorotationalModel::shared_matrix_bytes() const {
   int64_t bytes = 0;
   for (const auto& kind : packed_)
+    for (const auto& m : kind) bytes += m.bytes();
+  for (const auto& kind : packed_f_)
     for (const auto& m : kind) bytes += m.bytes();
   return bytes;
 }

@@ -49,4 +49,35 @@ class PackedMatrix {
   std::vector<double, Eigen::aligned_allocator<double>> data_;
 };
 
+// K in single precision, for products whose result only steers an
+// iteration (backward Euler's CG: the right-hand side and the residual it
+// starts from stay in double; see integrators/backward_euler.h): half the
+// bytes, twice the lanes. Panels of 16 rows; the 16 x 6 micro-kernel keeps
+// 12 AVX2 registers of 8 floats, runs float fma chains over k in ascending
+// order (bits independent of the batch, as PackedMatrix) and widens each
+// result to double as it stores it. X is float (its columns rounded from
+// double by the caller), Y double.
+class PackedMatrixF {
+ public:
+  PackedMatrixF() = default;
+  // K rounded to float entry by entry.
+  explicit PackedMatrixF(const PackedMatrix& k);
+
+  int rows() const { return rows_; }
+  int cols() const { return cols_; }
+  int padded_rows() const { return panels_ * kPanel; }
+  int64_t bytes() const { return static_cast<int64_t>(data_.size()) * 4; }
+
+  // Y(0 : padded_rows, 0 : count) = K X(0 : cols, 0 : count), accumulated
+  // in float. Rows past rows() come out zero.
+  void Apply(const float* x, int ldx, int count, double* y, int ldy) const;
+
+  static constexpr int kPanel = 16;
+
+ private:
+  int rows_ = 0, cols_ = 0, panels_ = 0;
+  // Panel p, column j, row r (0..15): data_[(p * cols_ + j) * 16 + r].
+  std::vector<float, Eigen::aligned_allocator<float>> data_;
+};
+
 }  // namespace dynsolid::models

@@ -37,6 +37,16 @@ namespace {
 using SparseMatrix = subdivision::SparseMatrix;
 using Clock = std::chrono::steady_clock;
 
+// Backward Euler's CG products run in single precision at this tolerance or
+// looser. A float product errs by about 1e-6 relative (element columns and K
+// rounded to float, sums of 192 terms); it only steers the CG: the
+// right-hand side and the residual CG starts from (the folded element pass)
+// are double, and the warm start leaves CG a correction of about 1/200 of
+// the right-hand side, so the product's error reaches the true residual
+// scaled down again (iterative refinement). tests/solid/solid_implicit_test
+// runs it against double products.
+constexpr double kSinglePrecisionCgTolerance = 1e-5;
+
 double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -571,6 +581,11 @@ struct Solid::Impl {
   bool SameMassAndDamping(const models::ElementLayout& l) const;
   bool paint_reuse = true;  // tests turn it off for a from-scratch reference
   void InstallMaterial(MaterialBuild b);
+  // Backward Euler's CG products in single precision when the tolerance
+  // allows (kSinglePrecisionCgTolerance); after the model or use_implicit
+  // changes.
+  void ConfigureLinearized();
+  bool double_cg = false;  // SetDoublePrecisionCgForTesting
   int SubstepsFor(double omega) const;
   // Loads from the lists (in id order), from scratch: f_const (point forces
   // then gravity) and the per-quad pressure.
@@ -1045,6 +1060,13 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   mt = std::move(b.mt);
   dt = std::move(b.dt);
   has_damping = b.has_damping;
+  ConfigureLinearized();
+}
+
+void Solid::Impl::ConfigureLinearized() {
+  if (corotational == nullptr) return;
+  corotational->SetSinglePrecisionLinearized(
+      use_implicit && !double_cg && settings.cg_tolerance() >= kSinglePrecisionCgTolerance);
 }
 
 int Solid::Impl::SubstepsFor(double omega) const {
@@ -1346,6 +1368,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       (im.settings.integrator() == SolverSettings::AUTO && im.corotational != nullptr &&
        im.substeps > kAutoImplicitSubsteps);
   rep.implicit = im.use_implicit;
+  im.ConfigureLinearized();
+  s->ReportMaterial();  // the float copies, when made
   if (im.use_implicit) {
     im.substeps = 1;
     im.x_nodes.setZero(rest.rows(), 3);
@@ -1486,6 +1510,12 @@ void Solid::SetPaintReuseForTesting(bool reuse) { impl_->paint_reuse = reuse; }
 void Solid::SetImplicitTwoPassForTesting(bool two_pass) {
   impl_->implicit_two_pass = two_pass;
   impl_->forces_valid = false;  // `f` changes meaning
+}
+
+void Solid::SetDoublePrecisionCgForTesting() {
+  impl_->double_cg = true;
+  impl_->ConfigureLinearized();
+  report_.single_precision_cg = false;
 }
 
 void Solid::SetSubstepsForTesting(int substeps) {
@@ -1676,6 +1706,7 @@ void Solid::ReportMaterial() {
   report_.damping_matrix = im.has_damping;
   // Filled by the model; BuildMaterial read them.
   if (im.corotational != nullptr) {
+    report_.single_precision_cg = im.corotational->single_precision_linearized();
     report_.shared_matrix_bytes = im.corotational->shared_matrix_bytes();
     report_.element_bytes = im.corotational->per_element_bytes();
   } else {

@@ -48,6 +48,9 @@ struct BuildReport {
   double stable_step = 0.0;        // 2 / omega_max, seconds
   int32_t substeps = 1;            // explicit sub-steps per scene step
   bool implicit = false;           // backward Euler (asked for, or chosen by auto)
+  // Backward Euler's CG applies the element matrices in single precision
+  // (cg_tolerance >= kSinglePrecisionCgTolerance; see solid.cc).
+  bool single_precision_cg = false;
   double build_ms = 0.0;
 };
 
@@ -127,6 +130,9 @@ class Solid {
   // true, the two-pass reference (F at p, then a Kt product). Both solve the
   // same system; results agree to the CG tolerance.
   void SetImplicitTwoPassForTesting(bool two_pass);
+  // Backward Euler's CG products in double even where the tolerance would
+  // run them in single precision (tests: the reference).
+  void SetDoublePrecisionCgForTesting();
   int64_t rollbacks() const { return rollbacks_; }
 
   double time() const { return time_; }

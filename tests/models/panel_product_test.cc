@@ -75,5 +75,54 @@ TEST(PackedMatrixTest, EntriesAreAscendingFmaChains) {
   }
 }
 
+// The single-precision copy: every shape and batch size against the double
+// product, to float rounding of the sum of |K| |x| terms; padding rows zero.
+TEST(PackedMatrixFTest, MatchesTheDoubleProductToFloatRounding) {
+  for (int n : {5, 8, 15, 24, 45, 192}) {
+    const Eigen::MatrixXd k = Random(n, n, 17u + n);
+    const PackedMatrixF packed{PackedMatrix(k)};
+    ASSERT_EQ(packed.padded_rows() % PackedMatrixF::kPanel, 0);
+    ASSERT_GE(packed.padded_rows(), n);
+    for (int count : {1, 5, 6, 7, 13, 64}) {
+      const int ld = packed.padded_rows() + 3;
+      const Eigen::MatrixXd x = Random(ld, count, 21u + count);
+      const Eigen::MatrixXf xf = x.cast<float>();
+      Eigen::MatrixXd y = Eigen::MatrixXd::Constant(ld, count, 99.0);
+      packed.Apply(xf.data(), ld, count, y.data(), ld);
+      const Eigen::MatrixXd want = k * x.topRows(n);
+      const Eigen::MatrixXd scale = k.cwiseAbs() * x.topRows(n).cwiseAbs();
+      for (int j = 0; j < count; ++j) {
+        for (int i = 0; i < n; ++i) {
+          EXPECT_NEAR(y(i, j), want(i, j), 4 * n * 6e-8 * scale(i, j)) << "n " << n;
+        }
+        for (int i = n; i < packed.padded_rows(); ++i) EXPECT_EQ(y(i, j), 0.0);
+        for (int i = packed.padded_rows(); i < ld; ++i) EXPECT_EQ(y(i, j), 99.0);
+      }
+    }
+  }
+}
+
+// Float fma chains over k in ascending order, widened to double: the same
+// bits wherever a column sits in a batch.
+TEST(PackedMatrixFTest, EntriesAreAscendingFloatFmaChains) {
+  const int n = 24;
+  const Eigen::MatrixXd k = Random(n, n, 9);
+  const Eigen::MatrixXf x = Random(n, 7, 10).cast<float>();
+  const PackedMatrixF packed{PackedMatrix(k)};
+  const Eigen::MatrixXf kf = k.cast<float>();
+  Eigen::MatrixXd y(packed.padded_rows(), 7);
+  packed.Apply(x.data(), n, 7, y.data(), packed.padded_rows());
+  for (int j = 0; j < 7; ++j) {
+    Eigen::VectorXd one(packed.padded_rows());
+    packed.Apply(x.col(j).data(), n, 1, one.data(), packed.padded_rows());
+    for (int i = 0; i < n; ++i) {
+      float acc = 0;
+      for (int c = 0; c < n; ++c) acc = std::fma(kf(i, c), x(c, j), acc);
+      ASSERT_EQ(y(i, j), static_cast<double>(acc));
+      ASSERT_EQ(one(i), y(i, j)) << "row " << i << " column " << j;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace dynsolid::models

@@ -124,6 +124,39 @@ TEST(SolidImplicitTest, FoldedRhsFollowsTheTwoPassReferenceToTheCgTolerance) {
   }
 }
 
+// Single-precision CG products (the default at tolerance 1e-4) against
+// double ones: the same CG iteration counts and a trajectory within a small
+// fraction of the tolerance's own effect (measured: 1.4e-11 of the
+// displacement, where tolerance 1e-4 against 1e-10 moves it 1.5e-5).
+TEST(SolidImplicitTest, SinglePrecisionCgFollowsTheDoubleOne) {
+  constexpr int kSteps = 60;
+  const std::string text = BlockScene(1e-4);
+  auto single = Make(text);
+  auto twice = Make(text);
+  auto exact = Make(BlockScene(1e-10));
+  ASSERT_NE(single, nullptr);
+  ASSERT_NE(twice, nullptr);
+  ASSERT_NE(exact, nullptr);
+  EXPECT_TRUE(single->build_report().single_precision_cg);
+  EXPECT_FALSE(exact->build_report().single_precision_cg) << "1e-10 is below float's reach";
+  twice->SetDoublePrecisionCgForTesting();
+  EXPECT_FALSE(twice->build_report().single_precision_cg);
+  const Points rest = single->control_positions();
+  const Trajectory a = Advance(*single, kSteps);
+  const Trajectory b = Advance(*twice, kSteps);
+  const Trajectory c = Advance(*exact, kSteps);
+  const double float_dev = Deviation(a, b, rest), tolerance_dev = Deviation(b, c, rest);
+  std::printf("single against double products: %.2e of the displacement (CG iterations %d and "
+              "%d); tolerance 1e-4 against 1e-10: %.2e\n",
+              float_dev, a.cg_iterations, b.cg_iterations, tolerance_dev);
+  EXPECT_LT(float_dev, 0.1 * tolerance_dev);
+  EXPECT_LE(std::abs(a.cg_iterations - b.cg_iterations), 2);
+  // The energy carried from the CG's own (float) products.
+  for (int i = 0; i < kSteps; ++i) {
+    EXPECT_NEAR(a.strain[i], b.strain[i], 1e-6 * b.exact_strain[i] + 1e-12) << "step " << i;
+  }
+}
+
 // Loads edited between steps (a point force moved, gravity, a pressure):
 // the folded path recomputes only the external forces (no element pass),
 // the two-pass path all forces; the trajectories agree to rounding.

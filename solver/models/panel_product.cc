@@ -11,125 +11,116 @@
 namespace dynsolid::models {
 namespace {
 
-constexpr int kPanel = PackedMatrix::kPanel;
 constexpr int kColumns = 6;  // columns of Y per micro-kernel call
 
-// y(0:8, 0:NC) = a(8 x k panel) x(0:k, 0:NC).
-template <int NC>
-void Kernel(const double* __restrict a, int k, const double* __restrict x, int ldx,
-            double* __restrict y, int ldy) {
+// The lanes of a micro-kernel: element type T, a register V of kWidth of
+// them, and a store that widens to double. A panel is two registers high
+// (8 doubles or 16 floats).
 #ifdef DYNSOLID_PANEL_AVX2
-  __m256d lo[NC], hi[NC];
+struct DoubleLanes {
+  using T = double;
+  using V = __m256d;
+  static constexpr int kWidth = 4;
+  static V Zero() { return _mm256_setzero_pd(); }
+  static V Load(const T* p) { return _mm256_loadu_pd(p); }
+  static V Broadcast(const T* p) { return _mm256_broadcast_sd(p); }
+  static V Fma(V a, V b, V c) { return _mm256_fmadd_pd(a, b, c); }
+  static void Store(double* y, V v) { _mm256_storeu_pd(y, v); }
+};
+struct FloatLanes {
+  using T = float;
+  using V = __m256;
+  static constexpr int kWidth = 8;
+  static V Zero() { return _mm256_setzero_ps(); }
+  static V Load(const T* p) { return _mm256_loadu_ps(p); }
+  static V Broadcast(const T* p) { return _mm256_broadcast_ss(p); }
+  static V Fma(V a, V b, V c) { return _mm256_fmadd_ps(a, b, c); }
+  static void Store(double* y, V v) {
+    _mm256_storeu_pd(y, _mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+    _mm256_storeu_pd(y + 4, _mm256_cvtps_pd(_mm256_extractf128_ps(v, 1)));
+  }
+};
+#else
+struct DoubleLanes {
+  using T = double;
+  static constexpr int kWidth = 4;
+};
+struct FloatLanes {
+  using T = float;
+  static constexpr int kWidth = 8;
+};
+#endif
+
+// y(0:P, 0:NC) = a(P x k panel) x(0:k, 0:NC), P = 2 kWidth rows, stored as
+// double. Every entry is one fma chain over k in ascending order.
+template <typename L, int NC>
+void Kernel(const typename L::T* __restrict a, int k, const typename L::T* __restrict x, int ldx,
+            double* __restrict y, int ldy) {
+  constexpr int W = L::kWidth;
+#ifdef DYNSOLID_PANEL_AVX2
+  typename L::V lo[NC], hi[NC];
 #pragma GCC unroll 6
-  for (int j = 0; j < NC; ++j) lo[j] = hi[j] = _mm256_setzero_pd();
+  for (int j = 0; j < NC; ++j) lo[j] = hi[j] = L::Zero();
   for (int kk = 0; kk < k; ++kk) {
-    const __m256d a0 = _mm256_loadu_pd(a + kPanel * kk);
-    const __m256d a1 = _mm256_loadu_pd(a + kPanel * kk + 4);
+    const typename L::V a0 = L::Load(a + 2 * W * kk);
+    const typename L::V a1 = L::Load(a + 2 * W * kk + W);
 #pragma GCC unroll 6
     for (int j = 0; j < NC; ++j) {
-      const __m256d b = _mm256_broadcast_sd(x + static_cast<int64_t>(j) * ldx + kk);
-      lo[j] = _mm256_fmadd_pd(a0, b, lo[j]);
-      hi[j] = _mm256_fmadd_pd(a1, b, hi[j]);
+      const typename L::V b = L::Broadcast(x + static_cast<int64_t>(j) * ldx + kk);
+      lo[j] = L::Fma(a0, b, lo[j]);
+      hi[j] = L::Fma(a1, b, hi[j]);
     }
   }
 #pragma GCC unroll 6
   for (int j = 0; j < NC; ++j) {
-    _mm256_storeu_pd(y + static_cast<int64_t>(j) * ldy, lo[j]);
-    _mm256_storeu_pd(y + static_cast<int64_t>(j) * ldy + 4, hi[j]);
+    L::Store(y + static_cast<int64_t>(j) * ldy, lo[j]);
+    L::Store(y + static_cast<int64_t>(j) * ldy + W, hi[j]);
   }
 #else
   // Same fma chains in the same order: the same bits as the AVX2 path.
-  double c[NC][kPanel] = {};
+  using T = typename L::T;
+  T c[NC][2 * W] = {};
   for (int kk = 0; kk < k; ++kk) {
     for (int j = 0; j < NC; ++j) {
-      const double b = x[static_cast<int64_t>(j) * ldx + kk];
-      for (int r = 0; r < kPanel; ++r) c[j][r] = std::fma(a[kPanel * kk + r], b, c[j][r]);
+      const T b = x[static_cast<int64_t>(j) * ldx + kk];
+      for (int r = 0; r < 2 * W; ++r) c[j][r] = std::fma(a[2 * W * kk + r], b, c[j][r]);
     }
   }
   for (int j = 0; j < NC; ++j) {
-    for (int r = 0; r < kPanel; ++r) y[static_cast<int64_t>(j) * ldy + r] = c[j][r];
-  }
-#endif
-}
-
-constexpr int kPanelF = PackedMatrixF::kPanel;
-
-// y(0:16, 0:NC) = a(16 x k float panel) x(0:k, 0:NC) (float), stored as double.
-template <int NC>
-void KernelF(const float* __restrict a, int k, const float* __restrict x, int ldx,
-             double* __restrict y, int ldy) {
-#ifdef DYNSOLID_PANEL_AVX2
-  __m256 lo[NC], hi[NC];
-#pragma GCC unroll 6
-  for (int j = 0; j < NC; ++j) lo[j] = hi[j] = _mm256_setzero_ps();
-  for (int kk = 0; kk < k; ++kk) {
-    const __m256 a0 = _mm256_loadu_ps(a + kPanelF * kk);
-    const __m256 a1 = _mm256_loadu_ps(a + kPanelF * kk + 8);
-#pragma GCC unroll 6
-    for (int j = 0; j < NC; ++j) {
-      const __m256 b = _mm256_broadcast_ss(x + static_cast<int64_t>(j) * ldx + kk);
-      lo[j] = _mm256_fmadd_ps(a0, b, lo[j]);
-      hi[j] = _mm256_fmadd_ps(a1, b, hi[j]);
-    }
-  }
-#pragma GCC unroll 6
-  for (int j = 0; j < NC; ++j) {
-    double* yj = y + static_cast<int64_t>(j) * ldy;
-    _mm256_storeu_pd(yj, _mm256_cvtps_pd(_mm256_castps256_ps128(lo[j])));
-    _mm256_storeu_pd(yj + 4, _mm256_cvtps_pd(_mm256_extractf128_ps(lo[j], 1)));
-    _mm256_storeu_pd(yj + 8, _mm256_cvtps_pd(_mm256_castps256_ps128(hi[j])));
-    _mm256_storeu_pd(yj + 12, _mm256_cvtps_pd(_mm256_extractf128_ps(hi[j], 1)));
-  }
-#else
-  float c[NC][kPanelF] = {};
-  for (int kk = 0; kk < k; ++kk) {
-    for (int j = 0; j < NC; ++j) {
-      const float b = x[static_cast<int64_t>(j) * ldx + kk];
-      for (int r = 0; r < kPanelF; ++r) c[j][r] = std::fma(a[kPanelF * kk + r], b, c[j][r]);
-    }
-  }
-  for (int j = 0; j < NC; ++j) {
-    for (int r = 0; r < kPanelF; ++r) y[static_cast<int64_t>(j) * ldy + r] = c[j][r];
+    for (int r = 0; r < 2 * W; ++r) y[static_cast<int64_t>(j) * ldy + r] = c[j][r];
   }
 #endif
 }
 
 // Runs Kernel over the 6-column tiles of a batch and the panels of a
-// packed matrix (panel_size elements apart).
-template <typename T, typename Y, int P, template <int> class K>
-void Tiles(const T* data, int panels, int cols, const T* x, int ldx, int count, Y* y, int ldy) {
+// packed matrix.
+template <typename L>
+void Tiles(const typename L::T* data, int panels, int cols, const typename L::T* x, int ldx,
+           int count, double* y, int ldy) {
+  using T = typename L::T;
+  constexpr int P = 2 * L::kWidth;
   const int64_t panel_size = static_cast<int64_t>(cols) * P;
   for (int j0 = 0; j0 < count; j0 += kColumns) {
     const T* xb = x + static_cast<int64_t>(j0) * ldx;
-    Y* yb = y + static_cast<int64_t>(j0) * ldy;
+    double* yb = y + static_cast<int64_t>(j0) * ldy;
     const int nc = std::min(kColumns, count - j0);
     for (int p = 0; p < panels; ++p) {
       const T* a = data + p * panel_size;
-      Y* yp = yb + p * P;
+      double* yp = yb + p * P;
       switch (nc) {
-        case 6: K<6>::Run(a, cols, xb, ldx, yp, ldy); break;
-        case 5: K<5>::Run(a, cols, xb, ldx, yp, ldy); break;
-        case 4: K<4>::Run(a, cols, xb, ldx, yp, ldy); break;
-        case 3: K<3>::Run(a, cols, xb, ldx, yp, ldy); break;
-        case 2: K<2>::Run(a, cols, xb, ldx, yp, ldy); break;
-        default: K<1>::Run(a, cols, xb, ldx, yp, ldy); break;
+        case 6: Kernel<L, 6>(a, cols, xb, ldx, yp, ldy); break;
+        case 5: Kernel<L, 5>(a, cols, xb, ldx, yp, ldy); break;
+        case 4: Kernel<L, 4>(a, cols, xb, ldx, yp, ldy); break;
+        case 3: Kernel<L, 3>(a, cols, xb, ldx, yp, ldy); break;
+        case 2: Kernel<L, 2>(a, cols, xb, ldx, yp, ldy); break;
+        default: Kernel<L, 1>(a, cols, xb, ldx, yp, ldy); break;
       }
     }
   }
 }
 
-template <int NC>
-struct DoubleKernel {
-  static void Run(const double* a, int k, const double* x, int ldx, double* y, int ldy) {
-    Kernel<NC>(a, k, x, ldx, y, ldy);
-  }
-};
-template <int NC>
-struct FloatKernel {
-  static void Run(const float* a, int k, const float* x, int ldx, double* y, int ldy) {
-    KernelF<NC>(a, k, x, ldx, y, ldy);
-  }
-};
+static_assert(2 * DoubleLanes::kWidth == PackedMatrix::kPanel);
+static_assert(2 * FloatLanes::kWidth == PackedMatrixF::kPanel);
 
 // Packs rows x cols entries get(i, j) into panels of P rows (zero padded).
 template <typename T, int P, typename Get>
@@ -167,7 +158,7 @@ Eigen::MatrixXd PackedMatrix::Unpack() const {
 }
 
 void PackedMatrix::Apply(const double* x, int ldx, int count, double* y, int ldy) const {
-  Tiles<double, double, kPanel, DoubleKernel>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
+  Tiles<DoubleLanes>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
 }
 
 PackedMatrixF::PackedMatrixF(const PackedMatrix& k)
@@ -177,7 +168,7 @@ PackedMatrixF::PackedMatrixF(const PackedMatrix& k)
 }
 
 void PackedMatrixF::Apply(const float* x, int ldx, int count, double* y, int ldy) const {
-  Tiles<float, double, kPanel, FloatKernel>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
+  Tiles<FloatLanes>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
 }
 
 }  // namespace dynsolid::models

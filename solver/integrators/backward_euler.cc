@@ -107,17 +107,12 @@ void BackwardEuler::Apply(const StiffnessOperator& kt, const Points& x, Points& 
 CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const Points& force,
                             const StiffnessOperator& kt, Points& p_next, double tolerance,
                             int max_iterations) {
-  v_ = (p - p_prev) / h_;
-  Mask(v_);
-  WarmStart();
-  // rhs = h (F - h Kt v - Dt v) - h^2 Kt dv0; r0 = rhs - (Mt + h Dt) dv0.
-  kt(v_, tmp_);
-  rhs_ = h_ * (force - h_ * tmp_);
-  if (!x_.isZero(0)) {
-    kt(x_, tmp_);
-    rhs_ -= (h_ * h_) * tmp_;
-  }
-  return Solve(p, kt, p_next, tolerance, max_iterations);
+  // F - h Kt w from F and one Kt product.
+  const ForceAhead from_force = [&](const Points& w, Points& out) {
+    kt(w, out);
+    out = force - h_ * out;
+  };
+  return Step(p, p_prev, from_force, kt, p_next, tolerance, max_iterations);
 }
 
 CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const ForceAhead& force_ahead,
@@ -126,7 +121,8 @@ CgStats BackwardEuler::Step(const Points& p, const Points& p_prev, const ForceAh
   v_ = (p - p_prev) / h_;
   Mask(v_);
   WarmStart();
-  // rhs = h (F - h Kt (v + dv0) - Dt v) in one evaluation.
+  // rhs = h (F - h Kt (v + dv0) - Dt v) (Solve subtracts the Dt term) in one
+  // evaluation of the force ahead.
   z_ = v_ + x_;
   force_ahead(z_, tmp_);
   rhs_ = h_ * tmp_;

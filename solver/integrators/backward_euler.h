@@ -24,8 +24,8 @@
 // affine in p, so F - h Kt (v + dv0) = A^T (f - g_R(A (p + h (v + dv0)))),
 // the force evaluated ahead along v + dv0 (Step with `force_ahead`: one
 // element pass for the right-hand side and the start together). Step with
-// `force` (the reference path) forms b from F and a Kt product, and r0 with
-// one more.
+// `force` (the reference path) takes F - h Kt (v + dv0) from F and one Kt
+// product.
 //
 // Stopping test: ||r|| <= tolerance * ||b - h^2 Kt dv0||, the right-hand side
 // with the stiffness acting on the warm start left out (it is r0 + (Mt + h
@@ -64,11 +64,10 @@ class BackwardEuler {
 
   void Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h, std::vector<uint8_t> fixed);
 
-  // One step from (p, p_prev) to p_next. `force` = F (then b takes one Kt
-  // product more, and a warm start's residual another) or `force_ahead`
-  // gives F - h Kt (v + dv0) directly; both then solve the same system from
-  // the warm start dv0 with PCG to `tolerance` (the stopping test above), at
-  // most `max_iterations`.
+  // One step from (p, p_prev) to p_next. `force` = F (then F - h Kt (v + dv0)
+  // takes one Kt product) or `force_ahead` gives it directly; both then
+  // solve the same system from the warm start dv0 with PCG to `tolerance`
+  // (the stopping test above), at most `max_iterations`.
   CgStats Step(const Points& p, const Points& p_prev, const Points& force,
                const StiffnessOperator& kt, Points& p_next, double tolerance, int max_iterations);
   CgStats Step(const Points& p, const Points& p_prev, const ForceAhead& force_ahead,

@@ -411,7 +411,7 @@ struct Solid::Impl {
   // with the frames of p (Advance). `f` then holds the external
   // forces f_ext(p) only (point forces, gravity, pressure at p). With
   // implicit_two_pass (tests: the reference path) `f` holds F as for the
-  // explicit scheme and the rhs takes a Kt product more.
+  // explicit scheme and F - h Kt w takes a Kt product.
   bool implicit_two_pass = false;
   integrators::BackwardEuler::ForceAhead force_ahead;
   const Points* ahead_from = nullptr;  // p of the step in progress
@@ -1282,7 +1282,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   s->rest_volume_ = layout->rest_volume;
   ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout)));
   im.InstallMaterial(std::move(material));
-  s->ReportMaterial();
   s->total_mass_ = im.mt.sum();
   s->BuildSurface();
 
@@ -1369,7 +1368,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
        im.substeps > kAutoImplicitSubsteps);
   rep.implicit = im.use_implicit;
   im.ConfigureLinearized();
-  s->ReportMaterial();  // the float copies, when made
+  s->ReportMaterial();  // after ConfigureLinearized: the float copies, when made
   if (im.use_implicit) {
     im.substeps = 1;
     im.x_nodes.setZero(rest.rows(), 3);
@@ -1515,7 +1514,7 @@ void Solid::SetImplicitTwoPassForTesting(bool two_pass) {
 void Solid::SetDoublePrecisionCgForTesting() {
   impl_->double_cg = true;
   impl_->ConfigureLinearized();
-  report_.single_precision_cg = false;
+  ReportMaterial();
 }
 
 void Solid::SetSubstepsForTesting(int substeps) {

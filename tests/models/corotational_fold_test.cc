@@ -16,32 +16,21 @@
 #include "solver/models/corotational.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/models/model_fixture.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::models {
 namespace {
 
-struct Fixture {
-  scene::Discretization d;
-  Points rest;
-  ElementLayout layout;
+struct Fixture : test_util::MeshFixture {
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<CorotationalModel> model;
 };
 
 std::unique_ptr<Fixture> Build(const char* name, int levels, int threads) {
-  auto scene = scene::BuiltinScene(name);
-  EXPECT_OK(scene);
   auto f = std::make_unique<Fixture>();
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), levels);
-  EXPECT_OK(d);
-  f->d = *std::move(d);
-  f->rest = f->d.node_matrix * f->d.control().positions();
   // Two materials, so that groups differ by material too.
-  f->layout = BuildElementLayout(f->d.elements, f->rest, f->d.hierarchy.control_cell,
-                                 [](const Eigen::Vector3d& x, int32_t) {
-                                   return MaterialPoint{x.x() > 0.5 ? 2e5 : 1e5, 0.3, 1000, 0};
-                                 });
+  test_util::BuildMesh(scene::BuiltinScene(name), levels, test_util::TwoMaterials(1e5, 0.3), *f);
   f->pool = std::make_unique<WorkerPool>(threads);
   f->model = std::make_unique<CorotationalModel>(f->layout, f->rest, *f->pool);
   return f;
@@ -61,15 +50,8 @@ Points Deformed(const Points& rest, double amplitude, double angle) {
   return (p * r.transpose()).rowwise() + Eigen::RowVector3d(0.3, 1.2, -0.7);
 }
 
-Points Random(int64_t rows, uint32_t seed) {
-  std::mt19937 gen(seed);
-  std::normal_distribution<double> normal;
-  Points v(rows, 3);
-  for (int64_t i = 0; i < v.size(); ++i) v.data()[i] = normal(gen);
-  return v;
-}
-
-double Dot(const Points& a, const Points& b) { return (a.array() * b.array()).sum(); }
+using test_util::Dot;
+using test_util::RandomPoints;
 
 TEST(CorotationalFoldTest, UpdateFramesThenAffineForcesIsForcesBitForBit) {
   auto a = Build("mixed", 2, 2);
@@ -98,7 +80,7 @@ TEST(CorotationalFoldTest, UpdateFramesThenAffineForcesIsForcesBitForBit) {
 TEST(CorotationalFoldTest, AffineForcesAheadIsForcesPlusTheLinearizedStep) {
   auto f = Build("mixed", 2, 2);
   const Points x = Deformed(f->rest, 0.03, 0.8);
-  const Points v = Random(x.rows(), 5);
+  const Points v = RandomPoints(x.rows(), 5);
   // A large step (h |v| a tenth of the solid): the identity is exact, so
   // only rounding separates the two sides.
   const double h = 0.1 * 3.0 / v.cwiseAbs().maxCoeff();
@@ -127,7 +109,7 @@ TEST(CorotationalFoldTest, ResultsAreBitIdenticalForAnyPoolSize) {
   for (int threads : {1, 2, 3}) {
     auto f = Build("mixed", 2, threads);
     const Points d = Deformed(f->rest, 0.02, 0.5);
-    const Points v = Random(d.rows(), 9);
+    const Points v = RandomPoints(d.rows(), 9);
     f->model->UpdateFrames(d);
     Points g;
     const double e = f->model->AffineForces(d + 1e-3 * v, g);

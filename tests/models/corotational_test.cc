@@ -16,6 +16,7 @@
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/models/model_fixture.h"
 #include "tests/testing/status_matchers.h"
 
 // Counts heap allocations while g_count_mallocs is set: malloc and friends of
@@ -60,17 +61,9 @@ MaterialSampler Uniform() {
   return [](const Eigen::Vector3d&, int32_t) { return MaterialPoint{kYoung, kPoisson, 1000, 0}; };
 }
 
-// Stiffer where x > 0.5: groups then differ by material as well.
-MaterialSampler TwoMaterials() {
-  return [](const Eigen::Vector3d& x, int32_t) {
-    return MaterialPoint{x.x() > 0.5 ? 2 * kYoung : kYoung, kPoisson, 1000, 0};
-  };
-}
+MaterialSampler TwoMaterials() { return test_util::TwoMaterials(kYoung, kPoisson); }
 
-struct Fixture {
-  scene::Discretization d;
-  Points rest;
-  ElementLayout layout;
+struct Fixture : test_util::MeshFixture {
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<CorotationalModel> model;
 
@@ -81,13 +74,8 @@ struct Fixture {
 
 std::unique_ptr<Fixture> BuildFrom(const absl::StatusOr<Scene>& scene, int levels,
                                    int threads = 1, const MaterialSampler& sampler = Uniform()) {
-  EXPECT_OK(scene);
   auto f = std::make_unique<Fixture>();
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), levels);
-  EXPECT_OK(d);
-  f->d = *std::move(d);
-  f->rest = f->d.node_matrix * f->d.control().positions();
-  f->layout = BuildElementLayout(f->d.elements, f->rest, f->d.hierarchy.control_cell, sampler);
+  test_util::BuildMesh(scene, levels, sampler, *f);
   f->pool = std::make_unique<WorkerPool>(threads);
   f->model = std::make_unique<CorotationalModel>(f->layout, f->rest, *f->pool);
   return f;
@@ -119,15 +107,8 @@ Points Deformed(const Points& rest, double amplitude, const Eigen::Matrix3d& r) 
   return Rigid(p, r, Eigen::RowVector3d(0.4, -1.3, 2.1));
 }
 
-Points RandomPoints(int64_t rows, uint32_t seed) {
-  std::mt19937 gen(seed);
-  std::normal_distribution<double> normal;
-  Points v(rows, 3);
-  for (int64_t i = 0; i < v.size(); ++i) v.data()[i] = normal(gen);
-  return v;
-}
-
-double Dot(const Points& a, const Points& b) { return (a.array() * b.array()).sum(); }
+using test_util::Dot;
+using test_util::RandomPoints;
 
 // The node-major rigid modes of rest nodes x (n x 3): three translations,
 // then three infinitesimal rotations about the centroid.

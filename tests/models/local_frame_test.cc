@@ -8,32 +8,21 @@
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/models/model_fixture.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::models {
 namespace {
 
-struct Fixture {
-  scene::Discretization d;
-  Points rest;
-  ElementLayout layout;
+struct Fixture : test_util::MeshFixture {
   WorkerPool pool{1};
   std::unique_ptr<LocalFrameModel> model;
 };
 
 std::unique_ptr<Fixture> Build(const std::string& name, int levels) {
   auto f = std::make_unique<Fixture>();
-  auto scene = scene::BuiltinScene(name);
-  EXPECT_OK(scene);
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), levels);
-  EXPECT_OK(d);
-  f->d = *std::move(d);
-  f->rest = f->d.node_matrix * f->d.control().positions();
-  // A non-uniform material: softer where x > 0.5, so groups differ by material too.
-  MaterialSampler sampler = [](const Eigen::Vector3d& x, int32_t) {
-    return MaterialPoint{x.x() > 0.5 ? 2e5 : 1e5, 0.3, 1000, 0};
-  };
-  f->layout = BuildElementLayout(f->d.elements, f->rest, f->d.hierarchy.control_cell, sampler);
+  // Two materials (stiffer where x > 0.5), so that groups differ by material too.
+  test_util::BuildMesh(scene::BuiltinScene(name), levels, test_util::TwoMaterials(1e5, 0.3), *f);
   f->model = std::make_unique<LocalFrameModel>(
       f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest, kForceParts),
       f->d.elements.num_nodes(), f->pool);

@@ -73,12 +73,11 @@ class BackwardEuler {
   CgStats Step(const Points& p, const Points& p_prev, const ForceAhead& force_ahead,
                const StiffnessOperator& kt, Points& p_next, double tolerance, int max_iterations);
 
-  // The last step's velocity v, its change dv, the CG's correction
-  // c = dv - dv0 to the warm start and Kt c (summed from the CG's own Kt
-  // products, no extra evaluation): a caller's energy bookkeeping
-  // (E(p + h (v + dv)) of a quadratic E from E and its gradient at the point
-  // p + h (v + dv0) the folded force was evaluated at). Fixed rows are zero.
-  const Points& last_v() const { return v_; }
+  // The last step's velocity change dv, the CG's correction c = dv - dv0 to
+  // the warm start and Kt c (summed from the CG's own Kt products, no extra
+  // evaluation): a caller's energy bookkeeping (E(p + h (v + dv)) of a
+  // quadratic E from E and its gradient at the point p + h (v + dv0) the
+  // folded force was evaluated at). Fixed rows are zero.
   const Points& last_dv() const { return x_; }
   const Points& last_correction() const { return c_; }
   const Points& last_kt_correction() const { return kx_; }

@@ -16,6 +16,13 @@ namespace dynsolid::models {
 namespace {
 
 constexpr int32_t kBatch = 64;
+// The frame's Newton iteration stops after a step below 1e-5 rad (an error
+// of about 1e-10 rad left; rotation.h). The frame only rotates the
+// rotation-blind measure delta, so a frame error e moves the force by e of
+// itself: 1e-10 against CG's 1e-4. From a one-step-old warm start on a
+// solid turning at a few rad/s that is two Newton steps instead of four
+// and a check.
+constexpr double kFrameNewtonExit = 1e-5;
 
 }  // namespace
 
@@ -115,7 +122,7 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
     f(1, c) = py.dot(gc);
     f(2, c) = pz.dot(gc);
   }
-  ExtractRotation(f, q, 8, &r);
+  ExtractRotation(f, q, 8, &r, kFrameNewtonExit);
   Map(dx, n) = r(0, 0) * qx + r(1, 0) * qy + r(2, 0) * qz;
   Map(dy, n) = r(0, 1) * qx + r(1, 1) * qy + r(2, 1) * qz;
   Map(dz, n) = r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz;
@@ -167,7 +174,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
   Eigen::Matrix3d fm;
   for (int a = 0; a < 3; ++a)
     for (int c = 0; c < 3; ++c) fm(a, c) = Sum4(f[a][c]);
-  ExtractRotation(fm, q, 8, &r);
+  ExtractRotation(fm, q, 8, &r, kFrameNewtonExit);
   // dhat_i = R^T delta_i: column a of the output is R(:, a) . delta_i.
   __m256d rr[3][3];
   for (int a = 0; a < 3; ++a)
@@ -346,7 +353,7 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
   // (the gradient of the energy).
   g.resize(num_nodes_, 3);
   pool_.Run([&](int t) {
-    for (int k = t; k < measure_parts; k += threads) measure_.TransposePart(y_, k, g);
+    for (int k = t; k < measure_parts; k += threads) measure_.TransposePart(d, y_, k, g);
   });
   const auto t3 = std::chrono::steady_clock::now();
   // The measure's phase holds both its passes (forward and transpose).
@@ -363,6 +370,10 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
   return bytes;
 }
 
-int64_t LocalFrameModel::per_element_bytes() const { return PerElementBytes(layout_); }
+int64_t LocalFrameModel::per_element_bytes() const {
+  int64_t elements = 0;
+  for (const ElementBlock& b : layout_.blocks) elements += b.size();
+  return PerElementBytes(layout_) + (elements > 0 ? measure_.bytes() / elements : 0);
+}
 
 }  // namespace dynsolid::models

@@ -73,6 +73,8 @@ class LocalFrameModel final : public InternalForceModel {
     return packed_[kind][group][axis].Unpack();
   }
   int64_t shared_matrix_bytes() const;
+  // The layout's per-element bytes (element_blocks.h) plus the measure's
+  // edge and corner lists spread over the elements.
   int64_t per_element_bytes() const;
 
  private:

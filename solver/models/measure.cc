@@ -104,15 +104,27 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                          (ks[2] == ks[t] ? 4 : 0));
     }
   }
+  // The parts hold everything a pass needs; the global lists only counted.
+  num_edges_ = static_cast<int64_t>(edges_.size());
+  num_corners_ = static_cast<int64_t>(corners_.size());
+  std::vector<Edge>().swap(edges_);
+  std::vector<Corner>().swap(corners_);
   for (Part& p : parts_) {
-    const size_t ne = p.ei.size(), nc = p.cn.size();
-    for (auto* v : {&p.rx, &p.ry, &p.rz, &p.l, &p.fx, &p.fy, &p.fz}) v->assign(ne, 0.0);
-    for (auto* v : {&p.ahx, &p.ahy, &p.ahz, &p.bhx, &p.bhy, &p.bhz, &p.la, &p.lb, &p.cs,
-                    &p.inv_s, &p.alpha, &p.beta, &p.dalpha, &p.dbeta, &p.tax, &p.tay, &p.taz,
-                    &p.tbx, &p.tby, &p.tbz}) {
-      v->assign(nc, 0.0);
-    }
+    for (auto* v : {&p.nodes, &p.ei, &p.ej, &p.cn, &p.ca, &p.cb}) v->shrink_to_fit();
+    for (auto* v : {&p.e_rest, &p.cos0, &p.sin0}) v->shrink_to_fit();
+    p.e_owns.shrink_to_fit();
+    p.c_owns.shrink_to_fit();
   }
+}
+
+int64_t DeformationMeasure::bytes() const {
+  auto b = [](const auto& v) { return static_cast<int64_t>(v.size() * sizeof(v[0])); };
+  int64_t n = b(owner_);
+  for (const Part& p : parts_) {
+    n += b(p.nodes) + b(p.ei) + b(p.ej) + b(p.e_rest) + b(p.e_owns) + b(p.cn) + b(p.ca) +
+         b(p.cb) + b(p.cos0) + b(p.sin0) + b(p.c_owns);
+  }
+  return n;
 }
 
 int64_t DeformationMeasure::terms_per_pass() const {
@@ -126,41 +138,88 @@ namespace {
 // The geometry loops below take their arrays as restrict-qualified
 // parameters, which is what lets GCC run them in SIMD lanes (gathers of
 // the node rows, square roots, divisions and selects four at a time).
+// They run over chunks of kChunk terms whose results stay in L1 until the
+// scalar adds take them; no per-term state outlives a chunk, and the
+// transpose recomputes the geometry from d (a few dozen operations per
+// term, cheaper than writing and reading back 20 doubles per corner).
 #define R __restrict
+
+constexpr int64_t kChunk = 256;
 
 // Edge (i, j): r = d_j - d_i, l = |r| and the stretch term f r with
 // f = (l - l0) / (2 l) (zero for a zero-length edge).
 void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
-                 const double* R rest, double* R rx, double* R ry, double* R rz, double* R l,
-                 double* R fx, double* R fy, double* R fz, int64_t ne) {
+                 const double* R rest, double* R fx, double* R fy, double* R fz, int64_t ne) {
   for (int64_t q = 0; q < ne; ++q) {
     const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
     const double x = pd[j] - pd[i], y = pd[j + 1] - pd[i + 1], z = pd[j + 2] - pd[i + 2];
     const double len = std::sqrt(x * x + y * y + z * z);
     const double f_any = 0.5 * (len - rest[q]) / (len > 0 ? len : 1.0);
     const double f = len > 0 ? f_any : 0.0;
-    rx[q] = x;
-    ry[q] = y;
-    rz[q] = z;
-    l[q] = len;
     fx[q] = f * x;
     fy[q] = f * y;
     fz[q] = f * z;
   }
 }
 
-// Corner (n; a, b): with phi = (theta - theta0) / 2, C = cos(phi),
-// S = sin(phi), rotating a by +phi and b by -phi about n gives
-// delta_a = alpha ra - beta la b^ and delta_b = alpha rb - beta lb a^,
-// alpha = 1 - C + c S / s, beta = S / s (c, s the cosine and sine of the
-// current angle). A degenerate corner (a zero side, collinear sides, or an
-// angle half a turn from its rest value) contributes nothing: its alpha,
-// beta and their derivatives in theta are zero and its other state finite.
+// Corner geometry (n; a, b) from ra = a - n and rb = b - n: with
+// phi = (theta - theta0) / 2, C = cos(phi), S = sin(phi), rotating a by
+// +phi and b by -phi about n gives delta_a = alpha ra - beta la b^ and
+// delta_b = alpha rb - beta lb a^, alpha = 1 - C + c S / s, beta = S / s
+// (c, s the cosine and sine of the current angle). A degenerate corner (a
+// zero side, collinear sides, or an angle half a turn from its rest value)
+// contributes nothing: its alpha, beta and their derivatives in theta are
+// zero and its other values finite.
+struct CornerGeometry {
+  double ax, ay, az, bx, by, bz;  // unit sides a^, b^
+  double la, lb;                  // side lengths (1 for a zero side)
+  double c, inv_s;                // cos theta, 1 / sin theta
+  double al, bt, dal, dbt;        // alpha, beta and their theta derivatives
+};
+
+[[gnu::always_inline]] inline CornerGeometry MeasureCorner(double rax, double ray, double raz,
+                                                           double rbx, double rby, double rbz,
+                                                           double cos0, double sin0) {
+  CornerGeometry g;
+  const double lra = std::sqrt(rax * rax + ray * ray + raz * raz);
+  const double lrb = std::sqrt(rbx * rbx + rby * rby + rbz * rbz);
+  // Validity as 0/1 doubles (bool lanes keep GCC from vectorizing).
+  const double sides = std::min(lra, lrb) > 0 ? 1.0 : 0.0;
+  const double ia_any = 1.0 / (sides > 0 ? lra : 1.0), ib_any = 1.0 / (sides > 0 ? lrb : 1.0);
+  const double ia = sides > 0 ? ia_any : 0.0, ib = sides > 0 ? ib_any : 0.0;
+  g.ax = rax * ia, g.ay = ray * ia, g.az = raz * ia;
+  g.bx = rbx * ib, g.by = rby * ib, g.bz = rbz * ib;
+  const double c = g.ax * g.bx + g.ay * g.by + g.az * g.bz;
+  const double x0 = g.ay * g.bz - g.az * g.by, x1 = g.az * g.bx - g.ax * g.bz,
+               x2 = g.ax * g.by - g.ay * g.bx;
+  const double sn = std::sqrt(x0 * x0 + x1 * x1 + x2 * x2);
+  // phi in (-pi/2, pi/2) by half-angle formulas.
+  const double cos_d = c * cos0 + sn * sin0;
+  const double sin_d = sn * cos0 - c * sin0;
+  const double cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
+  const double ok_s = sn > 1e-300 ? sides : 0.0;
+  const double okf = cap_c >= 1e-12 ? ok_s : 0.0;
+  const double s_safe = okf > 0 ? sn : 1.0, c_safe = okf > 0 ? cap_c : 1.0;
+  const double is = 1.0 / s_safe;
+  const double cap_s = sin_d / (2.0 * c_safe);
+  const double bt_any = cap_s * is;
+  const double al_any = 1.0 - c_safe + c * bt_any;
+  const double dal_any = -0.5 * cap_s + c * c_safe * 0.5 * is - c * c * cap_s * is * is;
+  const double dbt_any = c_safe * 0.5 * is - cap_s * c * is * is;
+  g.bt = okf > 0 ? bt_any : 0.0;
+  g.al = okf > 0 ? al_any : 0.0;
+  g.dal = okf > 0 ? dal_any : 0.0;
+  g.dbt = okf > 0 ? dbt_any : 0.0;
+  g.la = sides > 0 ? lra : 1.0;
+  g.lb = sides > 0 ? lrb : 1.0;
+  g.c = c;
+  g.inv_s = is;
+  return g;
+}
+
+// The corner terms on a and b (n's is minus their sum).
 void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
                    const int32_t* R cb, const double* R cos0, const double* R sin0,
-                   double* R ahx, double* R ahy, double* R ahz, double* R bhx, double* R bhy,
-                   double* R bhz, double* R la, double* R lb, double* R cs, double* R inv_s,
-                   double* R alpha, double* R beta, double* R dalpha, double* R dbeta,
                    double* R tax, double* R tay, double* R taz, double* R tbx, double* R tby,
                    double* R tbz, int64_t nc) {
   for (int64_t q = 0; q < nc; ++q) {
@@ -168,75 +227,39 @@ void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
     const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
     const double rax = pd[a] - pd[n], ray = pd[a + 1] - pd[n + 1], raz = pd[a + 2] - pd[n + 2];
     const double rbx = pd[b] - pd[n], rby = pd[b + 1] - pd[n + 1], rbz = pd[b + 2] - pd[n + 2];
-    const double lra = std::sqrt(rax * rax + ray * ray + raz * raz);
-    const double lrb = std::sqrt(rbx * rbx + rby * rby + rbz * rbz);
-    // Validity as 0/1 doubles (bool lanes keep GCC from vectorizing).
-    const double sides = std::min(lra, lrb) > 0 ? 1.0 : 0.0;
-    const double ia_any = 1.0 / (sides > 0 ? lra : 1.0), ib_any = 1.0 / (sides > 0 ? lrb : 1.0);
-    const double ia = sides > 0 ? ia_any : 0.0, ib = sides > 0 ? ib_any : 0.0;
-    const double ax = rax * ia, ay = ray * ia, az = raz * ia;
-    const double bx = rbx * ib, by = rby * ib, bz = rbz * ib;
-    const double c = ax * bx + ay * by + az * bz;
-    const double x0 = ay * bz - az * by, x1 = az * bx - ax * bz, x2 = ax * by - ay * bx;
-    const double sn = std::sqrt(x0 * x0 + x1 * x1 + x2 * x2);
-    // phi in (-pi/2, pi/2) by half-angle formulas.
-    const double cos_d = c * cos0[q] + sn * sin0[q];
-    const double sin_d = sn * cos0[q] - c * sin0[q];
-    const double cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
-    const double ok_s = sn > 1e-300 ? sides : 0.0;
-    const double okf = cap_c >= 1e-12 ? ok_s : 0.0;
-    const double s_safe = okf > 0 ? sn : 1.0, c_safe = okf > 0 ? cap_c : 1.0;
-    const double is = 1.0 / s_safe;
-    const double cap_s = sin_d / (2.0 * c_safe);
-    const double bt_any = cap_s * is;
-    const double al_any = 1.0 - c_safe + c * bt_any;
-    const double dal_any = -0.5 * cap_s + c * c_safe * 0.5 * is - c * c * cap_s * is * is;
-    const double dbt_any = c_safe * 0.5 * is - cap_s * c * is * is;
-    const double bt = okf > 0 ? bt_any : 0.0, al = okf > 0 ? al_any : 0.0;
-    const double dal = okf > 0 ? dal_any : 0.0, dbt = okf > 0 ? dbt_any : 0.0;
-    ahx[q] = ax;
-    ahy[q] = ay;
-    ahz[q] = az;
-    bhx[q] = bx;
-    bhy[q] = by;
-    bhz[q] = bz;
-    la[q] = sides > 0 ? lra : 1.0;
-    lb[q] = sides > 0 ? lrb : 1.0;
-    cs[q] = c;
-    inv_s[q] = is;
-    alpha[q] = al;
-    beta[q] = bt;
-    dalpha[q] = dal;
-    dbeta[q] = dbt;
-    const double bla = bt * lra, blb = bt * lrb;
-    tax[q] = al * rax - bla * bx;
-    tay[q] = al * ray - bla * by;
-    taz[q] = al * raz - bla * bz;
-    tbx[q] = al * rbx - blb * ax;
-    tby[q] = al * rby - blb * ay;
-    tbz[q] = al * rbz - blb * az;
+    const CornerGeometry g = MeasureCorner(rax, ray, raz, rbx, rby, rbz, cos0[q], sin0[q]);
+    // With a zero side, la/lb hold 1 but alpha = beta = 0: the true lengths
+    // times beta are zero either way.
+    const double bla = g.bt * g.la, blb = g.bt * g.lb;
+    tax[q] = g.al * rax - bla * g.bx;
+    tay[q] = g.al * ray - bla * g.by;
+    taz[q] = g.al * raz - bla * g.bz;
+    tbx[q] = g.al * rbx - blb * g.ax;
+    tby[q] = g.al * rby - blb * g.ay;
+    tbz[q] = g.al * rbz - blb * g.az;
   }
 }
 
 // Edge (i, j): c = 1/2 (1 - l0 / l) r with r = d_j - d_i adds to delta_j and
 // subtracts from delta_i, so d/dr of (y_j - y_i) . c is
 // J (y_j - y_i) with J = 1/2 [(1 - l0/l) I + (l0 / l^3) r r^T].
-void EdgeTranspose(const double* R py, const int32_t* R ei, const int32_t* R ej,
-                   const double* R rest, const double* R rx, const double* R ry,
-                   const double* R rz, const double* R l, double* R fx, double* R fy,
+void EdgeTranspose(const double* R pd, const double* R py, const int32_t* R ei,
+                   const int32_t* R ej, const double* R rest, double* R fx, double* R fy,
                    double* R fz, int64_t ne) {
   for (int64_t q = 0; q < ne; ++q) {
     const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
+    const double rx = pd[j] - pd[i], ry = pd[j + 1] - pd[i + 1], rz = pd[j + 2] - pd[i + 2];
+    const double len = std::sqrt(rx * rx + ry * ry + rz * rz);
     const double dx = py[j] - py[i], dy = py[j + 1] - py[i + 1], dz = py[j + 2] - py[i + 2];
-    const bool ok = l[q] > 0;
-    const double il = 1.0 / (ok ? l[q] : 1.0);
-    const double rdy = rx[q] * dx + ry[q] * dy + rz[q] * dz;
+    const bool ok = len > 0;
+    const double il = 1.0 / (ok ? len : 1.0);
+    const double rdy = rx * dx + ry * dy + rz * dz;
     const double c1_any = 0.5 * (1.0 - rest[q] * il);
     const double c2_any = 0.5 * rest[q] * il * il * il * rdy;
     const double c1 = ok ? c1_any : 0.0, c2 = ok ? c2_any : 0.0;
-    fx[q] = c1 * dx + c2 * rx[q];
-    fy[q] = c1 * dy + c2 * ry[q];
-    fz[q] = c1 * dz + c2 * rz[q];
+    fx[q] = c1 * dx + c2 * rx;
+    fy[q] = c1 * dy + c2 * ry;
+    fz[q] = c1 * dz + c2 * rz;
   }
 }
 
@@ -250,28 +273,28 @@ void EdgeTranspose(const double* R py, const int32_t* R ei, const int32_t* R ej,
 //   dF/dra = (P alpha' - Q beta') (-ta / la) + alpha ya
 //            - beta [(ya.b^) a^ + (lb / la)(yb - (yb.a^) a^)],
 // and symmetrically for rb; n gets minus both.
-void CornerTranspose(const double* R py, const int32_t* R ca, const int32_t* R cb,
-                     const double* R ahx, const double* R ahy, const double* R ahz,
-                     const double* R bhx, const double* R bhy, const double* R bhz,
-                     const double* R la, const double* R lb, const double* R cs,
-                     const double* R inv_s, const double* R alpha, const double* R beta,
-                     const double* R dalpha, const double* R dbeta, double* R tax,
-                     double* R tay, double* R taz, double* R tbx, double* R tby, double* R tbz,
-                     int64_t nc) {
+void CornerTranspose(const double* R pd, const double* R py, const int32_t* R cn,
+                     const int32_t* R ca, const int32_t* R cb, const double* R cos0,
+                     const double* R sin0, double* R tax, double* R tay, double* R taz,
+                     double* R tbx, double* R tby, double* R tbz, int64_t nc) {
   for (int64_t q = 0; q < nc; ++q) {
+    const int64_t n = 3 * static_cast<int64_t>(cn[q]);
     const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
+    const double rax = pd[a] - pd[n], ray = pd[a + 1] - pd[n + 1], raz = pd[a + 2] - pd[n + 2];
+    const double rbx = pd[b] - pd[n], rby = pd[b + 1] - pd[n + 1], rbz = pd[b + 2] - pd[n + 2];
+    const CornerGeometry g = MeasureCorner(rax, ray, raz, rbx, rby, rbz, cos0[q], sin0[q]);
     const double yax = py[a], yay = py[a + 1], yaz = py[a + 2];
     const double ybx = py[b], yby = py[b + 1], ybz = py[b + 2];
-    const double ax = ahx[q], ay = ahy[q], az = ahz[q], bx = bhx[q], by = bhy[q], bz = bhz[q];
-    const double lra = la[q], lrb = lb[q], c = cs[q];
-    const double al = alpha[q], bt = beta[q];
+    const double ax = g.ax, ay = g.ay, az = g.az, bx = g.bx, by = g.by, bz = g.bz;
+    const double lra = g.la, lrb = g.lb, c = g.c;
+    const double al = g.al, bt = g.bt;
     const double yab = yax * bx + yay * by + yaz * bz;
     const double yba = ybx * ax + yby * ay + ybz * az;
     const double pp =
         lra * (yax * ax + yay * ay + yaz * az) + lrb * (ybx * bx + yby * by + ybz * bz);
     const double qq = lra * yab + lrb * yba;
-    const double coef = pp * dalpha[q] - qq * dbeta[q];
-    const double ka = -coef * inv_s[q] / lra, kb = -coef * inv_s[q] / lrb;
+    const double coef = pp * g.dal - qq * g.dbt;
+    const double ka = -coef * g.inv_s / lra, kb = -coef * g.inv_s / lrb;
     const double lba = lrb / lra, lab = lra / lrb;
     tax[q] = ka * (bx - c * ax) + al * yax - bt * (yab * ax + lba * (ybx - yba * ax));
     tay[q] = ka * (by - c * ay) + al * yay - bt * (yab * ay + lba * (yby - yba * ay));
@@ -284,69 +307,93 @@ void CornerTranspose(const double* R py, const int32_t* R ca, const int32_t* R c
 
 #undef R
 
+// One chunk's terms, kept in L1 between the geometry loop and the adds.
+struct ChunkTerms {
+  alignas(64) double x0[kChunk], y0[kChunk], z0[kChunk];  // edges: f; corners: ta
+  alignas(64) double x1[kChunk], y1[kChunk], z1[kChunk];  // corners: tb
+};
+
+inline void AddRow(double* out, int32_t v, double x, double y, double z) {
+  double* o = out + 3 * static_cast<int64_t>(v);
+  o[0] += x;
+  o[1] += y;
+  o[2] += z;
+}
+
 }  // namespace
 
-void DeformationMeasure::AddTerms(const Part& p, bool centres, double* out) {
+template <typename EdgeTerms, typename CornerTerms>
+void DeformationMeasure::RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
+                                 CornerTerms corner_terms) {
   for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
-  auto add = [out](int32_t v, double sign, double x, double y, double z) {
-    double* o = out + 3 * static_cast<int64_t>(v);
-    o[0] += sign * x;
-    o[1] += sign * y;
-    o[2] += sign * z;
-  };
-  for (size_t q = 0; q < p.ei.size(); ++q) {
-    const uint8_t owns = p.e_owns[q];
-    if (owns & 1) add(p.ei[q], -1.0, p.fx[q], p.fy[q], p.fz[q]);
-    if (owns & 2) add(p.ej[q], 1.0, p.fx[q], p.fy[q], p.fz[q]);
+  ChunkTerms t;
+  const int64_t ne = static_cast<int64_t>(p.ei.size());
+  for (int64_t q0 = 0; q0 < ne; q0 += kChunk) {
+    const int64_t m = std::min(kChunk, ne - q0);
+    edge_terms(q0, m, t.x0, t.y0, t.z0);
+    for (int64_t u = 0; u < m; ++u) {
+      const uint8_t owns = p.e_owns[q0 + u];
+      if (owns & 1) AddRow(out, p.ei[q0 + u], -t.x0[u], -t.y0[u], -t.z0[u]);
+      if (owns & 2) AddRow(out, p.ej[q0 + u], t.x0[u], t.y0[u], t.z0[u]);
+    }
   }
-  for (size_t q = 0; q < p.cn.size(); ++q) {
-    const uint8_t owns = p.c_owns[q];
-    if (owns & 1) add(p.ca[q], 1.0, p.tax[q], p.tay[q], p.taz[q]);
-    if (owns & 2) add(p.cb[q], 1.0, p.tbx[q], p.tby[q], p.tbz[q]);
-    if (centres && (owns & 4)) {
-      add(p.cn[q], -1.0, p.tax[q] + p.tbx[q], p.tay[q] + p.tby[q], p.taz[q] + p.tbz[q]);
+  const int64_t nc = static_cast<int64_t>(p.cn.size());
+  for (int64_t q0 = 0; q0 < nc; q0 += kChunk) {
+    const int64_t m = std::min(kChunk, nc - q0);
+    corner_terms(q0, m, t.x0, t.y0, t.z0, t.x1, t.y1, t.z1);
+    for (int64_t u = 0; u < m; ++u) {
+      const uint8_t owns = p.c_owns[q0 + u];
+      if (owns & 1) AddRow(out, p.ca[q0 + u], t.x0[u], t.y0[u], t.z0[u]);
+      if (owns & 2) AddRow(out, p.cb[q0 + u], t.x1[u], t.y1[u], t.z1[u]);
+      if (centres && (owns & 4)) {
+        AddRow(out, p.cn[q0 + u], -(t.x0[u] + t.x1[u]), -(t.y0[u] + t.y1[u]),
+               -(t.z0[u] + t.z1[u]));
+      }
     }
   }
 }
 
-void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) {
-  Part& p = parts_[k];
-  const int64_t ne = static_cast<int64_t>(p.ei.size());
-  const int64_t nc = static_cast<int64_t>(p.cn.size());
-  EdgeForward(d.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
-              p.rz.data(), p.l.data(), p.fx.data(), p.fy.data(), p.fz.data(), ne);
-  CornerForward(d.data(), p.cn.data(), p.ca.data(), p.cb.data(), p.cos0.data(), p.sin0.data(),
-                p.ahx.data(), p.ahy.data(), p.ahz.data(), p.bhx.data(), p.bhy.data(),
-                p.bhz.data(), p.la.data(), p.lb.data(), p.cs.data(), p.inv_s.data(),
-                p.alpha.data(), p.beta.data(), p.dalpha.data(), p.dbeta.data(), p.tax.data(),
-                p.tay.data(), p.taz.data(), p.tbx.data(), p.tby.data(), p.tbz.data(), nc);
-  AddTerms(p, /*centres=*/false, delta.data());
+void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) const {
+  const Part& p = parts_[k];
+  const double* pd = d.data();
+  RunPart(
+      p, /*centres=*/false, delta.data(),
+      [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
+        EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy, fz, m);
+      },
+      [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
+          double* bz) {
+        CornerForward(pd, p.cn.data() + q0, p.ca.data() + q0, p.cb.data() + q0,
+                      p.cos0.data() + q0, p.sin0.data() + q0, ax, ay, az, bx, by, bz, m);
+      });
 }
 
-void DeformationMeasure::TransposePart(const Points& y, int k, Points& out_points) {
-  Part& p = parts_[k];
-  const int64_t ne = static_cast<int64_t>(p.ei.size());
-  const int64_t nc = static_cast<int64_t>(p.cn.size());
-  EdgeTranspose(y.data(), p.ei.data(), p.ej.data(), p.e_rest.data(), p.rx.data(), p.ry.data(),
-                p.rz.data(), p.l.data(), p.fx.data(), p.fy.data(), p.fz.data(), ne);
-  CornerTranspose(y.data(), p.ca.data(), p.cb.data(), p.ahx.data(), p.ahy.data(), p.ahz.data(),
-                  p.bhx.data(), p.bhy.data(), p.bhz.data(), p.la.data(), p.lb.data(),
-                  p.cs.data(), p.inv_s.data(), p.alpha.data(), p.beta.data(), p.dalpha.data(),
-                  p.dbeta.data(), p.tax.data(), p.tay.data(), p.taz.data(), p.tbx.data(),
-                  p.tby.data(), p.tbz.data(), nc);
-  AddTerms(p, /*centres=*/true, out_points.data());
+void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
+                                       Points& out) const {
+  const Part& p = parts_[k];
+  const double* pd = d.data();
+  const double* py = y.data();
+  RunPart(
+      p, /*centres=*/true, out.data(),
+      [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
+        EdgeTranspose(pd, py, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy,
+                      fz, m);
+      },
+      [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
+          double* bz) {
+        CornerTranspose(pd, py, p.cn.data() + q0, p.ca.data() + q0, p.cb.data() + q0,
+                        p.cos0.data() + q0, p.sin0.data() + q0, ax, ay, az, bx, by, bz, m);
+      });
 }
 
-void DeformationMeasure::Apply(const Points& d, Points& delta) {
+void DeformationMeasure::Apply(const Points& d, Points& delta) const {
   delta.resize(d.rows(), 3);
   for (int k = 0; k < parts(); ++k) ForwardPart(d, k, delta);
 }
 
-void DeformationMeasure::ApplyTranspose(const Points& d, const Points& y, Points& out) {
-  Points scratch(d.rows(), 3);
-  for (int k = 0; k < parts(); ++k) ForwardPart(d, k, scratch);
+void DeformationMeasure::ApplyTranspose(const Points& d, const Points& y, Points& out) const {
   out.resize(y.rows(), 3);
-  for (int k = 0; k < parts(); ++k) TransposePart(y, k, out);
+  for (int k = 0; k < parts(); ++k) TransposePart(d, y, k, out);
 }
 
 }  // namespace dynsolid::models

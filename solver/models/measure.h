@@ -40,25 +40,29 @@ class DeformationMeasure {
   int parts() const { return static_cast<int>(parts_.size()); }
 
   // delta (#nodes by 3) for node positions d: part k writes the rows of its
-  // nodes (all of them, zeros included) and keeps the geometry it computed
-  // for TransposePart. `delta` must already have d.rows() rows.
-  void ForwardPart(const Points& d, int k, Points& delta);
+  // nodes (all of them, zeros included). `delta` must already have d.rows()
+  // rows.
+  void ForwardPart(const Points& d, int k, Points& delta) const;
 
-  // out = (d delta / d d)^T y at the positions of the last ForwardPart of
-  // the same part (the transpose of the measure's Jacobian): for an energy
-  // E(delta), the force is dE/dd = (d delta / d d)^T dE/d delta. Part k
-  // writes the rows of its nodes; `out` must have y.rows() rows.
-  void TransposePart(const Points& y, int k, Points& out);
+  // out = (d delta / d d)^T y at positions d (the transpose of the
+  // measure's Jacobian): for an energy E(delta), the force is
+  // dE/dd = (d delta / d d)^T dE/d delta. Part k writes the rows of its
+  // nodes; `out` must have y.rows() rows. The geometry is recomputed from
+  // d, not kept from the forward pass: the measure holds no per-term state.
+  void TransposePart(const Points& d, const Points& y, int k, Points& out) const;
 
   // Whole-measure conveniences (tests): all parts in turn, resizing outputs.
-  void Apply(const Points& d, Points& delta);
-  void ApplyTranspose(const Points& d, const Points& y, Points& out);
+  void Apply(const Points& d, Points& delta) const;
+  void ApplyTranspose(const Points& d, const Points& y, Points& out) const;
 
-  int64_t num_edges() const { return static_cast<int64_t>(edges_.size()); }
-  int64_t num_corners() const { return static_cast<int64_t>(corners_.size()); }
+  int64_t num_edges() const { return num_edges_; }
+  int64_t num_corners() const { return num_corners_; }
   // Edge and corner terms computed per pass, counting those computed by
   // two or more parts once for each (>= num_edges() + num_corners()).
   int64_t terms_per_pass() const;
+  // Bytes the measure keeps: its parts' node, edge and corner lists (node
+  // ids, rest lengths, rest angles, ownership bits). No per-term state.
+  int64_t bytes() const;
 
  private:
   struct Edge {
@@ -84,26 +88,21 @@ class DeformationMeasure {
     std::vector<int32_t> cn, ca, cb;
     std::vector<double> cos0, sin0;
     std::vector<uint8_t> c_owns;
-    // Forward-pass state. Edges: r = d_j - d_i, l, and the term f r.
-    std::vector<double> rx, ry, rz, l, fx, fy, fz;
-    // Corners: the unit sides a^, b^, their lengths, cos and 1/sin of the
-    // angle, alpha, beta and their derivatives in theta (all zero for a
-    // degenerate corner), then the terms on a and b (forward) or on a and
-    // b in the transpose (n gets minus both).
-    std::vector<double> ahx, ahy, ahz, bhx, bhy, bhz, la, lb, cs, inv_s;
-    std::vector<double> alpha, beta, dalpha, dbeta;
-    std::vector<double> tax, tay, taz, tbx, tby, tbz;
   };
-  // Clears the part's nodes in `out` (#nodes by 3, row-major) and adds the
-  // part's edge terms (f: -1 on i, +1 on j) and corner terms (ta on a, tb
-  // on b, and with `centres` -(ta + tb) on n) to the nodes it owns, in
-  // ascending term order.
-  static void AddTerms(const Part& p, bool centres, double* out);
+  // Clears the part's nodes in `out` (#nodes by 3, row-major), then adds
+  // the part's edge terms (f: -1 on i, +1 on j) and corner terms (ta on a,
+  // tb on b, and with `centres` -(ta + tb) on n) to the nodes it owns, in
+  // ascending term order, computing them chunk by chunk with edge_terms and
+  // corner_terms.
+  template <typename EdgeTerms, typename CornerTerms>
+  static void RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
+                      CornerTerms corner_terms);
   void AddEdge(int32_t i, int32_t j, const Points& rest);
   void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest);
 
-  std::vector<Edge> edges_;
-  std::vector<Corner> corners_;
+  std::vector<Edge> edges_;      // while constructing
+  std::vector<Corner> corners_;  // while constructing
+  int64_t num_edges_ = 0, num_corners_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
   std::vector<Part> parts_;
 };

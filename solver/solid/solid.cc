@@ -1,6 +1,7 @@
 #include "solver/solid/solid.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -544,6 +545,17 @@ struct Solid::Impl {
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+  // out = A p (A the node matrix), its rows split over the pool: each row's
+  // sum is taken whole by one thread, so the bits do not depend on the
+  // thread count.
+  void ToNodes(const Points& p, Points& out);
+  // out = A^T g: A's rows in kProjectParts fixed ranges, each range's
+  // product A_k^T g_k into a buffer of its own (threads take ranges t,
+  // t + T, ...), then the buffers added in range order: the same bits
+  // whatever the thread count.
+  void FromNodes(const Points& g, Points& out);
+  static constexpr int kProjectParts = 8;
+  std::array<Points, kProjectParts> project_parts;
   // Folded implicit path: the frames at p and out = f_ext(p) (constant loads
   // and pressure at p; no internal or spring forces); with `energy` also the
   // exact strain energy at p (one element pass more).
@@ -796,10 +808,37 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
   return std::sqrt(std::max(lambda, 0.0));
 }
 
+void Solid::Impl::ToNodes(const Points& p, Points& out) {
+  const SparseMatrix& a = d->node_matrix;
+  const Eigen::Index rows = a.rows();
+  out.resize(rows, 3);
+  const int threads = pool->size();
+  pool->Run([&](int t) {
+    const Eigen::Index r0 = rows * t / threads, r1 = rows * (t + 1) / threads;
+    if (r1 > r0) out.middleRows(r0, r1 - r0).noalias() = a.middleRows(r0, r1 - r0) * p;
+  });
+}
+
+void Solid::Impl::FromNodes(const Points& g, Points& out) {
+  const SparseMatrix& a = d->node_matrix;
+  const Eigen::Index rows = a.rows(), cols = a.cols();
+  const int threads = pool->size();
+  pool->Run([&](int t) {
+    for (int k = t; k < kProjectParts; k += threads) {
+      const Eigen::Index r0 = rows * k / kProjectParts, r1 = rows * (k + 1) / kProjectParts;
+      Points& part = project_parts[k];
+      part.resize(cols, 3);
+      part.noalias() = a.middleRows(r0, r1 - r0).transpose() * g.middleRows(r0, r1 - r0);
+    }
+  });
+  out = project_parts[0];
+  for (int k = 1; k < kProjectParts; ++k) out += project_parts[k];
+}
+
 void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases,
                                 Points& pressure) {
   auto t0 = Clock::now();
-  nodes.noalias() = d->node_matrix * p;
+  ToNodes(p, nodes);
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   last_strain_energy = model->Forces(nodes, g);
@@ -808,7 +847,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   phases.measure = timing.measure_ms;
   phases.stiffness = timing.elements_ms;
   t0 = Clock::now();
-  out.noalias() = d->node_matrix.transpose() * g;
+  FromNodes(g, out);
   out = -out;
   phases.project = MsSince(t0);
   if (has_const_force || !spring_point.empty() || has_pressure) {
@@ -829,7 +868,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
 void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
                                  Points& pressure, bool energy) {
   auto t0 = Clock::now();
-  nodes.noalias() = d->node_matrix * p;
+  ToNodes(p, nodes);
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
   if (energy) {
@@ -1375,10 +1414,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     im.kx_nodes.setZero(rest.rows(), 3);
     Impl* ip = &im;
     im.stiffness_op = [ip](const Points& x, Points& out) {
-      ip->x_nodes.noalias() = ip->d->node_matrix * x;
+      ip->ToNodes(x, ip->x_nodes);
       ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
       ++ip->element_passes;
-      out.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
+      ip->FromNodes(ip->kx_nodes, out);
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
       }
@@ -1390,10 +1429,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
       const auto t0 = Clock::now();
       const Points& p = *ip->ahead_from;
       ip->ahead = p + ip->implicit.h() * v;
-      ip->x_nodes.noalias() = ip->d->node_matrix * ip->ahead;
+      ip->ToNodes(ip->ahead, ip->x_nodes);
       ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
       ++ip->element_passes;
-      ip->g_ahead.noalias() = ip->d->node_matrix.transpose() * ip->kx_nodes;
+      ip->FromNodes(ip->kx_nodes, ip->g_ahead);
       out = ip->f - ip->g_ahead;
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         const int32_t i = ip->spring_point[s];
@@ -1534,7 +1573,9 @@ Points Solid::InternalControlForces(const Points& p) {
   im.model->ResetFrames();
   im.model->Forces(d, g);
   im.model->set_frames(frames);
-  return d_.node_matrix.transpose() * g;
+  Points out;
+  im.FromNodes(g, out);
+  return out;
 }
 
 double Solid::StrainEnergy(const Points& p) {

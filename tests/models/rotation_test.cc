@@ -154,5 +154,42 @@ TEST(ExtractRotationTest, NewtonGivesASymmetricStretchForInvertedAndDegenerateF)
   }
 }
 
+TEST(ExtractRotationTest, TurnByIsTheExactTurnUpToAQuarterRadian) {
+  const Eigen::Quaterniond q(Rot(0.9, {1, -1, 2}));
+  for (double angle : {0.0, 1e-9, 1e-4, 1e-3, 0.01, 0.1, 0.25}) {
+    const Eigen::Vector3d axis = Eigen::Vector3d(0.3, 0.8, -0.5).normalized();
+    const Eigen::Quaterniond exact = q * Eigen::Quaterniond(Eigen::AngleAxisd(angle, axis));
+    const Eigen::Quaterniond series = TurnBy(q, angle * axis);
+    EXPECT_LT((series.coeffs() - exact.coeffs()).cwiseAbs().maxCoeff(), 4e-16) << angle;
+    EXPECT_NEAR(series.norm(), 1.0, 4e-16) << angle;
+  }
+}
+
+// The local-frame model's early exit (after a Newton step below 1e-5 rad)
+// skips the iteration that only confirms convergence: from frames one step
+// (2e-3 rad) and ten steps old, under stretches up to 1.5 : 0.7, the frame
+// it leaves is the one the full iteration reaches, to the bit, and the
+// polar rotation to 1e-15 rad. An exit at 0.1 rad stops a step early and
+// is caught by the same comparison.
+TEST(ExtractRotationTest, NewtonExitGivesTheFrameOfTheFullIteration) {
+  const Eigen::Matrix3d axes = Rot(0.4, {1, 2, 3});
+  for (double off : {2e-3, 2e-2}) {
+    for (const Eigen::Vector3d& s : {Eigen::Vector3d(1, 1, 1), Eigen::Vector3d(1.1, 0.95, 1.02),
+                                     Eigen::Vector3d(1.5, 0.7, 1)}) {
+      const Eigen::Matrix3d f = Deformed(Rot(0.7, {0.3, -1, 0.5}), s, axes);
+      const Eigen::Quaterniond start(Rot(off, {1, 1, 0}).transpose() * Polar(f));
+      Eigen::Quaterniond q = start, full = start, early = start;
+      Eigen::Matrix3d r, r_full;
+      ExtractRotation(f, q, 8, &r, 1e-5);
+      ExtractRotation(f, full, 8, &r_full);
+      EXPECT_EQ(q.coeffs(), full.coeffs()) << off << " " << s.transpose();
+      EXPECT_EQ(r, r_full);
+      EXPECT_LT(Eigen::AngleAxisd(r.transpose() * Polar(f)).angle(), 1e-15);
+      ExtractRotation(f, early, 8, nullptr, 0.1);
+      EXPECT_NE(early.coeffs(), full.coeffs()) << off << " " << s.transpose();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace dynsolid::models

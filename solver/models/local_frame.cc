@@ -19,9 +19,10 @@ constexpr int32_t kBatch = 64;
 // The frame's Newton iteration stops after a step below 1e-5 rad (an error
 // of about 1e-10 rad left; rotation.h). The frame only rotates the
 // rotation-blind measure delta, so a frame error e moves the force by e of
-// itself: 1e-10 against CG's 1e-4. From a one-step-old warm start on a
-// solid turning at a few rad/s that is two Newton steps instead of four
-// and a check.
+// itself: 1e-10 against CG's 1e-4. From a one-step-old warm start the
+// Newton iteration lands on the polar rotation in two steps; the exit
+// saves the third evaluation, which would only confirm it (the frame is
+// the same to the bit: rotation_test).
 constexpr double kFrameNewtonExit = 1e-5;
 
 }  // namespace

@@ -8,37 +8,55 @@
 
 namespace dynsolid::models {
 
-void DeformationMeasure::AddEdge(int32_t i, int32_t j, const Points& rest) {
-  edges_.push_back({i, j, (rest.row(j) - rest.row(i)).norm()});
+namespace {
+
+// The edges and corners of the whole mesh, gathered once at construction
+// and handed out to the parts.
+struct Edge {
+  int32_t i, j;
+  double rest_length;
+};
+struct Corner {
+  int32_t n, a, b;
+  double cos0, sin0;  // of the rest angle
+};
+
+void AddEdge(int32_t i, int32_t j, const Points& rest, std::vector<Edge>& edges) {
+  edges.push_back({i, j, (rest.row(j) - rest.row(i)).norm()});
 }
 
-void DeformationMeasure::AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest) {
+void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest,
+               std::vector<Corner>& corners) {
   const Eigen::Vector3d ra = rest.row(a) - rest.row(n);
   const Eigen::Vector3d rb = rest.row(b) - rest.row(n);
   const double la = ra.norm(), lb = rb.norm();
   if (la <= 0 || lb <= 0) return;
-  corners_.push_back({n, a, b, ra.dot(rb) / (la * lb), ra.cross(rb).norm() / (la * lb)});
+  corners.push_back({n, a, b, ra.dot(rb) / (la * lb), ra.cross(rb).norm() / (la * lb)});
 }
+
+}  // namespace
 
 DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                                        const fem::ElementSet& elements, const Points& rest,
                                        int parts) {
-  edges_.reserve(mesh.num_edges());
+  std::vector<Edge> edges;
+  std::vector<Corner> corners;
+  edges.reserve(mesh.num_edges());
   for (int32_t e = 0; e < mesh.num_edges(); ++e) {
     const auto& ev = mesh.edge_vertices(e);
-    AddEdge(ev[0], ev[1], rest);
+    AddEdge(ev[0], ev[1], rest, edges);
   }
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     const auto loop = mesh.face_vertices(f);
     const size_t k = loop.size();
     for (size_t i = 0; i < k; ++i) {
-      AddCorner(loop[i], loop[(i + k - 1) % k], loop[(i + 1) % k], rest);
+      AddCorner(loop[i], loop[(i + k - 1) % k], loop[(i + 1) % k], rest, corners);
     }
   }
   // Pyramid elements: centre-to-vertex edges and the side triangles, once each.
   for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
     const int32_t apex = elements.num_mesh_vertices + v;
-    for (int32_t x : mesh.cell_vertices(elements.virtual_node_cell[v])) AddEdge(apex, x, rest);
+    for (int32_t x : mesh.cell_vertices(elements.virtual_node_cell[v])) AddEdge(apex, x, rest, edges);
   }
   std::set<std::array<int32_t, 3>> triangles;
   for (int32_t p = 0; p < elements.num_pyramid(); ++p) {
@@ -48,9 +66,9 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
       if (a == b) continue;  // degenerate base side (a triangle face)
       std::array<int32_t, 3> key{std::min(a, b), std::max(a, b), q[4]};
       if (!triangles.insert(key).second) continue;
-      AddCorner(q[4], a, b, rest);
-      AddCorner(a, b, q[4], rest);
-      AddCorner(b, q[4], a, rest);
+      AddCorner(q[4], a, b, rest, corners);
+      AddCorner(a, b, q[4], rest, corners);
+      AddCorner(b, q[4], a, rest, corners);
     }
   }
 
@@ -79,7 +97,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     }
     return true;
   };
-  for (const Edge& edge : edges_) {
+  for (const Edge& edge : edges) {
     const int ks[2] = {owner_[edge.i], owner_[edge.j]};
     for (int t = 0; t < 2; ++t) {
       if (!distinct(ks, t)) continue;
@@ -90,7 +108,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
       p.e_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0));
     }
   }
-  for (const Corner& c : corners_) {
+  for (const Corner& c : corners) {
     const int ks[3] = {owner_[c.a], owner_[c.b], owner_[c.n]};
     for (int t = 0; t < 3; ++t) {
       if (!distinct(ks, t)) continue;
@@ -105,10 +123,8 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     }
   }
   // The parts hold everything a pass needs; the global lists only counted.
-  num_edges_ = static_cast<int64_t>(edges_.size());
-  num_corners_ = static_cast<int64_t>(corners_.size());
-  std::vector<Edge>().swap(edges_);
-  std::vector<Corner>().swap(corners_);
+  num_edges_ = static_cast<int64_t>(edges.size());
+  num_corners_ = static_cast<int64_t>(corners.size());
   for (Part& p : parts_) {
     for (auto* v : {&p.nodes, &p.ei, &p.ej, &p.cn, &p.ca, &p.cb}) v->shrink_to_fit();
     for (auto* v : {&p.e_rest, &p.cos0, &p.sin0}) v->shrink_to_fit();

@@ -65,14 +65,6 @@ class DeformationMeasure {
   int64_t bytes() const;
 
  private:
-  struct Edge {
-    int32_t i, j;
-    double rest_length;
-  };
-  struct Corner {
-    int32_t n, a, b;
-    double cos0, sin0;  // of the rest angle
-  };
   // A part's edges and corners in structure-of-arrays form, so the
   // geometry loops run in SIMD lanes (gathers in, per-term results out),
   // and the adds into the part's own nodes follow as a scalar loop in
@@ -97,11 +89,7 @@ class DeformationMeasure {
   template <typename EdgeTerms, typename CornerTerms>
   static void RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
                       CornerTerms corner_terms);
-  void AddEdge(int32_t i, int32_t j, const Points& rest);
-  void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest);
 
-  std::vector<Edge> edges_;      // while constructing
-  std::vector<Corner> corners_;  // while constructing
   int64_t num_edges_ = 0, num_corners_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
   std::vector<Part> parts_;

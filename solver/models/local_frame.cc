@@ -137,17 +137,7 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
 // lanes added in a fixed order: the bits depend on the element alone.
 using simd::LoadRow;
 
-// Rows r0..r3 (x, y, z, 0) to columns x, y, z over the four nodes.
-inline void Transpose3(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x, __m256d& y,
-                       __m256d& z) {
-  const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
-  const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // y0 y1 0 0
-  const __m256d t2 = _mm256_unpacklo_pd(r2, r3);  // x2 x3 z2 z3
-  const __m256d t3 = _mm256_unpackhi_pd(r2, r3);  // y2 y3 0 0
-  x = _mm256_permute2f128_pd(t0, t2, 0x20);
-  y = _mm256_permute2f128_pd(t1, t3, 0x20);
-  z = _mm256_permute2f128_pd(t0, t2, 0x31);
-}
+using simd::RowsToColumns;
 
 inline double Sum4(__m256d v) {
   alignas(32) double a[4];
@@ -163,7 +153,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
     for (auto& v : row) v = _mm256_setzero_pd();
   for (int i = 0; i < n; i += 4) {
     __m256d x, y, z;
-    Transpose3(LoadRow(d, ids[i]), LoadRow(d, ids[i + 1]), LoadRow(d, ids[i + 2]),
+    RowsToColumns(LoadRow(d, ids[i]), LoadRow(d, ids[i + 1]), LoadRow(d, ids[i + 2]),
                LoadRow(d, ids[i + 3]), x, y, z);
     for (int c = 0; c < 3; ++c) {
       const __m256d g = _mm256_loadu_pd(grad + c * n + i);
@@ -183,7 +173,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
   double* out[3] = {dx, dy, dz};
   for (int i = 0; i < n; i += 4) {
     __m256d x, y, z;
-    Transpose3(LoadRow(delta, ids[i]), LoadRow(delta, ids[i + 1]), LoadRow(delta, ids[i + 2]),
+    RowsToColumns(LoadRow(delta, ids[i]), LoadRow(delta, ids[i + 1]), LoadRow(delta, ids[i + 2]),
                LoadRow(delta, ids[i + 3]), x, y, z);
     for (int a = 0; a < 3; ++a) {
       const __m256d v =
@@ -210,16 +200,8 @@ void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, con
       o[a] = _mm256_fmadd_pd(rr[a][2], az,
                              _mm256_fmadd_pd(rr[a][1], ay, _mm256_mul_pd(rr[a][0], ax)));
     }
-    // Columns gx, gy, gz over four nodes to rows (gx, gy, gz, 0).
-    const __m256d zero = _mm256_setzero_pd();
-    const __m256d t0 = _mm256_unpacklo_pd(o[0], o[1]);  // x0 y0 x2 y2
-    const __m256d t1 = _mm256_unpackhi_pd(o[0], o[1]);  // x1 y1 x3 y3
-    const __m256d t2 = _mm256_unpacklo_pd(o[2], zero);  // z0 0 z2 0
-    const __m256d t3 = _mm256_unpackhi_pd(o[2], zero);  // z1 0 z3 0
-    const __m256d row[4] = {_mm256_permute2f128_pd(t0, t2, 0x20),
-                            _mm256_permute2f128_pd(t1, t3, 0x20),
-                            _mm256_permute2f128_pd(t0, t2, 0x31),
-                            _mm256_permute2f128_pd(t1, t3, 0x31)};
+    __m256d row[4];
+    simd::ColumnsToRows(o[0], o[1], o[2], row);
     for (int k = 0; k < 4; ++k) {
       double* p = g + 3 * static_cast<int64_t>(ids[i + k]);
       _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), row[k]));

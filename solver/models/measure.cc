@@ -6,6 +6,13 @@
 
 #include <Eigen/Geometry>
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+
+#include "solver/models/simd_rows.h"
+#define DYNSOLID_MEASURE_AVX2 1
+#endif
+
 namespace dynsolid::models {
 
 namespace {
@@ -20,6 +27,16 @@ struct Corner {
   int32_t n, a, b;
   double cos0, sin0;  // of the rest angle
 };
+struct Quad {
+  std::array<int32_t, 4> v;
+  std::array<double, 4> cos0, sin0;  // of corner k's rest angle (at v[k])
+};
+
+#ifdef DYNSOLID_MEASURE_AVX2
+constexpr bool kQuadLanes = true;
+#else
+constexpr bool kQuadLanes = false;
+#endif
 
 void AddEdge(int32_t i, int32_t j, const Points& rest, std::vector<Edge>& edges) {
   edges.push_back({i, j, (rest.row(j) - rest.row(i)).norm()});
@@ -38,9 +55,10 @@ void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest,
 
 DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                                        const fem::ElementSet& elements, const Points& rest,
-                                       int parts) {
+                                       int parts, bool quads) {
   std::vector<Edge> edges;
   std::vector<Corner> corners;
+  std::vector<Quad> quad_list;
   edges.reserve(mesh.num_edges());
   for (int32_t e = 0; e < mesh.num_edges(); ++e) {
     const auto& ev = mesh.edge_vertices(e);
@@ -49,9 +67,22 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
     const auto loop = mesh.face_vertices(f);
     const size_t k = loop.size();
+    const size_t first = corners.size();
     for (size_t i = 0; i < k; ++i) {
       AddCorner(loop[i], loop[(i + k - 1) % k], loop[(i + 1) % k], rest, corners);
     }
+    // A quadrilateral with four distinct nodes and four proper rest corners
+    // runs as one: its corners leave the per-corner list.
+    if (!quads || !kQuadLanes || k != 4 || corners.size() != first + 4) continue;
+    Quad q;
+    for (int i = 0; i < 4; ++i) {
+      q.v[i] = loop[i];
+      q.cos0[i] = corners[first + i].cos0;
+      q.sin0[i] = corners[first + i].sin0;
+    }
+    if (q.v[0] == q.v[2] || q.v[1] == q.v[3]) continue;  // (adjacent ones give zero sides)
+    quad_list.push_back(q);
+    corners.resize(first);
   }
   // Pyramid elements: centre-to-vertex edges and the side triangles, once each.
   for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
@@ -108,6 +139,21 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
       p.e_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0));
     }
   }
+  for (const Quad& q : quad_list) {
+    const int ks[4] = {owner_[q.v[0]], owner_[q.v[1]], owner_[q.v[2]], owner_[q.v[3]]};
+    for (int t = 0; t < 4; ++t) {
+      if (!distinct(ks, t)) continue;
+      Part& p = parts_[ks[t]];
+      uint8_t owns = 0;
+      for (int i = 0; i < 4; ++i) {
+        p.qv.push_back(q.v[i]);
+        if (ks[i] == ks[t]) owns |= static_cast<uint8_t>(1 << i);
+      }
+      p.q_rest.insert(p.q_rest.end(), q.cos0.begin(), q.cos0.end());
+      p.q_rest.insert(p.q_rest.end(), q.sin0.begin(), q.sin0.end());
+      p.q_owns.push_back(owns);
+    }
+  }
   for (const Corner& c : corners) {
     const int ks[3] = {owner_[c.a], owner_[c.b], owner_[c.n]};
     for (int t = 0; t < 3; ++t) {
@@ -124,12 +170,12 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
   }
   // The parts hold everything a pass needs; the global lists only counted.
   num_edges_ = static_cast<int64_t>(edges.size());
-  num_corners_ = static_cast<int64_t>(corners.size());
+  num_quads_ = static_cast<int64_t>(quad_list.size());
+  num_corners_ = static_cast<int64_t>(corners.size()) + 4 * num_quads_;
   for (Part& p : parts_) {
-    for (auto* v : {&p.nodes, &p.ei, &p.ej, &p.cn, &p.ca, &p.cb}) v->shrink_to_fit();
-    for (auto* v : {&p.e_rest, &p.cos0, &p.sin0}) v->shrink_to_fit();
-    p.e_owns.shrink_to_fit();
-    p.c_owns.shrink_to_fit();
+    for (auto* v : {&p.nodes, &p.ei, &p.ej, &p.qv, &p.cn, &p.ca, &p.cb}) v->shrink_to_fit();
+    for (auto* v : {&p.e_rest, &p.q_rest, &p.cos0, &p.sin0}) v->shrink_to_fit();
+    for (auto* v : {&p.e_owns, &p.q_owns, &p.c_owns}) v->shrink_to_fit();
   }
 }
 
@@ -137,15 +183,17 @@ int64_t DeformationMeasure::bytes() const {
   auto b = [](const auto& v) { return static_cast<int64_t>(v.size() * sizeof(v[0])); };
   int64_t n = b(owner_);
   for (const Part& p : parts_) {
-    n += b(p.nodes) + b(p.ei) + b(p.ej) + b(p.e_rest) + b(p.e_owns) + b(p.cn) + b(p.ca) +
-         b(p.cb) + b(p.cos0) + b(p.sin0) + b(p.c_owns);
+    n += b(p.nodes) + b(p.ei) + b(p.ej) + b(p.e_rest) + b(p.e_owns) + b(p.qv) + b(p.q_rest) +
+         b(p.q_owns) + b(p.cn) + b(p.ca) + b(p.cb) + b(p.cos0) + b(p.sin0) + b(p.c_owns);
   }
   return n;
 }
 
 int64_t DeformationMeasure::terms_per_pass() const {
   int64_t n = 0;
-  for (const Part& p : parts_) n += static_cast<int64_t>(p.ei.size() + p.cn.size());
+  for (const Part& p : parts_) {
+    n += static_cast<int64_t>(p.ei.size() + p.cn.size() + 4 * p.q_owns.size());
+  }
   return n;
 }
 
@@ -178,6 +226,65 @@ void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
   }
 }
 
+// The corner formulas are written once, for a value type T: double (the
+// per-corner loops, which GCC runs in SIMD lanes) or Lanes (four corners of
+// a quadrilateral in one AVX2 register). Conditions are masks of T: 0 or 1
+// for double (bool lanes keep GCC from vectorizing), all bits for Lanes.
+inline double Sqrt(double a) { return std::sqrt(a); }
+inline double Min(double a, double b) { return std::min(a, b); }
+inline double Max(double a, double b) { return std::max(a, b); }
+inline double Greater(double a, double b) { return a > b ? 1.0 : 0.0; }
+inline double NotLess(double a, double b) { return a >= b ? 1.0 : 0.0; }
+inline double And(double m, double n) { return m > 0 ? n : 0.0; }
+inline double Select(double m, double a, double b) { return m > 0 ? a : b; }
+
+#ifdef DYNSOLID_MEASURE_AVX2
+// Two quadrilaterals' corners (lane k of register h: corner k of
+// quadrilateral h): two AVX2 registers, each operation issued on
+// both back to back. The corner formulas are a chain of dependent square
+// roots and divisions; two independent chains side by side keep the units
+// busy where one quadrilateral at a time waits on its own latency.
+struct Lanes {
+  __m256d v[2];
+  Lanes() = default;
+  Lanes(__m256d a, __m256d b) : v{a, b} {}
+  Lanes(double x) : v{_mm256_set1_pd(x), _mm256_set1_pd(x)} {}  // NOLINT: implicit
+};
+#define DYNSOLID_LANES_OP(name, expr)                              \
+  inline Lanes name(Lanes a, Lanes b) {                            \
+    return {[&](__m256d x, __m256d y) { return expr; }(a.v[0], b.v[0]), \
+            [&](__m256d x, __m256d y) { return expr; }(a.v[1], b.v[1])}; \
+  }
+DYNSOLID_LANES_OP(operator+, _mm256_add_pd(x, y))
+DYNSOLID_LANES_OP(operator-, _mm256_sub_pd(x, y))
+DYNSOLID_LANES_OP(operator*, _mm256_mul_pd(x, y))
+DYNSOLID_LANES_OP(operator/, _mm256_div_pd(x, y))
+// std::min(a, b) is (b < a ? b : a), std::max(a, b) is (a < b ? b : a):
+// vminpd and vmaxpd return their second operand on ties and NaNs.
+DYNSOLID_LANES_OP(Min, _mm256_min_pd(y, x))
+DYNSOLID_LANES_OP(Max, _mm256_max_pd(y, x))
+DYNSOLID_LANES_OP(Greater, _mm256_cmp_pd(x, y, _CMP_GT_OQ))
+DYNSOLID_LANES_OP(NotLess, _mm256_cmp_pd(x, y, _CMP_GE_OQ))
+DYNSOLID_LANES_OP(And, _mm256_and_pd(x, y))
+#undef DYNSOLID_LANES_OP
+inline Lanes operator-(Lanes a) {
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  return {_mm256_xor_pd(a.v[0], sign), _mm256_xor_pd(a.v[1], sign)};
+}
+inline Lanes Sqrt(Lanes a) { return {_mm256_sqrt_pd(a.v[0]), _mm256_sqrt_pd(a.v[1])}; }
+inline Lanes Select(Lanes m, Lanes a, Lanes b) {
+  return {_mm256_blendv_pd(b.v[0], a.v[0], m.v[0]), _mm256_blendv_pd(b.v[1], a.v[1], m.v[1])};
+}
+// Within each quadrilateral, lane k takes lane k + 1 (Next) or lane k - 1
+// (Prev), cyclically.
+inline Lanes Next(Lanes a) {
+  return {_mm256_permute4x64_pd(a.v[0], 0x39), _mm256_permute4x64_pd(a.v[1], 0x39)};
+}
+inline Lanes Prev(Lanes a) {
+  return {_mm256_permute4x64_pd(a.v[0], 0x93), _mm256_permute4x64_pd(a.v[1], 0x93)};
+}
+#endif
+
 // Corner geometry (n; a, b) from ra = a - n and rb = b - n: with
 // phi = (theta - theta0) / 2, C = cos(phi), S = sin(phi), rotating a by
 // +phi and b by -phi about n gives delta_a = alpha ra - beta la b^ and
@@ -186,51 +293,108 @@ void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
 // zero side, collinear sides, or an angle half a turn from its rest value)
 // contributes nothing: its alpha, beta and their derivatives in theta are
 // zero and its other values finite.
+template <typename T>
 struct CornerGeometry {
-  double ax, ay, az, bx, by, bz;  // unit sides a^, b^
-  double la, lb;                  // side lengths (1 for a zero side)
-  double c, inv_s;                // cos theta, 1 / sin theta
-  double al, bt, dal, dbt;        // alpha, beta and their theta derivatives
+  T ax, ay, az, bx, by, bz;  // unit sides a^, b^
+  T la, lb;                  // side lengths (1 for a zero side)
+  T ia, ib;                  // their inverses (0 for a zero side)
+  T c, inv_s;                // cos theta, 1 / sin theta
+  T al, bt, dal, dbt;        // alpha, beta and their theta derivatives
 };
 
-[[gnu::always_inline]] inline CornerGeometry MeasureCorner(double rax, double ray, double raz,
-                                                           double rbx, double rby, double rbz,
-                                                           double cos0, double sin0) {
-  CornerGeometry g;
-  const double lra = std::sqrt(rax * rax + ray * ray + raz * raz);
-  const double lrb = std::sqrt(rbx * rbx + rby * rby + rbz * rbz);
-  // Validity as 0/1 doubles (bool lanes keep GCC from vectorizing).
-  const double sides = std::min(lra, lrb) > 0 ? 1.0 : 0.0;
-  const double ia_any = 1.0 / (sides > 0 ? lra : 1.0), ib_any = 1.0 / (sides > 0 ? lrb : 1.0);
-  const double ia = sides > 0 ? ia_any : 0.0, ib = sides > 0 ? ib_any : 0.0;
+// A side's length and inverse: l = |r| and 1 / l (1 for a zero side).
+template <typename T>
+struct Side {
+  T l, inv;
+};
+template <typename T>
+[[gnu::always_inline]] inline Side<T> MeasureSide(T rx, T ry, T rz) {
+  const T l = Sqrt(rx * rx + ry * ry + rz * rz);
+  return {l, T(1.0) / Select(Greater(l, T(0.0)), l, T(1.0))};
+}
+
+// The corner's geometry from its sides ra, rb, their lengths and inverses
+// (MeasureSide), and its rest angle's cosine and sine.
+template <typename T>
+[[gnu::always_inline]] inline CornerGeometry<T> MeasureCorner(T rax, T ray, T raz, T rbx, T rby,
+                                                              T rbz, Side<T> sa, Side<T> sb,
+                                                              T cos0, T sin0) {
+  CornerGeometry<T> g;
+  const T lra = sa.l, lrb = sb.l;
+  const T sides = Greater(Min(lra, lrb), T(0.0));
+  const T ia = Select(sides, sa.inv, T(0.0)), ib = Select(sides, sb.inv, T(0.0));
   g.ax = rax * ia, g.ay = ray * ia, g.az = raz * ia;
   g.bx = rbx * ib, g.by = rby * ib, g.bz = rbz * ib;
-  const double c = g.ax * g.bx + g.ay * g.by + g.az * g.bz;
-  const double x0 = g.ay * g.bz - g.az * g.by, x1 = g.az * g.bx - g.ax * g.bz,
-               x2 = g.ax * g.by - g.ay * g.bx;
-  const double sn = std::sqrt(x0 * x0 + x1 * x1 + x2 * x2);
+  const T c = g.ax * g.bx + g.ay * g.by + g.az * g.bz;
+  const T x0 = g.ay * g.bz - g.az * g.by, x1 = g.az * g.bx - g.ax * g.bz,
+          x2 = g.ax * g.by - g.ay * g.bx;
+  const T sn = Sqrt(x0 * x0 + x1 * x1 + x2 * x2);
   // phi in (-pi/2, pi/2) by half-angle formulas.
-  const double cos_d = c * cos0 + sn * sin0;
-  const double sin_d = sn * cos0 - c * sin0;
-  const double cap_c = std::sqrt(std::max(0.0, 0.5 * (1.0 + cos_d)));
-  const double ok_s = sn > 1e-300 ? sides : 0.0;
-  const double okf = cap_c >= 1e-12 ? ok_s : 0.0;
-  const double s_safe = okf > 0 ? sn : 1.0, c_safe = okf > 0 ? cap_c : 1.0;
-  const double is = 1.0 / s_safe;
-  const double cap_s = sin_d / (2.0 * c_safe);
-  const double bt_any = cap_s * is;
-  const double al_any = 1.0 - c_safe + c * bt_any;
-  const double dal_any = -0.5 * cap_s + c * c_safe * 0.5 * is - c * c * cap_s * is * is;
-  const double dbt_any = c_safe * 0.5 * is - cap_s * c * is * is;
-  g.bt = okf > 0 ? bt_any : 0.0;
-  g.al = okf > 0 ? al_any : 0.0;
-  g.dal = okf > 0 ? dal_any : 0.0;
-  g.dbt = okf > 0 ? dbt_any : 0.0;
-  g.la = sides > 0 ? lra : 1.0;
-  g.lb = sides > 0 ? lrb : 1.0;
+  const T cos_d = c * cos0 + sn * sin0;
+  const T sin_d = sn * cos0 - c * sin0;
+  const T cap_c = Sqrt(Max(T(0.0), T(0.5) * (T(1.0) + cos_d)));
+  const T ok_s = And(Greater(sn, T(1e-300)), sides);
+  const T okf = And(NotLess(cap_c, T(1e-12)), ok_s);
+  const T s_safe = Select(okf, sn, T(1.0)), c_safe = Select(okf, cap_c, T(1.0));
+  const T is = T(1.0) / s_safe;
+  const T cap_s = sin_d / (T(2.0) * c_safe);
+  const T bt_any = cap_s * is;
+  const T al_any = T(1.0) - c_safe + c * bt_any;
+  const T dal_any = T(-0.5) * cap_s + c * c_safe * T(0.5) * is - c * c * cap_s * is * is;
+  const T dbt_any = c_safe * T(0.5) * is - cap_s * c * is * is;
+  g.bt = Select(okf, bt_any, T(0.0));
+  g.al = Select(okf, al_any, T(0.0));
+  g.dal = Select(okf, dal_any, T(0.0));
+  g.dbt = Select(okf, dbt_any, T(0.0));
+  g.la = Select(sides, lra, T(1.0));
+  g.lb = Select(sides, lrb, T(1.0));
+  g.ia = ia;
+  g.ib = ib;
   g.c = c;
   g.inv_s = is;
   return g;
+}
+
+// A corner's terms on a and b.
+template <typename T>
+struct CornerTerms {
+  T ax, ay, az, bx, by, bz;
+};
+
+// Forward: delta_a = alpha ra - beta la b^, delta_b = alpha rb - beta lb a^.
+template <typename T>
+[[gnu::always_inline]] inline CornerTerms<T> ForwardTerms(T rax, T ray, T raz, T rbx, T rby,
+                                                          T rbz, const CornerGeometry<T>& g) {
+  // With a zero side, la/lb hold 1 but alpha = beta = 0: the true lengths
+  // times beta are zero either way.
+  const T bla = g.bt * g.la, blb = g.bt * g.lb;
+  return {g.al * rax - bla * g.bx, g.al * ray - bla * g.by, g.al * raz - bla * g.bz,
+          g.al * rbx - blb * g.ax, g.al * rby - blb * g.ay, g.al * rbz - blb * g.az};
+}
+
+// Transpose: dF/dra and dF/drb for F = ya.delta_a + yb.delta_b (derivation
+// at CornerTranspose below).
+template <typename T>
+[[gnu::always_inline]] inline CornerTerms<T> TransposeTerms(T yax, T yay, T yaz, T ybx, T yby,
+                                                            T ybz, const CornerGeometry<T>& g) {
+  const T ax = g.ax, ay = g.ay, az = g.az, bx = g.bx, by = g.by, bz = g.bz;
+  const T lra = g.la, lrb = g.lb, c = g.c;
+  const T al = g.al, bt = g.bt;
+  const T yab = yax * bx + yay * by + yaz * bz;
+  const T yba = ybx * ax + yby * ay + ybz * az;
+  const T pp = lra * (yax * ax + yay * ay + yaz * az) + lrb * (ybx * bx + yby * by + ybz * bz);
+  const T qq = lra * yab + lrb * yba;
+  const T coef = pp * g.dal - qq * g.dbt;
+  // (With a zero side ia and ib are 0, and so are alpha, beta and their
+  // derivatives: the terms are zero either way.)
+  const T ka = -coef * g.inv_s * g.ia, kb = -coef * g.inv_s * g.ib;
+  const T lba = lrb * g.ia, lab = lra * g.ib;
+  return {ka * (bx - c * ax) + al * yax - bt * (yab * ax + lba * (ybx - yba * ax)),
+          ka * (by - c * ay) + al * yay - bt * (yab * ay + lba * (yby - yba * ay)),
+          ka * (bz - c * az) + al * yaz - bt * (yab * az + lba * (ybz - yba * az)),
+          kb * (ax - c * bx) + al * ybx - bt * (yba * bx + lab * (yax - yab * bx)),
+          kb * (ay - c * by) + al * yby - bt * (yba * by + lab * (yay - yab * by)),
+          kb * (az - c * bz) + al * ybz - bt * (yba * bz + lab * (yaz - yab * bz))};
 }
 
 // The corner terms on a and b (n's is minus their sum).
@@ -243,16 +407,12 @@ void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
     const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
     const double rax = pd[a] - pd[n], ray = pd[a + 1] - pd[n + 1], raz = pd[a + 2] - pd[n + 2];
     const double rbx = pd[b] - pd[n], rby = pd[b + 1] - pd[n + 1], rbz = pd[b + 2] - pd[n + 2];
-    const CornerGeometry g = MeasureCorner(rax, ray, raz, rbx, rby, rbz, cos0[q], sin0[q]);
-    // With a zero side, la/lb hold 1 but alpha = beta = 0: the true lengths
-    // times beta are zero either way.
-    const double bla = g.bt * g.la, blb = g.bt * g.lb;
-    tax[q] = g.al * rax - bla * g.bx;
-    tay[q] = g.al * ray - bla * g.by;
-    taz[q] = g.al * raz - bla * g.bz;
-    tbx[q] = g.al * rbx - blb * g.ax;
-    tby[q] = g.al * rby - blb * g.ay;
-    tbz[q] = g.al * rbz - blb * g.az;
+    const CornerGeometry<double> g =
+        MeasureCorner<double>(rax, ray, raz, rbx, rby, rbz, MeasureSide(rax, ray, raz),
+                              MeasureSide(rbx, rby, rbz), cos0[q], sin0[q]);
+    const CornerTerms<double> t = ForwardTerms(rax, ray, raz, rbx, rby, rbz, g);
+    tax[q] = t.ax, tay[q] = t.ay, taz[q] = t.az;
+    tbx[q] = t.bx, tby[q] = t.by, tbz[q] = t.bz;
   }
 }
 
@@ -298,26 +458,14 @@ void CornerTranspose(const double* R pd, const double* R py, const int32_t* R cn
     const int64_t a = 3 * static_cast<int64_t>(ca[q]), b = 3 * static_cast<int64_t>(cb[q]);
     const double rax = pd[a] - pd[n], ray = pd[a + 1] - pd[n + 1], raz = pd[a + 2] - pd[n + 2];
     const double rbx = pd[b] - pd[n], rby = pd[b + 1] - pd[n + 1], rbz = pd[b + 2] - pd[n + 2];
-    const CornerGeometry g = MeasureCorner(rax, ray, raz, rbx, rby, rbz, cos0[q], sin0[q]);
+    const CornerGeometry<double> g =
+        MeasureCorner<double>(rax, ray, raz, rbx, rby, rbz, MeasureSide(rax, ray, raz),
+                              MeasureSide(rbx, rby, rbz), cos0[q], sin0[q]);
     const double yax = py[a], yay = py[a + 1], yaz = py[a + 2];
     const double ybx = py[b], yby = py[b + 1], ybz = py[b + 2];
-    const double ax = g.ax, ay = g.ay, az = g.az, bx = g.bx, by = g.by, bz = g.bz;
-    const double lra = g.la, lrb = g.lb, c = g.c;
-    const double al = g.al, bt = g.bt;
-    const double yab = yax * bx + yay * by + yaz * bz;
-    const double yba = ybx * ax + yby * ay + ybz * az;
-    const double pp =
-        lra * (yax * ax + yay * ay + yaz * az) + lrb * (ybx * bx + yby * by + ybz * bz);
-    const double qq = lra * yab + lrb * yba;
-    const double coef = pp * g.dal - qq * g.dbt;
-    const double ka = -coef * g.inv_s / lra, kb = -coef * g.inv_s / lrb;
-    const double lba = lrb / lra, lab = lra / lrb;
-    tax[q] = ka * (bx - c * ax) + al * yax - bt * (yab * ax + lba * (ybx - yba * ax));
-    tay[q] = ka * (by - c * ay) + al * yay - bt * (yab * ay + lba * (yby - yba * ay));
-    taz[q] = ka * (bz - c * az) + al * yaz - bt * (yab * az + lba * (ybz - yba * az));
-    tbx[q] = kb * (ax - c * bx) + al * ybx - bt * (yba * bx + lab * (yax - yab * bx));
-    tby[q] = kb * (ay - c * by) + al * yby - bt * (yba * by + lab * (yay - yab * by));
-    tbz[q] = kb * (az - c * bz) + al * ybz - bt * (yba * bz + lab * (yaz - yab * bz));
+    const CornerTerms<double> t = TransposeTerms(yax, yay, yaz, ybx, yby, ybz, g);
+    tax[q] = t.ax, tay[q] = t.ay, taz[q] = t.az;
+    tbx[q] = t.bx, tby[q] = t.by, tbz[q] = t.bz;
   }
 }
 
@@ -336,11 +484,117 @@ inline void AddRow(double* out, int32_t v, double x, double y, double z) {
   o[2] += z;
 }
 
+#ifdef DYNSOLID_MEASURE_AVX2
+// Quadrilaterals q0 and q1's node rows of `base` as columns (lane k of
+// register h: node k of quadrilateral h).
+inline void LoadQuads(const double* base, const int32_t* v0, const int32_t* v1, Lanes& x,
+                      Lanes& y, Lanes& z) {
+  const int32_t* v[2] = {v0, v1};
+  for (int h = 0; h < 2; ++h) {
+    simd::RowsToColumns(simd::LoadRow(base, v[h][0]), simd::LoadRow(base, v[h][1]),
+                        simd::LoadRow(base, v[h][2]), simd::LoadRow(base, v[h][3]), x.v[h],
+                        y.v[h], z.v[h]);
+  }
+}
+
+inline Lanes LoadRest(const double* rest, int64_t q0, int64_t q1, int offset) {
+  return {_mm256_loadu_pd(rest + 8 * q0 + offset), _mm256_loadu_pd(rest + 8 * q1 + offset)};
+}
+
+// Adds lane k of register h of (x, y, z) to node v_h[k]'s row where bit k
+// of owns_h is set (x and y in one 2-lane add, z alone: a 4-lane store
+// would write the next row, which another part may own).
+inline void AddQuads(double* out, const int32_t* v0, const int32_t* v1, uint8_t owns0,
+                     uint8_t owns1, Lanes x, Lanes y, Lanes z) {
+  const int32_t* v[2] = {v0, v1};
+  const uint8_t owns[2] = {owns0, owns1};
+  for (int h = 0; h < 2; ++h) {
+    __m256d row[4];
+    simd::ColumnsToRows(x.v[h], y.v[h], z.v[h], row);
+    for (int k = 0; k < 4; ++k) {
+      if (!(owns[h] & (1 << k))) continue;
+      double* o = out + 3 * static_cast<int64_t>(v[h][k]);
+      _mm_storeu_pd(o, _mm_add_pd(_mm_loadu_pd(o), _mm256_castpd256_pd128(row[k])));
+      o[2] += _mm256_cvtsd_f64(_mm256_permute4x64_pd(row[k], 0x02));
+    }
+  }
+}
+
+// Corner k of a quadrilateral sits at node k, between a = node k - 1 and
+// b = node k + 1: its sides are ra = Prev(p) - p, rb = Next(p) - p (the
+// same differences, to the bit, as the per-corner path's a - n and b - n).
+// Side b of corner k is side a of corner k + 1 reversed: one length and
+// inverse per side, rotated into place (the same bits: the components are
+// exact negatives).
+struct QuadSides {
+  Lanes rax, ray, raz, rbx, rby, rbz;
+  Side<Lanes> a, b;
+};
+inline QuadSides Sides(Lanes x, Lanes y, Lanes z) {
+  QuadSides r{Prev(x) - x, Prev(y) - y, Prev(z) - z, Next(x) - x, Next(y) - y, Next(z) - z,
+              {}, {}};
+  r.b = MeasureSide(r.rbx, r.rby, r.rbz);
+  r.a = {Prev(r.b.l), Prev(r.b.inv)};
+  return r;
+}
+
+// Quadrilaterals two at a time; with an odd count the last runs as both
+// halves, its second copy adding nothing (no owned nodes).
+template <typename Body>
+void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq, Body body) {
+  for (int64_t q = 0; q < nq; q += 2) {
+    const int64_t q1 = q + 1 < nq ? q + 1 : q;
+    body(q, q1, qv + 4 * q, qv + 4 * q1, owns[q], q1 != q ? owns[q1] : uint8_t{0});
+  }
+}
+
+// Forward: node k takes corner k + 1's term on its a and corner k - 1's on
+// its b.
+void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
+                  const double* pd, double* out) {
+  ForQuadPairs(qv, owns, nq,
+               [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
+                   uint8_t o1) {
+                 Lanes x, y, z;
+                 LoadQuads(pd, v0, v1, x, y, z);
+                 const QuadSides r = Sides(x, y, z);
+                 const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
+                     r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
+                     LoadRest(rest, q0, q1, 0), LoadRest(rest, q0, q1, 4));
+                 const CornerTerms<Lanes> t =
+                     ForwardTerms(r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, g);
+                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx), Next(t.ay) + Prev(t.by),
+                          Next(t.az) + Prev(t.bz));
+               });
+}
+
+// Transpose: as the forward, plus minus both of its own corner's terms.
+void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
+                    const double* pd, const double* py, double* out) {
+  ForQuadPairs(qv, owns, nq,
+               [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
+                   uint8_t o1) {
+                 Lanes x, y, z, yx, yy, yz;
+                 LoadQuads(pd, v0, v1, x, y, z);
+                 LoadQuads(py, v0, v1, yx, yy, yz);
+                 const QuadSides r = Sides(x, y, z);
+                 const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
+                     r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
+                     LoadRest(rest, q0, q1, 0), LoadRest(rest, q0, q1, 4));
+                 const CornerTerms<Lanes> t = TransposeTerms(Prev(yx), Prev(yy), Prev(yz),
+                                                             Next(yx), Next(yy), Next(yz), g);
+                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx) - (t.ax + t.bx),
+                          Next(t.ay) + Prev(t.by) - (t.ay + t.by),
+                          Next(t.az) + Prev(t.bz) - (t.az + t.bz));
+               });
+}
+#endif
+
 }  // namespace
 
-template <typename EdgeTerms, typename CornerTerms>
+template <typename EdgeTerms, typename QuadTerms, typename CornerTerms>
 void DeformationMeasure::RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
-                                 CornerTerms corner_terms) {
+                                 QuadTerms quad_terms, CornerTerms corner_terms) {
   for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
   ChunkTerms t;
   const int64_t ne = static_cast<int64_t>(p.ei.size());
@@ -353,6 +607,7 @@ void DeformationMeasure::RunPart(const Part& p, bool centres, double* out, EdgeT
       if (owns & 2) AddRow(out, p.ej[q0 + u], t.x0[u], t.y0[u], t.z0[u]);
     }
   }
+  quad_terms(out);
   const int64_t nc = static_cast<int64_t>(p.cn.size());
   for (int64_t q0 = 0; q0 < nc; q0 += kChunk) {
     const int64_t m = std::min(kChunk, nc - q0);
@@ -377,6 +632,14 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
         EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy, fz, m);
       },
+      [&](double* out) {
+#ifdef DYNSOLID_MEASURE_AVX2
+        QuadsForward(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
+                     static_cast<int64_t>(p.q_owns.size()), pd, out);
+#else
+        (void)out;  // no quadrilaterals are built without AVX2
+#endif
+      },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
           double* bz) {
         CornerForward(pd, p.cn.data() + q0, p.ca.data() + q0, p.cb.data() + q0,
@@ -394,6 +657,14 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
         EdgeTranspose(pd, py, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy,
                       fz, m);
+      },
+      [&](double* out) {
+#ifdef DYNSOLID_MEASURE_AVX2
+        QuadsTranspose(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
+                       static_cast<int64_t>(p.q_owns.size()), pd, py, out);
+#else
+        (void)out;
+#endif
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
           double* bz) {

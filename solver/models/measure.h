@@ -20,6 +20,17 @@
 // another's rows, and there are no per-thread buffers to clear and add.
 // Terms of edges and corners on a boundary between parts are computed by
 // each part they touch (a few percent of the work on large meshes).
+//
+// Quadrilateral faces (every face of a subdivided hexahedral mesh) are
+// processed whole, their four corners in the four lanes of one AVX2
+// register: the face's four node rows are loaded once and transposed, each
+// corner's sides are lane rotations of them, and each node's share of the
+// face (the terms of the two or three corners that touch it) is summed in
+// registers and added to its row once. Per node the sums run over its
+// edges, then its quadrilaterals, then its other corners, each list
+// ascending: still one global order. Without AVX2, or with `quads` false
+// (the reference the tests hold the quadrilateral path to), every corner
+// goes through the per-corner path.
 #pragma once
 
 #include <array>
@@ -35,7 +46,7 @@ class DeformationMeasure {
  public:
   DeformationMeasure() = default;
   DeformationMeasure(const mesh::CellComplex& mesh, const fem::ElementSet& elements,
-                     const Points& rest, int parts);
+                     const Points& rest, int parts, bool quads = true);
 
   int parts() const { return static_cast<int>(parts_.size()); }
 
@@ -57,6 +68,9 @@ class DeformationMeasure {
 
   int64_t num_edges() const { return num_edges_; }
   int64_t num_corners() const { return num_corners_; }
+  // Quadrilaterals whose four corners run together (their corners count in
+  // num_corners()).
+  int64_t num_quads() const { return num_quads_; }
   // Edge and corner terms computed per pass, counting those computed by
   // two or more parts once for each (>= num_edges() + num_corners()).
   int64_t terms_per_pass() const;
@@ -76,21 +90,29 @@ class DeformationMeasure {
     std::vector<int32_t> ei, ej;
     std::vector<double> e_rest;
     std::vector<uint8_t> e_owns;
-    // Corners touching an owned node, ascending.
+    // Quadrilaterals touching an owned node, ascending: their nodes in loop
+    // order (4 each; corner k is at node k, between nodes k - 1 and k + 1),
+    // the cosines then the sines of the corners' rest angles (8 each), and
+    // bit k set when node k is owned.
+    std::vector<int32_t> qv;
+    std::vector<double> q_rest;
+    std::vector<uint8_t> q_owns;
+    // Other corners touching an owned node, ascending.
     std::vector<int32_t> cn, ca, cb;
     std::vector<double> cos0, sin0;
     std::vector<uint8_t> c_owns;
   };
   // Clears the part's nodes in `out` (#nodes by 3, row-major), then adds
-  // the part's edge terms (f: -1 on i, +1 on j) and corner terms (ta on a,
-  // tb on b, and with `centres` -(ta + tb) on n) to the nodes it owns, in
-  // ascending term order, computing them chunk by chunk with edge_terms and
-  // corner_terms.
-  template <typename EdgeTerms, typename CornerTerms>
+  // the part's edge terms (f: -1 on i, +1 on j), its quadrilaterals' terms
+  // (quad_terms adds them itself) and its other corner terms (ta on a, tb
+  // on b, and with `centres` -(ta + tb) on n) to the nodes it owns, in
+  // ascending term order, computing edges and corners chunk by chunk with
+  // edge_terms and corner_terms.
+  template <typename EdgeTerms, typename QuadTerms, typename CornerTerms>
   static void RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
-                      CornerTerms corner_terms);
+                      QuadTerms quad_terms, CornerTerms corner_terms);
 
-  int64_t num_edges_ = 0, num_corners_ = 0;
+  int64_t num_edges_ = 0, num_corners_ = 0, num_quads_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
   std::vector<Part> parts_;
 };

@@ -112,5 +112,47 @@ TEST(LocalFrameTest, MeasureGivesTheSameBitsForAnyPartCount) {
   }
 }
 
+// Quadrilaterals run four corners to a register; the per-corner path is the
+// reference: the same terms summed in another order, so the two agree to
+// rounding. The transpose is the adjoint of the forward's derivative
+// (central differences of y . delta along random directions).
+TEST(LocalFrameTest, QuadrilateralPathMatchesThePerCornerPathAndItsTransposeIsTheAdjoint) {
+  for (const char* name : {"block3", "mixed", "torus"}) {
+    auto f = Build(name, 1);
+    Points d = f->rest, y = f->rest;
+    for (int64_t i = 0; i < d.rows(); ++i) {
+      for (int c = 0; c < 3; ++c) {
+        d(i, c) += 0.03 * std::sin(1.3 * i + 0.7 * c);
+        y(i, c) = std::cos(0.41 * i - 1.1 * c);
+      }
+    }
+    const DeformationMeasure quads(f->d.fine(), f->d.elements, f->rest, 3, true);
+    const DeformationMeasure corners(f->d.fine(), f->d.elements, f->rest, 3, false);
+    EXPECT_EQ(quads.num_corners(), corners.num_corners()) << name;
+    EXPECT_EQ(corners.num_quads(), 0) << name;
+#if defined(__AVX2__) && defined(__FMA__)
+    EXPECT_GT(quads.num_quads(), 0) << name << ": the quadrilateral path runs";
+#endif
+    Points dq, dc, tq, tc;
+    quads.Apply(d, dq);
+    corners.Apply(d, dc);
+    quads.ApplyTranspose(d, y, tq);
+    corners.ApplyTranspose(d, y, tc);
+    ASSERT_GT(dc.cwiseAbs().maxCoeff(), 1e-4) << name;
+    EXPECT_LE((dq - dc).cwiseAbs().maxCoeff(), 1e-13 * dc.cwiseAbs().maxCoeff()) << name;
+    EXPECT_LE((tq - tc).cwiseAbs().maxCoeff(), 1e-13 * tc.cwiseAbs().maxCoeff()) << name;
+    for (uint32_t seed : {1u, 2u, 3u}) {
+      const Points v = test_util::RandomPoints(d.rows(), seed);
+      const double h = 1e-6;
+      Points plus, minus;
+      quads.Apply(d + h * v, plus);
+      quads.Apply(d - h * v, minus);
+      const double fd = test_util::Dot(y, plus - minus) / (2 * h);
+      const double analytic = test_util::Dot(tq, v);
+      EXPECT_NEAR(analytic, fd, 1e-6 * std::abs(fd)) << name << " seed " << seed;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace dynsolid::models

@@ -1,0 +1,90 @@
+// The local-frame deformation measure alone (measure.h), one thread: its
+// forward pass (delta from d) and its transpose, with quadrilaterals run
+// four corners to a register (the models' path) and with every corner on
+// its own (the per-corner path the tests hold it to), at a few block sizes.
+// Prints nanoseconds per edge-or-corner term, best of several rounds, and
+// the two paths' largest difference.
+//
+//   measure_bench [max_elements=50000]
+//
+// Prints figures only; nothing here is a test.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "solver/models/measure.h"
+#include "solver/scene/build.h"
+#include "solver/scene/scene_loader.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Best-of-rounds milliseconds of `f`, repeated `reps` times per round.
+template <typename F>
+double BestMs(int reps, F&& f) {
+  double best = 1e300;
+  for (int round = 0; round < 7; ++round) {
+    const auto t0 = Clock::now();
+    for (int r = 0; r < reps; ++r) f();
+    best = std::min(best, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  return best / reps;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int64_t max_elements = argc > 1 ? std::atoll(argv[1]) : 50000;
+  std::printf("# Deformation measure, one thread: ns per term (edges + corners)\n\n");
+  std::printf("| block | nodes | edges | corners | quads | forward quad | forward per-corner | "
+              "transpose quad | transpose per-corner | max rel. difference |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  for (int n : {3, 5, 7, 9}) {
+    if (int64_t{n} * n * n * 64 > max_elements) break;
+    auto scene = dynsolid::scene::BuiltinScene("block3");
+    if (!scene.ok()) return 1;
+    scene->mutable_mesh()->mutable_block()->set_nx(n);
+    scene->mutable_mesh()->mutable_block()->set_ny(n);
+    scene->mutable_mesh()->mutable_block()->set_nz(n);
+    auto d = dynsolid::scene::BuildDiscretization(*scene, dynsolid::scene::BuiltinSceneDir(), 2);
+    if (!d.ok()) {
+      std::printf("| %d^3 | failed: %s |\n", n, std::string(d.status().message()).c_str());
+      continue;
+    }
+    const dynsolid::Points rest = d->node_matrix * d->control().positions();
+    const dynsolid::models::DeformationMeasure quad(d->fine(), d->elements, rest, 1, true);
+    const dynsolid::models::DeformationMeasure corner(d->fine(), d->elements, rest, 1, false);
+    // A smooth deformation (bend, twist and stretch) and a smooth y.
+    dynsolid::Points x = rest, y = rest;
+    for (int64_t i = 0; i < rest.rows(); ++i) {
+      const double a = 0.05 * rest(i, 2), c = std::cos(a), s = std::sin(a);
+      x(i, 0) = 1.02 * (c * rest(i, 0) - s * rest(i, 1));
+      x(i, 1) = s * rest(i, 0) + c * rest(i, 1) + 0.01 * rest(i, 2) * rest(i, 2);
+      for (int k = 0; k < 3; ++k) y(i, k) = std::cos(0.37 * i - 1.3 * k);
+    }
+    dynsolid::Points dq, dc, tq, tc;
+    quad.Apply(x, dq);
+    corner.Apply(x, dc);
+    quad.ApplyTranspose(x, y, tq);
+    corner.ApplyTranspose(x, y, tc);
+    const double diff =
+        std::max((dq - dc).cwiseAbs().maxCoeff() / dc.cwiseAbs().maxCoeff(),
+                 (tq - tc).cwiseAbs().maxCoeff() / tc.cwiseAbs().maxCoeff());
+    const double terms = static_cast<double>(quad.num_edges() + quad.num_corners());
+    const int reps = std::max(1, static_cast<int>(2e6 / terms));
+    const double ns = 1e6 / terms;
+    const double fq = BestMs(reps, [&] { quad.Apply(x, dq); }) * ns;
+    const double fc = BestMs(reps, [&] { corner.Apply(x, dc); }) * ns;
+    const double bq = BestMs(reps, [&] { quad.ApplyTranspose(x, y, tq); }) * ns;
+    const double bc = BestMs(reps, [&] { corner.ApplyTranspose(x, y, tc); }) * ns;
+    std::printf("| %d^3 | %lld | %lld | %lld | %lld | %.2f | %.2f | %.2f | %.2f | %.1e |\n", n,
+                static_cast<long long>(rest.rows()), static_cast<long long>(quad.num_edges()),
+                static_cast<long long>(quad.num_corners()),
+                static_cast<long long>(quad.num_quads()), fq, fc, bq, bc, diff);
+  }
+  return 0;
+}

@@ -1,5 +1,7 @@
 #include "solver/common/worker_pool.h"
 
+#include <chrono>
+
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
 #define DYNSOLID_PAUSE() _mm_pause()
@@ -10,11 +12,28 @@
 namespace dynsolid {
 namespace {
 
-// Spin this many rounds (a pause each, some 10-30 microseconds in all)
-// before sleeping on the condition variable: a step issues several Runs a
-// millisecond apart or less, and a futex wake-up costs more than the work
-// of a small Run.
-constexpr int kSpinRounds = 1000;
+// Spin this long before sleeping on the condition variable. A step issues
+// a dozen Runs with serial work between them (the mass solve, traces,
+// the integrator's vector updates: tens of microseconds); a worker that
+// fell asleep in such a gap costs a futex wake-up (several microseconds)
+// on the next Run, more than the work of a small Run. 1000 pauses (10-30
+// microseconds, depending on the CPU's pause) was shorter than those gaps:
+// block3's node products ran at half speed. A time limit, not a count,
+// because a pause lasts 10 to 140 cycles from one CPU to the next.
+constexpr auto kSpin = std::chrono::microseconds(250);
+
+// Spins (pausing) until ready() or kSpin has passed; returns ready().
+template <typename Ready>
+bool SpinUntil(Ready ready) {
+  const auto end = std::chrono::steady_clock::now() + kSpin;
+  while (true) {
+    for (int i = 0; i < 32; ++i) {
+      if (ready()) return true;
+      DYNSOLID_PAUSE();
+    }
+    if (std::chrono::steady_clock::now() >= end) return ready();
+  }
+}
 
 }  // namespace
 
@@ -46,10 +65,7 @@ void WorkerPool::RunRaw(void (*fn)(void*, int), void* ctx) {
   }
   start_cv_.notify_all();
   fn(ctx, 0);
-  for (int i = 0; i < kSpinRounds; ++i) {
-    if (pending_.load(std::memory_order_acquire) == 0) return;
-    DYNSOLID_PAUSE();
-  }
+  if (SpinUntil([this] { return pending_.load(std::memory_order_acquire) == 0; })) return;
   std::unique_lock<std::mutex> lock(mu_);
   done_cv_.wait(lock, [this] { return pending_.load(std::memory_order_acquire) == 0; });
 }
@@ -57,12 +73,10 @@ void WorkerPool::RunRaw(void (*fn)(void*, int), void* ctx) {
 void WorkerPool::Loop(int index) {
   uint64_t seen = 0;
   while (true) {
-    bool ready = false;
-    for (int i = 0; i < kSpinRounds && !ready; ++i) {
-      ready = generation_.load(std::memory_order_acquire) != seen ||
-              stop_.load(std::memory_order_acquire);
-      if (!ready) DYNSOLID_PAUSE();
-    }
+    const bool ready = SpinUntil([&] {
+      return generation_.load(std::memory_order_acquire) != seen ||
+             stop_.load(std::memory_order_acquire);
+    });
     if (!ready) {
       std::unique_lock<std::mutex> lock(mu_);
       start_cv_.wait(lock, [&] {

@@ -39,7 +39,8 @@ class WorkerPool {
   std::mutex mu_;
   std::condition_variable start_cv_, done_cv_;
   // fn_ and ctx_ are written before generation_ is released and read after
-  // it is acquired. Workers spin briefly, then sleep on start_cv_.
+  // it is acquired. Workers spin for a while (worker_pool.cc), then sleep on
+  // start_cv_.
   void (*fn_)(void*, int) = nullptr;
   void* ctx_ = nullptr;
   std::atomic<uint64_t> generation_{0};

@@ -21,17 +21,25 @@ namespace {
 // block3's node products ran at half speed. A time limit, not a count,
 // because a pause lasts 10 to 140 cycles from one CPU to the next.
 constexpr auto kSpin = std::chrono::microseconds(250);
+// The first part of it busy (pauses); the rest yields the core between
+// checks, so that where threads outnumber cores (tests run side by side,
+// many sessions on one server) a waiting worker gives its core to whoever
+// has work instead of burning it.
+constexpr auto kBusySpin = std::chrono::microseconds(20);
 
-// Spins (pausing) until ready() or kSpin has passed; returns ready().
+// Waits (pausing, then yielding) until ready() or kSpin has passed;
+// returns ready().
 template <typename Ready>
 bool SpinUntil(Ready ready) {
-  const auto end = std::chrono::steady_clock::now() + kSpin;
+  const auto start = std::chrono::steady_clock::now();
   while (true) {
     for (int i = 0; i < 32; ++i) {
       if (ready()) return true;
       DYNSOLID_PAUSE();
     }
-    if (std::chrono::steady_clock::now() >= end) return ready();
+    const auto waited = std::chrono::steady_clock::now() - start;
+    if (waited >= kSpin) return ready();
+    if (waited >= kBusySpin) std::this_thread::yield();
   }
 }
 

@@ -97,9 +97,12 @@ Run Measure(dynsolid::Scene scene, int steps) {
   return r;
 }
 
+// Dense n x n product in scalar type T (double or float), GFLOP/s.
+template <typename T>
 double DenseGemmGflops() {
+  using M = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
   const int n = 256;
-  Eigen::MatrixXd a = Eigen::MatrixXd::Random(n, n), b = Eigen::MatrixXd::Random(n, n), c(n, n);
+  M a = M::Random(n, n), b = M::Random(n, n), c(n, n);
   std::vector<double> t;
   for (int i = 0; i < 20; ++i) {
     const auto t0 = Clock::now();
@@ -114,7 +117,7 @@ double DenseGemmGflops() {
 // batch of 64 columns, as Eigen's GEMM (packs K on every call) and as the
 // pre-packed panel kernel the models use. GFLOP/s, best of many repeats.
 struct ProductRates {
-  double eigen = 0, packed = 0;
+  double eigen = 0, packed = 0, eigen_f = 0, packed_f = 0;
 };
 ProductRates ElementProductGflops(int n) {
   const int cols = 64;
@@ -122,6 +125,10 @@ ProductRates ElementProductGflops(int n) {
   Eigen::MatrixXd y(n, cols);
   const dynsolid::models::PackedMatrix packed(k);
   Eigen::MatrixXd yp(packed.padded_rows(), cols);
+  const Eigen::MatrixXf kf = k.cast<float>(), xf = x.cast<float>();
+  Eigen::MatrixXf yf(n, cols);
+  const dynsolid::models::PackedMatrixF packed_f(packed);
+  Eigen::MatrixXd ypf(packed_f.padded_rows(), cols);
   const int reps = std::max(1, 4000000 / (n * n));
   auto best = [&](auto&& f) {
     double t = 1e300;
@@ -135,7 +142,11 @@ ProductRates ElementProductGflops(int n) {
   ProductRates out;
   out.eigen = best([&] { y.noalias() = k * x; });
   out.packed = best([&] { packed.Apply(x.data(), n, cols, yp.data(), packed.padded_rows()); });
+  out.eigen_f = best([&] { yf.noalias() = kf * xf; });
+  out.packed_f =
+      best([&] { packed_f.Apply(xf.data(), n, cols, ypf.data(), packed_f.padded_rows()); });
   if ((yp.topRows(n) - y).cwiseAbs().maxCoeff() > 1e-10 * n) std::printf("MISMATCH n=%d\n", n);
+  if ((ypf.topRows(n) - y).cwiseAbs().maxCoeff() > 1e-4 * n) std::printf("MISMATCH float n=%d\n", n);
   return out;
 }
 
@@ -149,7 +160,7 @@ int main(int argc, char** argv) {
   std::printf("| scene | #CC | #FE | %%BE | %%LE | %%PE | substeps | ms/step | steps/s | "
               "paper ms/step | speed-up |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
-  double block3_stiffness_rate = 0;
+  double block3_stiffness_rate = 0, block3_double_rate = 0;
   for (const std::string& name : dynsolid::scene::BuiltinSceneNames()) {
     auto scene = dynsolid::scene::BuiltinScene(name);
     if (!scene.ok()) continue;
@@ -169,6 +180,19 @@ int main(int argc, char** argv) {
                 paper ? absl::StrCat(static_cast<int>(310.0 / r.ms), "x").c_str() : "n/a");
     if (name == "block3") block3_stiffness_rate = r.stiffness_flops / (r.stiffness_ms * 1e6);
     if (name == "block3") {
+      // The same with double-precision element products.
+      auto dbl = *scene;
+      dbl.mutable_solver()->set_element_products(dynsolid::SolverSettings::DOUBLE);
+      const Run rd = Measure(dbl, steps);
+      if (rd.ok) {
+        block3_double_rate = rd.stiffness_flops / (rd.stiffness_ms * 1e6);
+        std::printf("| block3, double element products | %lld | %lld | %.1f | %.1f | %.1f | %d | "
+                    "%.3f | %.0f | 310 | %dx |\n",
+                    static_cast<long long>(rd.control_cells), static_cast<long long>(rd.elements),
+                    100.0 * rd.cubic / rd.cells, 100.0 * rd.linear / rd.cells,
+                    100.0 * rd.pyramid_cells / rd.cells, rd.substeps, rd.ms, 1000.0 / rd.ms,
+                    static_cast<int>(310.0 / rd.ms));
+      }
       // The default block sits still (no loads); the same block pulled
       // sideways at its top, so it bends and swings: CG and the frame
       // iterations then have work to do.
@@ -192,18 +216,26 @@ int main(int argc, char** argv) {
       }
     }
   }
-  const double gemm = DenseGemmGflops();
+  const double gemm = DenseGemmGflops<double>();
+  const double gemm_f = DenseGemmGflops<float>();
   std::printf("\n# FLOP rate (same run)\n\n");
-  std::printf("dense Eigen 256x256 matrix product: %.2f GFLOP/s\n", gemm);
-  std::printf("block3 stiffness application:       %.2f GFLOP/s (%.0f %% of dense; counts only the "
-              "element matrix products, over the whole stiffness phase: frames, rotations, "
-              "gathers, products, scatters; all threads)\n",
-              block3_stiffness_rate, 100.0 * block3_stiffness_rate / gemm);
+  std::printf("dense Eigen 256x256 matrix product, double: %.2f GFLOP/s\n", gemm);
+  std::printf("dense Eigen 256x256 matrix product, float:  %.2f GFLOP/s\n", gemm_f);
+  std::printf("block3 stiffness application, float products (the default): %.2f GFLOP/s (%.0f %% "
+              "of the dense float product)\n",
+              block3_stiffness_rate, 100.0 * block3_stiffness_rate / gemm_f);
+  std::printf("block3 stiffness application, double products:              %.2f GFLOP/s (%.0f %% "
+              "of the dense double product)\n",
+              block3_double_rate, 100.0 * block3_double_rate / gemm);
+  std::printf("(counts only the element matrix products, over the whole stiffness phase: frames, "
+              "rotations, gathers, products, scatters; all threads)\n");
   std::printf("\nElement products alone, one thread, K (n x n) times 64 element columns:\n\n");
-  std::printf("| n | Eigen GEMM GFLOP/s | packed kernel GFLOP/s | ratio |\n| ---: | ---: | ---: | ---: |\n");
+  std::printf("| n | Eigen GEMM GFLOP/s | packed kernel GFLOP/s | ratio | Eigen GEMM float | "
+              "packed kernel float | ratio |\n| ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (int n : {8, 24, 64, 192}) {
     const ProductRates p = ElementProductGflops(n);
-    std::printf("| %d | %.2f | %.2f | %.2f |\n", n, p.eigen, p.packed, p.packed / p.eigen);
+    std::printf("| %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", n, p.eigen, p.packed,
+                p.packed / p.eigen, p.eigen_f, p.packed_f, p.packed_f / p.eigen_f);
   }
 
   std::printf("\n# Scaling: n x n x n blocks at 2 levels, uniform material, sharp box edges (the "

@@ -27,6 +27,12 @@ class InternalForceModel {
   // Allocates nothing after the first call.
   virtual double Forces(const Points& d, Points& g) = 0;
 
+  // The same in full double precision, for callers that difference or
+  // compare forces and energies (finite differences, the stable-step
+  // estimate, diagnostics), where a model steps with single-precision
+  // element products (LocalFrameModel). Updates the frames as Forces does.
+  virtual double ExactForces(const Points& d, Points& g) { return Forces(d, g); }
+
   // Forget warm-started frames (after a rollback or a jump in state).
   virtual void ResetFrames() = 0;
 

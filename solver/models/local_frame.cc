@@ -1,6 +1,7 @@
 #include "solver/models/local_frame.h"
 
 #include <chrono>
+#include <type_traits>
 
 
 #include "solver/models/rotation.h"
@@ -29,8 +30,13 @@ constexpr double kFrameNewtonExit = 1e-5;
 
 LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure,
                                  int32_t num_nodes, WorkerPool& pool,
-                                 const LocalFrameModel* previous)
-    : layout_(layout), pool_(pool), measure_(std::move(measure)), num_nodes_(num_nodes) {
+                                 const LocalFrameModel* previous, bool float_products)
+    : layout_(layout),
+      pool_(pool),
+      measure_(std::move(measure)),
+      num_nodes_(num_nodes),
+      float_products_(float_products) {
+  if (previous != nullptr && previous->float_products_ != float_products) previous = nullptr;
   fem::NodeMatrixX3 g;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
@@ -41,7 +47,11 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
       if (reuse[gi] >= 0) {
-        packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
+        if (float_products) {
+          packed_f_[kind].push_back(previous->packed_f_[kind][reuse[gi]]);
+        } else {
+          packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
+        }
         continue;
       }
       ++integrated_groups_;
@@ -62,9 +72,14 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
           }
         }
       }
-      packed_[kind].push_back({PackedMatrix(b[0] * b[0].transpose()),
-                               PackedMatrix(b[1] * b[1].transpose()),
-                               PackedMatrix(b[2] * b[2].transpose())});
+      const std::array<PackedMatrix, 3> k = {PackedMatrix(b[0] * b[0].transpose()),
+                                             PackedMatrix(b[1] * b[1].transpose()),
+                                             PackedMatrix(b[2] * b[2].transpose())};
+      if (float_products) {
+        packed_f_[kind].push_back({PackedMatrixF(k[0]), PackedMatrixF(k[1]), PackedMatrixF(k[2])});
+      } else {
+        packed_[kind].push_back(k);
+      }
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
     centre_gradient_[kind].resize(block.groups.size());
@@ -81,6 +96,9 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
     for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
       m->setZero(fem::kCubicNodes, kBatch);
     }
+    if (float_products) {
+      for (Eigen::MatrixXf* m : {&w.fx, &w.fy, &w.fz}) m->setZero(fem::kCubicNodes, kBatch);
+    }
   }
   delta_.setZero(num_nodes_, 3);
   y_.setZero(num_nodes_, 3);
@@ -96,15 +114,15 @@ namespace {
 // centre (grad: n x 3 column-major), R_e its rotation (warm started in q),
 // and the columns dhat = R_e^T delta_i split by axis into dx, dy, dz.
 // kN > 0 fixes the node count at compile time (cubic 64, linear 8).
-template <int kN>
+template <int kN, typename T>
 void LocalDeformation(int n_dyn, const double* d, const double* delta, const int32_t* ids,
-                      const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, double* dx,
-                      double* dy, double* dz) {
+                      const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx, T* dy,
+                      T* dz) {
   const int n = kN > 0 ? kN : n_dyn;
   constexpr int kRows = (kN > 0) ? kN : Eigen::Dynamic;
   using Vec = Eigen::Matrix<double, kRows, 1, 0, (kN > 0 ? kN : fem::kCubicNodes), 1>;
   using CMap = Eigen::Map<const Eigen::Matrix<double, kRows, 1>>;
-  using Map = Eigen::Map<Eigen::Matrix<double, kRows, 1>>;
+  using Map = Eigen::Map<Eigen::Matrix<T, kRows, 1>>;
   Vec px(n), py(n), pz(n), qx(n), qy(n), qz(n);
   for (int i = 0; i < n; ++i) {
     const double* a = d + 3 * static_cast<int64_t>(ids[i]);
@@ -124,9 +142,9 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
     f(2, c) = pz.dot(gc);
   }
   ExtractRotation(f, q, 8, &r, kFrameNewtonExit);
-  Map(dx, n) = r(0, 0) * qx + r(1, 0) * qy + r(2, 0) * qz;
-  Map(dy, n) = r(0, 1) * qx + r(1, 1) * qy + r(2, 1) * qz;
-  Map(dz, n) = r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz;
+  Map(dx, n) = (r(0, 0) * qx + r(1, 0) * qy + r(2, 0) * qz).template cast<T>();
+  Map(dy, n) = (r(0, 1) * qx + r(1, 1) * qy + r(2, 1) * qz).template cast<T>();
+  Map(dz, n) = (r(0, 2) * qx + r(1, 2) * qy + r(2, 2) * qz).template cast<T>();
 }
 
 #ifdef DYNSOLID_LF_AVX2
@@ -145,9 +163,14 @@ inline double Sum4(__m256d v) {
   return (a[0] + a[1]) + (a[2] + a[3]);
 }
 
+// Four values of a dhat column stored as T (float: rounded here).
+inline void StoreColumn(double* out, __m256d v) { _mm256_storeu_pd(out, v); }
+inline void StoreColumn(float* out, __m256d v) { _mm_storeu_ps(out, _mm256_cvtpd_ps(v)); }
+
+template <typename T>
 void LocalDeformationAvx2(int n, const double* d, const double* delta, const int32_t* ids,
-                          const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r,
-                          double* dx, double* dy, double* dz) {
+                          const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx,
+                          T* dy, T* dz) {
   __m256d f[3][3];
   for (auto& row : f)
     for (auto& v : row) v = _mm256_setzero_pd();
@@ -170,7 +193,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
   __m256d rr[3][3];
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(b, a));
-  double* out[3] = {dx, dy, dz};
+  T* out[3] = {dx, dy, dz};
   for (int i = 0; i < n; i += 4) {
     __m256d x, y, z;
     RowsToColumns(LoadRow(delta, ids[i]), LoadRow(delta, ids[i + 1]), LoadRow(delta, ids[i + 2]),
@@ -178,7 +201,7 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
     for (int a = 0; a < 3; ++a) {
       const __m256d v =
           _mm256_fmadd_pd(rr[a][2], z, _mm256_fmadd_pd(rr[a][1], y, _mm256_mul_pd(rr[a][0], x)));
-      _mm256_storeu_pd(out[a] + i, v);
+      StoreColumn(out[a] + i, v);
     }
   }
 }
@@ -230,13 +253,29 @@ void RotateBackAndAdd(int n_dyn, const Eigen::Matrix3d& r, const double* yx, con
   }
 }
 
+// The shared matrices' products in precision T: float (PackedMatrixF) or
+// double (PackedMatrix).
+inline void ApplyK(const PackedMatrix& k, const double* x, int ld, int count, double* y) {
+  k.Apply(x, ld, count, y, ld);
+}
+inline void ApplyK(const PackedMatrixF& k, const float* x, int ld, int count, double* y) {
+  k.Apply(x, ld, count, y, ld);
+}
+
 }  // namespace
 
-void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
+template <typename T, typename KSet>
+void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, Workspace& w) {
   std::array<Eigen::Matrix3d, kBatch> rot;
   ClearPartRows(schedule_, part, w.g);
   w.energy = 0;
   const int ld = fem::kCubicNodes;  // leading dimension of the batch columns
+  T* cols[3];
+  if constexpr (std::is_same_v<T, float>) {
+    cols[0] = w.fx.data(), cols[1] = w.fy.data(), cols[2] = w.fz.data();
+  } else {
+    cols[0] = w.dx.data(), cols[1] = w.dy.data(), cols[2] = w.dz.data();
+  }
   for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
@@ -256,9 +295,9 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
       const int32_t e = block.by_group[batch.first + b];
       const int32_t* ids = block.element_nodes(e);
       Eigen::Quaterniond& q = frames_[batch.kind][e];
-      double* cx = w.dx.data() + b * ld;
-      double* cy = w.dy.data() + b * ld;
-      double* cz = w.dz.data() + b * ld;
+      T* cx = cols[0] + b * ld;
+      T* cy = cols[1] + b * ld;
+      T* cz = cols[2] + b * ld;
 #ifdef DYNSOLID_LF_AVX2
       if (n % 4 == 0) {
         LocalDeformationAvx2(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
@@ -273,19 +312,22 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
         LocalDeformation<-1>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
       }
     }
-    const auto& k = packed_[batch.kind][batch.group];
-    k[0].Apply(w.dx.data(), ld, batch.count, w.yx.data(), ld);
-    k[1].Apply(w.dy.data(), ld, batch.count, w.yy.data(), ld);
-    k[2].Apply(w.dz.data(), ld, batch.count, w.yz.data(), ld);
-    auto dx = w.dx.topLeftCorner(n, batch.count);
-    auto dy = w.dy.topLeftCorner(n, batch.count);
-    auto dz = w.dz.topLeftCorner(n, batch.count);
+    const auto& k = packed[batch.kind][batch.group];
+    ApplyK(k[0], cols[0], ld, batch.count, w.yx.data());
+    ApplyK(k[1], cols[1], ld, batch.count, w.yy.data());
+    ApplyK(k[2], cols[2], ld, batch.count, w.yz.data());
+    using Block = Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>, 0,
+                             Eigen::OuterStride<>>;
+    const Block dx(cols[0], n, batch.count, Eigen::OuterStride<>(ld));
+    const Block dy(cols[1], n, batch.count, Eigen::OuterStride<>(ld));
+    const Block dz(cols[2], n, batch.count, Eigen::OuterStride<>(ld));
     auto yx = w.yx.topLeftCorner(n, batch.count);
     auto yy = w.yy.topLeftCorner(n, batch.count);
     auto yz = w.yz.topLeftCorner(n, batch.count);
     for (int32_t b = 0; b < batch.count; ++b) {
-      w.energy += 0.5 * (dx.col(b).dot(yx.col(b)) + dy.col(b).dot(yy.col(b)) +
-                         dz.col(b).dot(yz.col(b)));
+      w.energy += 0.5 * (dx.col(b).template cast<double>().dot(yx.col(b)) +
+                         dy.col(b).template cast<double>().dot(yy.col(b)) +
+                         dz.col(b).template cast<double>().dot(yz.col(b)));
     }
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
@@ -310,6 +352,25 @@ void LocalFrameModel::RunBatches(int part, const Points& d, Workspace& w) {
 }
 
 double LocalFrameModel::Forces(const Points& d, Points& g) {
+  return float_products_ ? RunForces(d, g, packed_f_) : RunForces(d, g, packed_);
+}
+
+double LocalFrameModel::ExactForces(const Points& d, Points& g) {
+  if (!float_products_) return RunForces(d, g, packed_);
+  // The float matrices' entries, products in double.
+  std::array<std::vector<std::array<PackedMatrix, 3>>, 3> exact;
+  for (int kind = 0; kind < 3; ++kind) {
+    for (const auto& k : packed_f_[kind]) {
+      exact[kind].push_back({PackedMatrix(k[0].Unpack()), PackedMatrix(k[1].Unpack()),
+                             PackedMatrix(k[2].Unpack())});
+    }
+  }
+  return RunForces(d, g, exact);
+}
+
+template <typename KSet>
+double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed) {
+  using T = std::conditional_t<std::is_same_v<KSet, decltype(packed_f_)>, float, double>;
   // Fixed parts; threads take parts t, t + T, ...; every sum is taken in an
   // order fixed by the parts alone (see measure.h and ElementSchedule).
   const auto t0 = std::chrono::steady_clock::now();
@@ -321,7 +382,7 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
   });
   const auto t1 = std::chrono::steady_clock::now();
   pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) RunBatches(k, d, work_[k]);
+    for (int k = t; k < parts; k += threads) RunBatches<T>(k, d, packed, work_[k]);
   });
   // y = dE/d delta = sum_e R_e K dhat, summed over the parts' buffers.
   pool_.Run([&](int t) {
@@ -348,6 +409,9 @@ double LocalFrameModel::Forces(const Points& d, Points& g) {
 int64_t LocalFrameModel::shared_matrix_bytes() const {
   int64_t bytes = 0;
   for (const auto& kind : packed_)
+    for (const auto& grp : kind)
+      for (const auto& m : grp) bytes += m.bytes();
+  for (const auto& kind : packed_f_)
     for (const auto& grp : kind)
       for (const auto& m : grp) bytes += m.bytes();
   return bytes;

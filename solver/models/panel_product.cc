@@ -136,6 +136,21 @@ void Pack(int rows, int cols, int panels, const Get& get,
   }
 }
 
+// The rows x cols matrix held in panels of P rows, as doubles.
+template <typename T, int P>
+Eigen::MatrixXd Unpacked(int rows, int cols, int panels,
+                         const std::vector<T, Eigen::aligned_allocator<T>>& data) {
+  Eigen::MatrixXd k(rows, cols);
+  for (int p = 0; p < panels; ++p) {
+    for (int j = 0; j < cols; ++j) {
+      for (int r = 0; r < P && p * P + r < rows; ++r) {
+        k(p * P + r, j) = data[(static_cast<size_t>(p) * cols + j) * P + r];
+      }
+    }
+  }
+  return k;
+}
+
 }  // namespace
 
 PackedMatrix::PackedMatrix(const Eigen::MatrixXd& k)
@@ -146,15 +161,7 @@ PackedMatrix::PackedMatrix(const Eigen::MatrixXd& k)
 }
 
 Eigen::MatrixXd PackedMatrix::Unpack() const {
-  Eigen::MatrixXd k(rows_, cols_);
-  for (int p = 0; p < panels_; ++p) {
-    for (int j = 0; j < cols_; ++j) {
-      for (int r = 0; r < kPanel && p * kPanel + r < rows_; ++r) {
-        k(p * kPanel + r, j) = data_[(static_cast<size_t>(p) * cols_ + j) * kPanel + r];
-      }
-    }
-  }
-  return k;
+  return Unpacked<double, kPanel>(rows_, cols_, panels_, data_);
 }
 
 void PackedMatrix::Apply(const double* x, int ldx, int count, double* y, int ldy) const {
@@ -165,6 +172,10 @@ PackedMatrixF::PackedMatrixF(const PackedMatrix& k)
     : rows_(k.rows()), cols_(k.cols()), panels_((rows_ + kPanel - 1) / kPanel) {
   const Eigen::MatrixXd full = k.Unpack();
   Pack<float, kPanel>(rows_, cols_, panels_, [&](int i, int j) { return full(i, j); }, data_);
+}
+
+Eigen::MatrixXd PackedMatrixF::Unpack() const {
+  return Unpacked<float, kPanel>(rows_, cols_, panels_, data_);
 }
 
 void PackedMatrixF::Apply(const float* x, int ldx, int count, double* y, int ldy) const {

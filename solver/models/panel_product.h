@@ -67,6 +67,8 @@ class PackedMatrixF {
   int cols() const { return cols_; }
   int padded_rows() const { return panels_ * kPanel; }
   int64_t bytes() const { return static_cast<int64_t>(data_.size()) * 4; }
+  // The float entries (rows x cols), widened to double.
+  Eigen::MatrixXd Unpack() const;
 
   // Y(0 : padded_rows, 0 : count) = K X(0 : cols, 0 : count), accumulated
   // in float. Rows past rows() come out zero.

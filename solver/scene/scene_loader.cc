@@ -401,6 +401,9 @@ SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
   if (s.cg_max_iterations() == 0) s.set_cg_max_iterations(kDefaultCgMaxIterations);
   if (s.max_substeps() == 0) s.set_max_substeps(kDefaultMaxSubsteps);
   if (s.stability_safety() == 0) s.set_stability_safety(kDefaultStabilitySafety);
+  if (s.element_products() == SolverSettings::PRECISION_DEFAULT) {
+    s.set_element_products(SolverSettings::FLOAT);
+  }
   return s;
 }
 

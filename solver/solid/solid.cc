@@ -789,7 +789,7 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
     const double eps = 1e-7 * std::max(scale, 1e-3);
     dn = rest + eps * (nm * v);
     m.ResetFrames();
-    m.Forces(dn, gn);
+    m.ExactForces(dn, gn);
     kv.noalias() = nm.transpose() * gn;
     kv /= eps;
     for (size_t s = 0; s < spring_point.size(); ++s) kv.row(spring_point[s]) += spring_k[s] * v.row(spring_point[s]);
@@ -1074,8 +1074,9 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
         previous != nullptr
             ? previous->measure()
             : models::DeformationMeasure(d->fine(), d->elements, rest_nodes, pool->size());
-    auto m = std::make_unique<models::LocalFrameModel>(*l, std::move(measure),
-                                                        d->elements.num_nodes(), *pool, previous);
+    auto m = std::make_unique<models::LocalFrameModel>(
+        *l, std::move(measure), d->elements.num_nodes(), *pool, previous,
+        settings.element_products() == SolverSettings::FLOAT);
     b.shared_matrix_bytes = m->shared_matrix_bytes();
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
@@ -1571,7 +1572,7 @@ Points Solid::InternalControlForces(const Points& p) {
   // next implicit step is linearized in) are part of its state: kept.
   const models::InternalForceModel::Frames frames = im.model->frames();
   im.model->ResetFrames();
-  im.model->Forces(d, g);
+  im.model->ExactForces(d, g);
   im.model->set_frames(frames);
   Points out;
   im.FromNodes(g, out);
@@ -1584,7 +1585,7 @@ double Solid::StrainEnergy(const Points& p) {
   Points g(d.rows(), 3);
   const models::InternalForceModel::Frames frames = im.model->frames();  // as above
   im.model->ResetFrames();
-  const double e = im.model->Forces(d, g);
+  const double e = im.model->ExactForces(d, g);
   im.model->set_frames(frames);
   return e;
 }

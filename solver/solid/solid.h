@@ -149,11 +149,12 @@ class Solid {
 
   // A^T g(A p): the model's internal forces on the control points at
   // control positions p (#control by 3), frames found afresh (tests, reports,
-  // finite-difference checks). Does not change the solid's state.
+  // finite-difference checks), with double-precision element products
+  // whatever solver.element_products says. Does not change the solid's state.
   Points InternalControlForces(const Points& p);
 
   // The model's strain energy (J) at control positions p (frames found
-  // afresh). Does not change the solid's state.
+  // afresh; double-precision products). Does not change the solid's state.
   double StrainEnergy(const Points& p);
 
   // Linear static equilibrium of the corotational model about rest under the

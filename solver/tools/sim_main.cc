@@ -139,6 +139,11 @@ int main(int argc, char** argv) {
     run.model = loaded->scene.solver().model() == dynsolid::SolverSettings::COROTATIONAL
                     ? "corotational"
                     : "local_frame";
+    run.element_products =
+        run.model == "local_frame" && dynsolid::scene::ResolvedSolverSettings(loaded->scene)
+                                              .element_products() == dynsolid::SolverSettings::FLOAT
+            ? "float"
+            : "double";
     run.total_mass = s.total_mass();
     run.rest_volume = s.rest_volume();
     control = s.control_positions();

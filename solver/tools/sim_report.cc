@@ -73,6 +73,7 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
     j.Begin("dynamics")
         .Add("model", run.model)
         .Add("integrator", run.integrator)
+        .Add("element_products", run.element_products)
         .Add("time_step", run.time_step)
         .Add("total_mass", run.total_mass)
         .Add("rest_volume", run.rest_volume)

@@ -21,6 +21,8 @@ struct RunRecord {
   const solid::BuildReport* build = nullptr;
   double time_step = 0, total_mass = 0, rest_volume = 0;
   std::string model = "local_frame", integrator = "central_difference";
+  // The local-frame model's element products in a step: "float" or "double".
+  std::string element_products = "double";
 };
 
 // stats.json: counts of the paper's Table 1 (control cells, elements by kind

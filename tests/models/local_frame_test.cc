@@ -154,5 +154,49 @@ TEST(LocalFrameTest, QuadrilateralPathMatchesThePerCornerPathAndItsTransposeIsTh
   }
 }
 
+// Single-precision element products (the stepping default): the shared
+// matrices and the rotated local deformation rounded to float for the
+// product only. Forces within 1e-6 of the double products (relative to
+// their largest entry; 2e-8 measured), the energy within 1e-7 (2e-9),
+// zero force for a rigid motion still; ExactForces runs the same rounded
+// entries in double (6e-9 from the double model: the matrices' rounding).
+TEST(LocalFrameTest, FloatProductsStayWithinRoundingOfDoubleProducts) {
+  auto f = Build("mixed", 2);  // cubic, linear and pyramid elements
+  const int32_t nodes = f->d.elements.num_nodes();
+  LocalFrameModel dbl(f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest, kForceParts),
+                      nodes, f->pool, nullptr, /*float_products=*/false);
+  LocalFrameModel flt(f->layout, DeformationMeasure(f->d.fine(), f->d.elements, f->rest, kForceParts),
+                      nodes, f->pool, nullptr, /*float_products=*/true);
+  EXPECT_TRUE(flt.float_products());
+  EXPECT_LT(flt.shared_matrix_bytes(), dbl.shared_matrix_bytes()) << "float matrices only";
+  Points d = f->rest;
+  for (int64_t i = 0; i < d.rows(); ++i) {
+    d(i, 0) += 0.02 * std::sin(1.0 + 2.0 * i);
+    d(i, 2) += 0.015 * std::cos(3.0 * i);
+  }
+  d = d * Eigen::AngleAxisd(0.6, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix().transpose();
+  Points gd, gf, ge;
+  const double ed = dbl.Forces(d, gd);
+  flt.ResetFrames();
+  const double ef = flt.Forces(d, gf);
+  flt.ResetFrames();
+  const double ee = flt.ExactForces(d, ge);
+  const double scale = gd.cwiseAbs().maxCoeff();
+  ASSERT_GT(scale, 0);
+  EXPECT_GT((gf - gd).cwiseAbs().maxCoeff(), 0) << "the float path ran";
+  EXPECT_LE((gf - gd).cwiseAbs().maxCoeff(), 1e-6 * scale);
+  EXPECT_NEAR(ef, ed, 1e-7 * ed);
+  // ExactForces: the rounded matrices' entries in double arithmetic, so
+  // only the matrices' rounding separates it from dbl.
+  EXPECT_LE((ge - gd).cwiseAbs().maxCoeff(), 1e-7 * scale);
+  EXPECT_NEAR(ee, ed, 1e-7 * ed);
+  // Rigid motion: delta is zero before any rounding.
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, -1, 0.2).normalized()).toRotationMatrix();
+  const Points moved = (f->rest * r.transpose()).rowwise() + Eigen::RowVector3d(1, 2, 3);
+  flt.ResetFrames();
+  flt.Forces(moved, gf);
+  EXPECT_LE(gf.cwiseAbs().maxCoeff(), 1e-10 * scale);
+}
+
 }  // namespace
 }  // namespace dynsolid::models

@@ -414,7 +414,7 @@ TEST_F(EveryFieldTest, UndeclaredEnumNumbersAreRejectedNamingTheField) {
     ExpectPositioned(scene, name, rule);
     ++visited;
   });
-  EXPECT_EQ(visited, 2);  // solver.model, solver.integrator
+  EXPECT_EQ(visited, 3);  // solver.model, solver.integrator, solver.element_products
 }
 
 // ------------------------------------------------------------- defaults
@@ -429,6 +429,7 @@ TEST(DefaultsTest, EmptySolverSettingsResolveToTheDocumentedDefaults) {
   EXPECT_EQ(s.max_substeps(), 1000);
   EXPECT_EQ(s.stability_safety(), 0.9);
   EXPECT_FALSE(s.snap_forces_to_quadrature());
+  EXPECT_EQ(s.element_products(), SolverSettings::FLOAT);
   // A resolved scene is still valid, and resolving is idempotent.
   Scene scene;
   scene.mutable_mesh()->set_file("x.vtk");
@@ -448,6 +449,7 @@ TEST(DefaultsTest, GivenSolverSettingsAreKept) {
   given->set_max_substeps(1);
   given->set_stability_safety(0.5);
   given->set_snap_forces_to_quadrature(true);
+  given->set_element_products(SolverSettings::DOUBLE);
   EXPECT_TRUE(
       google::protobuf::util::MessageDifferencer::Equals(ResolvedSolverSettings(scene), *given));
 

@@ -97,6 +97,16 @@ Run Measure(dynsolid::Scene scene, int steps) {
   return r;
 }
 
+// One row of the Table 1 analogue; `paper`: the paper's 310 ms cube row.
+void PrintRow(const std::string& label, const Run& r, bool paper) {
+  std::printf("| %s | %lld | %lld | %.1f | %.1f | %.1f | %d | %.3f | %.0f | %s | %s |\n",
+              label.c_str(), static_cast<long long>(r.control_cells),
+              static_cast<long long>(r.elements), 100.0 * r.cubic / r.cells,
+              100.0 * r.linear / r.cells, 100.0 * r.pyramid_cells / r.cells, r.substeps, r.ms,
+              1000.0 / r.ms, paper ? "310" : "n/a",
+              paper ? absl::StrCat(static_cast<int>(310.0 / r.ms), "x").c_str() : "n/a");
+}
+
 // Dense n x n product in scalar type T (double or float), GFLOP/s.
 template <typename T>
 double DenseGemmGflops() {
@@ -171,13 +181,7 @@ int main(int argc, char** argv) {
     }
     // The only paper figure we hold: 310 ms per step for its 3x3x3 cube at
     // two levels (quoted in issue 3). The rest of Table 1 was not readable.
-    const bool paper = name == "block3";
-    std::printf("| %s | %lld | %lld | %.1f | %.1f | %.1f | %d | %.3f | %.0f | %s | %s |\n",
-                name.c_str(), static_cast<long long>(r.control_cells),
-                static_cast<long long>(r.elements), 100.0 * r.cubic / r.cells,
-                100.0 * r.linear / r.cells, 100.0 * r.pyramid_cells / r.cells, r.substeps, r.ms,
-                1000.0 / r.ms, paper ? "310" : "n/a",
-                paper ? absl::StrCat(static_cast<int>(310.0 / r.ms), "x").c_str() : "n/a");
+    PrintRow(name, r, name == "block3");
     if (name == "block3") block3_stiffness_rate = r.stiffness_flops / (r.stiffness_ms * 1e6);
     if (name == "block3") {
       // The same with double-precision element products.
@@ -186,12 +190,7 @@ int main(int argc, char** argv) {
       const Run rd = Measure(dbl, steps);
       if (rd.ok) {
         block3_double_rate = rd.stiffness_flops / (rd.stiffness_ms * 1e6);
-        std::printf("| block3, double element products | %lld | %lld | %.1f | %.1f | %.1f | %d | "
-                    "%.3f | %.0f | 310 | %dx |\n",
-                    static_cast<long long>(rd.control_cells), static_cast<long long>(rd.elements),
-                    100.0 * rd.cubic / rd.cells, 100.0 * rd.linear / rd.cells,
-                    100.0 * rd.pyramid_cells / rd.cells, rd.substeps, rd.ms, 1000.0 / rd.ms,
-                    static_cast<int>(310.0 / rd.ms));
+        PrintRow("block3, double element products", rd, true);
       }
       // The default block sits still (no loads); the same block pulled
       // sideways at its top, so it bends and swings: CG and the frame
@@ -204,12 +203,7 @@ int main(int argc, char** argv) {
       force->mutable_force()->set_x(2e4);
       const Run m = Measure(moving, steps);
       if (m.ok) {
-        std::printf("| block3, pulled (20 kN at the top) | %lld | %lld | %.1f | %.1f | %.1f | %d | "
-                    "%.3f | %.0f | 310 | %dx |\n",
-                    static_cast<long long>(m.control_cells), static_cast<long long>(m.elements),
-                    100.0 * m.cubic / m.cells, 100.0 * m.linear / m.cells,
-                    100.0 * m.pyramid_cells / m.cells, m.substeps, m.ms, 1000.0 / m.ms,
-                    static_cast<int>(310.0 / m.ms));
+        PrintRow("block3, pulled (20 kN at the top)", m, true);
         std::printf("|  (pulled block3: CG to 1e-4, %.2f iterations per step, at most %d in one "
                     "solve) |\n",
                     m.cg_per_step, m.cg_max);

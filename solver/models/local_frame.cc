@@ -361,8 +361,7 @@ double LocalFrameModel::ExactForces(const Points& d, Points& g) {
   std::array<std::vector<std::array<PackedMatrix, 3>>, 3> exact;
   for (int kind = 0; kind < 3; ++kind) {
     for (const auto& k : packed_f_[kind]) {
-      exact[kind].push_back({PackedMatrix(k[0].Unpack()), PackedMatrix(k[1].Unpack()),
-                             PackedMatrix(k[2].Unpack())});
+      exact[kind].push_back({PackedMatrix(k[0]), PackedMatrix(k[1]), PackedMatrix(k[2])});
     }
   }
   return RunForces(d, g, exact);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
@@ -122,6 +123,9 @@ void Tiles(const typename L::T* data, int panels, int cols, const typename L::T*
 static_assert(2 * DoubleLanes::kWidth == PackedMatrix::kPanel);
 static_assert(2 * FloatLanes::kWidth == PackedMatrixF::kPanel);
 
+template <typename T>
+using LanesOf = std::conditional_t<std::is_same_v<T, double>, DoubleLanes, FloatLanes>;
+
 // Packs rows x cols entries get(i, j) into panels of P rows (zero padded).
 template <typename T, int P, typename Get>
 void Pack(int rows, int cols, int panels, const Get& get,
@@ -153,33 +157,25 @@ Eigen::MatrixXd Unpacked(int rows, int cols, int panels,
 
 }  // namespace
 
-PackedMatrix::PackedMatrix(const Eigen::MatrixXd& k)
+template <typename T>
+PackedPanels<T>::PackedPanels(const Eigen::MatrixXd& k)
     : rows_(static_cast<int>(k.rows())),
       cols_(static_cast<int>(k.cols())),
       panels_((rows_ + kPanel - 1) / kPanel) {
-  Pack<double, kPanel>(rows_, cols_, panels_, [&](int i, int j) { return k(i, j); }, data_);
+  Pack<T, kPanel>(rows_, cols_, panels_, [&](int i, int j) { return k(i, j); }, data_);
 }
 
-Eigen::MatrixXd PackedMatrix::Unpack() const {
-  return Unpacked<double, kPanel>(rows_, cols_, panels_, data_);
+template <typename T>
+Eigen::MatrixXd PackedPanels<T>::Unpack() const {
+  return Unpacked<T, kPanel>(rows_, cols_, panels_, data_);
 }
 
-void PackedMatrix::Apply(const double* x, int ldx, int count, double* y, int ldy) const {
-  Tiles<DoubleLanes>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
+template <typename T>
+void PackedPanels<T>::Apply(const T* x, int ldx, int count, double* y, int ldy) const {
+  Tiles<LanesOf<T>>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
 }
 
-PackedMatrixF::PackedMatrixF(const PackedMatrix& k)
-    : rows_(k.rows()), cols_(k.cols()), panels_((rows_ + kPanel - 1) / kPanel) {
-  const Eigen::MatrixXd full = k.Unpack();
-  Pack<float, kPanel>(rows_, cols_, panels_, [&](int i, int j) { return full(i, j); }, data_);
-}
-
-Eigen::MatrixXd PackedMatrixF::Unpack() const {
-  return Unpacked<float, kPanel>(rows_, cols_, panels_, data_);
-}
-
-void PackedMatrixF::Apply(const float* x, int ldx, int count, double* y, int ldy) const {
-  Tiles<FloatLanes>(data_.data(), panels_, cols_, x, ldx, count, y, ldy);
-}
+template class PackedPanels<double>;
+template class PackedPanels<float>;
 
 }  // namespace dynsolid::models

@@ -24,62 +24,54 @@
 
 namespace dynsolid::models {
 
-class PackedMatrix {
+// K (rows x cols) packed once in panels of kPanel rows, its entries of type
+// T: double (PackedMatrix, panels of 8) or float (PackedMatrixF, panels of
+// 16). A panel is 64 bytes high: two AVX2 registers of 4 doubles or 8
+// floats.
+//
+// PackedMatrixF holds K rounded to float, for products whose result is
+// accurate enough at float rounding: backward Euler's CG (the right-hand
+// side and the residual it starts from stay in double; see
+// integrators/backward_euler.h) and the local-frame model's stepping
+// products (solver.element_products; models/local_frame.h). Half the
+// bytes, twice the lanes: its 16 x 6 micro-kernel keeps 12 AVX2 registers
+// of 8 floats and runs float fma chains over k in ascending order (bits
+// independent of the batch, as in double). X is then float (its columns
+// rounded from double by the caller); Y is double either way (float
+// results widened as they are stored).
+template <typename T>
+class PackedPanels {
  public:
-  PackedMatrix() = default;
-  explicit PackedMatrix(const Eigen::MatrixXd& k);
+  static constexpr int kPanel = 64 / static_cast<int>(sizeof(T));
+
+  PackedPanels() = default;
+  // K's entries rounded to T.
+  explicit PackedPanels(const Eigen::MatrixXd& k);
+  // The same matrix in the other precision (through its double entries).
+  template <typename U>
+  explicit PackedPanels(const PackedPanels<U>& k) : PackedPanels(k.Unpack()) {}
 
   int rows() const { return rows_; }
   int cols() const { return cols_; }
   // Rows rounded up to the panel height: Y needs this many rows per column.
   int padded_rows() const { return panels_ * kPanel; }
-  int64_t bytes() const { return static_cast<int64_t>(data_.size()) * 8; }
-  // K itself (rows x cols), unpacked.
-  Eigen::MatrixXd Unpack() const;
-
-  // Y(0 : padded_rows, 0 : count) = K X(0 : cols, 0 : count). Rows past
-  // rows() come out zero. x and y must not overlap.
-  void Apply(const double* x, int ldx, int count, double* y, int ldy) const;
-
-  static constexpr int kPanel = 8;
-
- private:
-  int rows_ = 0, cols_ = 0, panels_ = 0;
-  // Panel p, column j, row r (0..7): data_[(p * cols_ + j) * 8 + r].
-  std::vector<double, Eigen::aligned_allocator<double>> data_;
-};
-
-// K in single precision, for products whose result only steers an
-// iteration (backward Euler's CG: the right-hand side and the residual it
-// starts from stay in double; see integrators/backward_euler.h): half the
-// bytes, twice the lanes. Panels of 16 rows; the 16 x 6 micro-kernel keeps
-// 12 AVX2 registers of 8 floats, runs float fma chains over k in ascending
-// order (bits independent of the batch, as PackedMatrix) and widens each
-// result to double as it stores it. X is float (its columns rounded from
-// double by the caller), Y double.
-class PackedMatrixF {
- public:
-  PackedMatrixF() = default;
-  // K rounded to float entry by entry.
-  explicit PackedMatrixF(const PackedMatrix& k);
-
-  int rows() const { return rows_; }
-  int cols() const { return cols_; }
-  int padded_rows() const { return panels_ * kPanel; }
-  int64_t bytes() const { return static_cast<int64_t>(data_.size()) * 4; }
-  // The float entries (rows x cols), widened to double.
+  int64_t bytes() const { return static_cast<int64_t>(data_.size() * sizeof(T)); }
+  // K itself (rows x cols), unpacked (and widened to double).
   Eigen::MatrixXd Unpack() const;
 
   // Y(0 : padded_rows, 0 : count) = K X(0 : cols, 0 : count), accumulated
-  // in float. Rows past rows() come out zero.
-  void Apply(const float* x, int ldx, int count, double* y, int ldy) const;
-
-  static constexpr int kPanel = 16;
+  // in T. Rows past rows() come out zero. x and y must not overlap.
+  void Apply(const T* x, int ldx, int count, double* y, int ldy) const;
 
  private:
   int rows_ = 0, cols_ = 0, panels_ = 0;
-  // Panel p, column j, row r (0..15): data_[(p * cols_ + j) * 16 + r].
-  std::vector<float, Eigen::aligned_allocator<float>> data_;
+  // Panel p, column j, row r (0 .. kPanel - 1): data_[(p * cols_ + j) * kPanel + r].
+  std::vector<T, Eigen::aligned_allocator<T>> data_;
 };
+
+extern template class PackedPanels<double>;
+extern template class PackedPanels<float>;
+using PackedMatrix = PackedPanels<double>;
+using PackedMatrixF = PackedPanels<float>;
 
 }  // namespace dynsolid::models

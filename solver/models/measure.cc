@@ -588,6 +588,12 @@ void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, 
                           Next(t.az) + Prev(t.bz) - (t.az + t.bz));
                });
 }
+#else
+// No quadrilaterals are built without AVX2 (kQuadLanes): nothing to add.
+void QuadsForward(const int32_t*, const double*, const uint8_t*, int64_t, const double*,
+                  double*) {}
+void QuadsTranspose(const int32_t*, const double*, const uint8_t*, int64_t, const double*,
+                    const double*, double*) {}
 #endif
 
 }  // namespace
@@ -633,12 +639,8 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
         EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy, fz, m);
       },
       [&](double* out) {
-#ifdef DYNSOLID_MEASURE_AVX2
         QuadsForward(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
                      static_cast<int64_t>(p.q_owns.size()), pd, out);
-#else
-        (void)out;  // no quadrilaterals are built without AVX2
-#endif
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
           double* bz) {
@@ -659,12 +661,8 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
                       fz, m);
       },
       [&](double* out) {
-#ifdef DYNSOLID_MEASURE_AVX2
         QuadsTranspose(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
                        static_cast<int64_t>(p.q_owns.size()), pd, py, out);
-#else
-        (void)out;
-#endif
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
           double* bz) {

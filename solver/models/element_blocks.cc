@@ -79,6 +79,46 @@ ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size
   return out;
 }
 
+void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
+  schedule.batch_nodes.clear();
+  schedule.local_ids.clear();
+  schedule.max_batch_nodes = 0;
+  std::vector<int32_t> nodes;
+  for (ElementBatch& batch : schedule.batches) {
+    const ElementBlock& block = layout.blocks[batch.kind];
+    const int n = block.nodes;
+    nodes.clear();
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      nodes.insert(nodes.end(), ids, ids + n);
+    }
+    std::sort(nodes.begin(), nodes.end());
+    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+    batch.nodes_begin = static_cast<int64_t>(schedule.batch_nodes.size());
+    batch.num_nodes = static_cast<int32_t>(nodes.size());
+    batch.local_begin = static_cast<int64_t>(schedule.local_ids.size());
+    schedule.max_batch_nodes = std::max(schedule.max_batch_nodes, batch.num_nodes);
+    schedule.batch_nodes.insert(schedule.batch_nodes.end(), nodes.begin(), nodes.end());
+    for (int32_t b = 0; b < batch.count; ++b) {
+      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      for (int i = 0; i < n; ++i) {
+        const auto at = std::lower_bound(nodes.begin(), nodes.end(), ids[i]) - nodes.begin();
+        schedule.local_ids.push_back(static_cast<uint16_t>(at));
+      }
+    }
+  }
+}
+
+int64_t BatchTableBytes(const ElementLayout& layout, const ElementSchedule& schedule) {
+  int64_t elements = 0;
+  for (const ElementBlock& b : layout.blocks) elements += b.size();
+  if (elements == 0) return 0;
+  const int64_t bytes = static_cast<int64_t>(schedule.batch_nodes.size()) * 4 +
+                        static_cast<int64_t>(schedule.local_ids.size()) * 2 +
+                        static_cast<int64_t>(schedule.batches.size()) * sizeof(ElementBatch);
+  return bytes / elements;
+}
+
 void ClearPartRows(const ElementSchedule& schedule, int k, Points& buffer) {
   double* b = buffer.data();
   for (int32_t v : schedule.part_nodes[k]) b[3 * v] = b[3 * v + 1] = b[3 * v + 2] = 0;

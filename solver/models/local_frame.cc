@@ -17,6 +17,13 @@ namespace dynsolid::models {
 namespace {
 
 constexpr int32_t kBatch = 64;
+// A batch's node rows, gathered from the big arrays once per batch: row j
+// (global node nodes[j]) holds d in doubles 0-2 and delta in 4-6 of a
+// 64-byte line (kLocalStride), so an element's loads are aligned and hit
+// L1. The sums R_e K dhat go into rows of kSumStride doubles (x, y, z, 0).
+constexpr int kLocalStride = 8;
+constexpr int kSumStride = 4;
+
 // The frame's Newton iteration stops after a step below 1e-5 rad (an error
 // of about 1e-10 rad left; rotation.h). The frame only rotates the
 // rotation-blind measure delta, so a frame error e moves the force by e of
@@ -89,9 +96,12 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   }
   work_.resize(kForceParts);
   schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
+  IndexBatchNodes(layout, schedule_);
   for (Workspace& w : work_) {
-    // One row of slack for the 4-lane row updates (RotateBackAndAddAvx2).
-    w.g.setZero(num_nodes_ + 1, 3);
+    w.g.setZero(num_nodes_, 3);
+    // Room for the largest batch's rows, plus a line for the alignment.
+    w.local.assign(kLocalStride * (static_cast<size_t>(schedule_.max_batch_nodes) + 1), 0.0);
+    w.sums.assign(kSumStride * static_cast<size_t>(schedule_.max_batch_nodes) + kLocalStride, 0.0);
     part_buffers_.push_back(&w.g);
     for (Eigen::MatrixXd* m : {&w.dx, &w.dy, &w.dz, &w.yx, &w.yy, &w.yz}) {
       m->setZero(fem::kCubicNodes, kBatch);
@@ -110,14 +120,41 @@ void LocalFrameModel::ResetFrames() {
 
 namespace {
 
+inline double* AlignedRows(std::vector<double>& store) {
+  return reinterpret_cast<double*>((reinterpret_cast<uintptr_t>(store.data()) + 63) &
+                                   ~uintptr_t{63});
+}
+
+void GatherRows(int m, const int32_t* nodes, const double* d, const double* delta,
+                double* local) {
+  for (int j = 0; j < m; ++j) {
+    const double* a = d + 3 * static_cast<int64_t>(nodes[j]);
+    const double* b = delta + 3 * static_cast<int64_t>(nodes[j]);
+    double* o = local + kLocalStride * j;
+    o[0] = a[0], o[1] = a[1], o[2] = a[2], o[3] = 0;
+    o[4] = b[0], o[5] = b[1], o[6] = b[2], o[7] = 0;
+  }
+}
+
+// g[nodes[j]] += sums row j, for the batch's m nodes.
+void ScatterRows(int m, const int32_t* nodes, const double* sums, double* g) {
+  for (int j = 0; j < m; ++j) {
+    double* o = g + 3 * static_cast<int64_t>(nodes[j]);
+    const double* a = sums + kSumStride * j;
+    o[0] += a[0];
+    o[1] += a[1];
+    o[2] += a[2];
+  }
+}
+
 // One element's frame and local deformation: F = sum_i x_i grad_i^T at the
 // centre (grad: n x 3 column-major), R_e its rotation (warm started in q),
-// and the columns dhat = R_e^T delta_i split by axis into dx, dy, dz.
+// and the columns dhat = R_e^T delta_i split by axis into dx, dy, dz. The
+// element's node i is row lid[i] of the batch's gathered rows `local`.
 // kN > 0 fixes the node count at compile time (cubic 64, linear 8).
 template <int kN, typename T>
-void LocalDeformation(int n_dyn, const double* d, const double* delta, const int32_t* ids,
-                      const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx, T* dy,
-                      T* dz) {
+void LocalDeformation(int n_dyn, const double* local, const uint16_t* lid, const double* grad,
+                      Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx, T* dy, T* dz) {
   const int n = kN > 0 ? kN : n_dyn;
   constexpr int kRows = (kN > 0) ? kN : Eigen::Dynamic;
   using Vec = Eigen::Matrix<double, kRows, 1, 0, (kN > 0 ? kN : fem::kCubicNodes), 1>;
@@ -125,14 +162,13 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
   using Map = Eigen::Map<Eigen::Matrix<T, kRows, 1>>;
   Vec px(n), py(n), pz(n), qx(n), qy(n), qz(n);
   for (int i = 0; i < n; ++i) {
-    const double* a = d + 3 * static_cast<int64_t>(ids[i]);
-    const double* b = delta + 3 * static_cast<int64_t>(ids[i]);
+    const double* a = local + kLocalStride * lid[i];
     px[i] = a[0];
     py[i] = a[1];
     pz[i] = a[2];
-    qx[i] = b[0];
-    qy[i] = b[1];
-    qz[i] = b[2];
+    qx[i] = a[4];
+    qy[i] = a[5];
+    qz[i] = a[6];
   }
   Eigen::Matrix3d f;
   for (int c = 0; c < 3; ++c) {
@@ -148,13 +184,11 @@ void LocalDeformation(int n_dyn, const double* d, const double* delta, const int
 }
 
 #ifdef DYNSOLID_LF_AVX2
-// The same two steps for n a multiple of 4 (cubic 64, linear 8), four
-// nodes at a time: node rows are loaded whole (x, y, z, masked fourth
-// lane) and transposed in registers, so no scalar copies go through the
-// stack. F's terms are summed per lane over nodes i = 4 t + lane, then the
-// lanes added in a fixed order: the bits depend on the element alone.
-using simd::LoadRow;
-
+// The same for n a multiple of 4 (cubic 64, linear 8), four nodes at a
+// time: the gathered rows are loaded whole (aligned) and transposed in
+// registers, and delta's columns kept on the stack for the rotation. F's
+// terms are summed per lane over nodes i = 4 t + lane, then the lanes
+// added in a fixed order: the bits depend on the element alone.
 using simd::RowsToColumns;
 
 inline double Sum4(__m256d v) {
@@ -168,22 +202,31 @@ inline void StoreColumn(double* out, __m256d v) { _mm256_storeu_pd(out, v); }
 inline void StoreColumn(float* out, __m256d v) { _mm_storeu_ps(out, _mm256_cvtpd_ps(v)); }
 
 template <typename T>
-void LocalDeformationAvx2(int n, const double* d, const double* delta, const int32_t* ids,
-                          const double* grad, Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx,
-                          T* dy, T* dz) {
+void LocalDeformationAvx2(int n, const double* local, const uint16_t* lid, const double* grad,
+                          Eigen::Quaterniond& q, Eigen::Matrix3d& r, T* dx, T* dy, T* dz) {
+  alignas(32) double cx[fem::kCubicNodes], cy[fem::kCubicNodes], cz[fem::kCubicNodes];
   __m256d f[3][3];
   for (auto& row : f)
     for (auto& v : row) v = _mm256_setzero_pd();
   for (int i = 0; i < n; i += 4) {
+    const double* p0 = local + kLocalStride * lid[i];
+    const double* p1 = local + kLocalStride * lid[i + 1];
+    const double* p2 = local + kLocalStride * lid[i + 2];
+    const double* p3 = local + kLocalStride * lid[i + 3];
     __m256d x, y, z;
-    RowsToColumns(LoadRow(d, ids[i]), LoadRow(d, ids[i + 1]), LoadRow(d, ids[i + 2]),
-               LoadRow(d, ids[i + 3]), x, y, z);
+    RowsToColumns(_mm256_load_pd(p0), _mm256_load_pd(p1), _mm256_load_pd(p2),
+                  _mm256_load_pd(p3), x, y, z);
     for (int c = 0; c < 3; ++c) {
       const __m256d g = _mm256_loadu_pd(grad + c * n + i);
       f[0][c] = _mm256_fmadd_pd(x, g, f[0][c]);
       f[1][c] = _mm256_fmadd_pd(y, g, f[1][c]);
       f[2][c] = _mm256_fmadd_pd(z, g, f[2][c]);
     }
+    RowsToColumns(_mm256_load_pd(p0 + 4), _mm256_load_pd(p1 + 4), _mm256_load_pd(p2 + 4),
+                  _mm256_load_pd(p3 + 4), x, y, z);
+    _mm256_store_pd(cx + i, x);
+    _mm256_store_pd(cy + i, y);
+    _mm256_store_pd(cz + i, z);
   }
   Eigen::Matrix3d fm;
   for (int a = 0; a < 3; ++a)
@@ -195,9 +238,8 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
     for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(b, a));
   T* out[3] = {dx, dy, dz};
   for (int i = 0; i < n; i += 4) {
-    __m256d x, y, z;
-    RowsToColumns(LoadRow(delta, ids[i]), LoadRow(delta, ids[i + 1]), LoadRow(delta, ids[i + 2]),
-               LoadRow(delta, ids[i + 3]), x, y, z);
+    const __m256d x = _mm256_load_pd(cx + i), y = _mm256_load_pd(cy + i),
+                  z = _mm256_load_pd(cz + i);
     for (int a = 0; a < 3; ++a) {
       const __m256d v =
           _mm256_fmadd_pd(rr[a][2], z, _mm256_fmadd_pd(rr[a][1], y, _mm256_mul_pd(rr[a][0], x)));
@@ -206,12 +248,25 @@ void LocalDeformationAvx2(int n, const double* d, const double* delta, const int
   }
 }
 
-// g_i += R (yx_i, yy_i, yz_i), four nodes at a time. g must have one row of
-// slack past its last node: each node's row is updated with a full 4-lane
-// load and store whose fourth lane writes back the next row's x unchanged
-// (g is the calling part's own buffer, so no other thread touches it).
+// 1/2 dhat . y for one element (n a multiple of 4), y = K dhat.
+inline __m256d LoadWide(const double* p) { return _mm256_loadu_pd(p); }
+inline __m256d LoadWide(const float* p) { return _mm256_cvtps_pd(_mm_loadu_ps(p)); }
+template <typename T>
+double HalfDotAvx2(int n, const T* dx, const T* dy, const T* dz, const double* yx,
+                   const double* yy, const double* yz) {
+  __m256d acc = _mm256_setzero_pd();
+  for (int i = 0; i < n; i += 4) {
+    acc = _mm256_fmadd_pd(LoadWide(dx + i), _mm256_loadu_pd(yx + i), acc);
+    acc = _mm256_fmadd_pd(LoadWide(dy + i), _mm256_loadu_pd(yy + i), acc);
+    acc = _mm256_fmadd_pd(LoadWide(dz + i), _mm256_loadu_pd(yz + i), acc);
+  }
+  return 0.5 * Sum4(acc);
+}
+
+// sums[lid_i] += R (yx_i, yy_i, yz_i), four nodes at a time (aligned rows
+// of kSumStride).
 void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, const double* yy,
-                          const double* yz, const int32_t* ids, double* g) {
+                          const double* yz, const uint16_t* lid, double* sums) {
   __m256d rr[3][3];
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(a, b));
@@ -226,17 +281,17 @@ void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, con
     __m256d row[4];
     simd::ColumnsToRows(o[0], o[1], o[2], row);
     for (int k = 0; k < 4; ++k) {
-      double* p = g + 3 * static_cast<int64_t>(ids[i + k]);
-      _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), row[k]));
+      double* p = sums + kSumStride * lid[i + k];
+      _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), row[k]));
     }
   }
 }
 #endif
 
-// g_i += R_e (yx_i, yy_i, yz_i) for the element's nodes.
+// sums[lid_i] += R_e (yx_i, yy_i, yz_i) for the element's nodes.
 template <int kN>
 void RotateBackAndAdd(int n_dyn, const Eigen::Matrix3d& r, const double* yx, const double* yy,
-                      const double* yz, const int32_t* ids, double* g) {
+                      const double* yz, const uint16_t* lid, double* sums) {
   const int n = kN > 0 ? kN : n_dyn;
   constexpr int kRows = (kN > 0) ? kN : Eigen::Dynamic;
   using Vec = Eigen::Matrix<double, kRows, 1, 0, (kN > 0 ? kN : fem::kCubicNodes), 1>;
@@ -246,7 +301,7 @@ void RotateBackAndAdd(int n_dyn, const Eigen::Matrix3d& r, const double* yx, con
   const Vec gy = r(1, 0) * ax + r(1, 1) * ay + r(1, 2) * az;
   const Vec gz = r(2, 0) * ax + r(2, 1) * ay + r(2, 2) * az;
   for (int i = 0; i < n; ++i) {
-    double* o = g + 3 * static_cast<int64_t>(ids[i]);
+    double* o = sums + kSumStride * lid[i];
     o[0] += gx[i];
     o[1] += gy[i];
     o[2] += gz[i];
@@ -269,6 +324,8 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
   std::array<Eigen::Matrix3d, kBatch> rot;
   ClearPartRows(schedule_, part, w.g);
   w.energy = 0;
+  double* local = AlignedRows(w.local);
+  double* sums = AlignedRows(w.sums);
   const int ld = fem::kCubicNodes;  // leading dimension of the batch columns
   T* cols[3];
   if constexpr (std::is_same_v<T, float>) {
@@ -281,35 +338,40 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const ElementBlock& block = layout_.blocks[batch.kind];
     const int n = block.nodes;
     const double* grad = centre_gradient_[batch.kind][batch.group].data();
-    // Elements of a group sit anywhere in the node-id array: fetch the
-    // next elements' ids (n ints each) ahead of their turn.
-    auto prefetch_ids = [&](int32_t b) {
-      if (b >= batch.count) return;
-      const char* p = reinterpret_cast<const char*>(block.element_nodes(block.by_group[batch.first + b]));
-      for (int off = 0; off < n * 4; off += 64) __builtin_prefetch(p + off);
-    };
-    prefetch_ids(0);
-    prefetch_ids(1);
+    const int32_t* nodes = schedule_.batch_nodes.data() + batch.nodes_begin;
+    const uint16_t* lids = schedule_.local_ids.data() + batch.local_begin;
+    GatherRows(batch.num_nodes, nodes, d.data(), delta_.data(), local);
+    // The next batch's rows (d and delta to read, the buffer to update)
+    // are fetched a share per element, so their misses overlap this
+    // batch's work.
+    const bool has_next = bi + 1 < schedule_.part_start[part + 1];
+    const int32_t next_m = has_next ? schedule_.batches[bi + 1].num_nodes : 0;
+    const int32_t* next_nodes =
+        has_next ? schedule_.batch_nodes.data() + schedule_.batches[bi + 1].nodes_begin : nullptr;
     for (int32_t b = 0; b < batch.count; ++b) {
-      prefetch_ids(b + 2);
-      const int32_t e = block.by_group[batch.first + b];
-      const int32_t* ids = block.element_nodes(e);
-      Eigen::Quaterniond& q = frames_[batch.kind][e];
+      for (int32_t j = next_m * b / batch.count; j < next_m * (b + 1) / batch.count; ++j) {
+        const int64_t row = 3 * static_cast<int64_t>(next_nodes[j]);
+        __builtin_prefetch(d.data() + row);
+        __builtin_prefetch(delta_.data() + row);
+        __builtin_prefetch(w.g.data() + row, 1);
+      }
+      const uint16_t* lid = lids + static_cast<int64_t>(b) * n;
+      Eigen::Quaterniond& q = frames_[batch.kind][block.by_group[batch.first + b]];
       T* cx = cols[0] + b * ld;
       T* cy = cols[1] + b * ld;
       T* cz = cols[2] + b * ld;
 #ifdef DYNSOLID_LF_AVX2
       if (n % 4 == 0) {
-        LocalDeformationAvx2(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+        LocalDeformationAvx2(n, local, lid, grad, q, rot[b], cx, cy, cz);
         continue;
       }
 #endif
       if (n == fem::kCubicNodes) {
-        LocalDeformation<fem::kCubicNodes>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+        LocalDeformation<fem::kCubicNodes>(n, local, lid, grad, q, rot[b], cx, cy, cz);
       } else if (n == 8) {
-        LocalDeformation<8>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+        LocalDeformation<8>(n, local, lid, grad, q, rot[b], cx, cy, cz);
       } else {
-        LocalDeformation<-1>(n, d.data(), delta_.data(), ids, grad, q, rot[b], cx, cy, cz);
+        LocalDeformation<-1>(n, local, lid, grad, q, rot[b], cx, cy, cz);
       }
     }
     const auto& k = packed[batch.kind][batch.group];
@@ -325,29 +387,38 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     auto yy = w.yy.topLeftCorner(n, batch.count);
     auto yz = w.yz.topLeftCorner(n, batch.count);
     for (int32_t b = 0; b < batch.count; ++b) {
+#ifdef DYNSOLID_LF_AVX2
+      if (n % 4 == 0) {
+        w.energy += HalfDotAvx2(n, cols[0] + b * ld, cols[1] + b * ld, cols[2] + b * ld,
+                                &yx(0, b), &yy(0, b), &yz(0, b));
+        continue;
+      }
+#endif
       w.energy += 0.5 * (dx.col(b).template cast<double>().dot(yx.col(b)) +
                          dy.col(b).template cast<double>().dot(yy.col(b)) +
                          dz.col(b).template cast<double>().dot(yz.col(b)));
     }
+    std::fill(sums, sums + kSumStride * static_cast<int64_t>(batch.num_nodes), 0.0);
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      const uint16_t* lid = lids + static_cast<int64_t>(b) * n;
       const double* ax = w.yx.data() + b * ld;
       const double* ay = w.yy.data() + b * ld;
       const double* az = w.yz.data() + b * ld;
 #ifdef DYNSOLID_LF_AVX2
       if (n % 4 == 0) {
-        RotateBackAndAddAvx2(n, rot[b], ax, ay, az, ids, w.g.data());
+        RotateBackAndAddAvx2(n, rot[b], ax, ay, az, lid, sums);
         continue;
       }
 #endif
       if (n == fem::kCubicNodes) {
-        RotateBackAndAdd<fem::kCubicNodes>(n, rot[b], ax, ay, az, ids, w.g.data());
+        RotateBackAndAdd<fem::kCubicNodes>(n, rot[b], ax, ay, az, lid, sums);
       } else if (n == 8) {
-        RotateBackAndAdd<8>(n, rot[b], ax, ay, az, ids, w.g.data());
+        RotateBackAndAdd<8>(n, rot[b], ax, ay, az, lid, sums);
       } else {
-        RotateBackAndAdd<-1>(n, rot[b], ax, ay, az, ids, w.g.data());
+        RotateBackAndAdd<-1>(n, rot[b], ax, ay, az, lid, sums);
       }
     }
+    ScatterRows(batch.num_nodes, nodes, sums, w.g.data());
   }
 }
 
@@ -419,7 +490,8 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
 int64_t LocalFrameModel::per_element_bytes() const {
   int64_t elements = 0;
   for (const ElementBlock& b : layout_.blocks) elements += b.size();
-  return PerElementBytes(layout_) + (elements > 0 ? measure_.bytes() / elements : 0);
+  return PerElementBytes(layout_) + BatchTableBytes(layout_, schedule_) +
+         (elements > 0 ? measure_.bytes() / elements : 0);
 }
 
 }  // namespace dynsolid::models

@@ -97,6 +97,9 @@ class LocalFrameModel final : public InternalForceModel {
  private:
   struct Workspace {
     Points g;  // this part's sum of R_e K dhat (rows of its nodes only)
+    // A batch's gathered node rows and its sums (local_frame.cc), each
+    // with room to align its rows to 64 bytes.
+    std::vector<double> local, sums;
     Eigen::MatrixXd dx, dy, dz, yx, yy, yz;  // 64 x batch columns
     Eigen::MatrixXf fx, fy, fz;              // dhat rounded (float products)
     double energy = 0;

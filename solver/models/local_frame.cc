@@ -342,18 +342,24 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const uint16_t* lids = schedule_.local_ids.data() + batch.local_begin;
     GatherRows(batch.num_nodes, nodes, d.data(), delta_.data(), local);
     // The next batch's rows (d and delta to read, the buffer to update)
-    // are fetched a share per element, so their misses overlap this
-    // batch's work.
-    const bool has_next = bi + 1 < schedule_.part_start[part + 1];
-    const int32_t next_m = has_next ? schedule_.batches[bi + 1].num_nodes : 0;
+    // and its elements' frames are fetched a share per element, so their
+    // misses overlap this batch's work.
+    const ElementBatch* next =
+        bi + 1 < schedule_.part_start[part + 1] ? &schedule_.batches[bi + 1] : nullptr;
+    const int32_t next_m = next != nullptr ? next->num_nodes : 0;
+    const int32_t next_count = next != nullptr ? next->count : 0;
     const int32_t* next_nodes =
-        has_next ? schedule_.batch_nodes.data() + schedule_.batches[bi + 1].nodes_begin : nullptr;
+        next != nullptr ? schedule_.batch_nodes.data() + next->nodes_begin : nullptr;
     for (int32_t b = 0; b < batch.count; ++b) {
       for (int32_t j = next_m * b / batch.count; j < next_m * (b + 1) / batch.count; ++j) {
         const int64_t row = 3 * static_cast<int64_t>(next_nodes[j]);
         __builtin_prefetch(d.data() + row);
         __builtin_prefetch(delta_.data() + row);
         __builtin_prefetch(w.g.data() + row, 1);
+      }
+      for (int32_t j = next_count * b / batch.count; j < next_count * (b + 1) / batch.count; ++j) {
+        const ElementBlock& next_block = layout_.blocks[next->kind];
+        __builtin_prefetch(&frames_[next->kind][next_block.by_group[next->first + j]], 1);
       }
       const uint16_t* lid = lids + static_cast<int64_t>(b) * n;
       Eigen::Quaterniond& q = frames_[batch.kind][block.by_group[batch.first + b]];

@@ -540,9 +540,19 @@ inline QuadSides Sides(Lanes x, Lanes y, Lanes z) {
 
 // Quadrilaterals two at a time; with an odd count the last runs as both
 // halves, its second copy adding nothing (no owned nodes).
+// Rows of the quadrilaterals kQuadsAhead further on are prefetched from
+// each of `rows` (the node arrays read, and the output), so their misses
+// overlap this pair's arithmetic.
+constexpr int64_t kQuadsAhead = 16;
 template <typename Body>
-void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq, Body body) {
+void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq,
+                  std::initializer_list<const double*> rows, Body body) {
   for (int64_t q = 0; q < nq; q += 2) {
+    if (q + kQuadsAhead + 2 <= nq) {
+      for (const int32_t* v = qv + 4 * (q + kQuadsAhead); v < qv + 4 * (q + kQuadsAhead + 2); ++v) {
+        for (const double* base : rows) __builtin_prefetch(base + 3 * static_cast<int64_t>(*v));
+      }
+    }
     const int64_t q1 = q + 1 < nq ? q + 1 : q;
     body(q, q1, qv + 4 * q, qv + 4 * q1, owns[q], q1 != q ? owns[q1] : uint8_t{0});
   }
@@ -552,7 +562,7 @@ void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq, Body body)
 // its b.
 void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
                   const double* pd, double* out) {
-  ForQuadPairs(qv, owns, nq,
+  ForQuadPairs(qv, owns, nq, {pd, out},
                [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
                    uint8_t o1) {
                  Lanes x, y, z;
@@ -571,7 +581,7 @@ void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, in
 // Transpose: as the forward, plus minus both of its own corner's terms.
 void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
                     const double* pd, const double* py, double* out) {
-  ForQuadPairs(qv, owns, nq,
+  ForQuadPairs(qv, owns, nq, {pd, py, out},
                [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
                    uint8_t o1) {
                  Lanes x, y, z, yx, yy, yz;
@@ -599,15 +609,29 @@ void QuadsTranspose(const int32_t*, const double*, const uint8_t*, int64_t, cons
 }  // namespace
 
 template <typename EdgeTerms, typename QuadTerms, typename CornerTerms>
-void DeformationMeasure::RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
-                                 QuadTerms quad_terms, CornerTerms corner_terms) {
+void DeformationMeasure::RunPart(const Part& p, bool centres, double* out,
+                                 std::initializer_list<const double*> inputs,
+                                 EdgeTerms edge_terms, QuadTerms quad_terms,
+                                 CornerTerms corner_terms) {
   for (int32_t v : p.nodes) out[3 * v] = out[3 * v + 1] = out[3 * v + 2] = 0;
+  // While a chunk's terms are added, the next chunk's node rows (of the
+  // inputs and the output) are prefetched, one term per term added.
+  auto prefetch = [&](int32_t v) {
+    const int64_t row = 3 * static_cast<int64_t>(v);
+    for (const double* base : inputs) __builtin_prefetch(base + row);
+    __builtin_prefetch(out + row, 1);
+  };
   ChunkTerms t;
   const int64_t ne = static_cast<int64_t>(p.ei.size());
   for (int64_t q0 = 0; q0 < ne; q0 += kChunk) {
     const int64_t m = std::min(kChunk, ne - q0);
     edge_terms(q0, m, t.x0, t.y0, t.z0);
+    const int64_t ahead = std::min(kChunk, std::max<int64_t>(ne - q0 - kChunk, 0));
     for (int64_t u = 0; u < m; ++u) {
+      if (u < ahead) {
+        prefetch(p.ei[q0 + kChunk + u]);
+        prefetch(p.ej[q0 + kChunk + u]);
+      }
       const uint8_t owns = p.e_owns[q0 + u];
       if (owns & 1) AddRow(out, p.ei[q0 + u], -t.x0[u], -t.y0[u], -t.z0[u]);
       if (owns & 2) AddRow(out, p.ej[q0 + u], t.x0[u], t.y0[u], t.z0[u]);
@@ -618,7 +642,13 @@ void DeformationMeasure::RunPart(const Part& p, bool centres, double* out, EdgeT
   for (int64_t q0 = 0; q0 < nc; q0 += kChunk) {
     const int64_t m = std::min(kChunk, nc - q0);
     corner_terms(q0, m, t.x0, t.y0, t.z0, t.x1, t.y1, t.z1);
+    const int64_t ahead = std::min(kChunk, std::max<int64_t>(nc - q0 - kChunk, 0));
     for (int64_t u = 0; u < m; ++u) {
+      if (u < ahead) {
+        prefetch(p.cn[q0 + kChunk + u]);
+        prefetch(p.ca[q0 + kChunk + u]);
+        prefetch(p.cb[q0 + kChunk + u]);
+      }
       const uint8_t owns = p.c_owns[q0 + u];
       if (owns & 1) AddRow(out, p.ca[q0 + u], t.x0[u], t.y0[u], t.z0[u]);
       if (owns & 2) AddRow(out, p.cb[q0 + u], t.x1[u], t.y1[u], t.z1[u]);
@@ -634,7 +664,7 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
   const Part& p = parts_[k];
   const double* pd = d.data();
   RunPart(
-      p, /*centres=*/false, delta.data(),
+      p, /*centres=*/false, delta.data(), {pd},
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
         EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy, fz, m);
       },
@@ -655,7 +685,7 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
   const double* pd = d.data();
   const double* py = y.data();
   RunPart(
-      p, /*centres=*/true, out.data(),
+      p, /*centres=*/true, out.data(), {pd, py},
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
         EdgeTranspose(pd, py, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy,
                       fz, m);

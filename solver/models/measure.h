@@ -35,6 +35,7 @@
 
 #include <array>
 #include <cstdint>
+#include <initializer_list>
 #include <vector>
 
 #include "solver/fem/element_set.h"
@@ -109,7 +110,8 @@ class DeformationMeasure {
   // ascending term order, computing edges and corners chunk by chunk with
   // edge_terms and corner_terms.
   template <typename EdgeTerms, typename QuadTerms, typename CornerTerms>
-  static void RunPart(const Part& p, bool centres, double* out, EdgeTerms edge_terms,
+  static void RunPart(const Part& p, bool centres, double* out,
+                      std::initializer_list<const double*> inputs, EdgeTerms edge_terms,
                       QuadTerms quad_terms, CornerTerms corner_terms);
 
   int64_t num_edges_ = 0, num_corners_ = 0, num_quads_ = 0;

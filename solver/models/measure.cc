@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <set>
 
 #include <Eigen/Geometry>
@@ -128,6 +129,26 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     }
     return true;
   };
+  // Rest lengths and quadrilateral rest corners, each distinct value (to
+  // the bit) once: a regular block has one of each, so a term carries a
+  // 4-byte index instead of 8 (edges) or 64 bytes (quadrilaterals), and
+  // the passes stream that much less.
+  std::map<double, uint32_t> edge_index;
+  auto edge_rest_id = [&](double length) {
+    auto [it, added] = edge_index.try_emplace(length, static_cast<uint32_t>(edge_rest_.size()));
+    if (added) edge_rest_.push_back(length);
+    return it->second;
+  };
+  std::map<std::array<double, 8>, uint32_t> quad_index;
+  auto quad_rest_id = [&](const Quad& q) {
+    std::array<double, 8> key;
+    std::copy(q.cos0.begin(), q.cos0.end(), key.begin());
+    std::copy(q.sin0.begin(), q.sin0.end(), key.begin() + 4);
+    auto [it, added] =
+        quad_index.try_emplace(key, static_cast<uint32_t>(quad_rest_.size() / 8));
+    if (added) quad_rest_.insert(quad_rest_.end(), key.begin(), key.end());
+    return it->second;
+  };
   for (const Edge& edge : edges) {
     const int ks[2] = {owner_[edge.i], owner_[edge.j]};
     for (int t = 0; t < 2; ++t) {
@@ -135,7 +156,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
       Part& p = parts_[ks[t]];
       p.ei.push_back(edge.i);
       p.ej.push_back(edge.j);
-      p.e_rest.push_back(edge.rest_length);
+      p.e_rest.push_back(edge_rest_id(edge.rest_length));
       p.e_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0));
     }
   }
@@ -149,8 +170,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
         p.qv.push_back(q.v[i]);
         if (ks[i] == ks[t]) owns |= static_cast<uint8_t>(1 << i);
       }
-      p.q_rest.insert(p.q_rest.end(), q.cos0.begin(), q.cos0.end());
-      p.q_rest.insert(p.q_rest.end(), q.sin0.begin(), q.sin0.end());
+      p.q_rest.push_back(quad_rest_id(q));
       p.q_owns.push_back(owns);
     }
   }
@@ -174,14 +194,15 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
   num_corners_ = static_cast<int64_t>(corners.size()) + 4 * num_quads_;
   for (Part& p : parts_) {
     for (auto* v : {&p.nodes, &p.ei, &p.ej, &p.qv, &p.cn, &p.ca, &p.cb}) v->shrink_to_fit();
-    for (auto* v : {&p.e_rest, &p.q_rest, &p.cos0, &p.sin0}) v->shrink_to_fit();
+    for (auto* v : {&p.e_rest, &p.q_rest}) v->shrink_to_fit();
+    for (auto* v : {&p.cos0, &p.sin0}) v->shrink_to_fit();
     for (auto* v : {&p.e_owns, &p.q_owns, &p.c_owns}) v->shrink_to_fit();
   }
 }
 
 int64_t DeformationMeasure::bytes() const {
   auto b = [](const auto& v) { return static_cast<int64_t>(v.size() * sizeof(v[0])); };
-  int64_t n = b(owner_);
+  int64_t n = b(owner_) + b(edge_rest_) + b(quad_rest_);
   for (const Part& p : parts_) {
     n += b(p.nodes) + b(p.ei) + b(p.ej) + b(p.e_rest) + b(p.e_owns) + b(p.qv) + b(p.q_rest) +
          b(p.q_owns) + b(p.cn) + b(p.ca) + b(p.cb) + b(p.cos0) + b(p.sin0) + b(p.c_owns);
@@ -213,12 +234,13 @@ constexpr int64_t kChunk = 256;
 // Edge (i, j): r = d_j - d_i, l = |r| and the stretch term f r with
 // f = (l - l0) / (2 l) (zero for a zero-length edge).
 void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
-                 const double* R rest, double* R fx, double* R fy, double* R fz, int64_t ne) {
+                 const double* R rest, const uint32_t* R rest_id, double* R fx, double* R fy,
+                 double* R fz, int64_t ne) {
   for (int64_t q = 0; q < ne; ++q) {
     const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
     const double x = pd[j] - pd[i], y = pd[j + 1] - pd[i + 1], z = pd[j + 2] - pd[i + 2];
     const double len = std::sqrt(x * x + y * y + z * z);
-    const double f_any = 0.5 * (len - rest[q]) / (len > 0 ? len : 1.0);
+    const double f_any = 0.5 * (len - rest[rest_id[q]]) / (len > 0 ? len : 1.0);
     const double f = len > 0 ? f_any : 0.0;
     fx[q] = f * x;
     fy[q] = f * y;
@@ -420,9 +442,10 @@ void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
 // subtracts from delta_i, so d/dr of (y_j - y_i) . c is
 // J (y_j - y_i) with J = 1/2 [(1 - l0/l) I + (l0 / l^3) r r^T].
 void EdgeTranspose(const double* R pd, const double* R py, const int32_t* R ei,
-                   const int32_t* R ej, const double* R rest, double* R fx, double* R fy,
-                   double* R fz, int64_t ne) {
+                   const int32_t* R ej, const double* R rest, const uint32_t* R rest_id,
+                   double* R fx, double* R fy, double* R fz, int64_t ne) {
   for (int64_t q = 0; q < ne; ++q) {
+    const double l0 = rest[rest_id[q]];
     const int64_t i = 3 * static_cast<int64_t>(ei[q]), j = 3 * static_cast<int64_t>(ej[q]);
     const double rx = pd[j] - pd[i], ry = pd[j + 1] - pd[i + 1], rz = pd[j + 2] - pd[i + 2];
     const double len = std::sqrt(rx * rx + ry * ry + rz * rz);
@@ -430,8 +453,8 @@ void EdgeTranspose(const double* R pd, const double* R py, const int32_t* R ei,
     const bool ok = len > 0;
     const double il = 1.0 / (ok ? len : 1.0);
     const double rdy = rx * dx + ry * dy + rz * dz;
-    const double c1_any = 0.5 * (1.0 - rest[q] * il);
-    const double c2_any = 0.5 * rest[q] * il * il * il * rdy;
+    const double c1_any = 0.5 * (1.0 - l0 * il);
+    const double c2_any = 0.5 * l0 * il * il * il * rdy;
     const double c1 = ok ? c1_any : 0.0, c2 = ok ? c2_any : 0.0;
     fx[q] = c1 * dx + c2 * rx;
     fy[q] = c1 * dy + c2 * ry;
@@ -497,8 +520,12 @@ inline void LoadQuads(const double* base, const int32_t* v0, const int32_t* v1, 
   }
 }
 
-inline Lanes LoadRest(const double* rest, int64_t q0, int64_t q1, int offset) {
-  return {_mm256_loadu_pd(rest + 8 * q0 + offset), _mm256_loadu_pd(rest + 8 * q1 + offset)};
+// Quadrilaterals q0 and q1's rest cosines (offset 0) or sines (offset 4):
+// rows rest_id[q] of the measure's table of distinct rest corners.
+inline Lanes LoadRest(const double* rest, const uint32_t* rest_id, int64_t q0, int64_t q1,
+                      int offset) {
+  return {_mm256_loadu_pd(rest + 8 * static_cast<int64_t>(rest_id[q0]) + offset),
+          _mm256_loadu_pd(rest + 8 * static_cast<int64_t>(rest_id[q1]) + offset)};
 }
 
 // Adds lane k of register h of (x, y, z) to node v_h[k]'s row where bit k
@@ -560,8 +587,8 @@ void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq,
 
 // Forward: node k takes corner k + 1's term on its a and corner k - 1's on
 // its b.
-void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
-                  const double* pd, double* out) {
+void QuadsForward(const int32_t* qv, const double* rest, const uint32_t* rest_id,
+                  const uint8_t* owns, int64_t nq, const double* pd, double* out) {
   ForQuadPairs(qv, owns, nq, {pd, out},
                [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
                    uint8_t o1) {
@@ -570,7 +597,7 @@ void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, in
                  const QuadSides r = Sides(x, y, z);
                  const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
                      r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
-                     LoadRest(rest, q0, q1, 0), LoadRest(rest, q0, q1, 4));
+                     LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
                  const CornerTerms<Lanes> t =
                      ForwardTerms(r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, g);
                  AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx), Next(t.ay) + Prev(t.by),
@@ -579,8 +606,9 @@ void QuadsForward(const int32_t* qv, const double* rest, const uint8_t* owns, in
 }
 
 // Transpose: as the forward, plus minus both of its own corner's terms.
-void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, int64_t nq,
-                    const double* pd, const double* py, double* out) {
+void QuadsTranspose(const int32_t* qv, const double* rest, const uint32_t* rest_id,
+                    const uint8_t* owns, int64_t nq, const double* pd, const double* py,
+                    double* out) {
   ForQuadPairs(qv, owns, nq, {pd, py, out},
                [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
                    uint8_t o1) {
@@ -590,7 +618,7 @@ void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, 
                  const QuadSides r = Sides(x, y, z);
                  const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
                      r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
-                     LoadRest(rest, q0, q1, 0), LoadRest(rest, q0, q1, 4));
+                     LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
                  const CornerTerms<Lanes> t = TransposeTerms(Prev(yx), Prev(yy), Prev(yz),
                                                              Next(yx), Next(yy), Next(yz), g);
                  AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx) - (t.ax + t.bx),
@@ -600,10 +628,10 @@ void QuadsTranspose(const int32_t* qv, const double* rest, const uint8_t* owns, 
 }
 #else
 // No quadrilaterals are built without AVX2 (kQuadLanes): nothing to add.
-void QuadsForward(const int32_t*, const double*, const uint8_t*, int64_t, const double*,
-                  double*) {}
-void QuadsTranspose(const int32_t*, const double*, const uint8_t*, int64_t, const double*,
-                    const double*, double*) {}
+void QuadsForward(const int32_t*, const double*, const uint32_t*, const uint8_t*, int64_t,
+                  const double*, double*) {}
+void QuadsTranspose(const int32_t*, const double*, const uint32_t*, const uint8_t*, int64_t,
+                    const double*, const double*, double*) {}
 #endif
 
 }  // namespace
@@ -666,10 +694,11 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
   RunPart(
       p, /*centres=*/false, delta.data(), {pd},
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
-        EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy, fz, m);
+        EdgeForward(pd, p.ei.data() + q0, p.ej.data() + q0, edge_rest_.data(),
+                    p.e_rest.data() + q0, fx, fy, fz, m);
       },
       [&](double* out) {
-        QuadsForward(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
+        QuadsForward(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                      static_cast<int64_t>(p.q_owns.size()), pd, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
@@ -687,11 +716,11 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
   RunPart(
       p, /*centres=*/true, out.data(), {pd, py},
       [&](int64_t q0, int64_t m, double* fx, double* fy, double* fz) {
-        EdgeTranspose(pd, py, p.ei.data() + q0, p.ej.data() + q0, p.e_rest.data() + q0, fx, fy,
-                      fz, m);
+        EdgeTranspose(pd, py, p.ei.data() + q0, p.ej.data() + q0, edge_rest_.data(),
+                      p.e_rest.data() + q0, fx, fy, fz, m);
       },
       [&](double* out) {
-        QuadsTranspose(p.qv.data(), p.q_rest.data(), p.q_owns.data(),
+        QuadsTranspose(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                        static_cast<int64_t>(p.q_owns.size()), pd, py, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,

@@ -76,7 +76,9 @@ class DeformationMeasure {
   // two or more parts once for each (>= num_edges() + num_corners()).
   int64_t terms_per_pass() const;
   // Bytes the measure keeps: its parts' node, edge and corner lists (node
-  // ids, rest lengths, rest angles, ownership bits). No per-term state.
+  // ids, rest lengths or their indices, rest angles or their indices,
+  // ownership bits) and the tables of distinct rest values. No per-term
+  // state.
   int64_t bytes() const;
 
  private:
@@ -89,14 +91,14 @@ class DeformationMeasure {
     std::vector<int32_t> nodes;  // owned, ascending
     // Edges touching an owned node, ascending.
     std::vector<int32_t> ei, ej;
-    std::vector<double> e_rest;
+    std::vector<uint32_t> e_rest;  // rows of edge_rest_
     std::vector<uint8_t> e_owns;
     // Quadrilaterals touching an owned node, ascending: their nodes in loop
     // order (4 each; corner k is at node k, between nodes k - 1 and k + 1),
-    // the cosines then the sines of the corners' rest angles (8 each), and
-    // bit k set when node k is owned.
+    // their rest corners (rows of quad_rest_), and bit k set when node k
+    // is owned.
     std::vector<int32_t> qv;
-    std::vector<double> q_rest;
+    std::vector<uint32_t> q_rest;
     std::vector<uint8_t> q_owns;
     // Other corners touching an owned node, ascending.
     std::vector<int32_t> cn, ca, cb;
@@ -116,6 +118,10 @@ class DeformationMeasure {
 
   int64_t num_edges_ = 0, num_corners_ = 0, num_quads_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
+  // The distinct rest lengths of edges, and the distinct rest corners of
+  // quadrilaterals (the cosines then the sines of their four rest angles,
+  // 8 per row), which the parts' terms index.
+  std::vector<double> edge_rest_, quad_rest_;
   std::vector<Part> parts_;
 };
 

@@ -125,14 +125,20 @@ inline double* AlignedRows(std::vector<double>& store) {
                                    ~uintptr_t{63});
 }
 
+// Row j of `local` = node nodes[j]'s d and delta rows (kLocalStride).
 void GatherRows(int m, const int32_t* nodes, const double* d, const double* delta,
                 double* local) {
   for (int j = 0; j < m; ++j) {
+    double* o = local + kLocalStride * j;
+#ifdef DYNSOLID_LF_AVX2
+    _mm256_store_pd(o, simd::LoadRow(d, nodes[j]));
+    _mm256_store_pd(o + 4, simd::LoadRow(delta, nodes[j]));
+#else
     const double* a = d + 3 * static_cast<int64_t>(nodes[j]);
     const double* b = delta + 3 * static_cast<int64_t>(nodes[j]);
-    double* o = local + kLocalStride * j;
     o[0] = a[0], o[1] = a[1], o[2] = a[2], o[3] = 0;
     o[4] = b[0], o[5] = b[1], o[6] = b[2], o[7] = 0;
+#endif
   }
 }
 
@@ -141,8 +147,12 @@ void ScatterRows(int m, const int32_t* nodes, const double* sums, double* g) {
   for (int j = 0; j < m; ++j) {
     double* o = g + 3 * static_cast<int64_t>(nodes[j]);
     const double* a = sums + kSumStride * j;
+#ifdef DYNSOLID_LF_AVX2
+    _mm_storeu_pd(o, _mm_add_pd(_mm_loadu_pd(o), _mm_load_pd(a)));
+#else
     o[0] += a[0];
     o[1] += a[1];
+#endif
     o[2] += a[2];
   }
 }

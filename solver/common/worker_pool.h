@@ -31,6 +31,22 @@ class WorkerPool {
            static_cast<void*>(&job));
   }
 
+  // Calls job(part) once for every part in [0, parts), concurrently: each
+  // thread takes the next part not yet taken until none is left, so a
+  // slow part does not hold back the parts behind it. Which thread runs a
+  // part varies from run to run: a part must write only its own outputs
+  // (its rows, its buffer), so the results depend on the parts alone.
+  template <typename Job>
+  void RunParts(int parts, Job&& job) {
+    std::atomic<int> next{0};
+    Run([&](int) {
+      for (int k = next.fetch_add(1, std::memory_order_relaxed); k < parts;
+           k = next.fetch_add(1, std::memory_order_relaxed)) {
+        job(k);
+      }
+    });
+  }
+
  private:
   void RunRaw(void (*fn)(void*, int), void* ctx);
   void Loop(int index);

@@ -237,8 +237,10 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       const int32_t* ids = block.element_nodes(e);
 #ifdef DYNSOLID_COROT_AVX2
       {
-        Eigen::Matrix3d r_in;
-        if (update == nullptr) r_in = frames_[batch.kind][e].toRotationMatrix();
+        // (Read only without `update`; set either way, which GCC can see.)
+        const Eigen::Matrix3d r_in = update == nullptr
+                                         ? frames_[batch.kind][e].toRotationMatrix()
+                                         : Eigen::Matrix3d::Identity();
         ElementColumn(n, x.data(), rest_.data(), ids, grp.centre_gradient.data(), subtract_rest,
                       &r_in, rot[b],
                       update != nullptr ? &(*update)[batch.kind][e] : nullptr,
@@ -300,12 +302,9 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
 double CorotationalModel::Forces(const Points& d, Points& g) {
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
-  const int threads = pool_.size();
-  // Parts t, t + T, ... on thread t, each into its own buffer, summed in part
-  // order: the same bits for any thread count.
-  pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) RunBatches(k, d, &frames_, work_[k]);
-  });
+  // Each part into its own buffer (whichever thread takes it), summed in
+  // part order: the same bits for any thread count.
+  pool_.RunParts(parts, [&](int k) { RunBatches(k, d, &frames_, work_[k]); });
   SumParts(g);
   double energy = 0;
   for (int k = 0; k < parts; ++k) energy += work_[k].energy;
@@ -342,10 +341,7 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
 void CorotationalModel::UpdateFrames(const Points& d) {
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
-  const int threads = pool_.size();
-  pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) FrameBatches(k, d);
-  });
+  pool_.RunParts(parts, [&](int k) { FrameBatches(k, d); });
   timing_.measure_ms = -1;
   timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -353,10 +349,7 @@ void CorotationalModel::UpdateFrames(const Points& d) {
 double CorotationalModel::AffineForces(const Points& x, Points& g) {
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
-  const int threads = pool_.size();
-  pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) RunBatches(k, x, nullptr, work_[k], true);
-  });
+  pool_.RunParts(parts, [&](int k) { RunBatches(k, x, nullptr, work_[k], true); });
   SumParts(g);
   double energy = 0;
   for (int k = 0; k < parts; ++k) energy += work_[k].energy;
@@ -367,10 +360,7 @@ double CorotationalModel::AffineForces(const Points& x, Points& g) {
 
 void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
   const int parts = static_cast<int>(work_.size());
-  const int threads = pool_.size();
-  pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) RunBatches(k, v, nullptr, work_[k]);
-  });
+  pool_.RunParts(parts, [&](int k) { RunBatches(k, v, nullptr, work_[k]); });
   SumParts(out);
 }
 

@@ -457,19 +457,15 @@ double LocalFrameModel::ExactForces(const Points& d, Points& g) {
 template <typename KSet>
 double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed) {
   using T = std::conditional_t<std::is_same_v<KSet, decltype(packed_f_)>, float, double>;
-  // Fixed parts; threads take parts t, t + T, ...; every sum is taken in an
-  // order fixed by the parts alone (see measure.h and ElementSchedule).
+  // Fixed parts, each taken by whichever thread is free (RunParts); every
+  // sum is taken in an order fixed by the parts alone (see measure.h and
+  // ElementSchedule).
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = kForceParts;
   const int threads = pool_.size();
-  const int measure_parts = measure_.parts();
-  pool_.Run([&](int t) {
-    for (int k = t; k < measure_parts; k += threads) measure_.ForwardPart(d, k, delta_);
-  });
+  pool_.RunParts(measure_.parts(), [&](int k) { measure_.ForwardPart(d, k, delta_); });
   const auto t1 = std::chrono::steady_clock::now();
-  pool_.Run([&](int t) {
-    for (int k = t; k < parts; k += threads) RunBatches<T>(k, d, packed, work_[k]);
-  });
+  pool_.RunParts(kForceParts, [&](int k) { RunBatches<T>(k, d, packed, work_[k]); });
   // y = dE/d delta = sum_e R_e K dhat, summed over the parts' buffers.
   pool_.Run([&](int t) {
     const int32_t n = num_nodes_;
@@ -482,9 +478,7 @@ double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed
   // The force is y's pull-back through the measure: g = (d delta / d d)^T y
   // (the gradient of the energy).
   g.resize(num_nodes_, 3);
-  pool_.Run([&](int t) {
-    for (int k = t; k < measure_parts; k += threads) measure_.TransposePart(d, y_, k, g);
-  });
+  pool_.RunParts(measure_.parts(), [&](int k) { measure_.TransposePart(d, y_, k, g); });
   const auto t3 = std::chrono::steady_clock::now();
   // The measure's phase holds both its passes (forward and transpose).
   timing_.measure_ms = std::chrono::duration<double, std::milli>((t1 - t0) + (t3 - t2)).count();

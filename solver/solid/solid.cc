@@ -822,14 +822,11 @@ void Solid::Impl::ToNodes(const Points& p, Points& out) {
 void Solid::Impl::FromNodes(const Points& g, Points& out) {
   const SparseMatrix& a = d->node_matrix;
   const Eigen::Index rows = a.rows(), cols = a.cols();
-  const int threads = pool->size();
-  pool->Run([&](int t) {
-    for (int k = t; k < kProjectParts; k += threads) {
-      const Eigen::Index r0 = rows * k / kProjectParts, r1 = rows * (k + 1) / kProjectParts;
-      Points& part = project_parts[k];
-      part.resize(cols, 3);
-      part.noalias() = a.middleRows(r0, r1 - r0).transpose() * g.middleRows(r0, r1 - r0);
-    }
+  pool->RunParts(kProjectParts, [&](int k) {
+    const Eigen::Index r0 = rows * k / kProjectParts, r1 = rows * (k + 1) / kProjectParts;
+    Points& part = project_parts[k];
+    part.resize(cols, 3);
+    part.noalias() = a.middleRows(r0, r1 - r0).transpose() * g.middleRows(r0, r1 - r0);
   });
   out = project_parts[0];
   for (int k = 1; k < kProjectParts; ++k) out += project_parts[k];

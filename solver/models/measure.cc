@@ -31,7 +31,14 @@ struct Corner {
 struct Quad {
   std::array<int32_t, 4> v;
   std::array<double, 4> cos0, sin0;  // of corner k's rest angle (at v[k])
+  // Side k (v[k] to v[k+1]) carries its edge's stretch term when bit k of
+  // `edges` is set, with rest length l0[k] (0 otherwise).
+  std::array<double, 4> l0{};
+  uint8_t edges = 0;
 };
+
+// A quadrilateral's row of the measure's rest table: cos0[4], sin0[4], l0[4].
+constexpr int kQuadRestRow = 12;
 
 #ifdef DYNSOLID_MEASURE_AVX2
 constexpr bool kQuadLanes = true;
@@ -104,6 +111,28 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     }
   }
 
+  // Every edge that is a side of a quadrilateral runs with the first such
+  // quadrilateral (its stretch term computed from the side's length and
+  // inverse, which the corners need anyway) and leaves the edge list.
+  std::vector<uint8_t> fused(edges.size(), 0);
+  if (!quad_list.empty()) {
+    std::map<std::pair<int32_t, int32_t>, int32_t> edge_at;
+    for (size_t e = 0; e < edges.size(); ++e) {
+      edge_at.emplace(std::minmax(edges[e].i, edges[e].j), static_cast<int32_t>(e));
+    }
+    for (Quad& q : quad_list) {
+      for (int k = 0; k < 4; ++k) {
+        const auto it = edge_at.find(std::minmax(q.v[k], q.v[(k + 1) % 4]));
+        if (it == edge_at.end() || fused[it->second]) continue;
+        const Edge& edge = edges[it->second];
+        fused[it->second] = 1;
+        q.edges |= static_cast<uint8_t>(1 << k);
+        // The side runs v[k] -> v[k+1]; the edge's term is the same either way.
+        q.l0[k] = edge.rest_length;
+      }
+    }
+  }
+
   // Ownership: cells in `parts` contiguous ranges; a node goes to the part
   // of its lowest-numbered cell.
   parts = std::clamp(parts, 1, 255);
@@ -139,17 +168,20 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     if (added) edge_rest_.push_back(length);
     return it->second;
   };
-  std::map<std::array<double, 8>, uint32_t> quad_index;
+  std::map<std::array<double, kQuadRestRow>, uint32_t> quad_index;
   auto quad_rest_id = [&](const Quad& q) {
-    std::array<double, 8> key;
+    std::array<double, kQuadRestRow> key;
     std::copy(q.cos0.begin(), q.cos0.end(), key.begin());
     std::copy(q.sin0.begin(), q.sin0.end(), key.begin() + 4);
+    std::copy(q.l0.begin(), q.l0.end(), key.begin() + 8);
     auto [it, added] =
-        quad_index.try_emplace(key, static_cast<uint32_t>(quad_rest_.size() / 8));
+        quad_index.try_emplace(key, static_cast<uint32_t>(quad_rest_.size() / kQuadRestRow));
     if (added) quad_rest_.insert(quad_rest_.end(), key.begin(), key.end());
     return it->second;
   };
-  for (const Edge& edge : edges) {
+  for (size_t e = 0; e < edges.size(); ++e) {
+    if (fused[e]) continue;
+    const Edge& edge = edges[e];
     const int ks[2] = {owner_[edge.i], owner_[edge.j]};
     for (int t = 0; t < 2; ++t) {
       if (!distinct(ks, t)) continue;
@@ -171,7 +203,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
         if (ks[i] == ks[t]) owns |= static_cast<uint8_t>(1 << i);
       }
       p.q_rest.push_back(quad_rest_id(q));
-      p.q_owns.push_back(owns);
+      p.q_owns.push_back(static_cast<uint8_t>(owns | (q.edges << 4)));
     }
   }
   for (const Corner& c : corners) {
@@ -214,6 +246,7 @@ int64_t DeformationMeasure::terms_per_pass() const {
   int64_t n = 0;
   for (const Part& p : parts_) {
     n += static_cast<int64_t>(p.ei.size() + p.cn.size() + 4 * p.q_owns.size());
+    for (uint8_t o : p.q_owns) n += __builtin_popcount(o >> 4);  // sides' edge terms
   }
   return n;
 }
@@ -520,12 +553,13 @@ inline void LoadQuads(const double* base, const int32_t* v0, const int32_t* v1, 
   }
 }
 
-// Quadrilaterals q0 and q1's rest cosines (offset 0) or sines (offset 4):
+// Quadrilaterals q0 and q1's rest cosines (offset 0), sines (offset 4) or
+// side rest lengths (offset 8):
 // rows rest_id[q] of the measure's table of distinct rest corners.
 inline Lanes LoadRest(const double* rest, const uint32_t* rest_id, int64_t q0, int64_t q1,
                       int offset) {
-  return {_mm256_loadu_pd(rest + 8 * static_cast<int64_t>(rest_id[q0]) + offset),
-          _mm256_loadu_pd(rest + 8 * static_cast<int64_t>(rest_id[q1]) + offset)};
+  return {_mm256_loadu_pd(rest + kQuadRestRow * static_cast<int64_t>(rest_id[q0]) + offset),
+          _mm256_loadu_pd(rest + kQuadRestRow * static_cast<int64_t>(rest_id[q1]) + offset)};
 }
 
 // Adds lane k of register h of (x, y, z) to node v_h[k]'s row where bit k
@@ -585,8 +619,21 @@ void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq,
   }
 }
 
+// Lane k all ones where side k of the quadrilateral carries its edge's
+// term (bit 4 + k of its owns byte) and has a nonzero length.
+inline Lanes SideEdges(uint8_t o0, uint8_t o1, Lanes length) {
+  const __m256i bit = _mm256_setr_epi64x(1, 2, 4, 8);
+  auto lanes = [&](uint8_t o) {
+    const __m256i b = _mm256_and_si256(_mm256_set1_epi64x(o >> 4), bit);
+    return _mm256_castsi256_pd(_mm256_cmpeq_epi64(b, bit));
+  };
+  return And(Lanes{lanes(o0), lanes(o1)}, Greater(length, Lanes(0.0)));
+}
+
 // Forward: node k takes corner k + 1's term on its a and corner k - 1's on
-// its b.
+// its b, and the stretch terms of sides k - 1 (+, it is their j) and k
+// (-, their i): side k's term is f r_b with f = (l - l0) / (2 l), exactly
+// the edge list's (EdgeForward, with the side's inverse for the division).
 void QuadsForward(const int32_t* qv, const double* rest, const uint32_t* rest_id,
                   const uint8_t* owns, int64_t nq, const double* pd, double* out) {
   ForQuadPairs(qv, owns, nq, {pd, out},
@@ -600,12 +647,19 @@ void QuadsForward(const int32_t* qv, const double* rest, const uint32_t* rest_id
                      LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
                  const CornerTerms<Lanes> t =
                      ForwardTerms(r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, g);
-                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx), Next(t.ay) + Prev(t.by),
-                          Next(t.az) + Prev(t.bz));
+                 const Lanes l0 = LoadRest(rest, rest_id, q0, q1, 8);
+                 const Lanes f = Select(SideEdges(o0, o1, r.b.l),
+                                        Lanes(0.5) * (r.b.l - l0) * r.b.inv, Lanes(0.0));
+                 const Lanes ex = f * r.rbx, ey = f * r.rby, ez = f * r.rbz;
+                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx) + (Prev(ex) - ex),
+                          Next(t.ay) + Prev(t.by) + (Prev(ey) - ey),
+                          Next(t.az) + Prev(t.bz) + (Prev(ez) - ez));
                });
 }
 
-// Transpose: as the forward, plus minus both of its own corner's terms.
+// Transpose: as the forward, plus minus both of its own corner's terms;
+// side k's stretch term is c1 dy + c2 r_b with dy = y_{k+1} - y_k,
+// c1 = (1 - l0 / l) / 2, c2 = l0 (r_b . dy) / (2 l^3) (EdgeTranspose).
 void QuadsTranspose(const int32_t* qv, const double* rest, const uint32_t* rest_id,
                     const uint8_t* owns, int64_t nq, const double* pd, const double* py,
                     double* out) {
@@ -621,9 +675,20 @@ void QuadsTranspose(const int32_t* qv, const double* rest, const uint32_t* rest_
                      LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
                  const CornerTerms<Lanes> t = TransposeTerms(Prev(yx), Prev(yy), Prev(yz),
                                                              Next(yx), Next(yy), Next(yz), g);
-                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx) - (t.ax + t.bx),
-                          Next(t.ay) + Prev(t.by) - (t.ay + t.by),
-                          Next(t.az) + Prev(t.bz) - (t.az + t.bz));
+                 const Lanes l0 = LoadRest(rest, rest_id, q0, q1, 8);
+                 const Lanes on = SideEdges(o0, o1, r.b.l);
+                 const Lanes il = r.b.inv;
+                 const Lanes dx = Next(yx) - yx, dy = Next(yy) - yy, dz = Next(yz) - yz;
+                 const Lanes rdy = r.rbx * dx + r.rby * dy + r.rbz * dz;
+                 const Lanes c1 = Select(on, Lanes(0.5) * (Lanes(1.0) - l0 * il), Lanes(0.0));
+                 const Lanes c2 =
+                     Select(on, Lanes(0.5) * l0 * il * il * il * rdy, Lanes(0.0));
+                 const Lanes ex = c1 * dx + c2 * r.rbx, ey = c1 * dy + c2 * r.rby,
+                             ez = c1 * dz + c2 * r.rbz;
+                 AddQuads(out, v0, v1, o0, o1,
+                          Next(t.ax) + Prev(t.bx) - (t.ax + t.bx) + (Prev(ex) - ex),
+                          Next(t.ay) + Prev(t.by) - (t.ay + t.by) + (Prev(ey) - ey),
+                          Next(t.az) + Prev(t.bz) - (t.az + t.bz) + (Prev(ez) - ez));
                });
 }
 #else

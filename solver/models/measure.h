@@ -26,9 +26,12 @@
 // register: the face's four node rows are loaded once and transposed, each
 // corner's sides are lane rotations of them, and each node's share of the
 // face (the terms of the two or three corners that touch it) is summed in
-// registers and added to its row once. Per node the sums run over its
-// edges, then its quadrilaterals, then its other corners, each list
-// ascending: still one global order. Without AVX2, or with `quads` false
+// registers and added to its row once. An edge that is a side of a
+// quadrilateral runs with the first such quadrilateral (its stretch term
+// from the side's length and inverse, which the corners compute anyway)
+// instead of in the edge list. Per node the sums run over its remaining
+// edges, then its quadrilaterals (corners and fused sides), then its
+// other corners, each list ascending: still one global order. Without AVX2, or with `quads` false
 // (the reference the tests hold the quadrilateral path to), every corner
 // goes through the per-corner path.
 #pragma once

@@ -13,6 +13,11 @@
 // element centre (warm started); dhat = R_e^T delta; y = sum_e R_e
 // diag(K_x, K_y, K_z) dhat. Elements of one group are processed in batches
 // as dense matrix products (the shared K times a block of dhat columns).
+// A batch gathers the rows (d, delta) of the nodes it touches once into a
+// small aligned array, its elements read them there by 16-bit local ids,
+// and its sums are added into the part's buffer once per node
+// (IndexBatchNodes, element_blocks.h); the next batch's rows and frames
+// are prefetched while it runs.
 // Strain energy E = 1/2 sum dhat . K dhat.
 //
 // The force is the gradient of E with the frames held fixed:

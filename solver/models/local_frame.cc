@@ -360,6 +360,8 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const int32_t next_count = next != nullptr ? next->count : 0;
     const int32_t* next_nodes =
         next != nullptr ? schedule_.batch_nodes.data() + next->nodes_begin : nullptr;
+    const int32_t* next_elements =
+        next != nullptr ? layout_.blocks[next->kind].by_group.data() + next->first : nullptr;
     for (int32_t b = 0; b < batch.count; ++b) {
       for (int32_t j = next_m * b / batch.count; j < next_m * (b + 1) / batch.count; ++j) {
         const int64_t row = 3 * static_cast<int64_t>(next_nodes[j]);
@@ -368,8 +370,7 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
         __builtin_prefetch(w.g.data() + row, 1);
       }
       for (int32_t j = next_count * b / batch.count; j < next_count * (b + 1) / batch.count; ++j) {
-        const ElementBlock& next_block = layout_.blocks[next->kind];
-        __builtin_prefetch(&frames_[next->kind][next_block.by_group[next->first + j]], 1);
+        __builtin_prefetch(&frames_[next->kind][next_elements[j]], 1);
       }
       const uint16_t* lid = lids + static_cast<int64_t>(b) * n;
       Eigen::Quaterniond& q = frames_[batch.kind][block.by_group[batch.first + b]];

@@ -29,6 +29,7 @@ struct Corner {
   double cos0, sin0;  // of the rest angle
 };
 struct Quad {
+  int32_t face;  // its mesh face (side k is mesh edge face_edges(face)[k])
   std::array<int32_t, 4> v;
   std::array<double, 4> cos0, sin0;  // of corner k's rest angle (at v[k])
   // Side k (v[k] to v[k+1]) carries its edge's stretch term when bit k of
@@ -83,6 +84,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     // runs as one: its corners leave the per-corner list.
     if (!quads || !kQuadLanes || k != 4 || corners.size() != first + 4) continue;
     Quad q;
+    q.face = f;
     for (int i = 0; i < 4; ++i) {
       q.v[i] = loop[i];
       q.cos0[i] = corners[first + i].cos0;
@@ -113,23 +115,19 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
 
   // Every edge that is a side of a quadrilateral runs with the first such
   // quadrilateral (its stretch term computed from the side's length and
-  // inverse, which the corners need anyway) and leaves the edge list.
+  // inverse, which the corners need anyway) and leaves the edge list. The
+  // first mesh.num_edges() entries of `edges` are the mesh's edges in
+  // order, so side k of a quadrilateral is edges[face_edges(face)[k]].
   std::vector<uint8_t> fused(edges.size(), 0);
-  if (!quad_list.empty()) {
-    std::map<std::pair<int32_t, int32_t>, int32_t> edge_at;
-    for (size_t e = 0; e < edges.size(); ++e) {
-      edge_at.emplace(std::minmax(edges[e].i, edges[e].j), static_cast<int32_t>(e));
-    }
-    for (Quad& q : quad_list) {
-      for (int k = 0; k < 4; ++k) {
-        const auto it = edge_at.find(std::minmax(q.v[k], q.v[(k + 1) % 4]));
-        if (it == edge_at.end() || fused[it->second]) continue;
-        const Edge& edge = edges[it->second];
-        fused[it->second] = 1;
-        q.edges |= static_cast<uint8_t>(1 << k);
-        // The side runs v[k] -> v[k+1]; the edge's term is the same either way.
-        q.l0[k] = edge.rest_length;
-      }
+  for (Quad& q : quad_list) {
+    const auto side_edges = mesh.face_edges(q.face);
+    for (int k = 0; k < 4; ++k) {
+      const int32_t e = side_edges[k];
+      if (fused[e]) continue;
+      fused[e] = 1;
+      q.edges |= static_cast<uint8_t>(1 << k);
+      // The side runs v[k] -> v[k+1]; the edge's term is the same either way.
+      q.l0[k] = edges[e].rest_length;
     }
   }
 
@@ -599,12 +597,13 @@ inline QuadSides Sides(Lanes x, Lanes y, Lanes z) {
   return r;
 }
 
-// Quadrilaterals two at a time; with an odd count the last runs as both
-// halves, its second copy adding nothing (no owned nodes).
-// Rows of the quadrilaterals kQuadsAhead further on are prefetched from
-// each of `rows` (the node arrays read, and the output), so their misses
-// overlap this pair's arithmetic.
 constexpr int64_t kQuadsAhead = 16;
+
+// Quadrilaterals two at a time; with an odd count the last runs as both
+// halves, its second copy adding nothing (no owned nodes). Rows of the
+// quadrilaterals kQuadsAhead further on are prefetched from each of
+// `rows` (the node arrays read, and the output), so their misses overlap
+// this pair's arithmetic.
 template <typename Body>
 void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq,
                   std::initializer_list<const double*> rows, Body body) {

@@ -466,7 +466,7 @@ double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed
   const int threads = pool_.size();
   pool_.RunParts(measure_.parts(), [&](int k) { measure_.ForwardPart(d, k, delta_); });
   const auto t1 = std::chrono::steady_clock::now();
-  pool_.RunParts(kForceParts, [&](int k) { RunBatches<T>(k, d, packed, work_[k]); });
+  pool_.RunParts(parts, [&](int k) { RunBatches<T>(k, d, packed, work_[k]); });
   // y = dE/d delta = sum_e R_e K dhat, summed over the parts' buffers.
   pool_.Run([&](int t) {
     const int32_t n = num_nodes_;

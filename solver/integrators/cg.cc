@@ -85,9 +85,12 @@ void ConjugateGradient::MaskFixed(Points& m) const {
 CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
                                  int max_iterations) {
   CgStats stats;
+  // A zero start (the integrators' usual one) needs none of the products
+  // with x below: they would be zero.
+  const bool x_zero = (x.array() == 0.0).all();
   // Right-hand side of the reduced system: b_f - S_fc x_c.
   double bnorm2[3];
-  if (any_fixed_) {
+  if (any_fixed_ && !x_zero) {
     b0_ = x;
     for (int64_t i = 0; i < b0_.rows(); ++i) {
       if (!fixed_[i]) b0_.row(i).setZero();
@@ -97,21 +100,29 @@ CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
     MaskFixed(b0_);
   } else {
     b0_ = b;
+    MaskFixed(b0_);
   }
   for (int c = 0; c < 3; ++c) bnorm2[c] = b0_.col(c).squaredNorm();
 
-  q_.noalias() = *s_ * x;
-  r_ = b - q_;
+  if (x_zero) {
+    r_ = b;
+  } else {
+    q_.noalias() = *s_ * x;
+    r_ = b - q_;
+  }
   MaskFixed(r_);
-  Precondition();
-  p_ = z_;
-  double rz[3], rr[3];
+  double rz[3] = {0, 0, 0}, rr[3];
   bool done[3];
   int iters[3] = {0, 0, 0};
   for (int c = 0; c < 3; ++c) {
-    rz[c] = r_.col(c).dot(z_.col(c));
     rr[c] = r_.col(c).squaredNorm();
     done[c] = rr[c] <= tolerance * tolerance * bnorm2[c] || bnorm2[c] == 0.0;
+  }
+  // (A start that already meets the tolerance needs no preconditioning.)
+  if (!(done[0] && done[1] && done[2])) {
+    Precondition();
+    p_ = z_;
+    for (int c = 0; c < 3; ++c) rz[c] = r_.col(c).dot(z_.col(c));
   }
   for (int it = 0; it < max_iterations && !(done[0] && done[1] && done[2]); ++it) {
     q_.noalias() = *s_ * p_;

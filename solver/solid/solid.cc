@@ -22,6 +22,7 @@
 #include "solver/common/parallel.h"
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
+#include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
 #include "solver/models/corotational.h"
@@ -394,6 +395,8 @@ struct MaterialBuild {
 
 struct Solid::Impl {
   scene::Discretization* d = nullptr;
+  // d->node_matrix in the form the per-step products stream (node_rows.h).
+  fem::NodeRows node_rows;
   SolverSettings settings;
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<models::ElementLayout> layout;  // the model references *layout
@@ -545,13 +548,13 @@ struct Solid::Impl {
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
-  // out = A p (A the node matrix), its rows split over the pool: each row's
-  // sum is taken whole by one thread, so the bits do not depend on the
-  // thread count.
+  // out = A p (A the node matrix, as node_rows), its rows split over the
+  // pool: each row's sum is taken whole by one thread, so the bits do not
+  // depend on the thread count.
   void ToNodes(const Points& p, Points& out);
   // out = A^T g: A's rows in kProjectParts fixed ranges, each range's
-  // product A_k^T g_k into a buffer of its own (threads take ranges t,
-  // t + T, ...), then the buffers added in range order: the same bits
+  // product A_k^T g_k into a buffer of its own (ranges taken by whichever
+  // thread is free), then the buffers added in range order: the same bits
   // whatever the thread count.
   void FromNodes(const Points& g, Points& out);
   static constexpr int kProjectParts = 8;
@@ -809,24 +812,19 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
 }
 
 void Solid::Impl::ToNodes(const Points& p, Points& out) {
-  const SparseMatrix& a = d->node_matrix;
-  const Eigen::Index rows = a.rows();
+  const int64_t rows = node_rows.rows();
   out.resize(rows, 3);
   const int threads = pool->size();
   pool->Run([&](int t) {
-    const Eigen::Index r0 = rows * t / threads, r1 = rows * (t + 1) / threads;
-    if (r1 > r0) out.middleRows(r0, r1 - r0).noalias() = a.middleRows(r0, r1 - r0) * p;
+    node_rows.Multiply(p, rows * t / threads, rows * (t + 1) / threads, out);
   });
 }
 
 void Solid::Impl::FromNodes(const Points& g, Points& out) {
-  const SparseMatrix& a = d->node_matrix;
-  const Eigen::Index rows = a.rows(), cols = a.cols();
+  const int64_t rows = node_rows.rows();
   pool->RunParts(kProjectParts, [&](int k) {
-    const Eigen::Index r0 = rows * k / kProjectParts, r1 = rows * (k + 1) / kProjectParts;
-    Points& part = project_parts[k];
-    part.resize(cols, 3);
-    part.noalias() = a.middleRows(r0, r1 - r0).transpose() * g.middleRows(r0, r1 - r0);
+    node_rows.MultiplyTransposed(g, rows * k / kProjectParts, rows * (k + 1) / kProjectParts,
+                                 project_parts[k]);
   });
   out = project_parts[0];
   for (int k = 1; k < kProjectParts; ++k) out += project_parts[k];
@@ -1266,6 +1264,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
   s->impl_ = std::make_unique<Impl>();
   Impl& im = *s->impl_;
   im.d = &s->d_;
+  im.node_rows = fem::NodeRows(s->d_.node_matrix);
   im.settings = scene::ResolvedSolverSettings(scene);
   im.surface = &s->surface_;
   if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
@@ -1292,7 +1291,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
 
   // Rest configuration.
   im.rest_control = control.positions();
-  im.rest_nodes = s->d_.node_matrix * im.rest_control;
+  im.rest_nodes = im.node_rows.Multiply(im.rest_control);
   const Points& rest = im.rest_nodes;
   im.pool = std::make_unique<WorkerPool>(threads > 0 ? threads : BuildThreads());
 
@@ -1563,7 +1562,7 @@ void Solid::SetSubstepsForTesting(int substeps) {
 
 Points Solid::InternalControlForces(const Points& p) {
   Impl& im = *impl_;
-  const Points d = d_.node_matrix * p;
+  const Points d = im.node_rows.Multiply(p);
   Points g(d.rows(), 3);
   // Frames found afresh; the solid's own (warm starts, and the frames the
   // next implicit step is linearized in) are part of its state: kept.
@@ -1578,7 +1577,7 @@ Points Solid::InternalControlForces(const Points& p) {
 
 double Solid::StrainEnergy(const Points& p) {
   Impl& im = *impl_;
-  const Points d = d_.node_matrix * p;
+  const Points d = im.node_rows.Multiply(p);
   Points g(d.rows(), 3);
   const models::InternalForceModel::Frames frames = im.model->frames();  // as above
   im.model->ResetFrames();
@@ -1703,13 +1702,13 @@ absl::StatusOr<Points> Solid::SolveStaticLinear() {
 std::vector<Eigen::Vector3d> Solid::TracedPositionsAt(const Points& p) const {
   const Impl& im = *impl_;
   std::vector<Eigen::Vector3d> out;
-  const Points nodes = d_.node_matrix * p;
   std::vector<double> shape;
   for (const MaterialLocation& m : im.traced) {
     im.ShapeAt(m, shape);
     const int32_t* ids = im.layout->blocks[m.kind].element_nodes(m.element);
     Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * nodes.row(ids[k]).transpose();
+    // Only the element's own nodes (rows of A p).
+    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * im.node_rows.Row(p, ids[k]);
     out.push_back(x);
   }
   return out;
@@ -1717,7 +1716,7 @@ std::vector<Eigen::Vector3d> Solid::TracedPositionsAt(const Points& p) const {
 
 Points Solid::ApplyMass(const Points& x) const { return impl_->mt * x; }
 
-Points Solid::NodePositions() const { return d_.node_matrix * p_; }
+Points Solid::NodePositions() const { return impl_->node_rows.Multiply(p_); }
 
 Energies Solid::ComputeEnergies() const {
   const Impl& im = *impl_;
@@ -1742,6 +1741,8 @@ void Solid::ReportMaterial() {
   report_.pyramid_groups = static_cast<int32_t>(im.layout->blocks[2].groups.size());
   report_.material_arrays = static_cast<int32_t>(im.layout->materials.size());
   report_.damping_matrix = im.has_damping;
+  report_.node_matrix_bytes = im.node_rows.bytes();
+  report_.node_matrix_float_values = im.node_rows.float_values();
   // Filled by the model; BuildMaterial read them.
   if (im.corotational != nullptr) {
     report_.single_precision_cg = im.corotational->single_precision_linearized();

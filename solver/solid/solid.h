@@ -44,6 +44,10 @@ struct BuildReport {
   bool gravity = false;
   int64_t element_bytes = 0;       // per-element storage beyond the mesh
   int64_t shared_matrix_bytes = 0; // the shared element matrices
+  // The node matrix A as the per-step products stream it (node_rows.h):
+  // its bytes, and whether its values are stored as floats (exactly).
+  int64_t node_matrix_bytes = 0;
+  bool node_matrix_float_values = false;
   double omega_max = 0.0;          // rad/s, from power iteration
   double stable_step = 0.0;        // 2 / omega_max, seconds
   int32_t substeps = 1;            // explicit sub-steps per scene step

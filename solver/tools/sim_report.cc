@@ -93,6 +93,8 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
         .Add("gravity", b.gravity)
         .Add("bytes_per_element", b.element_bytes)
         .Add("shared_matrix_bytes", b.shared_matrix_bytes)
+        .Add("node_matrix_bytes", b.node_matrix_bytes)
+        .Add("node_matrix_float_values", b.node_matrix_float_values)
         .Add("build_ms", b.build_ms)
         .End();
   }

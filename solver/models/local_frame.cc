@@ -258,31 +258,26 @@ void LocalDeformationAvx2(int n, const double* local, const uint16_t* lid, const
   }
 }
 
-// 1/2 dhat . y for one element (n a multiple of 4), y = K dhat.
 inline __m256d LoadWide(const double* p) { return _mm256_loadu_pd(p); }
 inline __m256d LoadWide(const float* p) { return _mm256_cvtps_pd(_mm_loadu_ps(p)); }
-template <typename T>
-double HalfDotAvx2(int n, const T* dx, const T* dy, const T* dz, const double* yx,
-                   const double* yy, const double* yz) {
-  __m256d acc = _mm256_setzero_pd();
-  for (int i = 0; i < n; i += 4) {
-    acc = _mm256_fmadd_pd(LoadWide(dx + i), _mm256_loadu_pd(yx + i), acc);
-    acc = _mm256_fmadd_pd(LoadWide(dy + i), _mm256_loadu_pd(yy + i), acc);
-    acc = _mm256_fmadd_pd(LoadWide(dz + i), _mm256_loadu_pd(yz + i), acc);
-  }
-  return 0.5 * Sum4(acc);
-}
 
 // sums[lid_i] += R (yx_i, yy_i, yz_i), four nodes at a time (aligned rows
-// of kSumStride).
-void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, const double* yy,
-                          const double* yz, const uint16_t* lid, double* sums) {
+// of kSumStride); returns the element's energy 1/2 dhat . y from the same
+// loads of y (dhat's columns dx, dy, dz).
+template <typename T>
+double RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const T* dx, const T* dy,
+                            const T* dz, const double* yx, const double* yy, const double* yz,
+                            const uint16_t* lid, double* sums) {
   __m256d rr[3][3];
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) rr[a][b] = _mm256_set1_pd(r(a, b));
+  __m256d energy = _mm256_setzero_pd();
   for (int i = 0; i < n; i += 4) {
     const __m256d ax = _mm256_loadu_pd(yx + i), ay = _mm256_loadu_pd(yy + i),
                   az = _mm256_loadu_pd(yz + i);
+    energy = _mm256_fmadd_pd(LoadWide(dx + i), ax, energy);
+    energy = _mm256_fmadd_pd(LoadWide(dy + i), ay, energy);
+    energy = _mm256_fmadd_pd(LoadWide(dz + i), az, energy);
     __m256d o[3];
     for (int a = 0; a < 3; ++a) {
       o[a] = _mm256_fmadd_pd(rr[a][2], az,
@@ -295,6 +290,7 @@ void RotateBackAndAddAvx2(int n, const Eigen::Matrix3d& r, const double* yx, con
       _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), row[k]));
     }
   }
+  return 0.5 * Sum4(energy);
 }
 #endif
 
@@ -405,11 +401,7 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     auto yz = w.yz.topLeftCorner(n, batch.count);
     for (int32_t b = 0; b < batch.count; ++b) {
 #ifdef DYNSOLID_LF_AVX2
-      if (n % 4 == 0) {
-        w.energy += HalfDotAvx2(n, cols[0] + b * ld, cols[1] + b * ld, cols[2] + b * ld,
-                                &yx(0, b), &yy(0, b), &yz(0, b));
-        continue;
-      }
+      if (n % 4 == 0) continue;  // (RotateBackAndAddAvx2 adds it)
 #endif
       w.energy += 0.5 * (dx.col(b).template cast<double>().dot(yx.col(b)) +
                          dy.col(b).template cast<double>().dot(yy.col(b)) +
@@ -423,7 +415,8 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
       const double* az = w.yz.data() + b * ld;
 #ifdef DYNSOLID_LF_AVX2
       if (n % 4 == 0) {
-        RotateBackAndAddAvx2(n, rot[b], ax, ay, az, lid, sums);
+        w.energy += RotateBackAndAddAvx2(n, rot[b], cols[0] + b * ld, cols[1] + b * ld,
+                                         cols[2] + b * ld, ax, ay, az, lid, sums);
         continue;
       }
 #endif

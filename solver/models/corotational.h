@@ -55,7 +55,7 @@ class CorotationalModel final : public InternalForceModel {
 
   double Forces(const Points& d, Points& g) override;
   void ResetFrames() override;
-  const InternalForceModel::Frames& frames() const override { return frames_; }
+  InternalForceModel::Frames frames() const override { return frames_; }
   void set_frames(const InternalForceModel::Frames& frames) override { frames_ = frames; }
   std::string_view name() const override { return "corotational"; }
   Timing last_timing() const override { return timing_; }

@@ -40,9 +40,9 @@ class InternalForceModel {
   // unit quaternion per element of ElementLayout::blocks[kind]: part of a
   // solid's exact state (saved and restored bit for bit) and handed over to
   // a model rebuilt after a material change. set_frames needs the sizes of
-  // frames().
+  // frames(). (A copy: a model may keep them in another order.)
   using Frames = std::array<std::vector<Eigen::Quaterniond>, 3>;
-  virtual const Frames& frames() const = 0;
+  virtual Frames frames() const = 0;
   virtual void set_frames(const Frames& frames) = 0;
 
   virtual std::string_view name() const = 0;

@@ -114,6 +114,23 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   y_.setZero(num_nodes_, 3);
 }
 
+InternalForceModel::Frames LocalFrameModel::frames() const {
+  Frames out;
+  for (int kind = 0; kind < 3; ++kind) {
+    const std::vector<int32_t>& order = layout_.blocks[kind].by_group;
+    out[kind].resize(frames_[kind].size());
+    for (size_t k = 0; k < order.size(); ++k) out[kind][order[k]] = frames_[kind][k];
+  }
+  return out;
+}
+
+void LocalFrameModel::set_frames(const Frames& frames) {
+  for (int kind = 0; kind < 3; ++kind) {
+    const std::vector<int32_t>& order = layout_.blocks[kind].by_group;
+    for (size_t k = 0; k < order.size(); ++k) frames_[kind][k] = frames[kind][order[k]];
+  }
+}
+
 void LocalFrameModel::ResetFrames() {
   for (auto& f : frames_) std::fill(f.begin(), f.end(), Eigen::Quaterniond::Identity());
 }
@@ -356,8 +373,6 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const int32_t next_count = next != nullptr ? next->count : 0;
     const int32_t* next_nodes =
         next != nullptr ? schedule_.batch_nodes.data() + next->nodes_begin : nullptr;
-    const int32_t* next_elements =
-        next != nullptr ? layout_.blocks[next->kind].by_group.data() + next->first : nullptr;
     for (int32_t b = 0; b < batch.count; ++b) {
       for (int32_t j = next_m * b / batch.count; j < next_m * (b + 1) / batch.count; ++j) {
         const int64_t row = 3 * static_cast<int64_t>(next_nodes[j]);
@@ -366,10 +381,10 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
         __builtin_prefetch(w.g.data() + row, 1);
       }
       for (int32_t j = next_count * b / batch.count; j < next_count * (b + 1) / batch.count; ++j) {
-        __builtin_prefetch(&frames_[next->kind][next_elements[j]], 1);
+        __builtin_prefetch(&frames_[next->kind][next->first + j], 1);
       }
       const uint16_t* lid = lids + static_cast<int64_t>(b) * n;
-      Eigen::Quaterniond& q = frames_[batch.kind][block.by_group[batch.first + b]];
+      Eigen::Quaterniond& q = frames_[batch.kind][batch.first + b];
       T* cx = cols[0] + b * ld;
       T* cy = cols[1] + b * ld;
       T* cz = cols[2] + b * ld;

@@ -84,8 +84,8 @@ class LocalFrameModel final : public InternalForceModel {
   double ExactForces(const Points& d, Points& g) override;
   bool float_products() const { return float_products_; }
   void ResetFrames() override;
-  const InternalForceModel::Frames& frames() const override { return frames_; }
-  void set_frames(const InternalForceModel::Frames& frames) override { frames_ = frames; }
+  InternalForceModel::Frames frames() const override;
+  void set_frames(const InternalForceModel::Frames& frames) override;
   std::string_view name() const override { return "local_frame"; }
   Timing last_timing() const override { return timing_; }
 
@@ -127,7 +127,10 @@ class LocalFrameModel final : public InternalForceModel {
   // The same rounded to float (float_products_ only).
   std::array<std::vector<std::array<PackedMatrixF, 3>>, 3> packed_f_;
   bool float_products_ = false;
-  std::array<std::vector<Eigen::Quaterniond>, 3> frames_;  // per element
+  // Per element, in the order of its kind block's by_group (the order the
+  // batches run in, so a batch reads its frames in sequence); frames() and
+  // set_frames() map them to and from element order.
+  std::array<std::vector<Eigen::Quaterniond>, 3> frames_;
   // Per group, the physical gradients at the element centre, n x 3 column-major.
   std::array<std::vector<Eigen::Matrix<double, Eigen::Dynamic, 3>>, 3> centre_gradient_;
   std::vector<const Points*> part_buffers_;

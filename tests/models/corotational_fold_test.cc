@@ -66,8 +66,8 @@ TEST(CorotationalFoldTest, UpdateFramesThenAffineForcesIsForcesBitForBit) {
     EXPECT_EQ(ea, eb) << "state " << k;
     EXPECT_TRUE(ga == gb) << "state " << k;
     for (int kind = 0; kind < 3; ++kind) {
-      const auto& fa = a->model->frames()[kind];
-      const auto& fb = b->model->frames()[kind];
+      const auto fa = a->model->frames()[kind];
+      const auto fb = b->model->frames()[kind];
       ASSERT_EQ(fa.size(), fb.size());
       for (size_t e = 0; e < fa.size(); ++e) {
         ASSERT_TRUE(fa[e].coeffs() == fb[e].coeffs()) << "state " << k << " kind " << kind

@@ -5,6 +5,8 @@
 
 
 #include "solver/models/rotation.h"
+#include "solver/fem/quadrature.h"
+#include <cmath>
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
@@ -45,6 +47,13 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       float_products_(float_products) {
   if (previous != nullptr && previous->float_products_ != float_products) previous = nullptr;
   fem::NodeMatrixX3 g;
+  // The cubic table's rule is a tensor Gauss rule of n1 points a side.
+  std::optional<KroneckerBasis> kron_basis;
+  if (float_products && layout.blocks[0].size() > 0) {
+    const int n1 = static_cast<int>(std::lround(std::cbrt(layout.tables[0].points)));
+    const fem::Rule1d rule = fem::GaussLegendre(n1);
+    kron_basis = KroneckerBasis::Make(rule.points, rule.weights);
+  }
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
@@ -56,6 +65,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       if (reuse[gi] >= 0) {
         if (float_products) {
           packed_f_[kind].push_back(previous->packed_f_[kind][reuse[gi]]);
+          if (kind == 0) kron_.push_back(previous->kron_[reuse[gi]]);
         } else {
           packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         }
@@ -79,9 +89,12 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
           }
         }
       }
-      const std::array<PackedMatrix, 3> k = {PackedMatrix(b[0] * b[0].transpose()),
-                                             PackedMatrix(b[1] * b[1].transpose()),
-                                             PackedMatrix(b[2] * b[2].transpose())};
+      const std::array<Eigen::MatrixXd, 3> dense = {b[0] * b[0].transpose(),
+                                                    b[1] * b[1].transpose(),
+                                                    b[2] * b[2].transpose()};
+      const std::array<PackedMatrix, 3> k = {PackedMatrix(dense[0]), PackedMatrix(dense[1]),
+                                             PackedMatrix(dense[2])};
+      if (kind == 0 && kron_basis) kron_.push_back(KroneckerStiffness::Fit(*kron_basis, dense));
       if (float_products) {
         packed_f_[kind].push_back({PackedMatrixF(k[0]), PackedMatrixF(k[1]), PackedMatrixF(k[2])});
       } else {
@@ -403,9 +416,21 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
       }
     }
     const auto& k = packed[batch.kind][batch.group];
-    ApplyK(k[0], cols[0], ld, batch.count, w.yx.data());
-    ApplyK(k[1], cols[1], ld, batch.count, w.yy.data());
-    ApplyK(k[2], cols[2], ld, batch.count, w.yz.data());
+    const KroneckerStiffness* kron = nullptr;
+    if constexpr (std::is_same_v<T, float>) {
+      if (batch.kind == 0 && kron_[batch.group]) kron = &*kron_[batch.group];
+    }
+    if (kron != nullptr) {
+      if constexpr (std::is_same_v<T, float>) {
+        kron->Apply(0, cols[0], ld, batch.count, w.yx.data());
+        kron->Apply(1, cols[1], ld, batch.count, w.yy.data());
+        kron->Apply(2, cols[2], ld, batch.count, w.yz.data());
+      }
+    } else {
+      ApplyK(k[0], cols[0], ld, batch.count, w.yx.data());
+      ApplyK(k[1], cols[1], ld, batch.count, w.yy.data());
+      ApplyK(k[2], cols[2], ld, batch.count, w.yz.data());
+    }
     using Block = Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>, 0,
                              Eigen::OuterStride<>>;
     const Block dx(cols[0], n, batch.count, Eigen::OuterStride<>(ld));
@@ -493,6 +518,21 @@ double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed
   timing_.measure_ms = std::chrono::duration<double, std::milli>((t1 - t0) + (t3 - t2)).count();
   timing_.elements_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
   return energy;
+}
+
+int32_t LocalFrameModel::factorized_groups() const {
+  int32_t n = 0;
+  for (const auto& k : kron_) n += k.has_value() ? 1 : 0;
+  return n;
+}
+
+int64_t LocalFrameModel::factorized_elements() const {
+  int64_t n = 0;
+  const ElementBlock& block = layout_.blocks[0];
+  for (size_t g = 0; g < kron_.size(); ++g) {
+    if (kron_[g]) n += block.group_start[g + 1] - block.group_start[g];
+  }
+  return n;
 }
 
 int64_t LocalFrameModel::shared_matrix_bytes() const {

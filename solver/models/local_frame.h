@@ -40,7 +40,10 @@
 // gradient's 1e-4 in the step it feeds; a rigidly moved
 // solid still has zero force (delta is zero before any rounding).
 // ExactForces runs the double products, for finite differences and
-// comparisons.
+// comparisons. With float products, a cubic group whose matrices are a sum
+// of Kronecker products of 1D B-spline integrals (an axis-aligned box of
+// one material: every interior element of a block) applies them
+// sum-factorized (kron_product.h), within the same rounding.
 //
 // Note on Eq. 15's factor 2 (MODEL.md writes K^x_x = 2 int ...): with it,
 // E would not keep its meaning in pascals (the energy 1/2 eps C eps gives
@@ -48,6 +51,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -56,6 +60,7 @@
 #include "solver/common/worker_pool.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
+#include "solver/models/kron_product.h"
 #include "solver/models/measure.h"
 #include "solver/models/panel_product.h"
 
@@ -79,6 +84,10 @@ class LocalFrameModel final : public InternalForceModel {
   const DeformationMeasure& measure() const { return measure_; }
   // Groups whose matrices were integrated (not taken over) at construction.
   int32_t integrated_groups() const { return integrated_groups_; }
+  // Cubic groups whose products run sum-factorized (kron_product.h), and
+  // the elements in them.
+  int32_t factorized_groups() const;
+  int64_t factorized_elements() const;
 
   double Forces(const Points& d, Points& g) override;
   double ExactForces(const Points& d, Points& g) override;
@@ -126,6 +135,10 @@ class LocalFrameModel final : public InternalForceModel {
   std::array<std::vector<std::array<PackedMatrix, 3>>, 3> packed_;
   // The same rounded to float (float_products_ only).
   std::array<std::vector<std::array<PackedMatrixF, 3>>, 3> packed_f_;
+  // Per cubic group with float products, its matrices' sum factorization
+  // where they have one (kron_product.h; an axis-aligned box of one
+  // material), used in place of packed_f_'s dense products.
+  std::vector<std::optional<KroneckerStiffness>> kron_;
   bool float_products_ = false;
   // Per element, in the order of its kind block's by_group (the order the
   // batches run in, so a batch reads its frames in sequence); frames() and

@@ -1752,6 +1752,7 @@ void Solid::ReportMaterial() {
     const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());
     report_.shared_matrix_bytes = lf->shared_matrix_bytes();
     report_.element_bytes = lf->per_element_bytes();
+    report_.factorized_elements = lf->factorized_elements();
   }
 }
 

@@ -48,6 +48,9 @@ struct BuildReport {
   // its bytes, and whether its values are stored as floats (exactly).
   int64_t node_matrix_bytes = 0;
   bool node_matrix_float_values = false;
+  // Cubic elements whose products run sum-factorized (local-frame model
+  // with float products; models/kron_product.h).
+  int64_t factorized_elements = 0;
   double omega_max = 0.0;          // rad/s, from power iteration
   double stable_step = 0.0;        // 2 / omega_max, seconds
   int32_t substeps = 1;            // explicit sub-steps per scene step

@@ -95,6 +95,7 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
         .Add("shared_matrix_bytes", b.shared_matrix_bytes)
         .Add("node_matrix_bytes", b.node_matrix_bytes)
         .Add("node_matrix_float_values", b.node_matrix_float_values)
+        .Add("factorized_elements", b.factorized_elements)
         .Add("build_ms", b.build_ms)
         .End();
   }

@@ -101,9 +101,10 @@ void StepBuilt(Built& b, int steps) {
   double cg = r.cg_per_step * static_cast<double>(b.step.size());
   for (int i = 0; i < steps; ++i) {
     const auto t0 = Clock::now();
-    if (!solid.Step().ok()) {
+    const absl::Status status = solid.Step();
+    if (!status.ok()) {
       r.ok = false;
-      r.error = "step failed";
+      r.error = absl::StrCat("step ", b.step.size() + 1, ": ", status.message());
       return;
     }
     b.step.push_back(Ms(t0, Clock::now()));

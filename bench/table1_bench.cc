@@ -104,7 +104,7 @@ void StepBuilt(Built& b, int steps) {
     const absl::Status status = solid.Step();
     if (!status.ok()) {
       r.ok = false;
-      r.error = absl::StrCat("step ", b.step.size() + 1, ": ", status.message());
+      r.error = std::string(status.message());
       return;
     }
     b.step.push_back(Ms(t0, Clock::now()));

@@ -377,22 +377,24 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const int32_t* nodes = schedule_.batch_nodes.data() + batch.nodes_begin;
     const uint16_t* lids = schedule_.local_ids.data() + batch.local_begin;
     GatherRows(batch.num_nodes, nodes, d.data(), delta_.data(), local);
-    // The next batch's rows (d and delta to read, the buffer to update)
-    // and its elements' frames are fetched a share per element, so their
-    // misses overlap this batch's work.
+    // The rows of the batch two ahead (d and delta to read, the buffer to
+    // update) are fetched towards L2 now, so their misses overlap this
+    // batch's and the next one's work; the next batch's element frames a
+    // share per element.
+    if (bi + 2 < schedule_.part_start[part + 1]) {
+      const ElementBatch& ahead = schedule_.batches[bi + 2];
+      const int32_t* ahead_nodes = schedule_.batch_nodes.data() + ahead.nodes_begin;
+      for (int32_t j = 0; j < ahead.num_nodes; ++j) {
+        const int64_t row = 3 * static_cast<int64_t>(ahead_nodes[j]);
+        __builtin_prefetch(d.data() + row, 0, 2);
+        __builtin_prefetch(delta_.data() + row, 0, 2);
+        __builtin_prefetch(w.g.data() + row, 1, 2);
+      }
+    }
     const ElementBatch* next =
         bi + 1 < schedule_.part_start[part + 1] ? &schedule_.batches[bi + 1] : nullptr;
-    const int32_t next_m = next != nullptr ? next->num_nodes : 0;
     const int32_t next_count = next != nullptr ? next->count : 0;
-    const int32_t* next_nodes =
-        next != nullptr ? schedule_.batch_nodes.data() + next->nodes_begin : nullptr;
     for (int32_t b = 0; b < batch.count; ++b) {
-      for (int32_t j = next_m * b / batch.count; j < next_m * (b + 1) / batch.count; ++j) {
-        const int64_t row = 3 * static_cast<int64_t>(next_nodes[j]);
-        __builtin_prefetch(d.data() + row);
-        __builtin_prefetch(delta_.data() + row);
-        __builtin_prefetch(w.g.data() + row, 1);
-      }
       for (int32_t j = next_count * b / batch.count; j < next_count * (b + 1) / batch.count; ++j) {
         __builtin_prefetch(&frames_[next->kind][next->first + j], 1);
       }

@@ -16,7 +16,7 @@
 // A batch gathers the rows (d, delta) of the nodes it touches once into a
 // small aligned array, its elements read them there by 16-bit local ids,
 // and its sums are added into the part's buffer once per node
-// (IndexBatchNodes, element_blocks.h); the next batch's rows and frames
+// (IndexBatchNodes, element_blocks.h); the rows of the batch two ahead
 // are prefetched while it runs.
 // Strain energy E = 1/2 sum dhat . K dhat.
 //

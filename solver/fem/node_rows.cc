@@ -1,7 +1,5 @@
 #include "solver/fem/node_rows.h"
 
-#include <cmath>
-
 namespace dynsolid::fem {
 
 NodeRows::NodeRows(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& a)
@@ -22,8 +20,7 @@ NodeRows::NodeRows(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& 
   const int64_t nnz = start_[n];
   narrow_ = cols_ <= 65536;
   exact_ = exact;
-  const bool narrow = narrow_;
-  if (narrow) {
+  if (narrow_) {
     col16_.reserve(nnz);
   } else {
     col32_.reserve(nnz);
@@ -36,7 +33,7 @@ NodeRows::NodeRows(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& 
   for (int64_t i = 0; i < n; ++i) {
     for (Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>::InnerIterator it(a, i); it;
          ++it) {
-      if (narrow) {
+      if (narrow_) {
         col16_.push_back(static_cast<uint16_t>(it.col()));
       } else {
         col32_.push_back(static_cast<int32_t>(it.col()));
@@ -99,18 +96,9 @@ void NodeRows::Multiply(const Points& p, int64_t r0, int64_t r1, Points& out) co
 }
 
 void NodeRows::MultiplyInto(const Points& p, int64_t r0, int64_t r1, double* out) const {
-  const int64_t* s = start_.data();
-  if (narrow_) {
-    if (exact_) {
-      MultiplyRange(s, col16_.data(), val32_.data(), p.data(), r0, r1, out);
-    } else {
-      MultiplyRange(s, col16_.data(), val64_.data(), p.data(), r0, r1, out);
-    }
-  } else if (exact_) {
-    MultiplyRange(s, col32_.data(), val32_.data(), p.data(), r0, r1, out);
-  } else {
-    MultiplyRange(s, col32_.data(), val64_.data(), p.data(), r0, r1, out);
-  }
+  WithArrays([&](const auto* col, const auto* val) {
+    MultiplyRange(start_.data(), col, val, p.data(), r0, r1, out);
+  });
 }
 
 Points NodeRows::Multiply(const Points& p) const {
@@ -127,18 +115,9 @@ Eigen::Vector3d NodeRows::Row(const Points& p, int64_t i) const {
 
 void NodeRows::MultiplyTransposed(const Points& g, int64_t r0, int64_t r1, Points& out) const {
   out.setZero(cols_, 3);
-  const int64_t* s = start_.data();
-  if (narrow_) {
-    if (exact_) {
-      MultiplyTransposedRange(s, col16_.data(), val32_.data(), g.data(), r0, r1, out.data());
-    } else {
-      MultiplyTransposedRange(s, col16_.data(), val64_.data(), g.data(), r0, r1, out.data());
-    }
-  } else if (exact_) {
-    MultiplyTransposedRange(s, col32_.data(), val32_.data(), g.data(), r0, r1, out.data());
-  } else {
-    MultiplyTransposedRange(s, col32_.data(), val64_.data(), g.data(), r0, r1, out.data());
-  }
+  WithArrays([&](const auto* col, const auto* val) {
+    MultiplyTransposedRange(start_.data(), col, val, g.data(), r0, r1, out.data());
+  });
 }
 
 }  // namespace dynsolid::fem

@@ -46,6 +46,20 @@ class NodeRows {
  private:
   // Rows [r0, r1) of A p into out (row r0 first, 3 doubles a row).
   void MultiplyInto(const Points& p, int64_t r0, int64_t r1, double* out) const;
+  // f(columns, values) with the arrays this matrix keeps (16 or 32-bit
+  // columns, float or double values).
+  template <typename F>
+  void WithArrays(F&& f) const {
+    if (narrow_ && exact_) {
+      f(col16_.data(), val32_.data());
+    } else if (narrow_) {
+      f(col16_.data(), val64_.data());
+    } else if (exact_) {
+      f(col32_.data(), val32_.data());
+    } else {
+      f(col32_.data(), val64_.data());
+    }
+  }
 
   int64_t cols_ = 0;
   bool narrow_ = true, exact_ = true;

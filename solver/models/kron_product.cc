@@ -1,11 +1,9 @@
 #include "solver/models/kron_product.h"
 
-#include <algorithm>
-#include <cmath>
-
 #include <Eigen/Dense>
 
 #include "solver/fem/basis.h"
+#include "solver/fem/element_set.h"
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
@@ -15,7 +13,7 @@
 namespace dynsolid::models {
 namespace {
 
-constexpr int kN = 64;
+constexpr int kN = fem::kCubicNodes;  // the 4 x 4 x 4 tensor-ordered nodes
 
 // T_d (64 x 64): the 1D matrix `a` on direction d's factor and `m` on the
 // other two (node m = 16 i + 4 j + k: i along u, j along v, k along w).

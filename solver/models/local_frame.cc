@@ -1,12 +1,11 @@
 #include "solver/models/local_frame.h"
 
 #include <chrono>
+#include <cmath>
 #include <type_traits>
 
-
-#include "solver/models/rotation.h"
 #include "solver/fem/quadrature.h"
-#include <cmath>
+#include "solver/models/rotation.h"
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
@@ -417,37 +416,23 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
         LocalDeformation<-1>(n, local, lid, grad, q, rot[b], cx, cy, cz);
       }
     }
-    const auto& k = packed[batch.kind][batch.group];
-    const KroneckerStiffness* kron = nullptr;
+    // y = K dhat: sum-factorized where the group has the form (float
+    // products only), else the shared dense matrices.
+    bool factorized = false;
     if constexpr (std::is_same_v<T, float>) {
-      if (batch.kind == 0 && kron_[batch.group]) kron = &*kron_[batch.group];
-    }
-    if (kron != nullptr) {
-      if constexpr (std::is_same_v<T, float>) {
-        kron->Apply(0, cols[0], ld, batch.count, w.yx.data());
-        kron->Apply(1, cols[1], ld, batch.count, w.yy.data());
-        kron->Apply(2, cols[2], ld, batch.count, w.yz.data());
+      if (batch.kind == 0 && kron_[batch.group]) {
+        const KroneckerStiffness& kron = *kron_[batch.group];
+        kron.Apply(0, cols[0], ld, batch.count, w.yx.data());
+        kron.Apply(1, cols[1], ld, batch.count, w.yy.data());
+        kron.Apply(2, cols[2], ld, batch.count, w.yz.data());
+        factorized = true;
       }
-    } else {
+    }
+    if (!factorized) {
+      const auto& k = packed[batch.kind][batch.group];
       ApplyK(k[0], cols[0], ld, batch.count, w.yx.data());
       ApplyK(k[1], cols[1], ld, batch.count, w.yy.data());
       ApplyK(k[2], cols[2], ld, batch.count, w.yz.data());
-    }
-    using Block = Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>, 0,
-                             Eigen::OuterStride<>>;
-    const Block dx(cols[0], n, batch.count, Eigen::OuterStride<>(ld));
-    const Block dy(cols[1], n, batch.count, Eigen::OuterStride<>(ld));
-    const Block dz(cols[2], n, batch.count, Eigen::OuterStride<>(ld));
-    auto yx = w.yx.topLeftCorner(n, batch.count);
-    auto yy = w.yy.topLeftCorner(n, batch.count);
-    auto yz = w.yz.topLeftCorner(n, batch.count);
-    for (int32_t b = 0; b < batch.count; ++b) {
-#ifdef DYNSOLID_LF_AVX2
-      if (n % 4 == 0) continue;  // (RotateBackAndAddAvx2 adds it)
-#endif
-      w.energy += 0.5 * (dx.col(b).template cast<double>().dot(yx.col(b)) +
-                         dy.col(b).template cast<double>().dot(yy.col(b)) +
-                         dz.col(b).template cast<double>().dot(yz.col(b)));
     }
     std::fill(sums, sums + kSumStride * static_cast<int64_t>(batch.num_nodes), 0.0);
     for (int32_t b = 0; b < batch.count; ++b) {
@@ -462,6 +447,13 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
         continue;
       }
 #endif
+      // The element's energy 1/2 dhat . y, then its rotated sums.
+      using Dhat = Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, 1>>;
+      using Y = Eigen::Map<const Eigen::VectorXd>;
+      const Dhat hx(cols[0] + b * ld, n), hy(cols[1] + b * ld, n), hz(cols[2] + b * ld, n);
+      w.energy += 0.5 * (hx.template cast<double>().dot(Y(ax, n)) +
+                         hy.template cast<double>().dot(Y(ay, n)) +
+                         hz.template cast<double>().dot(Y(az, n)));
       if (n == fem::kCubicNodes) {
         RotateBackAndAdd<fem::kCubicNodes>(n, rot[b], ax, ay, az, lid, sums);
       } else if (n == 8) {

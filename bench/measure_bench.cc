@@ -40,9 +40,14 @@ double BestMs(int reps, F&& f) {
 int main(int argc, char** argv) {
   const int64_t max_elements = argc > 1 ? std::atoll(argv[1]) : 50000;
   std::printf("# Deformation measure, one thread: ns per term (edges + corners)\n\n");
-  std::printf("| block | nodes | edges | corners | quads | forward quad | forward per-corner | "
-              "transpose quad | transpose per-corner | max rel. difference |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  using dynsolid::models::QuadPath;
+  const QuadPath paths[] = {QuadPath::kPerCorner, QuadPath::kAvx2, QuadPath::kAvx512};
+  std::printf("fastest quadrilateral path here: %s\n\n",
+              dynsolid::models::QuadPathName(dynsolid::models::FastestQuadPath()));
+  std::printf("| block | nodes | edges | corners | quads | path | forward | transpose | "
+              "forward vs per-corner | transpose vs per-corner | max rel. difference from "
+              "per-corner |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |\n");
   for (int n : {3, 5, 7, 9}) {
     if (int64_t{n} * n * n * 64 > max_elements) break;
     auto scene = dynsolid::scene::BuiltinScene("block3");
@@ -56,8 +61,6 @@ int main(int argc, char** argv) {
       continue;
     }
     const dynsolid::Points rest = d->node_matrix * d->control().positions();
-    const dynsolid::models::DeformationMeasure quad(d->fine(), d->elements, rest, 1, true);
-    const dynsolid::models::DeformationMeasure corner(d->fine(), d->elements, rest, 1, false);
     // A smooth deformation (bend, twist and stretch) and a smooth y.
     dynsolid::Points x = rest, y = rest;
     for (int64_t i = 0; i < rest.rows(); ++i) {
@@ -66,25 +69,34 @@ int main(int argc, char** argv) {
       x(i, 1) = s * rest(i, 0) + c * rest(i, 1) + 0.01 * rest(i, 2) * rest(i, 2);
       for (int k = 0; k < 3; ++k) y(i, k) = std::cos(0.37 * i - 1.3 * k);
     }
-    dynsolid::Points dq, dc, tq, tc;
-    quad.Apply(x, dq);
-    corner.Apply(x, dc);
-    quad.ApplyTranspose(x, y, tq);
-    corner.ApplyTranspose(x, y, tc);
-    const double diff =
-        std::max((dq - dc).cwiseAbs().maxCoeff() / dc.cwiseAbs().maxCoeff(),
-                 (tq - tc).cwiseAbs().maxCoeff() / tc.cwiseAbs().maxCoeff());
-    const double terms = static_cast<double>(quad.num_edges() + quad.num_corners());
-    const int reps = std::max(1, static_cast<int>(2e6 / terms));
-    const double ns = 1e6 / terms;
-    const double fq = BestMs(reps, [&] { quad.Apply(x, dq); }) * ns;
-    const double fc = BestMs(reps, [&] { corner.Apply(x, dc); }) * ns;
-    const double bq = BestMs(reps, [&] { quad.ApplyTranspose(x, y, tq); }) * ns;
-    const double bc = BestMs(reps, [&] { corner.ApplyTranspose(x, y, tc); }) * ns;
-    std::printf("| %d^3 | %lld | %lld | %lld | %lld | %.2f | %.2f | %.2f | %.2f | %.1e |\n", n,
-                static_cast<long long>(rest.rows()), static_cast<long long>(quad.num_edges()),
-                static_cast<long long>(quad.num_corners()),
-                static_cast<long long>(quad.num_quads()), fq, fc, bq, bc, diff);
+    dynsolid::Points dc, tc;  // the per-corner path's results
+    double fc = 0, bc = 0;
+    for (QuadPath path : paths) {
+      if (!dynsolid::models::QuadPathRuns(path)) {
+        std::printf("| %d^3 | | | | | %s | does not run here | | | | |\n", n,
+                    dynsolid::models::QuadPathName(path));
+        continue;
+      }
+      const dynsolid::models::DeformationMeasure m(d->fine(), d->elements, rest, 1, path);
+      dynsolid::Points dq, tq;
+      m.Apply(x, dq);
+      m.ApplyTranspose(x, y, tq);
+      if (path == QuadPath::kPerCorner) dc = dq, tc = tq;
+      const double diff =
+          std::max((dq - dc).cwiseAbs().maxCoeff() / dc.cwiseAbs().maxCoeff(),
+                   (tq - tc).cwiseAbs().maxCoeff() / tc.cwiseAbs().maxCoeff());
+      const double terms = static_cast<double>(m.num_edges() + m.num_corners());
+      const int reps = std::max(1, static_cast<int>(2e6 / terms));
+      const double ns = 1e6 / terms;
+      const double f = BestMs(reps, [&] { m.Apply(x, dq); }) * ns;
+      const double b = BestMs(reps, [&] { m.ApplyTranspose(x, y, tq); }) * ns;
+      if (path == QuadPath::kPerCorner) fc = f, bc = b;
+      std::printf("| %d^3 | %lld | %lld | %lld | %lld | %s | %.2f | %.2f | %.2fx | %.2fx | "
+                  "%.1e |\n",
+                  n, static_cast<long long>(rest.rows()), static_cast<long long>(m.num_edges()),
+                  static_cast<long long>(m.num_corners()), static_cast<long long>(m.num_quads()),
+                  dynsolid::models::QuadPathName(path), f, b, fc / f, bc / b, diff);
+    }
   }
   return 0;
 }

@@ -7,12 +7,8 @@
 
 #include <Eigen/Geometry>
 
-#if defined(__AVX2__) && defined(__FMA__)
-#include <immintrin.h>
-
-#include "solver/models/simd_rows.h"
-#define DYNSOLID_MEASURE_AVX2 1
-#endif
+#include "solver/models/measure_corner.h"
+#include "solver/models/measure_quads.h"
 
 namespace dynsolid::models {
 
@@ -38,14 +34,32 @@ struct Quad {
   uint8_t edges = 0;
 };
 
-// A quadrilateral's row of the measure's rest table: cos0[4], sin0[4], l0[4].
-constexpr int kQuadRestRow = 12;
+using measure_detail::kQuadRestRow;
+using measure_detail::QuadKernels;
 
-#ifdef DYNSOLID_MEASURE_AVX2
-constexpr bool kQuadLanes = true;
+// The kernels of a quadrilateral path, null where this build or CPU has
+// none. __builtin_cpu_supports also asks whether the OS saves the AVX-512
+// registers.
+QuadKernels KernelsOf(QuadPath path) {
+  switch (path) {
+    case QuadPath::kPerCorner:
+      return {};
+    case QuadPath::kAvx2:
+      if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return {};
+      return measure_detail::avx2::Kernels();
+    case QuadPath::kAvx512:
+#ifdef DYNSOLID_MEASURE_AVX512
+      if (!__builtin_cpu_supports("avx512f") || !__builtin_cpu_supports("avx512dq") ||
+          !__builtin_cpu_supports("avx512vl")) {
+        return {};
+      }
+      return measure_detail::avx512::Kernels();
 #else
-constexpr bool kQuadLanes = false;
+      return {};
 #endif
+  }
+  return {};
+}
 
 void AddEdge(int32_t i, int32_t j, const Points& rest, std::vector<Edge>& edges) {
   edges.push_back({i, j, (rest.row(j) - rest.row(i)).norm()});
@@ -62,9 +76,39 @@ void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest,
 
 }  // namespace
 
+bool QuadPathRuns(QuadPath path) {
+  return path == QuadPath::kPerCorner || KernelsOf(path).forward != nullptr;
+}
+
+QuadPath FastestQuadPath() {
+  static const QuadPath fastest = [] {
+    for (QuadPath p : {QuadPath::kAvx512, QuadPath::kAvx2}) {
+      if (QuadPathRuns(p)) return p;
+    }
+    return QuadPath::kPerCorner;
+  }();
+  return fastest;
+}
+
+const char* QuadPathName(QuadPath path) {
+  switch (path) {
+    case QuadPath::kPerCorner:
+      return "per-corner";
+    case QuadPath::kAvx2:
+      return "avx2";
+    case QuadPath::kAvx512:
+      return "avx512";
+  }
+  return "?";
+}
+
 DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                                        const fem::ElementSet& elements, const Points& rest,
-                                       int parts, bool quads) {
+                                       int parts, QuadPath quads) {
+  quad_path_ = QuadPathRuns(quads) ? quads : FastestQuadPath();
+  const QuadKernels kernels = KernelsOf(quad_path_);
+  quads_forward_ = kernels.forward;
+  quads_transpose_ = kernels.transpose;
   std::vector<Edge> edges;
   std::vector<Corner> corners;
   std::vector<Quad> quad_list;
@@ -82,7 +126,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
     }
     // A quadrilateral with four distinct nodes and four proper rest corners
     // runs as one: its corners leave the per-corner list.
-    if (!quads || !kQuadLanes || k != 4 || corners.size() != first + 4) continue;
+    if (quad_path_ == QuadPath::kPerCorner || k != 4 || corners.size() != first + 4) continue;
     Quad q;
     q.face = f;
     for (int i = 0; i < 4; ++i) {
@@ -251,6 +295,13 @@ int64_t DeformationMeasure::terms_per_pass() const {
 
 namespace {
 
+using measure_detail::CornerGeometry;
+using measure_detail::CornerTerms;
+using measure_detail::ForwardTerms;
+using measure_detail::MeasureCorner;
+using measure_detail::MeasureSide;
+using measure_detail::TransposeTerms;
+
 // The geometry loops below take their arrays as restrict-qualified
 // parameters, which is what lets GCC run them in SIMD lanes (gathers of
 // the node rows, square roots, divisions and selects four at a time).
@@ -278,178 +329,6 @@ void EdgeForward(const double* R pd, const int32_t* R ei, const int32_t* R ej,
     fz[q] = f * z;
   }
 }
-
-// The corner formulas are written once, for a value type T: double (the
-// per-corner loops, which GCC runs in SIMD lanes) or Lanes (four corners of
-// a quadrilateral in one AVX2 register). Conditions are masks of T: 0 or 1
-// for double (bool lanes keep GCC from vectorizing), all bits for Lanes.
-inline double Sqrt(double a) { return std::sqrt(a); }
-inline double Min(double a, double b) { return std::min(a, b); }
-inline double Max(double a, double b) { return std::max(a, b); }
-inline double Greater(double a, double b) { return a > b ? 1.0 : 0.0; }
-inline double NotLess(double a, double b) { return a >= b ? 1.0 : 0.0; }
-inline double And(double m, double n) { return m > 0 ? n : 0.0; }
-inline double Select(double m, double a, double b) { return m > 0 ? a : b; }
-
-#ifdef DYNSOLID_MEASURE_AVX2
-// Two quadrilaterals' corners (lane k of register h: corner k of
-// quadrilateral h): two AVX2 registers, each operation issued on
-// both back to back. The corner formulas are a chain of dependent square
-// roots and divisions; two independent chains side by side keep the units
-// busy where one quadrilateral at a time waits on its own latency.
-struct Lanes {
-  __m256d v[2];
-  Lanes() = default;
-  Lanes(__m256d a, __m256d b) : v{a, b} {}
-  Lanes(double x) : v{_mm256_set1_pd(x), _mm256_set1_pd(x)} {}  // NOLINT: implicit
-};
-#define DYNSOLID_LANES_OP(name, expr)                              \
-  inline Lanes name(Lanes a, Lanes b) {                            \
-    return {[&](__m256d x, __m256d y) { return expr; }(a.v[0], b.v[0]), \
-            [&](__m256d x, __m256d y) { return expr; }(a.v[1], b.v[1])}; \
-  }
-DYNSOLID_LANES_OP(operator+, _mm256_add_pd(x, y))
-DYNSOLID_LANES_OP(operator-, _mm256_sub_pd(x, y))
-DYNSOLID_LANES_OP(operator*, _mm256_mul_pd(x, y))
-DYNSOLID_LANES_OP(operator/, _mm256_div_pd(x, y))
-// std::min(a, b) is (b < a ? b : a), std::max(a, b) is (a < b ? b : a):
-// vminpd and vmaxpd return their second operand on ties and NaNs.
-DYNSOLID_LANES_OP(Min, _mm256_min_pd(y, x))
-DYNSOLID_LANES_OP(Max, _mm256_max_pd(y, x))
-DYNSOLID_LANES_OP(Greater, _mm256_cmp_pd(x, y, _CMP_GT_OQ))
-DYNSOLID_LANES_OP(NotLess, _mm256_cmp_pd(x, y, _CMP_GE_OQ))
-DYNSOLID_LANES_OP(And, _mm256_and_pd(x, y))
-#undef DYNSOLID_LANES_OP
-inline Lanes operator-(Lanes a) {
-  const __m256d sign = _mm256_set1_pd(-0.0);
-  return {_mm256_xor_pd(a.v[0], sign), _mm256_xor_pd(a.v[1], sign)};
-}
-inline Lanes Sqrt(Lanes a) { return {_mm256_sqrt_pd(a.v[0]), _mm256_sqrt_pd(a.v[1])}; }
-inline Lanes Select(Lanes m, Lanes a, Lanes b) {
-  return {_mm256_blendv_pd(b.v[0], a.v[0], m.v[0]), _mm256_blendv_pd(b.v[1], a.v[1], m.v[1])};
-}
-// Within each quadrilateral, lane k takes lane k + 1 (Next) or lane k - 1
-// (Prev), cyclically.
-inline Lanes Next(Lanes a) {
-  return {_mm256_permute4x64_pd(a.v[0], 0x39), _mm256_permute4x64_pd(a.v[1], 0x39)};
-}
-inline Lanes Prev(Lanes a) {
-  return {_mm256_permute4x64_pd(a.v[0], 0x93), _mm256_permute4x64_pd(a.v[1], 0x93)};
-}
-#endif
-
-// Corner geometry (n; a, b) from ra = a - n and rb = b - n: with
-// phi = (theta - theta0) / 2, C = cos(phi), S = sin(phi), rotating a by
-// +phi and b by -phi about n gives delta_a = alpha ra - beta la b^ and
-// delta_b = alpha rb - beta lb a^, alpha = 1 - C + c S / s, beta = S / s
-// (c, s the cosine and sine of the current angle). A degenerate corner (a
-// zero side, collinear sides, or an angle half a turn from its rest value)
-// contributes nothing: its alpha, beta and their derivatives in theta are
-// zero and its other values finite.
-template <typename T>
-struct CornerGeometry {
-  T ax, ay, az, bx, by, bz;  // unit sides a^, b^
-  T la, lb;                  // side lengths (1 for a zero side)
-  T ia, ib;                  // their inverses (0 for a zero side)
-  T c, inv_s;                // cos theta, 1 / sin theta
-  T al, bt, dal, dbt;        // alpha, beta and their theta derivatives
-};
-
-// A side's length and inverse: l = |r| and 1 / l (1 for a zero side).
-template <typename T>
-struct Side {
-  T l, inv;
-};
-template <typename T>
-[[gnu::always_inline]] inline Side<T> MeasureSide(T rx, T ry, T rz) {
-  const T l = Sqrt(rx * rx + ry * ry + rz * rz);
-  return {l, T(1.0) / Select(Greater(l, T(0.0)), l, T(1.0))};
-}
-
-// The corner's geometry from its sides ra, rb, their lengths and inverses
-// (MeasureSide), and its rest angle's cosine and sine.
-template <typename T>
-[[gnu::always_inline]] inline CornerGeometry<T> MeasureCorner(T rax, T ray, T raz, T rbx, T rby,
-                                                              T rbz, Side<T> sa, Side<T> sb,
-                                                              T cos0, T sin0) {
-  CornerGeometry<T> g;
-  const T lra = sa.l, lrb = sb.l;
-  const T sides = Greater(Min(lra, lrb), T(0.0));
-  const T ia = Select(sides, sa.inv, T(0.0)), ib = Select(sides, sb.inv, T(0.0));
-  g.ax = rax * ia, g.ay = ray * ia, g.az = raz * ia;
-  g.bx = rbx * ib, g.by = rby * ib, g.bz = rbz * ib;
-  const T c = g.ax * g.bx + g.ay * g.by + g.az * g.bz;
-  const T x0 = g.ay * g.bz - g.az * g.by, x1 = g.az * g.bx - g.ax * g.bz,
-          x2 = g.ax * g.by - g.ay * g.bx;
-  const T sn = Sqrt(x0 * x0 + x1 * x1 + x2 * x2);
-  // phi in (-pi/2, pi/2) by half-angle formulas.
-  const T cos_d = c * cos0 + sn * sin0;
-  const T sin_d = sn * cos0 - c * sin0;
-  const T cap_c = Sqrt(Max(T(0.0), T(0.5) * (T(1.0) + cos_d)));
-  const T ok_s = And(Greater(sn, T(1e-300)), sides);
-  const T okf = And(NotLess(cap_c, T(1e-12)), ok_s);
-  const T s_safe = Select(okf, sn, T(1.0)), c_safe = Select(okf, cap_c, T(1.0));
-  const T is = T(1.0) / s_safe;
-  const T cap_s = sin_d / (T(2.0) * c_safe);
-  const T bt_any = cap_s * is;
-  const T al_any = T(1.0) - c_safe + c * bt_any;
-  const T dal_any = T(-0.5) * cap_s + c * c_safe * T(0.5) * is - c * c * cap_s * is * is;
-  const T dbt_any = c_safe * T(0.5) * is - cap_s * c * is * is;
-  g.bt = Select(okf, bt_any, T(0.0));
-  g.al = Select(okf, al_any, T(0.0));
-  g.dal = Select(okf, dal_any, T(0.0));
-  g.dbt = Select(okf, dbt_any, T(0.0));
-  g.la = Select(sides, lra, T(1.0));
-  g.lb = Select(sides, lrb, T(1.0));
-  g.ia = ia;
-  g.ib = ib;
-  g.c = c;
-  g.inv_s = is;
-  return g;
-}
-
-// A corner's terms on a and b.
-template <typename T>
-struct CornerTerms {
-  T ax, ay, az, bx, by, bz;
-};
-
-// Forward: delta_a = alpha ra - beta la b^, delta_b = alpha rb - beta lb a^.
-template <typename T>
-[[gnu::always_inline]] inline CornerTerms<T> ForwardTerms(T rax, T ray, T raz, T rbx, T rby,
-                                                          T rbz, const CornerGeometry<T>& g) {
-  // With a zero side, la/lb hold 1 but alpha = beta = 0: the true lengths
-  // times beta are zero either way.
-  const T bla = g.bt * g.la, blb = g.bt * g.lb;
-  return {g.al * rax - bla * g.bx, g.al * ray - bla * g.by, g.al * raz - bla * g.bz,
-          g.al * rbx - blb * g.ax, g.al * rby - blb * g.ay, g.al * rbz - blb * g.az};
-}
-
-// Transpose: dF/dra and dF/drb for F = ya.delta_a + yb.delta_b (derivation
-// at CornerTranspose below).
-template <typename T>
-[[gnu::always_inline]] inline CornerTerms<T> TransposeTerms(T yax, T yay, T yaz, T ybx, T yby,
-                                                            T ybz, const CornerGeometry<T>& g) {
-  const T ax = g.ax, ay = g.ay, az = g.az, bx = g.bx, by = g.by, bz = g.bz;
-  const T lra = g.la, lrb = g.lb, c = g.c;
-  const T al = g.al, bt = g.bt;
-  const T yab = yax * bx + yay * by + yaz * bz;
-  const T yba = ybx * ax + yby * ay + ybz * az;
-  const T pp = lra * (yax * ax + yay * ay + yaz * az) + lrb * (ybx * bx + yby * by + ybz * bz);
-  const T qq = lra * yab + lrb * yba;
-  const T coef = pp * g.dal - qq * g.dbt;
-  // (With a zero side ia and ib are 0, and so are alpha, beta and their
-  // derivatives: the terms are zero either way.)
-  const T ka = -coef * g.inv_s * g.ia, kb = -coef * g.inv_s * g.ib;
-  const T lba = lrb * g.ia, lab = lra * g.ib;
-  return {ka * (bx - c * ax) + al * yax - bt * (yab * ax + lba * (ybx - yba * ax)),
-          ka * (by - c * ay) + al * yay - bt * (yab * ay + lba * (yby - yba * ay)),
-          ka * (bz - c * az) + al * yaz - bt * (yab * az + lba * (ybz - yba * az)),
-          kb * (ax - c * bx) + al * ybx - bt * (yba * bx + lab * (yax - yab * bx)),
-          kb * (ay - c * by) + al * yby - bt * (yba * by + lab * (yay - yab * by)),
-          kb * (az - c * bz) + al * ybz - bt * (yba * bz + lab * (yaz - yab * bz))};
-}
-
 // The corner terms on a and b (n's is minus their sum).
 void CornerForward(const double* R pd, const int32_t* R cn, const int32_t* R ca,
                    const int32_t* R cb, const double* R cos0, const double* R sin0,
@@ -538,165 +417,6 @@ inline void AddRow(double* out, int32_t v, double x, double y, double z) {
   o[2] += z;
 }
 
-#ifdef DYNSOLID_MEASURE_AVX2
-// Quadrilaterals q0 and q1's node rows of `base` as columns (lane k of
-// register h: node k of quadrilateral h).
-inline void LoadQuads(const double* base, const int32_t* v0, const int32_t* v1, Lanes& x,
-                      Lanes& y, Lanes& z) {
-  const int32_t* v[2] = {v0, v1};
-  for (int h = 0; h < 2; ++h) {
-    simd::RowsToColumns(simd::LoadRow(base, v[h][0]), simd::LoadRow(base, v[h][1]),
-                        simd::LoadRow(base, v[h][2]), simd::LoadRow(base, v[h][3]), x.v[h],
-                        y.v[h], z.v[h]);
-  }
-}
-
-// Quadrilaterals q0 and q1's rest cosines (offset 0), sines (offset 4) or
-// side rest lengths (offset 8):
-// rows rest_id[q] of the measure's table of distinct rest corners.
-inline Lanes LoadRest(const double* rest, const uint32_t* rest_id, int64_t q0, int64_t q1,
-                      int offset) {
-  return {_mm256_loadu_pd(rest + kQuadRestRow * static_cast<int64_t>(rest_id[q0]) + offset),
-          _mm256_loadu_pd(rest + kQuadRestRow * static_cast<int64_t>(rest_id[q1]) + offset)};
-}
-
-// Adds lane k of register h of (x, y, z) to node v_h[k]'s row where bit k
-// of owns_h is set (x and y in one 2-lane add, z alone: a 4-lane store
-// would write the next row, which another part may own).
-inline void AddQuads(double* out, const int32_t* v0, const int32_t* v1, uint8_t owns0,
-                     uint8_t owns1, Lanes x, Lanes y, Lanes z) {
-  const int32_t* v[2] = {v0, v1};
-  const uint8_t owns[2] = {owns0, owns1};
-  for (int h = 0; h < 2; ++h) {
-    __m256d row[4];
-    simd::ColumnsToRows(x.v[h], y.v[h], z.v[h], row);
-    for (int k = 0; k < 4; ++k) {
-      if (!(owns[h] & (1 << k))) continue;
-      double* o = out + 3 * static_cast<int64_t>(v[h][k]);
-      _mm_storeu_pd(o, _mm_add_pd(_mm_loadu_pd(o), _mm256_castpd256_pd128(row[k])));
-      o[2] += _mm256_cvtsd_f64(_mm256_permute4x64_pd(row[k], 0x02));
-    }
-  }
-}
-
-// Corner k of a quadrilateral sits at node k, between a = node k - 1 and
-// b = node k + 1: its sides are ra = Prev(p) - p, rb = Next(p) - p (the
-// same differences, to the bit, as the per-corner path's a - n and b - n).
-// Side b of corner k is side a of corner k + 1 reversed: one length and
-// inverse per side, rotated into place (the same bits: the components are
-// exact negatives).
-struct QuadSides {
-  Lanes rax, ray, raz, rbx, rby, rbz;
-  Side<Lanes> a, b;
-};
-inline QuadSides Sides(Lanes x, Lanes y, Lanes z) {
-  QuadSides r{Prev(x) - x, Prev(y) - y, Prev(z) - z, Next(x) - x, Next(y) - y, Next(z) - z,
-              {}, {}};
-  r.b = MeasureSide(r.rbx, r.rby, r.rbz);
-  r.a = {Prev(r.b.l), Prev(r.b.inv)};
-  return r;
-}
-
-constexpr int64_t kQuadsAhead = 16;
-
-// Quadrilaterals two at a time; with an odd count the last runs as both
-// halves, its second copy adding nothing (no owned nodes). Rows of the
-// quadrilaterals kQuadsAhead further on are prefetched from each of
-// `rows` (the node arrays read, and the output), so their misses overlap
-// this pair's arithmetic.
-template <typename Body>
-void ForQuadPairs(const int32_t* qv, const uint8_t* owns, int64_t nq,
-                  std::initializer_list<const double*> rows, Body body) {
-  for (int64_t q = 0; q < nq; q += 2) {
-    if (q + kQuadsAhead + 2 <= nq) {
-      for (const int32_t* v = qv + 4 * (q + kQuadsAhead); v < qv + 4 * (q + kQuadsAhead + 2); ++v) {
-        for (const double* base : rows) __builtin_prefetch(base + 3 * static_cast<int64_t>(*v));
-      }
-    }
-    const int64_t q1 = q + 1 < nq ? q + 1 : q;
-    body(q, q1, qv + 4 * q, qv + 4 * q1, owns[q], q1 != q ? owns[q1] : uint8_t{0});
-  }
-}
-
-// Lane k all ones where side k of the quadrilateral carries its edge's
-// term (bit 4 + k of its owns byte) and has a nonzero length.
-inline Lanes SideEdges(uint8_t o0, uint8_t o1, Lanes length) {
-  const __m256i bit = _mm256_setr_epi64x(1, 2, 4, 8);
-  auto lanes = [&](uint8_t o) {
-    const __m256i b = _mm256_and_si256(_mm256_set1_epi64x(o >> 4), bit);
-    return _mm256_castsi256_pd(_mm256_cmpeq_epi64(b, bit));
-  };
-  return And(Lanes{lanes(o0), lanes(o1)}, Greater(length, Lanes(0.0)));
-}
-
-// Forward: node k takes corner k + 1's term on its a and corner k - 1's on
-// its b, and the stretch terms of sides k - 1 (+, it is their j) and k
-// (-, their i): side k's term is f r_b with f = (l - l0) / (2 l), exactly
-// the edge list's (EdgeForward, with the side's inverse for the division).
-void QuadsForward(const int32_t* qv, const double* rest, const uint32_t* rest_id,
-                  const uint8_t* owns, int64_t nq, const double* pd, double* out) {
-  ForQuadPairs(qv, owns, nq, {pd, out},
-               [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
-                   uint8_t o1) {
-                 Lanes x, y, z;
-                 LoadQuads(pd, v0, v1, x, y, z);
-                 const QuadSides r = Sides(x, y, z);
-                 const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
-                     r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
-                     LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
-                 const CornerTerms<Lanes> t =
-                     ForwardTerms(r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, g);
-                 const Lanes l0 = LoadRest(rest, rest_id, q0, q1, 8);
-                 const Lanes f = Select(SideEdges(o0, o1, r.b.l),
-                                        Lanes(0.5) * (r.b.l - l0) * r.b.inv, Lanes(0.0));
-                 const Lanes ex = f * r.rbx, ey = f * r.rby, ez = f * r.rbz;
-                 AddQuads(out, v0, v1, o0, o1, Next(t.ax) + Prev(t.bx) + (Prev(ex) - ex),
-                          Next(t.ay) + Prev(t.by) + (Prev(ey) - ey),
-                          Next(t.az) + Prev(t.bz) + (Prev(ez) - ez));
-               });
-}
-
-// Transpose: as the forward, plus minus both of its own corner's terms;
-// side k's stretch term is c1 dy + c2 r_b with dy = y_{k+1} - y_k,
-// c1 = (1 - l0 / l) / 2, c2 = l0 (r_b . dy) / (2 l^3) (EdgeTranspose).
-void QuadsTranspose(const int32_t* qv, const double* rest, const uint32_t* rest_id,
-                    const uint8_t* owns, int64_t nq, const double* pd, const double* py,
-                    double* out) {
-  ForQuadPairs(qv, owns, nq, {pd, py, out},
-               [&](int64_t q0, int64_t q1, const int32_t* v0, const int32_t* v1, uint8_t o0,
-                   uint8_t o1) {
-                 Lanes x, y, z, yx, yy, yz;
-                 LoadQuads(pd, v0, v1, x, y, z);
-                 LoadQuads(py, v0, v1, yx, yy, yz);
-                 const QuadSides r = Sides(x, y, z);
-                 const CornerGeometry<Lanes> g = MeasureCorner<Lanes>(
-                     r.rax, r.ray, r.raz, r.rbx, r.rby, r.rbz, r.a, r.b,
-                     LoadRest(rest, rest_id, q0, q1, 0), LoadRest(rest, rest_id, q0, q1, 4));
-                 const CornerTerms<Lanes> t = TransposeTerms(Prev(yx), Prev(yy), Prev(yz),
-                                                             Next(yx), Next(yy), Next(yz), g);
-                 const Lanes l0 = LoadRest(rest, rest_id, q0, q1, 8);
-                 const Lanes on = SideEdges(o0, o1, r.b.l);
-                 const Lanes il = r.b.inv;
-                 const Lanes dx = Next(yx) - yx, dy = Next(yy) - yy, dz = Next(yz) - yz;
-                 const Lanes rdy = r.rbx * dx + r.rby * dy + r.rbz * dz;
-                 const Lanes c1 = Select(on, Lanes(0.5) * (Lanes(1.0) - l0 * il), Lanes(0.0));
-                 const Lanes c2 =
-                     Select(on, Lanes(0.5) * l0 * il * il * il * rdy, Lanes(0.0));
-                 const Lanes ex = c1 * dx + c2 * r.rbx, ey = c1 * dy + c2 * r.rby,
-                             ez = c1 * dz + c2 * r.rbz;
-                 AddQuads(out, v0, v1, o0, o1,
-                          Next(t.ax) + Prev(t.bx) - (t.ax + t.bx) + (Prev(ex) - ex),
-                          Next(t.ay) + Prev(t.by) - (t.ay + t.by) + (Prev(ey) - ey),
-                          Next(t.az) + Prev(t.bz) - (t.az + t.bz) + (Prev(ez) - ez));
-               });
-}
-#else
-// No quadrilaterals are built without AVX2 (kQuadLanes): nothing to add.
-void QuadsForward(const int32_t*, const double*, const uint32_t*, const uint8_t*, int64_t,
-                  const double*, double*) {}
-void QuadsTranspose(const int32_t*, const double*, const uint32_t*, const uint8_t*, int64_t,
-                    const double*, const double*, double*) {}
-#endif
 
 }  // namespace
 
@@ -762,7 +482,8 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
                     p.e_rest.data() + q0, fx, fy, fz, m);
       },
       [&](double* out) {
-        QuadsForward(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
+        if (p.q_owns.empty()) return;
+        quads_forward_(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                      static_cast<int64_t>(p.q_owns.size()), pd, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
@@ -784,7 +505,8 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
                       p.e_rest.data() + q0, fx, fy, fz, m);
       },
       [&](double* out) {
-        QuadsTranspose(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
+        if (p.q_owns.empty()) return;
+        quads_transpose_(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                        static_cast<int64_t>(p.q_owns.size()), pd, py, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,

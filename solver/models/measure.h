@@ -22,8 +22,9 @@
 // each part they touch (a few percent of the work on large meshes).
 //
 // Quadrilateral faces (every face of a subdivided hexahedral mesh) are
-// processed whole, their four corners in the four lanes of one AVX2
-// register: the face's four node rows are loaded once and transposed, each
+// processed whole, their four corners in four SIMD lanes, two faces at a
+// time (two AVX2 registers, or one AVX-512 register where the CPU has it:
+// QuadPath): the face's four node rows are loaded once and transposed, each
 // corner's sides are lane rotations of them, and each node's share of the
 // face (the terms of the two or three corners that touch it) is summed in
 // registers and added to its row once. An edge that is a side of a
@@ -31,9 +32,9 @@
 // from the side's length and inverse, which the corners compute anyway)
 // instead of in the edge list. Per node the sums run over its remaining
 // edges, then its quadrilaterals (corners and fused sides), then its
-// other corners, each list ascending: still one global order. Without AVX2, or with `quads` false
-// (the reference the tests hold the quadrilateral path to), every corner
-// goes through the per-corner path.
+// other corners, each list ascending: still one global order. Without AVX2,
+// or with QuadPath::kPerCorner (the reference the tests hold the
+// quadrilateral path to), every corner goes through the per-corner path.
 #pragma once
 
 #include <array>
@@ -46,11 +47,30 @@
 
 namespace dynsolid::models {
 
+// How the corners of quadrilateral faces run. kAvx2 and kAvx512 issue the
+// same operations in the same order and give the same bits; kPerCorner
+// sums the same terms in another order (agreement to rounding).
+enum class QuadPath : uint8_t {
+  kPerCorner,  // each corner alone, in the per-corner loops
+  kAvx2,       // four corners to an AVX2 register, two faces at a time
+  kAvx512,     // two faces to an AVX-512 register
+};
+// Whether this build and this CPU run `path`.
+bool QuadPathRuns(QuadPath path);
+// The widest path that runs here (kPerCorner without AVX2).
+QuadPath FastestQuadPath();
+// "per-corner", "avx2", "avx512".
+const char* QuadPathName(QuadPath path);
+
 class DeformationMeasure {
  public:
   DeformationMeasure() = default;
+  // `quads`: a path that does not run here falls back to FastestQuadPath()
+  // (quad_path() says which runs).
   DeformationMeasure(const mesh::CellComplex& mesh, const fem::ElementSet& elements,
-                     const Points& rest, int parts, bool quads = true);
+                     const Points& rest, int parts, QuadPath quads = FastestQuadPath());
+
+  QuadPath quad_path() const { return quad_path_; }
 
   int parts() const { return static_cast<int>(parts_.size()); }
 
@@ -119,6 +139,13 @@ class DeformationMeasure {
                       std::initializer_list<const double*> inputs, EdgeTerms edge_terms,
                       QuadTerms quad_terms, CornerTerms corner_terms);
 
+  QuadPath quad_path_ = QuadPath::kPerCorner;
+  // The quadrilateral kernels of quad_path_ (measure_quads.h; null for
+  // kPerCorner, which then has no quadrilaterals).
+  void (*quads_forward_)(const int32_t*, const double*, const uint32_t*, const uint8_t*,
+                         int64_t, const double*, double*) = nullptr;
+  void (*quads_transpose_)(const int32_t*, const double*, const uint32_t*, const uint8_t*,
+                           int64_t, const double*, const double*, double*) = nullptr;
   int64_t num_edges_ = 0, num_corners_ = 0, num_quads_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
   // The distinct rest lengths of edges, and the distinct rest corners of

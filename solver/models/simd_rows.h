@@ -1,7 +1,10 @@
 // AVX2 helpers for node rows (x, y, z in three consecutive doubles), shared
 // by the models' element kernels (local_frame.cc, corotational.cc) and the
-// deformation measure (measure.cc). Only included where __AVX2__ and
-// __FMA__ are defined.
+// deformation measure's quadrilateral kernels (measure_quads.inc). Only
+// included where __AVX2__ and __FMA__ are defined. Always inlined: the
+// kernels are compiled once more with AVX-512 flags, and an out-of-line
+// copy from that translation unit must never be the one the linker keeps
+// for the others.
 #pragma once
 
 #include <cstdint>
@@ -12,13 +15,13 @@ namespace dynsolid::models::simd {
 
 // Row `id` of a #nodes x 3 row-major array as (x, y, z, 0); reads nothing
 // past the row.
-inline __m256d LoadRow(const double* base, int32_t id) {
+[[gnu::always_inline]] inline __m256d LoadRow(const double* base, int32_t id) {
   return _mm256_maskload_pd(base + 3 * static_cast<int64_t>(id),
                             _mm256_setr_epi64x(-1, -1, -1, 0));
 }
 
 // Rows r0..r3 (x, y, z, any) to columns x, y, z over the four rows.
-inline void RowsToColumns(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x,
+[[gnu::always_inline]] inline void RowsToColumns(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x,
                           __m256d& y, __m256d& z) {
   const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
   const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // y0 y1 . .
@@ -30,7 +33,7 @@ inline void RowsToColumns(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256
 }
 
 // Columns x, y, z over four rows to the rows (x_k, y_k, z_k, 0).
-inline void ColumnsToRows(__m256d x, __m256d y, __m256d z, __m256d row[4]) {
+[[gnu::always_inline]] inline void ColumnsToRows(__m256d x, __m256d y, __m256d z, __m256d row[4]) {
   const __m256d zero = _mm256_setzero_pd();
   const __m256d t0 = _mm256_unpacklo_pd(x, y);     // x0 y0 x2 y2
   const __m256d t1 = _mm256_unpackhi_pd(x, y);     // x1 y1 x3 y3

@@ -1748,11 +1748,13 @@ void Solid::ReportMaterial() {
     report_.single_precision_cg = im.corotational->single_precision_linearized();
     report_.shared_matrix_bytes = im.corotational->shared_matrix_bytes();
     report_.element_bytes = im.corotational->per_element_bytes();
+    report_.measure_quad_path.clear();
   } else {
     const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());
     report_.shared_matrix_bytes = lf->shared_matrix_bytes();
     report_.element_bytes = lf->per_element_bytes();
     report_.factorized_elements = lf->factorized_elements();
+    report_.measure_quad_path = models::QuadPathName(lf->measure().quad_path());
   }
 }
 

@@ -51,6 +51,10 @@ struct BuildReport {
   // Cubic elements whose products run sum-factorized (local-frame model
   // with float products; models/kron_product.h).
   int64_t factorized_elements = 0;
+  // How the local-frame measure runs its quadrilateral faces
+  // (models::QuadPathName: "avx512", "avx2", "per-corner"); empty for the
+  // corotational model.
+  std::string measure_quad_path;
   double omega_max = 0.0;          // rad/s, from power iteration
   double stable_step = 0.0;        // 2 / omega_max, seconds
   int32_t substeps = 1;            // explicit sub-steps per scene step

@@ -2,6 +2,8 @@
 #include "solver/models/local_frame.h"
 
 #include <cmath>
+#include <cstdio>
+#include <string>
 
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
@@ -112,11 +114,22 @@ TEST(LocalFrameTest, MeasureGivesTheSameBitsForAnyPartCount) {
   }
 }
 
-// Quadrilaterals run four corners to a register; the per-corner path is the
+// Quadrilaterals run four corners to SIMD lanes; the per-corner path is the
 // reference: the same terms summed in another order, so the two agree to
-// rounding. The transpose is the adjoint of the forward's derivative
-// (central differences of y . delta along random directions).
+// rounding. The AVX2 and AVX-512 kernels issue the same operations on the
+// same values in the same order: the same bits. The transpose is the
+// adjoint of the forward's derivative (central differences of y . delta
+// along random directions).
 TEST(LocalFrameTest, QuadrilateralPathMatchesThePerCornerPathAndItsTransposeIsTheAdjoint) {
+  EXPECT_TRUE(QuadPathRuns(QuadPath::kPerCorner));
+  EXPECT_TRUE(QuadPathRuns(FastestQuadPath()));
+#if defined(__AVX2__) && defined(__FMA__)
+  EXPECT_TRUE(QuadPathRuns(QuadPath::kAvx2));
+  EXPECT_NE(FastestQuadPath(), QuadPath::kPerCorner);
+#endif
+  if (!QuadPathRuns(QuadPath::kAvx512)) {
+    std::printf("note: this CPU or build has no AVX-512; its kernel is not compared\n");
+  }
   for (const char* name : {"block3", "mixed", "torus"}) {
     auto f = Build(name, 1);
     Points d = f->rest, y = f->rest;
@@ -126,30 +139,43 @@ TEST(LocalFrameTest, QuadrilateralPathMatchesThePerCornerPathAndItsTransposeIsTh
         y(i, c) = std::cos(0.41 * i - 1.1 * c);
       }
     }
-    const DeformationMeasure quads(f->d.fine(), f->d.elements, f->rest, 3, true);
-    const DeformationMeasure corners(f->d.fine(), f->d.elements, f->rest, 3, false);
-    EXPECT_EQ(quads.num_corners(), corners.num_corners()) << name;
+    const DeformationMeasure corners(f->d.fine(), f->d.elements, f->rest, 3,
+                                     QuadPath::kPerCorner);
+    EXPECT_EQ(corners.quad_path(), QuadPath::kPerCorner);
     EXPECT_EQ(corners.num_quads(), 0) << name;
-#if defined(__AVX2__) && defined(__FMA__)
-    EXPECT_GT(quads.num_quads(), 0) << name << ": the quadrilateral path runs";
-#endif
-    Points dq, dc, tq, tc;
-    quads.Apply(d, dq);
+    Points dc, tc;
     corners.Apply(d, dc);
-    quads.ApplyTranspose(d, y, tq);
     corners.ApplyTranspose(d, y, tc);
     ASSERT_GT(dc.cwiseAbs().maxCoeff(), 1e-4) << name;
-    EXPECT_LE((dq - dc).cwiseAbs().maxCoeff(), 1e-13 * dc.cwiseAbs().maxCoeff()) << name;
-    EXPECT_LE((tq - tc).cwiseAbs().maxCoeff(), 1e-13 * tc.cwiseAbs().maxCoeff()) << name;
-    for (uint32_t seed : {1u, 2u, 3u}) {
-      const Points v = test_util::RandomPoints(d.rows(), seed);
-      const double h = 1e-6;
-      Points plus, minus;
-      quads.Apply(d + h * v, plus);
-      quads.Apply(d - h * v, minus);
-      const double fd = test_util::Dot(y, plus - minus) / (2 * h);
-      const double analytic = test_util::Dot(tq, v);
-      EXPECT_NEAR(analytic, fd, 1e-6 * std::abs(fd)) << name << " seed " << seed;
+    Points d_first, t_first;  // the first SIMD path's results
+    for (QuadPath path : {QuadPath::kAvx2, QuadPath::kAvx512}) {
+      if (!QuadPathRuns(path)) continue;
+      const std::string what = std::string(name) + " " + QuadPathName(path);
+      const DeformationMeasure quads(f->d.fine(), f->d.elements, f->rest, 3, path);
+      ASSERT_EQ(quads.quad_path(), path) << what;
+      EXPECT_EQ(quads.num_corners(), corners.num_corners()) << what;
+      EXPECT_GT(quads.num_quads(), 0) << what << ": the quadrilateral path runs";
+      Points dq, tq;
+      quads.Apply(d, dq);
+      quads.ApplyTranspose(d, y, tq);
+      EXPECT_LE((dq - dc).cwiseAbs().maxCoeff(), 1e-13 * dc.cwiseAbs().maxCoeff()) << what;
+      EXPECT_LE((tq - tc).cwiseAbs().maxCoeff(), 1e-13 * tc.cwiseAbs().maxCoeff()) << what;
+      if (d_first.size() == 0) {
+        d_first = dq, t_first = tq;
+      } else {
+        EXPECT_TRUE(dq == d_first) << what << ": not the AVX2 kernel's bits";
+        EXPECT_TRUE(tq == t_first) << what << ": not the AVX2 kernel's bits";
+      }
+      for (uint32_t seed : {1u, 2u, 3u}) {
+        const Points v = test_util::RandomPoints(d.rows(), seed);
+        const double h = 1e-6;
+        Points plus, minus;
+        quads.Apply(d + h * v, plus);
+        quads.Apply(d - h * v, minus);
+        const double fd = test_util::Dot(y, plus - minus) / (2 * h);
+        const double analytic = test_util::Dot(tq, v);
+        EXPECT_NEAR(analytic, fd, 1e-6 * std::abs(fd)) << what << " seed " << seed;
+      }
     }
   }
 }

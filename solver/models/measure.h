@@ -22,19 +22,19 @@
 // each part they touch (a few percent of the work on large meshes).
 //
 // Quadrilateral faces (every face of a subdivided hexahedral mesh) are
-// processed whole, their four corners in four SIMD lanes, two faces at a
-// time (two AVX2 registers, or one AVX-512 register where the CPU has it:
-// QuadPath): the face's four node rows are loaded once and transposed, each
-// corner's sides are lane rotations of them, and each node's share of the
-// face (the terms of the two or three corners that touch it) is summed in
+// processed whole, their four corners in four SIMD lanes, two faces at a time
+// in two AVX2 registers, or four in two AVX-512 registers where the CPU has
+// them (QuadPath): the face's four node rows are loaded once and transposed,
+// each corner's sides are lane rotations of them, and each node's share of
+// the face (the terms of the two or three corners that touch it) is summed in
 // registers and added to its row once. An edge that is a side of a
-// quadrilateral runs with the first such quadrilateral (its stretch term
-// from the side's length and inverse, which the corners compute anyway)
-// instead of in the edge list. Per node the sums run over its remaining
-// edges, then its quadrilaterals (corners and fused sides), then its
-// other corners, each list ascending: still one global order. Without AVX2,
-// or with QuadPath::kPerCorner (the reference the tests hold the
-// quadrilateral path to), every corner goes through the per-corner path.
+// quadrilateral runs with the first such quadrilateral (its stretch term from
+// the side's length and inverse, which the corners compute anyway) instead of
+// in the edge list. Per node the sums run over its remaining edges, then its
+// quadrilaterals (corners and fused sides), then its other corners, each list
+// ascending: still one global order. Without AVX2, or with
+// QuadPath::kPerCorner (the reference the tests hold the quadrilateral path
+// to), every corner goes through the per-corner path.
 #pragma once
 
 #include <array>
@@ -53,7 +53,7 @@ namespace dynsolid::models {
 enum class QuadPath : uint8_t {
   kPerCorner,  // each corner alone, in the per-corner loops
   kAvx2,       // four corners to an AVX2 register, two faces at a time
-  kAvx512,     // two faces to an AVX-512 register
+  kAvx512,     // two faces to an AVX-512 register, four at a time
 };
 // Whether this build and this CPU run `path`.
 bool QuadPathRuns(QuadPath path);

@@ -1,6 +1,6 @@
 // The deformation measure's quadrilateral kernels (measure.h): four corners
-// of a face in SIMD lanes, two faces at a time. One copy per instruction
-// set, each compiled from measure_quads.inc in its own translation unit
+// of a face in SIMD lanes, two faces (AVX2) or four (AVX-512) at a time.
+// One copy per instruction set, each compiled from measure_quads.inc in its own translation unit
 // and namespace (measure_quads_avx2.cc, measure_quads_avx512.cc); measure.cc
 // picks one at run time. Internal to solver/models.
 #pragma once

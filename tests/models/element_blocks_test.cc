@@ -133,7 +133,9 @@ TEST(AlignedAxes, UniformBlockIsOneGroupOfCompactBatches) {
     }
     ASSERT_GT(batches, 0);
     EXPECT_LE(static_cast<double>(nodes) / batches, limit);
-    if (layout == &f.layout) EXPECT_EQ(smallest, cluster);
+    if (layout == &f.layout) {
+      EXPECT_EQ(smallest, cluster);
+    }
   }
 }
 

@@ -156,7 +156,9 @@ TEST(BuildSolidTest, RefusesSolidsOverTheCellLimit) {
 }
 
 TEST(SessionRegistryTest, CreateGetCloseWithoutANetwork) {
-  SessionRegistry registry(RegistryOptions{2, BuildLimits{}});
+  RegistryOptions options;
+  options.max_sessions = 2;
+  SessionRegistry registry(options);
   CreateSessionRequest request;
   request.set_builtin_scene("block3");
   request.set_levels_override(0);

@@ -181,7 +181,9 @@ TEST(SolidImplicitTest, LoadEditsCostNoElementPassAndFollowTheReference) {
     for (int k = 0; k < 2; ++k) {
       Solid& s = *solids[k];
       if (i % 3 == 0) {  // a force that turns every third step
-        if (moving[k] >= 0) ASSERT_OK(s.RemoveLoad(moving[k]));
+        if (moving[k] >= 0) {
+          ASSERT_OK(s.RemoveLoad(moving[k]));
+        }
         PointForce pf;
         pf.mutable_position()->set_x(1.5);
         pf.mutable_position()->set_y(0.5);

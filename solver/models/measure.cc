@@ -8,7 +8,6 @@
 #include <Eigen/Geometry>
 
 #include "solver/models/measure_corner.h"
-#include "solver/models/measure_quads.h"
 
 namespace dynsolid::models {
 
@@ -106,9 +105,7 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                                        const fem::ElementSet& elements, const Points& rest,
                                        int parts, QuadPath quads) {
   quad_path_ = QuadPathRuns(quads) ? quads : FastestQuadPath();
-  const QuadKernels kernels = KernelsOf(quad_path_);
-  quads_forward_ = kernels.forward;
-  quads_transpose_ = kernels.transpose;
+  quads_ = KernelsOf(quad_path_);
   std::vector<Edge> edges;
   std::vector<Corner> corners;
   std::vector<Quad> quad_list;
@@ -483,7 +480,7 @@ void DeformationMeasure::ForwardPart(const Points& d, int k, Points& delta) cons
       },
       [&](double* out) {
         if (p.q_owns.empty()) return;
-        quads_forward_(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
+        quads_.forward(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                      static_cast<int64_t>(p.q_owns.size()), pd, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,
@@ -506,7 +503,7 @@ void DeformationMeasure::TransposePart(const Points& d, const Points& y, int k,
       },
       [&](double* out) {
         if (p.q_owns.empty()) return;
-        quads_transpose_(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
+        quads_.transpose(p.qv.data(), quad_rest_.data(), p.q_rest.data(), p.q_owns.data(),
                        static_cast<int64_t>(p.q_owns.size()), pd, py, out);
       },
       [&](int64_t q0, int64_t m, double* ax, double* ay, double* az, double* bx, double* by,

@@ -44,6 +44,7 @@
 
 #include "solver/fem/element_set.h"
 #include "solver/mesh/cell_complex.h"
+#include "solver/models/measure_quads.h"
 
 namespace dynsolid::models {
 
@@ -140,12 +141,9 @@ class DeformationMeasure {
                       QuadTerms quad_terms, CornerTerms corner_terms);
 
   QuadPath quad_path_ = QuadPath::kPerCorner;
-  // The quadrilateral kernels of quad_path_ (measure_quads.h; null for
-  // kPerCorner, which then has no quadrilaterals).
-  void (*quads_forward_)(const int32_t*, const double*, const uint32_t*, const uint8_t*,
-                         int64_t, const double*, double*) = nullptr;
-  void (*quads_transpose_)(const int32_t*, const double*, const uint32_t*, const uint8_t*,
-                           int64_t, const double*, const double*, double*) = nullptr;
+  // The quadrilateral kernels of quad_path_ (null for kPerCorner, which
+  // then has no quadrilaterals).
+  measure_detail::QuadKernels quads_;
   int64_t num_edges_ = 0, num_corners_ = 0, num_quads_ = 0;
   std::vector<uint8_t> owner_;  // node -> part
   // The distinct rest lengths of edges, and the distinct rest corners of

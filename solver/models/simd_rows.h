@@ -21,8 +21,9 @@ namespace dynsolid::models::simd {
 }
 
 // Rows r0..r3 (x, y, z, any) to columns x, y, z over the four rows.
-[[gnu::always_inline]] inline void RowsToColumns(__m256d r0, __m256d r1, __m256d r2, __m256d r3, __m256d& x,
-                          __m256d& y, __m256d& z) {
+[[gnu::always_inline]] inline void RowsToColumns(__m256d r0, __m256d r1, __m256d r2,
+                                                 __m256d r3, __m256d& x, __m256d& y,
+                                                 __m256d& z) {
   const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
   const __m256d t1 = _mm256_unpackhi_pd(r0, r1);  // y0 y1 . .
   const __m256d t2 = _mm256_unpacklo_pd(r2, r3);  // x2 x3 z2 z3
@@ -33,7 +34,8 @@ namespace dynsolid::models::simd {
 }
 
 // Columns x, y, z over four rows to the rows (x_k, y_k, z_k, 0).
-[[gnu::always_inline]] inline void ColumnsToRows(__m256d x, __m256d y, __m256d z, __m256d row[4]) {
+[[gnu::always_inline]] inline void ColumnsToRows(__m256d x, __m256d y, __m256d z,
+                                                 __m256d row[4]) {
   const __m256d zero = _mm256_setzero_pd();
   const __m256d t0 = _mm256_unpacklo_pd(x, y);     // x0 y0 x2 y2
   const __m256d t1 = _mm256_unpackhi_pd(x, y);     // x1 y1 x3 y3

@@ -1,0 +1,339 @@
+// Private to solver/solid: the Solid's internal state (Solid::Impl) and the
+// small helpers its translation units share (solid.cc: build, step, state;
+// solid_loads.cc: loads and constraints; solid_remesh.cc: topology
+// transfer). Nothing outside solver/solid includes it.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
+
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "solver/common/worker_pool.h"
+#include "solver/fem/node_rows.h"
+#include "solver/integrators/backward_euler.h"
+#include "solver/integrators/central_difference.h"
+#include "solver/models/corotational.h"
+#include "solver/models/element_blocks.h"
+#include "solver/fem/shape.h"
+#include "solver/models/internal_force.h"
+#include "solver/scene/scene_loader.h"
+#include "solver/solid/solid.h"
+#include "solver/subdivision/mcj.h"
+
+namespace dynsolid::solid {
+
+using SparseMatrix = subdivision::SparseMatrix;
+using Clock = std::chrono::steady_clock;
+
+// Backward Euler's CG products run in single precision at this tolerance or
+// looser. A float product errs by about 1e-6 relative (element columns and K
+// rounded to float, sums of 192 terms); it only steers the CG: the
+// right-hand side and the residual CG starts from (the folded element pass)
+// are double, and the warm start leaves CG a correction of about 1/200 of
+// the right-hand side, so the product's error reaches the true residual
+// scaled down again (iterative refinement). tests/solid/solid_implicit_test
+// runs it against double products.
+constexpr double kSinglePrecisionCgTolerance = 1e-5;
+
+// std::string_view as Abseil's string_view (Debian's Abseil has its own).
+inline absl::string_view A(std::string_view s) { return absl::string_view(s.data(), s.size()); }
+
+inline double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+inline Eigen::Vector3d V(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+inline bool InShape(const Region& r, const Eigen::Vector3d& x) {
+  switch (r.shape_case()) {
+    case Region::kBox: {
+      const Eigen::Vector3d lo = V(r.box().min()), hi = V(r.box().max());
+      return (x.array() >= lo.array()).all() && (x.array() <= hi.array()).all();
+    }
+    case Region::kSphere:
+      return (x - V(r.sphere().center())).norm() <= r.sphere().radius();
+    default:
+      return false;
+  }
+}
+
+inline bool InRegion(const Region& r, const Eigen::Vector3d& x, int32_t control_cell) {
+  if (InShape(r, x)) return true;
+  for (int32_t c : r.control_cells()) {
+    if (c == control_cell) return true;
+  }
+  return false;
+}
+
+inline models::MaterialPoint ToPoint(const Material& m) {
+  const Material r = scene::ResolvedMaterial(m);
+  return {r.young_modulus(), r.poisson_ratio(), r.density(), r.damping()};
+}
+
+// A material point: an element and its parametric coordinates.
+struct MaterialLocation {
+  int kind = 0;
+  int32_t element = 0;
+  Eigen::Vector3d uvw;
+};
+
+// What depends on the material samples: rebuilt together by Create,
+// PaintMaterial and RestoreState (one path).
+struct MaterialBuild {
+  std::unique_ptr<models::ElementLayout> layout;
+  std::unique_ptr<models::InternalForceModel> model;
+  models::CorotationalModel* corotational = nullptr;
+  SparseMatrix mt, dt;
+  bool has_damping = false;
+  int64_t shared_matrix_bytes = 0, element_bytes = 0;
+};
+
+struct Solid::Impl {
+  scene::Discretization* d = nullptr;
+  // d->node_matrix in the form the per-step products stream (node_rows.h).
+  fem::NodeRows node_rows;
+  SolverSettings settings;
+  std::unique_ptr<WorkerPool> pool;
+  std::unique_ptr<models::ElementLayout> layout;  // the model references *layout
+  std::unique_ptr<models::InternalForceModel> model;
+  SparseMatrix mt, dt;
+  bool has_damping = false;
+  integrators::CentralDifference integrator;
+  integrators::BackwardEuler implicit;
+  bool use_implicit = false;
+  models::CorotationalModel* corotational = nullptr;  // == model when corotational
+  Points x_nodes, kx_nodes;
+  integrators::BackwardEuler::StiffnessOperator stiffness_op;
+  // Backward Euler's folded right-hand side (the default): F - h Kt w =
+  // f_ext(p) - A^T g_R(A (p + h w)) - springs at p + h w (w = v + dv0, the
+  // velocity plus the CG's warm start), one element pass
+  // with the frames of p (Advance). `f` then holds the external
+  // forces f_ext(p) only (point forces, gravity, pressure at p). With
+  // implicit_two_pass (tests: the reference path) `f` holds F as for the
+  // explicit scheme and F - h Kt w takes a Kt product.
+  bool implicit_two_pass = false;
+  integrators::BackwardEuler::ForceAhead force_ahead;
+  const Points* ahead_from = nullptr;  // p of the step in progress
+  Points ahead, g_ahead;               // a = p + h w; A^T g_R(A a)
+  double ahead_energy = 0;             // E_R(a), J
+  double ahead_ms = 0;
+  int64_t element_passes = 0, frame_passes = 0;  // counters for StepStats
+  std::vector<uint8_t> fixed;
+  // Constant external control forces (point forces, gravity): #control x 3.
+  Points f_const;
+  bool has_const_force = false;
+  // Penalty springs on control points.
+  std::vector<int32_t> spring_point;
+  std::vector<double> spring_k;
+  Points rest_control;
+  Points rest_nodes;  // A rest_control: FEM nodes at rest
+  // Traced material points.
+  std::vector<MaterialLocation> traced;
+  double h_sub = 0;
+  int substeps = 1;
+  double omega_max = 0, stable_step = INFINITY;
+  // The fixed set the stable-step estimate was made with: it holds for any
+  // superset (constraints only lower the largest eigenvalue).
+  std::vector<uint8_t> omega_fixed;
+  // Per-step buffers.
+  Points nodes, g, f, p_next, backup_p, backup_prev;
+  double last_strain_energy = 0;
+  const Solid::Surface* surface = nullptr;  // the solid's boundary surface
+  std::pair<uint64_t, uint64_t> fingerprint;
+
+  // ---- Runtime loads and constraints (ids from one counter, ascending).
+  struct PointLoad {
+    int64_t id;
+    PointForce msg;
+    MaterialLocation at;
+  };
+  struct PressureLoad {
+    int64_t id;
+    Pressure msg;
+    std::vector<int32_t> quads;  // selected surface quads
+  };
+  struct FixConstraint {
+    int64_t id;
+    Region region;
+    std::vector<int32_t> points;  // control points, ascending
+  };
+  std::vector<PointLoad> point_loads;
+  std::vector<PressureLoad> pressures;
+  std::vector<FixConstraint> fixes;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  int64_t next_id = 1;
+  std::vector<int32_t> fix_count;  // per control point: active constraints holding it
+  Points hold;                     // rows of fixed points: where they are held
+
+  // ---- Boundary surface (quads of Solid::surface_).
+  SparseMatrix surface_rows;                  // node_matrix rows of the surface vertices
+  std::vector<int32_t> quad_cell;             // level-L cell of each quad
+  std::vector<Eigen::Vector3d> quad_centroid; // rest centroid of the quad's face
+  Points surface_rest;                        // #surface vertices x 3
+  // Pressure: total pascals per quad, the quads with a non-zero one, and the
+  // control forces at p and at the next state (for the ledger's work).
+  std::vector<double> quad_pascals;
+  std::vector<int32_t> pressed;
+  bool has_pressure = false;
+  Points surf_x, surf_f, f_press, f_press_next;
+
+  // Shape values of a kind at (u, v, w).
+  void ShapeAt(const MaterialLocation& m, std::vector<double>& n) const {
+    const int nodes_per = layout->blocks[m.kind].nodes;
+    n.resize(nodes_per);
+    std::vector<double> dn(3 * nodes_per);
+    fem::Shape(static_cast<fem::ElementKind>(m.kind), m.uvw[0], m.uvw[1], m.uvw[2], n.data(),
+               dn.data());
+  }
+
+  // Energy bookkeeping for the stability guard: H = kinetic + strain +
+  // spring energy - work of the external forces never grows for a
+  // stable run (damping only lowers it).
+  struct Ledger {
+    double work = 0;       // J, cumulative external work
+    double h_min = 0;      // lowest H so far
+    double peak = 0;       // highest kinetic + strain + spring energy so far
+    bool started = false;
+  };
+  Ledger ledger;
+  // Re-baseline the ledger at the start of the next step (after a fix,
+  // unfix or paint changed what the energies mean).
+  bool ledger_rebase = false;
+  Points velocity, mass_velocity, f_next;
+  bool forces_valid = false;
+
+  void SetSubsteps(int n, double h) {
+    substeps = n;
+    h_sub = h / n;
+    if (use_implicit) {
+      implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+      if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
+    } else {
+      integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+    }
+  }
+  // Runs the sub-steps of one scene step from (p, p_prev); error when the
+  // state goes non-finite or H grows (p, p_prev are then garbage).
+  absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);
+
+  static std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets(
+      const SparseMatrix& nm, const models::ElementLayout& layout,
+      const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
+      const std::vector<double>& spring_k);
+  std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const {
+    return StiffnessTriplets(d->node_matrix, *layout, *corotational, spring_point, spring_k);
+  }
+  // The same as a 3 #control square sparse matrix (K0 of the implicit
+  // preconditioner) for layout `l` and its model `m`.
+  Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
+                                              const models::CorotationalModel& m) const {
+    const std::vector<Eigen::Triplet<double, int32_t>> t =
+        StiffnessTriplets(d->node_matrix, l, m, spring_point, spring_k);
+    const Eigen::Index dofs = 3 * d->node_matrix.cols();
+    Eigen::SparseMatrix<double> k(dofs, dofs);
+    k.setFromTriplets(t.begin(), t.end());
+    return k;
+  }
+  Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
+
+  absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
+                                          bool snap) const;
+  static void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
+                                      bool has_damping, SparseMatrix& mt, SparseMatrix& dt);
+  double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
+                          const std::vector<uint8_t>& fixed_set) const;
+  void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+  // out = A p (A the node matrix, as node_rows), its rows split over the
+  // pool: each row's sum is taken whole by one thread, so the bits do not
+  // depend on the thread count.
+  void ToNodes(const Points& p, Points& out);
+  // out = A^T g: A's rows in kProjectParts fixed ranges, each range's
+  // product A_k^T g_k into a buffer of its own (ranges taken by whichever
+  // thread is free), then the buffers added in range order: the same bits
+  // whatever the thread count.
+  void FromNodes(const Points& g, Points& out);
+  static constexpr int kProjectParts = 8;
+  std::array<Points, kProjectParts> project_parts;
+  // Folded implicit path: the frames at p and out = f_ext(p) (constant loads
+  // and pressure at p; no internal or spring forces); with `energy` also the
+  // exact strain energy at p (one element pass more).
+  void ImplicitForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure,
+                      bool energy);
+  bool Folded() const { return use_implicit && !implicit_two_pass; }
+  // out = f_ext(p): constant loads and the pressure at p (into `pressure`).
+  void ExternalForces(const Points& p, Points& out, Points& pressure, PhaseTimes& phases);
+  // A load edit (point force, pressure, gravity). The folded implicit path
+  // carries only the external forces in `f`: they are recomputed at the next
+  // step, no element pass (loads_changed; recomputing unchanged loads gives
+  // the same bits, so the flag only saves time and need not be saved). The
+  // other paths recompute all forces.
+  bool loads_changed = false;
+  void LoadsChanged() {
+    if (Folded()) {
+      loads_changed = true;
+    } else {
+      forces_valid = false;
+    }
+  }
+
+  // Material: builds what depends on it from a layout (ResourceExhausted
+  // when the element matrices would not fit), and installs a build.
+  // The model, mass and damping for layout `l`. With `reuse` (a new
+  // material on the same mesh: a paint, a restored state), what the current
+  // build already has is taken over where its inputs are unchanged: element
+  // matrices of groups with the same rest shape and stiffness samples, the
+  // deformation measure, and Mt and Dt when no density or damping sample
+  // changed. Each is what integrating again would give, bit for bit.
+  absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l,
+                                              bool reuse = false) const;
+  // True when every element's density and damping samples in `l` equal the
+  // current layout's.
+  bool SameMassAndDamping(const models::ElementLayout& l) const;
+  bool paint_reuse = true;  // tests turn it off for a from-scratch reference
+  void InstallMaterial(MaterialBuild b);
+  // Backward Euler's CG products in single precision when the tolerance
+  // allows (kSinglePrecisionCgTolerance); after the model or use_implicit
+  // changes.
+  void ConfigureLinearized();
+  bool double_cg = false;  // SetDoublePrecisionCgForTesting
+  int SubstepsFor(double omega) const;
+  // Loads from the lists (in id order), from scratch: f_const (point forces
+  // then gravity) and the per-quad pressure.
+  void RebuildConstantLoads();
+  void RebuildPressure();
+  void PressureForces(const Points& p, Points& out);
+  // Selections of a region at rest.
+  std::vector<int32_t> SelectControlPoints(const Region& r) const;
+  std::vector<int32_t> SelectQuads(const Region& r) const;
+  absl::Status CheckControlCells(const Region& r, std::string_view field) const;
+  double SpringEnergy(const Points& p) const {
+    double e = 0;
+    for (size_t s = 0; s < spring_point.size(); ++s) {
+      e += 0.5 * spring_k[s] * (p.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
+    }
+    return e;
+  }
+  void RebaseLedger(const Points& p, const Points& p_prev) {
+    const Points v = (p - p_prev) / h_sub;
+    const Points mv = mt * v;
+    const double mech = 0.5 * (v.array() * mv.array()).sum() + last_strain_energy + SpringEnergy(p);
+    ledger.work = 0;
+    ledger.h_min = mech;
+    ledger.peak = std::max(ledger.peak, mech);
+    ledger.started = true;
+  }
+};
+
+}  // namespace dynsolid::solid

@@ -1,0 +1,340 @@
+// Loads and constraints of a live solid (solid.h "Runtime edits"): point
+// forces, follower pressures, gravity, drags, fixed regions, and the
+// selections of regions they are built from.
+#include <algorithm>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/solid/solid.h"
+#include "solver/solid/solid_impl.h"
+
+namespace dynsolid::solid {
+
+void Solid::Impl::RebuildConstantLoads() {
+  has_const_force = !point_loads.empty() || gravity.squaredNorm() > 0;
+  if (!has_const_force) {
+    f_const.resize(0, 3);
+    return;
+  }
+  Points fd = Points::Zero(d->node_matrix.rows(), 3);
+  std::vector<double> shape;
+  for (const PointLoad& load : point_loads) {
+    ShapeAt(load.at, shape);
+    const int32_t* ids = layout->blocks[load.at.kind].element_nodes(load.at.element);
+    for (size_t k = 0; k < shape.size(); ++k) {
+      fd.row(ids[k]) += shape[k] * V(load.msg.force()).transpose();
+    }
+  }
+  if (gravity.squaredNorm() > 0) {
+    // Body force mu g: f_i = g int mu N_i dV.
+    fem::NodeMatrixX3 gr;
+    for (int kind = 0; kind < 3; ++kind) {
+      const models::ElementBlock& block = layout->blocks[kind];
+      const fem::KindTable& table = layout->tables[kind];
+      std::vector<Eigen::VectorXd> weights(block.groups.size());
+      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+        const auto& grp = block.groups[gi];
+        weights[gi] = Eigen::VectorXd::Zero(block.nodes);
+        for (int q = 0; q < table.points; ++q) {
+          const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
+          weights[gi] += (layout->materials[grp.material][q].density * std::max(det, 0.0) *
+                          table.weight[q]) *
+                         Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
+        }
+      }
+      for (int32_t e = 0; e < block.size(); ++e) {
+        const int32_t* ids = block.element_nodes(e);
+        for (int k = 0; k < block.nodes; ++k) {
+          fd.row(ids[k]) += weights[block.group[e]][k] * gravity.transpose();
+        }
+      }
+    }
+  }
+  f_const = d->node_matrix.transpose() * fd;
+}
+
+void Solid::Impl::RebuildPressure() {
+  has_pressure = !pressures.empty();
+  quad_pascals.assign(quad_cell.size(), 0.0);
+  for (const PressureLoad& load : pressures) {
+    for (int32_t q : load.quads) quad_pascals[q] += load.msg.pascals();
+  }
+  pressed.clear();
+  for (size_t q = 0; q < quad_pascals.size(); ++q) {
+    if (quad_pascals[q] != 0) pressed.push_back(static_cast<int32_t>(q));
+  }
+  const int64_t nc = rest_control.rows(), ns = surface_rows.rows();
+  if (has_pressure) {
+    surf_x.setZero(ns, 3);
+    surf_f.setZero(ns, 3);
+    f_press.setZero(nc, 3);
+    f_press_next.setZero(nc, 3);
+  }
+}
+
+// out = S^T f_s with f_s the consistent nodal forces of the pressure on the
+// surface quads at the current surface positions x_s = S p (S: the surface
+// rows of A). Each quad is a bilinear patch x(u, v) = sum N_i x_i over its
+// loop (a boundary face of a linear or pyramid element, so the element's own
+// interpolation): f_i = P int N_i (x_u x x_v) du dv, exact with 2 x 2 Gauss
+// points (the integrand has degree 2 in u and in v). x_u x x_v follows the
+// outward loop, so P > 0 pushes outward. The forces sum to P times the
+// quad's vector area; over a closed surface to zero.
+void Solid::Impl::PressureForces(const Points& p, Points& out) {
+  surf_x.noalias() = surface_rows * p;
+  surf_f.setZero();
+  const double g0 = 0.5 - 0.5 / std::sqrt(3.0), g1 = 0.5 + 0.5 / std::sqrt(3.0);
+  const double gp[2] = {g0, g1};
+  const std::vector<std::array<int32_t, 4>>& quads = surface->quads;
+  for (int32_t q : pressed) {
+    const std::array<int32_t, 4>& v = quads[q];
+    const Eigen::Vector3d x0 = surf_x.row(v[0]).transpose(), x1 = surf_x.row(v[1]).transpose(),
+                          x2 = surf_x.row(v[2]).transpose(), x3 = surf_x.row(v[3]).transpose();
+    Eigen::Vector3d fn[4] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                             Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
+    for (double u : gp) {
+      for (double w : gp) {
+        // N0 = (1-u)(1-w), N1 = u(1-w), N2 = u w, N3 = (1-u) w.
+        const Eigen::Vector3d xu = (1 - w) * (x1 - x0) + w * (x2 - x3);
+        const Eigen::Vector3d xw = (1 - u) * (x3 - x0) + u * (x2 - x1);
+        const Eigen::Vector3d n = 0.25 * xu.cross(xw);  // Gauss weights 1/2 x 1/2
+        fn[0] += ((1 - u) * (1 - w)) * n;
+        fn[1] += (u * (1 - w)) * n;
+        fn[2] += (u * w) * n;
+        fn[3] += ((1 - u) * w) * n;
+      }
+    }
+    const double pa = quad_pascals[q];
+    for (int k = 0; k < 4; ++k) surf_f.row(v[k]) += (pa * fn[k]).transpose();
+  }
+  out.noalias() = surface_rows.transpose() * surf_f;
+}
+
+std::vector<int32_t> Solid::Impl::SelectControlPoints(const Region& r) const {
+  const mesh::CellComplex& control = d->control();
+  std::vector<int32_t> out;
+  for (int32_t i = 0; i < rest_control.rows(); ++i) {
+    if (InShape(r, rest_control.row(i).transpose())) out.push_back(i);
+  }
+  for (int32_t c : r.control_cells()) {
+    for (int32_t v : control.cell_vertices(c)) out.push_back(v);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::vector<int32_t> Solid::Impl::SelectQuads(const Region& r) const {
+  std::vector<int32_t> out;
+  const std::vector<int32_t>& cc = d->hierarchy.control_cell;
+  for (size_t q = 0; q < quad_cell.size(); ++q) {
+    const int32_t control_cell = cc.empty() ? quad_cell[q] : cc[quad_cell[q]];
+    if (InRegion(r, quad_centroid[q], control_cell)) out.push_back(static_cast<int32_t>(q));
+  }
+  return out;
+}
+
+absl::Status Solid::Impl::CheckControlCells(const Region& r, std::string_view field) const {
+  const int32_t n = d->control().num_cells();
+  for (int i = 0; i < r.control_cells_size(); ++i) {
+    if (r.control_cells(i) >= n) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          A(field), ".control_cells[", i, "] (", r.control_cells(i),
+          ") must be less than the number of control cells (", n, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+
+void Solid::ApplyFixed() {
+  Impl& im = *impl_;
+  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  report_.fixed_control_points =
+      static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  im.SetSubsteps(im.substeps, h_);
+}
+
+// ---- Loads.
+
+absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidatePointForce(f, "point_force"));
+  absl::StatusOr<MaterialLocation> at =
+      im.Locate(V(f.position()), im.rest_nodes, im.settings.snap_forces_to_quadrature());
+  if (!at.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("point_force.position: ", at.status().message()));
+  }
+  const int64_t id = im.next_id++;
+  im.point_loads.push_back({id, f, *at});
+  im.RebuildConstantLoads();
+  im.LoadsChanged();
+  report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+  return id;
+}
+
+absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidatePressure(p, "pressure"));
+  RETURN_IF_ERROR(im.CheckControlCells(p.region(), "pressure.region"));
+  std::vector<int32_t> quads = im.SelectQuads(p.region());
+  if (quads.empty()) {
+    return absl::InvalidArgumentError(
+        "pressure.region selects no boundary face (no face has its rest centroid in the region "
+        "or its cell in control_cells)");
+  }
+  const int64_t id = im.next_id++;
+  im.pressures.push_back({id, p, std::move(quads)});
+  im.RebuildPressure();
+  im.LoadsChanged();
+  return id;
+}
+
+absl::Status Solid::SetGravity(const Vec3& g) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
+  im.gravity = V(g);
+  im.RebuildConstantLoads();
+  im.LoadsChanged();
+  report_.gravity = im.gravity.squaredNorm() > 0;
+  return absl::OkStatus();
+}
+
+namespace {
+template <typename T>
+std::string IdList(const std::vector<T>& items) {
+  if (items.empty()) return "none";
+  std::string out;
+  for (const T& x : items) absl::StrAppend(&out, out.empty() ? "" : ", ", x.id);
+  return out;
+}
+}  // namespace
+
+absl::Status Solid::RemoveLoad(int64_t id) {
+  Impl& im = *impl_;
+  auto pf = std::find_if(im.point_loads.begin(), im.point_loads.end(),
+                         [id](const Impl::PointLoad& l) { return l.id == id; });
+  if (pf != im.point_loads.end()) {
+    im.point_loads.erase(pf);
+    im.RebuildConstantLoads();
+    im.LoadsChanged();
+    report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+    return absl::OkStatus();
+  }
+  auto pr = std::find_if(im.pressures.begin(), im.pressures.end(),
+                         [id](const Impl::PressureLoad& l) { return l.id == id; });
+  if (pr != im.pressures.end()) {
+    im.pressures.erase(pr);
+    im.RebuildPressure();
+    im.LoadsChanged();
+    return absl::OkStatus();
+  }
+  return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
+                                          IdList(im.point_loads), "; pressures: ",
+                                          IdList(im.pressures), ")"));
+}
+
+std::vector<int64_t> Solid::load_ids() const {
+  std::vector<int64_t> ids;
+  for (const auto& l : impl_->point_loads) ids.push_back(l.id);
+  for (const auto& l : impl_->pressures) ids.push_back(l.id);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+std::vector<int64_t> Solid::constraint_ids() const {
+  std::vector<int64_t> ids;
+  for (const auto& c : impl_->fixes) ids.push_back(c.id);
+  return ids;
+}
+
+Eigen::Vector3d Solid::gravity() const { return impl_->gravity; }
+
+// ---- Constraints.
+
+absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {
+  Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateValues(r, "region"));
+  RETURN_IF_ERROR(scene::ValidateNonEmptyRegion(r, "region"));
+  RETURN_IF_ERROR(im.CheckControlCells(r, "region"));
+  std::vector<int32_t> points = im.SelectControlPoints(r);
+  if (points.empty()) {
+    return absl::InvalidArgumentError(
+        "region selects no control point (no control point's rest position lies in it)");
+  }
+  // Newly held points stay where they are, with zero velocity.
+  for (int32_t i : points) {
+    if (im.fix_count[i]++ == 0) {
+      im.hold.row(i) = p_.row(i);
+      p_prev_.row(i) = p_.row(i);
+    }
+  }
+  const int64_t id = im.next_id++;
+  im.fixes.push_back({id, r, std::move(points)});
+  ApplyFixed();
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return id;
+}
+
+absl::Status Solid::Unfix(int64_t constraint_id) {
+  Impl& im = *impl_;
+  auto it = std::find_if(im.fixes.begin(), im.fixes.end(),
+                         [constraint_id](const Impl::FixConstraint& c) { return c.id == constraint_id; });
+  if (it == im.fixes.end()) {
+    return absl::NotFoundError(absl::StrCat("constraint id ", constraint_id,
+                                            " not found (active fixed regions: ",
+                                            IdList(im.fixes), ")"));
+  }
+  std::vector<int32_t> count = im.fix_count;
+  for (int32_t i : it->points) --count[i];
+  // The stable-step estimate holds while every point it was made with
+  // fixed stays fixed; otherwise estimate again (the live model's frames
+  // are kept).
+  bool reestimate = false;
+  for (size_t i = 0; i < count.size(); ++i) reestimate |= im.omega_fixed[i] && count[i] == 0;
+  double omega = im.omega_max;
+  int substeps = im.substeps;
+  std::vector<uint8_t> new_fixed(count.size());
+  for (size_t i = 0; i < count.size(); ++i) new_fixed[i] = count[i] > 0 ? 1 : 0;
+  if (reestimate) {
+    const models::InternalForceModel::Frames frames = im.model->frames();
+    omega = im.EstimateOmegaMax(*im.model, im.mt, new_fixed);
+    im.model->set_frames(frames);
+    if (!im.use_implicit) {
+      substeps = std::max(im.substeps, im.SubstepsFor(omega));
+      if (substeps > im.settings.max_substeps()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "constraint id ", constraint_id, ": without it the solid needs ", substeps,
+            " explicit sub-steps (stable step ", 2.0 / omega, " s) but solver.max_substeps is ",
+            im.settings.max_substeps()));
+      }
+    }
+  }
+  im.fix_count = std::move(count);
+  im.fixes.erase(it);
+  if (reestimate) {
+    im.omega_max = omega;
+    im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
+    im.omega_fixed = new_fixed;
+    report_.omega_max = im.omega_max;
+    report_.stable_step = im.stable_step;
+    if (substeps != im.substeps) {
+      const double old_h = im.h_sub;
+      im.substeps = substeps;
+      im.h_sub = h_ / substeps;
+      p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
+      report_.substeps = substeps;
+    }
+  }
+  ApplyFixed();
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return absl::OkStatus();
+}
+
+
+}  // namespace dynsolid::solid

@@ -76,6 +76,7 @@ absl::StatusOr<Discretization> Discretize(const Scene& scene, const mesh::MeshIn
   }
   t.local_refine_ms = clock.LapMs();
 
+  d.control_sharp = *tags;
   ASSIGN_OR_RETURN(d.hierarchy, subdivision::Subdivide(std::move(control_mesh), l, *std::move(tags)));
   t.subdivide_ms = clock.LapMs();
   d.elements = fem::ClassifyElements(*d.hierarchy.fine);

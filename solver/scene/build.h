@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "dynsolid/scene.pb.h"
@@ -29,6 +30,8 @@ struct Discretization {
   int32_t input_cells = 0;            // control cells before local refinement
   int32_t locally_refined_cells = 0;  // mesh.refine_cells
   int32_t sharp_control_edges = 0;    // tagged control edges
+  // Per edge of the control mesh (after local refinement): tagged sharp.
+  std::vector<uint8_t> control_sharp;
 
   const mesh::CellComplex& control() const { return *hierarchy.control; }
   const mesh::CellComplex& fine() const { return *hierarchy.fine; }

@@ -24,6 +24,7 @@
 #include "solver/common/status_macros.h"
 #include "solver/io/mesh_readers.h"
 #include "solver/scene/generators.h"
+#include "solver/scene/inline_mesh.h"
 
 namespace dynsolid::scene {
 namespace {
@@ -416,7 +417,7 @@ absl::Status ValidateScene(const Scene& scene) {
   if (m.source_case() == ControlMesh::SOURCE_NOT_SET) {
     return absl::InvalidArgumentError(
         "mesh.source is not set: the scene names no control mesh; set one of mesh.file, "
-        "mesh.block, mesh.beam, mesh.tube, mesh.torus, mesh.voxels");
+        "mesh.block, mesh.beam, mesh.tube, mesh.torus, mesh.voxels, mesh.inline_mesh");
   }
   // Non-finite numbers and unknown enum values anywhere, before the rules
   // below (which then see only finite numbers and known enum values).
@@ -441,6 +442,9 @@ absl::Status ValidateScene(const Scene& scene) {
       break;
     case ControlMesh::kVoxels:
       RETURN_IF_ERROR(WithPrefix(ValidateVoxels(m.voxels()), "mesh."));
+      break;
+    case ControlMesh::kInlineMesh:
+      RETURN_IF_ERROR(WithPrefix(MeshFromInline(m.inline_mesh()).status(), "mesh."));
       break;
   }
   RETURN_IF_ERROR(CheckFinite("mesh.scale", m.scale()));
@@ -640,6 +644,9 @@ absl::StatusOr<mesh::MeshInput> ControlMeshInput(const Scene& scene, std::string
       break;
     case ControlMesh::kVoxels:
       input = GenerateVoxels(m.voxels());
+      break;
+    case ControlMesh::kInlineMesh:
+      input = MeshFromInline(m.inline_mesh());
       break;
     case ControlMesh::SOURCE_NOT_SET:  // rejected by ValidateScene
       return absl::InternalError("mesh.source is not set");

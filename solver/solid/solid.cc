@@ -822,6 +822,12 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
                                                      scene::Discretization discretization,
                                                      int threads) {
+  return CreateWith(scene, std::move(discretization), threads, nullptr);
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
+    const Scene& scene, scene::Discretization discretization, int threads,
+    const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* materials) {
   if (threads < 0 || threads > 8) {
     return absl::InvalidArgumentError(
         absl::StrCat("threads: ", threads, " is outside 0-8 (0: the hardware's)"));
@@ -876,8 +882,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
     }
     return m;
   };
-  auto layout = std::make_unique<models::ElementLayout>(
-      models::BuildElementLayout(s->d_.elements, rest, s->d_.hierarchy.control_cell, sampler));
+  auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
+      s->d_.elements, rest, s->d_.hierarchy.control_cell,
+      materials != nullptr ? *materials : sampler));
   if (layout->inverted_elements > 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         layout->inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "
@@ -1107,6 +1114,8 @@ void Solid::SetAtRest(const Points& p) {
   im.ledger.peak = im.ledger.h_min;
   im.ledger_rebase = false;
 }
+
+int Solid::threads() const { return impl_->pool->size(); }
 
 void Solid::SetPaintReuseForTesting(bool reuse) { impl_->paint_reuse = reuse; }
 
@@ -1537,6 +1546,12 @@ std::string Solid::SaveState() const {
     w.Put<int64_t>(c.id);
     w.Bytes(c.region.SerializeAsString());
   }
+  w.Put<uint64_t>(im.drags.size());
+  for (const auto& d : im.drags) {
+    w.Put<int64_t>(d.id);
+    w.Put<uint8_t>(d.curve);
+    w.Bytes(d.curve ? d.shape.SerializeAsString() : d.drag.SerializeAsString());
+  }
   // Material samples: the distinct arrays and each element's array.
   const models::ElementLayout& l = *im.layout;
   w.Put<uint64_t>(l.materials.size());
@@ -1565,7 +1580,14 @@ std::string Solid::SaveState() const {
   return out;
 }
 
-absl::Status Solid::RestoreState(std::string_view bytes) {
+absl::Status Solid::RestoreState(std::string_view bytes) { return Restore(bytes, nullptr); }
+
+absl::Status Solid::RestoreStateAtClock(std::string_view bytes, double time, int64_t steps) {
+  const std::pair<double, int64_t> clock{time, steps};
+  return Restore(bytes, &clock);
+}
+
+absl::Status Solid::Restore(std::string_view bytes, const std::pair<double, int64_t>* clock) {
   static_assert(sizeof(models::MaterialPoint) == 4 * sizeof(double));
   Impl& im = *impl_;
   const int64_t nc = p_.rows();
@@ -1688,7 +1710,6 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
     }
     pressures.push_back({id, std::move(msg), std::move(quads)});
   }
-  if (r.ok() && saved_pressure != !pressures.empty()) r.Fail("pressure forces without pressures");
   last_id = 0;
   std::vector<Impl::FixConstraint> fixes;
   std::vector<int32_t> fix_count(nc, 0);
@@ -1710,6 +1731,33 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
     }
     for (int32_t i : points) ++fix_count[i];
     fixes.push_back({id, std::move(region), std::move(points)});
+  }
+  last_id = 0;
+  std::vector<Impl::DragLoad> drags;
+  const int64_t n_drags = r.Count("drags", next_id);
+  for (int64_t k = 0; k < n_drags && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("drag id");
+    check_id(id, "drag");
+    const bool curve = r.Get<uint8_t>("drag kind") != 0;
+    const std::string bytes = r.Bytes("drag");
+    if (!r.ok()) break;
+    absl::StatusOr<Impl::DragLoad> load = absl::InvalidArgumentError("bad message");
+    if (curve) {
+      CurveDrag msg;
+      if (msg.ParseFromString(bytes)) load = im.MakeCurve(msg);
+    } else {
+      Drag msg;
+      if (msg.ParseFromString(bytes)) load = im.MakeDrag(msg);
+    }
+    if (!load.ok()) {
+      r.Fail(absl::StrCat("drag ", id, " is invalid for this solid: ", load.status().message()));
+      break;
+    }
+    load->id = id;
+    drags.push_back(*std::move(load));
+  }
+  if (r.ok() && saved_pressure != !(pressures.empty() && drags.empty())) {
+    r.Fail("follower forces without pressures or drags");
   }
   RETURN_IF_ERROR(r.status());
 
@@ -1805,6 +1853,7 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   im.point_loads = std::move(point_loads);
   im.pressures = std::move(pressures);
   im.fixes = std::move(fixes);
+  im.drags = std::move(drags);
   im.fix_count = std::move(fix_count);
   im.next_id = next_id;
   im.gravity = gravity;
@@ -1826,8 +1875,8 @@ absl::Status Solid::RestoreState(std::string_view bytes) {
   im.last_strain_energy = strain;
   im.ledger = ledger;
   im.ledger_rebase = rebase;
-  time_ = time;
-  steps_ = steps;
+  time_ = clock != nullptr ? clock->first : time;
+  steps_ = clock != nullptr ? clock->second : steps;
   rollbacks_ = rollbacks;
   report_.substeps = substeps;
   report_.omega_max = omega;

@@ -18,7 +18,9 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -28,6 +30,10 @@
 #include "dynsolid/scene.pb.h"
 #include "solver/mesh/points.h"
 #include "solver/scene/build.h"
+
+namespace dynsolid::models {
+struct MaterialPoint;
+}  // namespace dynsolid::models
 
 namespace dynsolid::solid {
 
@@ -229,11 +235,32 @@ class Solid {
   absl::StatusOr<int64_t> AddPressure(const Pressure& p);
   // Gravity acceleration (m/s^2), replacing the scene's; zero removes it.
   absl::Status SetGravity(const Vec3& g);
-  // Removes a point force or pressure. NotFound naming the id otherwise.
+  // Removes a point force, pressure, drag or curve. NotFound naming the id
+  // otherwise.
   absl::Status RemoveLoad(int64_t id);
-  // (A per-step external force, e.g. a haptic probe's contact force, fits
-  // next to the pressure: a load evaluated in every force evaluation, its
-  // work counted in the ledger the same way.)
+
+  // A drag (scene.proto Drag): a spring of d.stiffness N/m from the
+  // material point whose rest position is d.material_point to d.target,
+  // evaluated in every force evaluation like the follower pressure (its
+  // work counted in the energy ledger the same way). Returns its load id.
+  // InvalidArgument naming the field: a point outside the solid at rest, a
+  // stiffness <= 0 or above kMaxDragStiffness.
+  absl::StatusOr<int64_t> AddDrag(const Drag& d);
+  // A curve manipulation (scene.proto CurveDrag): its sampled material
+  // points each tied by a drag spring to the target polyline. Returns its
+  // load id. InvalidArgument naming the field (fewer than 2 points, counts
+  // that differ, a sample outside the solid...).
+  absl::StatusOr<int64_t> AddCurveDrag(const CurveDrag& c);
+  // New targets: one for a drag, the target polyline (as many points as the
+  // curve was started with) for a curve. NotFound for an unknown id,
+  // InvalidArgument for a wrong count or a non-finite target.
+  absl::Status MoveDrag(int64_t id, const std::vector<Eigen::Vector3d>& targets);
+  static constexpr double kMaxDragStiffness = 1e9;  // N/m
+  // Current positions of the material points whose rest positions are
+  // `rest` (e.g. a drag's grip); InvalidArgument naming the index of a
+  // point outside the solid at rest.
+  absl::StatusOr<std::vector<Eigen::Vector3d>> MaterialPositions(
+      const std::vector<Eigen::Vector3d>& rest) const;
 
   // Holds the control points whose REST position lies in r (or that belong
   // to r.control_cells) at their CURRENT positions with zero velocity; they
@@ -286,13 +313,65 @@ class Solid {
   // Errors (the state is then unchanged): InvalidArgument for another
   // format, version or scene/discretization (fingerprint mismatch);
   // DataLoss for truncated or corrupted bytes.
-  static constexpr uint32_t kStateFormatVersion = 2;  // 2: backward Euler's warm start
+  static constexpr uint32_t kStateFormatVersion = 3;  // 3: drags and curves
   std::string SaveState() const;
   absl::Status RestoreState(std::string_view bytes);
+  // The same, but the clock reads `time` and `steps` afterwards (undo and
+  // redo: the state goes back, the session's clock goes on). The state may
+  // come from a solid of the same scene created at another time.
+  absl::Status RestoreStateAtClock(std::string_view bytes, double time, int64_t steps);
+
+  // ---- Topology edits (solver/sculpt/ makes the new control mesh; this
+  // carries the state over). The new control mesh's vertices, with, for
+  // each, its CURRENT position and the old control points it comes from
+  // (weights summing to 1: {old, 1} for a survivor), and for each new
+  // control cell the old cell it is or was refined from (-1: new
+  // material).
+  struct TopologyTransfer {
+    Points current;  // #new control points x 3, metres
+    std::vector<std::vector<std::pair<int32_t, double>>> vertex_sources;
+    std::vector<int32_t> cell_source;
+  };
+  struct TransferReport {
+    std::vector<int64_t> dropped_loads, dropped_constraints;
+    std::vector<std::string> dropped_traced;
+    // The scene the new solid stands for: Create(scene, its discretization)
+    // then RestoreState(new solid's SaveState()) gives it back bit for bit
+    // (its runtime items live in the state, its materials too; its traced
+    // points are the ones kept).
+    Scene scene;
+  };
+  // A new solid built from `scene` (the edited scene: its control mesh is
+  // `discretization`'s) in the state this one is in, carried over:
+  // positions from transfer.current (held points where they are held),
+  // velocities interpolated through vertex_sources, materials by the
+  // nearest sample of the same old control cell (base material in new
+  // cells), loads, drags, constraints (re-selected from their regions;
+  // kept ids), gravity, traced points, clock and rollback count; what no
+  // longer has a place is dropped and named in `report`. The new solid's
+  // topology_version is this one's + 1; its energy ledger restarts at the
+  // carried state. Errors: the scene's (InvalidArgument naming the field).
+  absl::StatusOr<std::unique_ptr<Solid>> Remeshed(const Scene& scene,
+                                                  scene::Discretization discretization,
+                                                  const TopologyTransfer& transfer,
+                                                  TransferReport* report) const;
+
+  // ---- Picking: the nearest hit of the ray origin + t direction (t > 0)
+  // on the current boundary surface. InvalidArgument for a non-finite or
+  // zero direction; nullopt for a miss.
+  struct PickHit {
+    int32_t quad = -1;            // surface quad (Surface::quads)
+    int32_t control_cell = -1;    // control cell the quad's cell descends from
+    int32_t control_face = -1;    // boundary face of that cell nearest the material point
+    Eigen::Vector3d point, material_point, normal;  // current, rest, current outward unit
+    double distance = 0;          // metres along the ray (direction normalized)
+  };
+  absl::StatusOr<std::optional<PickHit>> Pick(const Eigen::Vector3d& origin,
+                                              const Eigen::Vector3d& direction) const;
 
   // ---- Boundary surface for watchers (MODEL.md 7): the level-L boundary
   // faces. Topology is fixed until a topology edit; topology_version()
-  // counts those (always 0 in this build: no edit changes topology yet).
+  // counts those (Remeshed gives the new solid this one's + 1).
   struct Surface {
     // Outward quads over the surface vertices. A level-0 triangle is a
     // degenerate quad (a, b, c, c); larger level-0 polygons are fanned into
@@ -302,6 +381,11 @@ class Solid {
   };
   const Surface& BoundarySurface() const { return surface_; }
   int64_t topology_version() const { return topology_version_; }
+  // Sets it (a session that swaps solids, e.g. undoing a topology edit,
+  // keeps counting so that watchers see a new topology).
+  void set_topology_version(int64_t v) { topology_version_ = v; }
+  // The number of threads that step it (Create's `threads`, resolved).
+  int threads() const;
   // #surface vertices by 3 at the current p: only the surface rows of A.
   Points SurfacePositions() const;
   // Per surface vertex:
@@ -332,6 +416,12 @@ class Solid {
   void ReportMaterial();
   void BuildSurface();
   std::pair<uint64_t, uint64_t> Fingerprint(const Scene& scene) const;
+  // `clock`: the time and steps to set instead of the saved ones.
+  absl::Status Restore(std::string_view bytes, const std::pair<double, int64_t>* clock);
+  // Create with materials from `sampler` instead of the scene's (Remeshed).
+  static absl::StatusOr<std::unique_ptr<Solid>> CreateWith(
+      const Scene& scene, scene::Discretization discretization, int threads,
+      const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* sampler);
   // Makes impl_->fixed follow fix_count and re-sets the integrators up.
   void ApplyFixed();
 

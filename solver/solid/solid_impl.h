@@ -169,9 +169,33 @@ struct Solid::Impl {
     Region region;
     std::vector<int32_t> points;  // control points, ascending
   };
+  // A drag, or a curve (several springs under one id): spring s pulls the
+  // material point x_s = rows[s] . p (control-point weights) towards
+  // targets[s] with force stiffness (targets[s] - x_s).
+  struct DragLoad {
+    int64_t id;
+    bool curve = false;
+    Drag drag;        // a drag's message (target kept current)
+    CurveDrag shape;  // a curve's message (targets kept current)
+    double stiffness = 0;
+    std::vector<Eigen::Vector3d> material;  // rest positions of the springs' points
+    std::vector<Eigen::Vector3d> targets;
+    std::vector<std::vector<std::pair<int32_t, double>>> rows;
+  };
   std::vector<PointLoad> point_loads;
   std::vector<PressureLoad> pressures;
   std::vector<FixConstraint> fixes;
+  std::vector<DragLoad> drags;
+  // The control-point weights of the material point at rest position x
+  // (its element's shape values times the node matrix rows), ascending by
+  // control point.
+  absl::StatusOr<std::vector<std::pair<int32_t, double>>> ControlRow(
+      const Eigen::Vector3d& x) const;
+  // A drag or curve from its message, located on this solid (ids unset).
+  absl::StatusOr<DragLoad> MakeDrag(const Drag& d) const;
+  absl::StatusOr<DragLoad> MakeCurve(const CurveDrag& c) const;
+  // out += the drag springs' forces at p.
+  void AddDragForces(const Points& p, Points& out) const;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
   int64_t next_id = 1;
   std::vector<int32_t> fix_count;  // per control point: active constraints holding it

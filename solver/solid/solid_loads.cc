@@ -56,7 +56,9 @@ void Solid::Impl::RebuildConstantLoads() {
 }
 
 void Solid::Impl::RebuildPressure() {
-  has_pressure = !pressures.empty();
+  // The follower loads: pressures and drag springs (forces that depend on
+  // the positions; work counted trapezoidally in the ledger).
+  has_pressure = !pressures.empty() || !drags.empty();
   quad_pascals.assign(quad_cell.size(), 0.0);
   for (const PressureLoad& load : pressures) {
     for (int32_t q : load.quads) quad_pascals[q] += load.msg.pascals();
@@ -83,6 +85,11 @@ void Solid::Impl::RebuildPressure() {
 // outward loop, so P > 0 pushes outward. The forces sum to P times the
 // quad's vector area; over a closed surface to zero.
 void Solid::Impl::PressureForces(const Points& p, Points& out) {
+  if (pressed.empty()) {
+    out.setZero(p.rows(), 3);
+    AddDragForces(p, out);
+    return;
+  }
   surf_x.noalias() = surface_rows * p;
   surf_f.setZero();
   const double g0 = 0.5 - 0.5 / std::sqrt(3.0), g1 = 0.5 + 0.5 / std::sqrt(3.0);
@@ -110,6 +117,7 @@ void Solid::Impl::PressureForces(const Points& p, Points& out) {
     for (int k = 0; k < 4; ++k) surf_f.row(v[k]) += (pa * fn[k]).transpose();
   }
   out.noalias() = surface_rows.transpose() * surf_f;
+  AddDragForces(p, out);
 }
 
 std::vector<int32_t> Solid::Impl::SelectControlPoints(const Region& r) const {
@@ -232,15 +240,25 @@ absl::Status Solid::RemoveLoad(int64_t id) {
     im.LoadsChanged();
     return absl::OkStatus();
   }
+  auto dr = std::find_if(im.drags.begin(), im.drags.end(),
+                         [id](const Impl::DragLoad& l) { return l.id == id; });
+  if (dr != im.drags.end()) {
+    im.drags.erase(dr);
+    im.RebuildPressure();
+    im.LoadsChanged();
+    return absl::OkStatus();
+  }
   return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
                                           IdList(im.point_loads), "; pressures: ",
-                                          IdList(im.pressures), ")"));
+                                          IdList(im.pressures), "; drags: ", IdList(im.drags),
+                                          ")"));
 }
 
 std::vector<int64_t> Solid::load_ids() const {
   std::vector<int64_t> ids;
   for (const auto& l : impl_->point_loads) ids.push_back(l.id);
   for (const auto& l : impl_->pressures) ids.push_back(l.id);
+  for (const auto& l : impl_->drags) ids.push_back(l.id);
   std::sort(ids.begin(), ids.end());
   return ids;
 }

@@ -30,7 +30,23 @@ MATCHER_P2(StatusIs, code, message_matcher,
          ::testing::Value(std::string(s.message()), message_matcher);
 }
 
+// StatusIs(code): the code alone.
+MATCHER_P(StatusIs, code, "has code " + std::string(absl::StatusCodeToString(code))) {
+  const absl::Status& s = GetStatus(arg);
+  *result_listener << "status is " << s.ToString();
+  return s.code() == code;
+}
+
 }  // namespace dynsolid::testing
 
 #define ASSERT_OK(expr) ASSERT_THAT((expr), ::dynsolid::testing::IsOk())
 #define EXPECT_OK(expr) EXPECT_THAT((expr), ::dynsolid::testing::IsOk())
+
+#define DYNSOLID_CONCAT_INNER(a, b) a##b
+#define DYNSOLID_CONCAT(a, b) DYNSOLID_CONCAT_INNER(a, b)
+// ASSERT_OK_AND_ASSIGN(T x, expr): asserts expr (a StatusOr) is OK and moves
+// its value into the declaration.
+#define ASSERT_OK_AND_ASSIGN(decl, expr)                                    \
+  auto DYNSOLID_CONCAT(statusor_, __LINE__) = (expr);                       \
+  ASSERT_OK(DYNSOLID_CONCAT(statusor_, __LINE__));                          \
+  decl = *std::move(DYNSOLID_CONCAT(statusor_, __LINE__))

@@ -1,0 +1,287 @@
+// Carrying a solid's state over a topology edit (solid.h Remeshed): the
+// edit itself is a pure function of the control mesh (solver/sculpt/); this
+// builds the solid of the new mesh and moves positions, velocities,
+// materials, loads, drags, constraints and the clock onto it.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/solid/solid.h"
+#include "solver/solid/solid_impl.h"
+
+namespace dynsolid::solid {
+namespace {
+
+// The material samples of one old control cell, binned on a uniform grid
+// for nearest-sample queries.
+class CellSamples {
+ public:
+  void Add(const Eigen::Vector3d& x, const models::MaterialPoint& m) {
+    xs_.push_back(x);
+    ms_.push_back(m);
+  }
+  void Index() {
+    if (xs_.empty()) return;
+    lo_ = hi_ = xs_[0];
+    for (const Eigen::Vector3d& x : xs_) {
+      lo_ = lo_.cwiseMin(x);
+      hi_ = hi_.cwiseMax(x);
+    }
+    const double extent = std::max((hi_ - lo_).maxCoeff(), 1e-12);
+    n_ = std::clamp(static_cast<int>(std::cbrt(static_cast<double>(xs_.size()))), 1, 64);
+    bin_ = extent / n_ * (1 + 1e-9);
+    bins_.assign(static_cast<size_t>(n_) * n_ * n_, {});
+    for (size_t k = 0; k < xs_.size(); ++k) bins_[Bin(Cell(xs_[k]))].push_back(static_cast<int32_t>(k));
+  }
+  // The material of the sample nearest x (ties: the lowest index).
+  const models::MaterialPoint& Nearest(const Eigen::Vector3d& x) const {
+    const Eigen::Vector3i c = Cell(x);
+    double best = std::numeric_limits<double>::infinity();
+    int32_t best_k = 0;
+    for (int r = 0; r <= n_; ++r) {
+      // Every sample in rings beyond r is at least (r - 1) bins away... stop
+      // once the best is closer than the ring's inner distance.
+      if (best_k >= 0 && std::isfinite(best) && (r - 1) * bin_ > std::sqrt(best)) break;
+      for (int i = c.x() - r; i <= c.x() + r; ++i) {
+        for (int j = c.y() - r; j <= c.y() + r; ++j) {
+          for (int k = c.z() - r; k <= c.z() + r; ++k) {
+            if (std::max({std::abs(i - c.x()), std::abs(j - c.y()), std::abs(k - c.z())}) != r) continue;
+            if (i < 0 || j < 0 || k < 0 || i >= n_ || j >= n_ || k >= n_) continue;
+            for (int32_t s : bins_[Bin({i, j, k})]) {
+              const double d = (xs_[s] - x).squaredNorm();
+              if (d < best || (d == best && s < best_k)) {
+                best = d;
+                best_k = s;
+              }
+            }
+          }
+        }
+      }
+    }
+    return ms_[best_k];
+  }
+  bool empty() const { return xs_.empty(); }
+
+ private:
+  Eigen::Vector3i Cell(const Eigen::Vector3d& x) const {
+    Eigen::Vector3i c;
+    for (int a = 0; a < 3; ++a) {
+      c[a] = std::clamp(static_cast<int>(std::floor((x[a] - lo_[a]) / bin_)), 0, n_ - 1);
+    }
+    return c;
+  }
+  size_t Bin(const Eigen::Vector3i& c) const {
+    return (static_cast<size_t>(c.z()) * n_ + c.y()) * n_ + c.x();
+  }
+  std::vector<Eigen::Vector3d> xs_;
+  std::vector<models::MaterialPoint> ms_;
+  Eigen::Vector3d lo_, hi_;
+  int n_ = 1;
+  double bin_ = 1;
+  std::vector<std::vector<int32_t>> bins_;
+};
+
+// A region's control cells mapped to the new mesh: every new cell whose
+// source is one of them.
+Region RemapRegion(const Region& r, const std::vector<int32_t>& cell_source) {
+  if (r.control_cells_size() == 0) return r;
+  Region out = r;
+  out.clear_control_cells();
+  for (size_t c = 0; c < cell_source.size(); ++c) {
+    for (int32_t old : r.control_cells()) {
+      if (cell_source[c] == old) {
+        out.add_control_cells(static_cast<int32_t>(c));
+        break;
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::Remeshed(const Scene& scene,
+                                                       scene::Discretization discretization,
+                                                       const TopologyTransfer& t,
+                                                       TransferReport* report) const {
+  const Impl& old = *impl_;
+  const mesh::CellComplex& control = discretization.control();
+  const int32_t nv = control.num_vertices();
+  if (t.current.rows() != nv || static_cast<int32_t>(t.vertex_sources.size()) != nv ||
+      static_cast<int32_t>(t.cell_source.size()) != control.num_cells()) {
+    return absl::InternalError(absl::StrCat(
+        "topology transfer: ", t.current.rows(), " positions and ", t.vertex_sources.size(),
+        " vertex sources for ", nv, " control points, ", t.cell_source.size(),
+        " cell sources for ", control.num_cells(), " cells"));
+  }
+  const int32_t old_nc = static_cast<int32_t>(p_.rows());
+  const int32_t old_cells = d_.control().num_cells();
+  for (int32_t v = 0; v < nv; ++v) {
+    if (t.vertex_sources[v].empty()) {
+      return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " has no source"));
+    }
+    for (const auto& [src, w] : t.vertex_sources[v]) {
+      if (src < 0 || src >= old_nc || !std::isfinite(w)) {
+        return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " source ", src));
+      }
+    }
+  }
+  for (int32_t c : t.cell_source) {
+    if (c >= old_cells) return absl::InternalError(absl::StrCat("topology transfer: cell source ", c));
+  }
+
+  // Materials: uniform (one array of base samples) needs no transfer.
+  const models::MaterialPoint base = ToPoint(scene.materials().base());
+  const models::ElementLayout& layout = *old.layout;
+  bool uniform = layout.materials.size() == 1;
+  for (size_t k = 0; uniform && k < layout.materials[0].size(); ++k) {
+    uniform = layout.materials[0][k] == base;
+  }
+  std::vector<CellSamples> by_cell;
+  std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
+  if (!uniform) {
+    by_cell.resize(old_cells);
+    for (int kind = 0; kind < 3; ++kind) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::KindTable& table = layout.tables[kind];
+      for (int32_t e = 0; e < block.size(); ++e) {
+        const int32_t* ids = block.element_nodes(e);
+        const int32_t cell = d_.hierarchy.control_cell[block.cell[e]];
+        const std::vector<models::MaterialPoint>& array =
+            layout.materials[block.groups[block.group[e]].material];
+        for (int q = 0; q < table.points; ++q) {
+          Eigen::Vector3d x = Eigen::Vector3d::Zero();
+          for (int i = 0; i < block.nodes; ++i) x += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
+          by_cell[cell].Add(x, array[q]);
+        }
+      }
+    }
+    for (CellSamples& c : by_cell) c.Index();
+    sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
+      const int32_t src = t.cell_source[cell];
+      if (src < 0 || by_cell[src].empty()) return base;
+      return by_cell[src].Nearest(x);
+    };
+  }
+
+  // The scene the new solid is created from: its own items only (the
+  // runtime ones are carried over below, with their ids).
+  Scene clean = scene;
+  clean.mutable_loads()->clear_point_forces();
+  clean.mutable_loads()->clear_pressures();
+  clean.mutable_loads()->clear_gravity();
+  clean.mutable_constraints()->clear_fixed();
+  clean.clear_traced();
+  clean.mutable_materials()->clear_regions();
+  for (PenaltySpring& s : *clean.mutable_constraints()->mutable_springs()) {
+    *s.mutable_region() = RemapRegion(s.region(), t.cell_source);
+  }
+  ASSIGN_OR_RETURN(std::unique_ptr<Solid> out,
+                   CreateWith(clean, std::move(discretization), old.pool->size(),
+                              uniform ? nullptr : &sampler));
+  Solid& s = *out;
+  Impl& im = *s.impl_;
+  TransferReport local;
+  TransferReport& rep = report != nullptr ? *report : local;
+  rep = TransferReport();
+
+  // Loads, drags and constraints, with their ids.
+  im.next_id = old.next_id;
+  im.gravity = old.gravity;
+  const bool snap = im.settings.snap_forces_to_quadrature();
+  for (const Impl::PointLoad& l : old.point_loads) {
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(l.msg.position()), im.rest_nodes, snap);
+    if (at.ok()) {
+      im.point_loads.push_back({l.id, l.msg, *at});
+    } else {
+      rep.dropped_loads.push_back(l.id);
+    }
+  }
+  for (const Impl::PressureLoad& l : old.pressures) {
+    Pressure msg = l.msg;
+    *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source);
+    std::vector<int32_t> quads = im.SelectQuads(msg.region());
+    if (quads.empty()) {
+      rep.dropped_loads.push_back(l.id);
+    } else {
+      im.pressures.push_back({l.id, std::move(msg), std::move(quads)});
+    }
+  }
+  for (const Impl::DragLoad& l : old.drags) {
+    absl::StatusOr<Impl::DragLoad> moved = l.curve ? im.MakeCurve(l.shape) : im.MakeDrag(l.drag);
+    if (moved.ok()) {
+      moved->id = l.id;
+      im.drags.push_back(*std::move(moved));
+    } else {
+      rep.dropped_loads.push_back(l.id);
+    }
+  }
+  std::sort(rep.dropped_loads.begin(), rep.dropped_loads.end());
+  std::vector<uint8_t> was_fixed(nv, 0);
+  for (int32_t v = 0; v < nv; ++v) {
+    const auto& src = t.vertex_sources[v];
+    was_fixed[v] = src.size() == 1 && old.fixed[src[0].first] != 0;
+  }
+  for (const Impl::FixConstraint& c : old.fixes) {
+    Region region = RemapRegion(c.region, t.cell_source);
+    std::vector<int32_t> points = im.SelectControlPoints(region);
+    if (points.empty()) {
+      rep.dropped_constraints.push_back(c.id);
+      continue;
+    }
+    for (int32_t i : points) ++im.fix_count[i];
+    im.fixes.push_back({c.id, std::move(region), std::move(points)});
+  }
+  for (int i = 0; i < scene.traced_size(); ++i) {
+    absl::StatusOr<MaterialLocation> at =
+        im.Locate(V(scene.traced(i).position()), im.rest_nodes, false);
+    if (at.ok()) {
+      im.traced.push_back(*at);
+      s.traced_names_.push_back(scene.traced(i).name());
+      *clean.add_traced() = scene.traced(i);
+    } else {
+      rep.dropped_traced.push_back(scene.traced(i).name());
+    }
+  }
+  im.fingerprint = s.Fingerprint(clean);
+  rep.scene = std::move(clean);
+
+  // Positions and velocities.
+  s.p_ = t.current;
+  im.hold = t.current;
+  for (int32_t v = 0; v < nv; ++v) {
+    if (was_fixed[v]) im.hold.row(v) = old.hold.row(t.vertex_sources[v][0].first);
+    if (im.fix_count[v] > 0) s.p_.row(v) = im.hold.row(v);
+  }
+  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  im.SetSubsteps(im.substeps, s.h_);
+  s.p_prev_ = s.p_;
+  for (int32_t v = 0; v < nv; ++v) {
+    if (im.fixed[v]) continue;
+    Eigen::RowVector3d vel = Eigen::RowVector3d::Zero();
+    for (const auto& [src, w] : t.vertex_sources[v]) {
+      vel += w * (p_.row(src) - p_prev_.row(src)) / old.h_sub;
+    }
+    s.p_prev_.row(v) = s.p_.row(v) - im.h_sub * vel;
+  }
+  im.RebuildConstantLoads();
+  im.RebuildPressure();
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  s.time_ = time_;
+  s.steps_ = steps_;
+  s.rollbacks_ = rollbacks_;
+  s.topology_version_ = topology_version_ + 1;
+  s.report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+  s.report_.gravity = im.gravity.squaredNorm() > 0;
+  s.report_.fixed_control_points =
+      static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  return out;
+}
+
+}  // namespace dynsolid::solid

@@ -37,6 +37,7 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
@@ -77,6 +78,8 @@ ABSL_FLAG(int, break_every, 0,
           "run, testing: drop the command stream after every N-th command (0: never) to "
           "exercise reconnect and resend");
 ABSL_FLAG(bool, verbose, false, "run: print each script line and every reconnect on stderr");
+ABSL_FLAG(std::string, origin, "", "pick: the ray's origin X,Y,Z (metres)");
+ABSL_FLAG(std::string, direction, "", "pick: the ray's direction X,Y,Z");
 ABSL_FLAG(double, reconnect_seconds, 30,
           "run: give up when no stream has worked for this long");
 
@@ -93,6 +96,8 @@ const char kUsage[] =
     "  list\n"
     "  close --id ID --token TOKEN\n"
     "  stats --id ID --token TOKEN\n"
+    "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
+    "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
     "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
     "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
     "      [--json FILE] [--start_paused] [--levels L] [--noclose] [--keep_going]\n"
@@ -225,6 +230,39 @@ class Client {
     dynsolid::SessionStats reply;
     auto context = NewContext();
     return Report(stub_->GetStats(context.get(), ref, &reply), reply);
+  }
+
+  int Mesh() {
+    dynsolid::InspectRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    request.set_control_mesh(true);
+    dynsolid::InspectReply reply;
+    auto context = NewContext();
+    const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
+    return Report(status, reply.control_mesh());
+  }
+
+  int Pick() {
+    dynsolid::PickRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    for (const auto& [flag, out] :
+         {std::pair{"--origin", request.mutable_origin()},
+          std::pair{"--direction", request.mutable_direction()}}) {
+      const std::string text =
+          absl::GetFlag(std::string(flag) == "--origin" ? FLAGS_origin : FLAGS_direction);
+      std::vector<std::string> parts = absl::StrSplit(text, ',');
+      double v[3];
+      if (parts.size() != 3 || !absl::SimpleAtod(parts[0], &v[0]) ||
+          !absl::SimpleAtod(parts[1], &v[1]) || !absl::SimpleAtod(parts[2], &v[2])) {
+        return UsageError(absl::StrCat(flag, " needs X,Y,Z, got \"", text, "\""));
+      }
+      out->set_x(v[0]);
+      out->set_y(v[1]);
+      out->set_z(v[2]);
+    }
+    dynsolid::PickReply reply;
+    auto context = NewContext();
+    return Report(stub_->Pick(context.get(), request, &reply), reply);
   }
 
   int Run(const dynsolid::client::Script& script) {
@@ -379,7 +417,7 @@ int main(int argc, char** argv) {
   }
   const std::vector<char*> args = absl::ParseCommandLine(argc, argv);
   if (args.size() != 2) {
-    return UsageError("expected one command: create, get, list, close, stats, run or check");
+    return UsageError("expected one command: create, get, list, close, stats, mesh, pick, run or check");
   }
   const std::string command = args[1];
   if (command == "check") {
@@ -395,6 +433,8 @@ int main(int argc, char** argv) {
   if (command == "list") return client.List();
   if (command == "close") return client.Close();
   if (command == "stats") return client.Stats();
+  if (command == "mesh") return client.Mesh();
+  if (command == "pick") return client.Pick();
   if (command == "run") {
     dynsolid::client::Script script;
     if (int e = LoadScript(&script); e != 0) return e;

@@ -7,6 +7,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
@@ -18,6 +19,8 @@ namespace {
 constexpr int kMaxErrors = 20;
 constexpr int64_t kMaxStepCount = 1'000'000;
 constexpr double kMaxSleepSeconds = 3600;
+// Spring stiffness of a drag or curve when the script gives no k=, N/m.
+constexpr double kDefaultDragStiffness = 2e4;
 
 // What a verb accepts.
 struct VerbSpec {
@@ -41,7 +44,20 @@ const std::vector<VerbSpec>& Verbs() {
       {"remove", {"load"}, "load"},
       {"fix", Cat(kRegionKeys, {"name"}), nullptr},
       {"unfix", {"constraint"}, "constraint"},
-      {"paint", Cat(kRegionKeys, {"E", "nu", "density", "damping", "strength"}), nullptr},
+      {"paint", Cat(kRegionKeys, {"E", "nu", "density", "damping", "strength", "falloff"}),
+       nullptr},
+      {"drag", {"at", "to", "k", "name"}, nullptr},
+      {"curve", {"along", "to", "k", "samples", "name"}, nullptr},
+      {"move", {"load", "to"}, "load"},
+      {"release", {"load"}, "load"},
+      {"delete", {"cells", "near"}, "cells"},
+      {"extrude", {"faces", "near", "d", "layers"}, "faces"},
+      {"merge", {"faces", "near"}, "faces"},
+      {"subdivide", {"cells", "near"}, "cells"},
+      {"sharp", {"edges"}, "edges"},
+      {"smooth", {"edges"}, "edges"},
+      {"undo", {}, nullptr},
+      {"redo", {}, nullptr},
       {"pause", {}, nullptr},
       {"resume", {}, nullptr},
       {"step", {"count"}, "count"},
@@ -143,6 +159,52 @@ class LineParser {
     out->set_x(v[at]);
     out->set_y(v[at + 1]);
     out->set_z(v[at + 2]);
+  }
+
+  // Comma-separated integers >= 0 ("1,2,5"); at least one.
+  std::optional<std::vector<int32_t>> Indices(const std::string& key) {
+    if (!ok()) return std::nullopt;
+    std::vector<int32_t> out;
+    for (absl::string_view part : absl::StrSplit(args_.at(key), ',')) {
+      int32_t i = 0;
+      if (part.empty() || !absl::SimpleAtoi(part, &i) || i < 0) {
+        Fail(absl::StrCat("bad index \"", part, "\" in \"", Token(key), "\" (integers >= 0)"));
+        return std::nullopt;
+      }
+      out.push_back(i);
+    }
+    return out;
+  }
+  // A polyline "X,Y,Z/X,Y,Z/..." (at least 2 points).
+  std::optional<std::vector<std::vector<double>>> Polyline(const std::string& key) {
+    return Points(key, 2);
+  }
+  // Points "X,Y,Z/X,Y,Z/..." (at least `min`).
+  std::optional<std::vector<std::vector<double>>> Points(const std::string& key, size_t min = 1) {
+    if (!ok()) return std::nullopt;
+    std::vector<std::vector<double>> out;
+    const std::string all = args_.at(key);
+    for (absl::string_view point : absl::StrSplit(all, '/')) {
+      std::vector<double> xyz;
+      for (absl::string_view part : absl::StrSplit(point, ',')) {
+        double v = 0;
+        if (part.empty() || !absl::SimpleAtod(part, &v) || !std::isfinite(v)) {
+          Fail(absl::StrCat("bad number \"", part, "\" in \"", Token(key), "\""));
+          return std::nullopt;
+        }
+        xyz.push_back(v);
+      }
+      if (xyz.size() != 3) {
+        Fail(absl::StrCat("\"", Token(key), "\": each point needs 3 numbers (X,Y,Z/X,Y,Z/...)"));
+        return std::nullopt;
+      }
+      out.push_back(std::move(xyz));
+    }
+    if (out.size() < min) {
+      Fail(absl::StrCat("\"", Token(key), "\": needs at least ", min, " points"));
+      return std::nullopt;
+    }
+    return out;
   }
 
   // box= / sphere= / cells= into `region`; `required`: one must be given.
@@ -368,6 +430,145 @@ std::string ParseLine(const std::vector<std::string>& words,
         paint->set_strength(*v);
       }
     }
+    if (p.ok() && p.Has("falloff")) {
+      if (auto v = p.Number("falloff")) {
+        if (*v < 0 || *v > 1) p.Fail(absl::StrCat("\"", p.Token("falloff"), "\" must be in [0, 1]"));
+        paint->set_falloff(*v);
+      }
+    }
+  } else if (verb == "drag") {
+    p.Require("at", "X,Y,Z");
+    p.Require("to", "X,Y,Z");
+    Drag* d = c.mutable_drag();
+    if (auto v = p.Numbers("at", 3)) LineParser::SetVec(d->mutable_material_point(), *v);
+    if (auto v = p.Numbers("to", 3)) LineParser::SetVec(d->mutable_target(), *v);
+    d->set_stiffness(kDefaultDragStiffness);
+    if (p.ok() && p.Has("k")) {
+      if (auto v = p.Number("k")) {
+        if (*v <= 0) p.Fail(absl::StrCat("\"", p.Token("k"), "\" must be > 0 N/m"));
+        d->set_stiffness(*v);
+      }
+    }
+    bind_name(true);
+  } else if (verb == "curve") {
+    p.Require("along", "X,Y,Z/X,Y,Z/...");
+    p.Require("to", "X,Y,Z/X,Y,Z/...");
+    CurveDrag* cd = c.mutable_curve();
+    auto along = p.Polyline("along");
+    auto to = p.Polyline("to");
+    if (along && to && along->size() != to->size()) {
+      p.Fail(absl::StrCat("\"", p.Token("to"), "\" has ", to->size(), " points, \"along=\" has ",
+                          along->size()));
+    }
+    if (p.ok()) {
+      for (const auto& v : *along) LineParser::SetVec(cd->add_material_points(), v);
+      for (const auto& v : *to) LineParser::SetVec(cd->add_targets(), v);
+    }
+    cd->set_stiffness(kDefaultDragStiffness);
+    if (p.ok() && p.Has("k")) {
+      if (auto v = p.Number("k")) {
+        if (*v <= 0) p.Fail(absl::StrCat("\"", p.Token("k"), "\" must be > 0 N/m"));
+        cd->set_stiffness(*v);
+      }
+    }
+    if (p.ok() && p.Has("samples")) {
+      if (auto n = p.Integer("samples", 2, 256)) cd->set_samples(static_cast<int32_t>(*n));
+    }
+    bind_name(true);
+  } else if (verb == "move") {
+    int64_t id = 0;
+    reference("load", true, &id);
+    p.Require("to", "X,Y,Z or X,Y,Z/X,Y,Z/...");
+    MoveDrag* m = c.mutable_move_drag();
+    m->set_load_id(id);
+    if (p.ok()) {
+      if (absl::StrContains(p.Value("to"), '/')) {
+        if (auto line = p.Polyline("to")) {
+          for (const auto& v : *line) LineParser::SetVec(m->add_targets(), v);
+        }
+      } else if (auto v = p.Numbers("to", 3)) {
+        LineParser::SetVec(m->mutable_target(), *v);
+      }
+    }
+  } else if (verb == "release") {
+    int64_t id = 0;
+    reference("load", true, &id);
+    c.mutable_remove_load()->set_load_id(id);
+  } else if (verb == "delete" || verb == "subdivide") {
+    if (p.ok() && !p.Has("cells") && !p.Has("near")) p.Fail("needs cells=I,J,... or near=X,Y,Z/...");
+    auto* cells = verb == "delete" ? c.mutable_edit()->mutable_delete_cells()->mutable_cells()
+                                   : c.mutable_edit()->mutable_subdivide_cells()->mutable_cells();
+    auto* near = verb == "delete" ? c.mutable_edit()->mutable_delete_cells()->mutable_near()
+                                  : c.mutable_edit()->mutable_subdivide_cells()->mutable_near();
+    if (p.ok() && p.Has("cells")) {
+      if (auto v = p.Indices("cells")) cells->Add(v->begin(), v->end());
+    }
+    if (p.ok() && p.Has("near")) {
+      if (auto v = p.Points("near")) {
+        for (const auto& x : *v) LineParser::SetVec(near->Add(), x);
+      }
+    }
+  } else if (verb == "extrude") {
+    if (p.ok() && !p.Has("faces") && !p.Has("near")) p.Fail("needs faces=I,J,... or near=X,Y,Z/...");
+    p.Require("d", "METRES");
+    ExtrudeFaces* x = c.mutable_edit()->mutable_extrude_faces();
+    if (p.ok() && p.Has("faces")) {
+      if (auto v = p.Indices("faces")) x->mutable_faces()->Add(v->begin(), v->end());
+    }
+    if (p.ok() && p.Has("near")) {
+      if (auto v = p.Points("near")) {
+        for (const auto& y : *v) LineParser::SetVec(x->add_near(), y);
+      }
+    }
+    if (auto v = p.Number("d")) {
+      if (*v <= 0) p.Fail(absl::StrCat("\"", p.Token("d"), "\" must be > 0 metres"));
+      x->set_distance(*v);
+    }
+    x->set_layers(1);
+    if (p.ok() && p.Has("layers")) {
+      if (auto n = p.Integer("layers", 1, 16)) x->set_layers(static_cast<int32_t>(*n));
+    }
+  } else if (verb == "merge" && p.Has("near")) {
+    if (auto v = p.Points("near")) {
+      if (v->size() != 2) {
+        p.Fail(absl::StrCat("\"", p.Token("near"), "\" needs two points, got ", v->size()));
+      } else {
+        for (const auto& x : *v) LineParser::SetVec(c.mutable_edit()->mutable_merge_faces()->add_near(), x);
+      }
+    }
+  } else if (verb == "merge") {
+    p.Require("faces", "A,B");
+    if (auto v = p.Indices("faces")) {
+      if (v->size() != 2) {
+        p.Fail(absl::StrCat("\"", p.Token("faces"), "\" needs two faces, got ", v->size()));
+      } else {
+        c.mutable_edit()->mutable_merge_faces()->set_face_a((*v)[0]);
+        c.mutable_edit()->mutable_merge_faces()->set_face_b((*v)[1]);
+      }
+    }
+  } else if (verb == "sharp" || verb == "smooth") {
+    p.Require("edges", "V0-V1,V2-V3,...");
+    SharpEdges* e = c.mutable_edit()->mutable_sharp_edges();
+    e->set_sharp(verb == "sharp");
+    if (p.ok()) {
+      for (absl::string_view pair : absl::StrSplit(p.Value("edges"), ',')) {
+        std::vector<absl::string_view> ends = absl::StrSplit(pair, '-');
+        int32_t a = 0, b = 0;
+        if (ends.size() != 2 || !absl::SimpleAtoi(ends[0], &a) || !absl::SimpleAtoi(ends[1], &b) ||
+            a < 0 || b < 0) {
+          p.Fail(absl::StrCat("bad edge \"", pair, "\" in \"", p.Token("edges"),
+                              "\" (control vertex pairs V0-V1)"));
+          break;
+        }
+        EdgeRef* r = e->add_edges();
+        r->set_v0(a);
+        r->set_v1(b);
+      }
+    }
+  } else if (verb == "undo") {
+    c.mutable_undo();
+  } else if (verb == "redo") {
+    c.mutable_redo();
   } else if (verb == "pause") {
     c.mutable_pause();
   } else if (verb == "resume") {

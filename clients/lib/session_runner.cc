@@ -147,10 +147,12 @@ class Run {
             return absl::FailedPreconditionError(
                 absl::StrCat(where, ": \"", line.ref, "\" (line ", it->second.line,
                              ") was rejected, so there is nothing to ",
-                             line.verb == "remove" ? "remove" : "unfix"));
+                             line.verb));
           }
           if (command.has_remove_load()) {
             command.mutable_remove_load()->set_load_id(reply->load_id());
+          } else if (command.has_move_drag()) {
+            command.mutable_move_drag()->set_load_id(reply->load_id());
           } else {
             command.mutable_unfix()->set_constraint_id(reply->constraint_id());
           }

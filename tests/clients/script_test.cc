@@ -119,8 +119,13 @@ TEST(ScriptTest, EveryVerbBuildsItsCommand) {
 
   // Every command kind of service.proto is reachable from the language.
   std::set<std::string> kinds;
-  for (const ScriptLine& line : l) {
-    if (line.kind == ScriptLine::Kind::kCommand) kinds.insert(CommandKindName(line.command));
+  const Script sculpt = Parse(
+      "drag at=1,1,2 to=1,1,3 name=g\nmove g to=1,1,2\ncurve along=0,0,0/1,1,1 to=0,0,0/1,1,2\n"
+      "extrude near=1,1,3 d=1\nundo\nredo\n");
+  for (const Script* script : {&s, &sculpt}) {
+    for (const ScriptLine& line : script->lines) {
+      if (line.kind == ScriptLine::Kind::kCommand) kinds.insert(CommandKindName(line.command));
+    }
   }
   for (int i = 0; i < Command::descriptor()->field_count(); ++i) {
     EXPECT_EQ(kinds.count(Command::descriptor()->field(i)->name()), 1u)
@@ -131,7 +136,8 @@ TEST(ScriptTest, EveryVerbBuildsItsCommand) {
 TEST(ScriptTest, ErrorsNameFileLineVerbAndToken) {
   EXPECT_EQ(Error("forse at=1,2,3 f=0,0,1\n"),
             "s.txt:1: unknown command \"forse\" (commands: force, pressure, gravity, remove, fix, "
-            "unfix, paint, pause, resume, step, save, wait, wait_until, sleep, snapshot)");
+            "unfix, paint, drag, curve, move, release, delete, extrude, merge, subdivide, sharp, "
+            "smooth, undo, redo, pause, resume, step, save, wait, wait_until, sleep, snapshot)");
   EXPECT_EQ(Error("\n\nforce at=1,2 f=0,0,1\n"),
             "s.txt:3: force: \"at=1,2\" needs 3 numbers, got 2");
   EXPECT_EQ(Error("force at=1,2,3x f=0,0,1\n"),
@@ -215,7 +221,8 @@ TEST(ScriptTest, EveryBadLineIsReportedAndGoodLinesDoNotHideThem) {
   EXPECT_EQ(e,
             "s.txt:2: step: \"x\" must be an integer in [1, 1000000]\n"
             "s.txt:4: unknown command \"foo\" (commands: force, pressure, gravity, remove, fix, "
-            "unfix, paint, pause, resume, step, save, wait, wait_until, sleep, snapshot)\n"
+            "unfix, paint, drag, curve, move, release, delete, extrude, merge, subdivide, sharp, "
+            "smooth, undo, redo, pause, resume, step, save, wait, wait_until, sleep, snapshot)\n"
             "s.txt:6: sleep: missing seconds=SECONDS");
   EXPECT_EQ(Error("wait_until\n"), "s.txt:1: wait_until: missing step=N");
   // At most 20 are listed.
@@ -234,6 +241,75 @@ TEST(ScriptTest, EmptyAndCommentOnlyScriptsParseToNothing) {
   const Script s = Parse("step 3\r\npause\r\n");
   ASSERT_EQ(s.lines.size(), 2u);
   EXPECT_EQ(s.lines[0].command.step().count(), 3);
+}
+
+}  // namespace
+}  // namespace dynsolid::client
+
+namespace dynsolid::client {
+namespace {
+
+TEST(ScriptTest, SculptingVerbsBuildTheirCommands) {
+  const Script s = Parse(
+      "drag at=1,1,2 to=1.5,1,2.5 k=5e3 name=grab\n"
+      "move grab to=2,1,2.5\n"
+      "release grab\n"
+      "curve along=0,1,2/3,1,2 to=0,1,2/3,1,2.5 samples=8 name=bend\n"
+      "move bend to=0,1,2/3,1,3\n"
+      "extrude near=1.5,1.5,3 d=0.5 layers=2\n"
+      "extrude faces=3,4 d=0.25\n"
+      "delete cells=0\n"
+      "delete near=0.5,0.5,0.5/2.5,2.5,2.5\n"
+      "subdivide cells=13\n"
+      "merge near=0,1,1/3,1,1\n"
+      "merge faces=1,7\n"
+      "sharp edges=0-1,1-5\n"
+      "smooth edges=0-1\n"
+      "paint sphere=1,1,1,0.5 density=3000 falloff=0.5\n"
+      "undo\n"
+      "redo\n");
+  ASSERT_EQ(s.lines.size(), 17u);
+  const auto& l = s.lines;
+  EXPECT_EQ(l[0].command.drag().stiffness(), 5e3);
+  EXPECT_EQ(l[0].command.drag().target().z(), 2.5);
+  EXPECT_EQ(l[0].name, "grab");
+  EXPECT_EQ(l[1].ref, "grab");
+  EXPECT_EQ(l[1].command.move_drag().target().x(), 2);
+  EXPECT_EQ(l[2].ref, "grab");
+  EXPECT_TRUE(l[2].command.has_remove_load());
+  EXPECT_EQ(l[3].command.curve().material_points_size(), 2);
+  EXPECT_EQ(l[3].command.curve().targets(1).z(), 2.5);
+  EXPECT_EQ(l[3].command.curve().samples(), 8);
+  EXPECT_EQ(l[4].command.move_drag().targets_size(), 2);
+  const ExtrudeFaces& x = l[5].command.edit().extrude_faces();
+  EXPECT_EQ(x.near_size(), 1);
+  EXPECT_EQ(x.distance(), 0.5);
+  EXPECT_EQ(x.layers(), 2);
+  EXPECT_THAT(l[6].command.edit().extrude_faces().faces(), ::testing::ElementsAre(3, 4));
+  EXPECT_EQ(l[6].command.edit().extrude_faces().layers(), 1);
+  EXPECT_THAT(l[7].command.edit().delete_cells().cells(), ::testing::ElementsAre(0));
+  EXPECT_EQ(l[8].command.edit().delete_cells().near_size(), 2);
+  EXPECT_THAT(l[9].command.edit().subdivide_cells().cells(), ::testing::ElementsAre(13));
+  EXPECT_EQ(l[10].command.edit().merge_faces().near_size(), 2);
+  EXPECT_EQ(l[11].command.edit().merge_faces().face_b(), 7);
+  EXPECT_EQ(l[12].command.edit().sharp_edges().edges_size(), 2);
+  EXPECT_TRUE(l[12].command.edit().sharp_edges().sharp());
+  EXPECT_FALSE(l[13].command.edit().sharp_edges().sharp());
+  EXPECT_EQ(l[14].command.paint_material().falloff(), 0.5);
+  EXPECT_TRUE(l[15].command.has_undo());
+  EXPECT_TRUE(l[16].command.has_redo());
+}
+
+TEST(ScriptTest, SculptingMistakesAreNamed) {
+  EXPECT_THAT(Error("extrude d=0.5\n"), HasSubstr("s.txt:1: extrude: needs faces=I,J,... or near="));
+  EXPECT_THAT(Error("extrude faces=1 d=-1\n"), HasSubstr("\"d=-1\" must be > 0 metres"));
+  EXPECT_THAT(Error("merge faces=1\n"), HasSubstr("needs two faces, got 1"));
+  EXPECT_THAT(Error("sharp edges=1-x\n"), HasSubstr("bad edge \"1-x\""));
+  EXPECT_THAT(Error("curve along=0,0,0/1,1,1 to=0,0,0\n"), HasSubstr("needs at least 2 points"));
+  EXPECT_THAT(Error("drag at=1,1,1 to=2,2,2 k=0\n"), HasSubstr("\"k=0\" must be > 0 N/m"));
+  EXPECT_THAT(Error("move nothing to=1,1,1\n"), HasSubstr("unknown load \"nothing\""));
+  EXPECT_THAT(Error("delete cells=-1\n"), HasSubstr("bad index \"-1\""));
+  EXPECT_THAT(Error("paint sphere=1,1,1,1 E=1 falloff=2\n"), HasSubstr("\"falloff=2\" must be in [0, 1]"));
 }
 
 }  // namespace

@@ -353,6 +353,10 @@ absl::Status ValidateMaterialPaint(const MaterialPaint& paint, std::string_view 
     return absl::InvalidArgumentError(
         absl::StrCat(A(field), ".strength must be in (0, 1], got ", paint.strength()));
   }
+  if (!(paint.falloff() >= 0 && paint.falloff() <= 1)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        A(field), ".falloff must be in [0, 1] (0: the default 0.25), got ", paint.falloff()));
+  }
   return absl::OkStatus();
 }
 

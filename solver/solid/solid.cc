@@ -249,13 +249,14 @@ double PaintWeight(const MaterialPaint& paint, const Eigen::Vector3d& x, int32_t
     if (c == cell) w = paint.strength();
   }
   double depth = -1, band = 0;
+  const double falloff = paint.falloff() > 0 ? paint.falloff() : 0.25;
   if (r.shape_case() == Region::kSphere) {
     depth = r.sphere().radius() - (x - V(r.sphere().center())).norm();
-    band = 0.25 * r.sphere().radius();
+    band = falloff * r.sphere().radius();
   } else if (r.shape_case() == Region::kBox) {
     const Eigen::Vector3d lo = V(r.box().min()), hi = V(r.box().max());
     depth = std::min((x - lo).minCoeff(), (hi - x).minCoeff());
-    band = 0.25 * 0.5 * (hi - lo).minCoeff();
+    band = falloff * 0.5 * (hi - lo).minCoeff();
   }
   if (depth >= 0) {
     const double s = band > 0 ? Smoothstep(depth / band) : 1.0;

@@ -173,3 +173,40 @@ TEST(SolidDragTest, SavedDragsRestoreAndContinueBitForBit) {
 
 }  // namespace
 }  // namespace dynsolid::solid
+
+namespace dynsolid::solid {
+namespace {
+
+// The brush's falloff (MaterialPaint.falloff): a hard brush reaches the
+// target deeper inside its ball than a soft one.
+TEST(SolidBrushTest, AHardBrushPaintsMoreOfItsBallThanASoftOne) {
+  const std::string paint =
+      "region { sphere { center { x: 1 y: 1 z: 2 } radius: 0.9 } } material { young_modulus: "
+      "1e6 } strength: 1 falloff: ";
+  auto stiffness_at_top = [&](const std::string& falloff) {
+    auto s = Make(kStandingBlock);
+    EXPECT_OK(s->PaintMaterial(Parse<MaterialPaint>(paint + falloff)));
+    const Points x = s->SurfacePositions();
+    const Solid::SurfaceFields f = s->ComputeSurfaceFields();
+    int best = 0;
+    for (int v = 1; v < x.rows(); ++v) {
+      if ((x.row(v) - Eigen::RowVector3d(1, 1, 2)).norm() <
+          (x.row(best) - Eigen::RowVector3d(1, 1, 2)).norm()) {
+        best = v;
+      }
+    }
+    return f.stiffness[best];
+  };
+  const double hard = stiffness_at_top("0.05"), soft = stiffness_at_top("1");
+  EXPECT_GT(hard, 0.9e6);
+  EXPECT_LT(soft, 0.9 * hard);
+  EXPECT_GT(soft, 1e4);
+  auto s = Make(kStandingBlock);
+  const std::string before = s->SaveState();
+  EXPECT_THAT(s->PaintMaterial(Parse<MaterialPaint>(paint + "2")),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("paint.falloff must be in [0, 1]")));
+  EXPECT_EQ(s->SaveState(), before);
+}
+
+}  // namespace
+}  // namespace dynsolid::solid

@@ -18,6 +18,32 @@ std::string PointString(const Points& p, int32_t v) {
   return absl::StrCat("(", p(v, 0), ", ", p(v, 1), ", ", p(v, 2), ")");
 }
 
+// New cells (cell_source -1) must also have positive volume in the current
+// configuration: new material is added where the deformed solid is, and an
+// inverted element there would break the next step. (Old and refined cells
+// are the simulation's business.) Same tolerance as CellComplex::FromInput.
+absl::Status CheckNewCellsCurrent(const mesh::CellComplex& built, const EditResult& result) {
+  mesh::CellComplex deformed = built;
+  deformed.set_positions(result.current);
+  for (int32_t c = 0; c < deformed.num_cells(); ++c) {
+    if (result.cell_source[c] >= 0) continue;
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+    for (int32_t v : deformed.cell_vertices(c)) {
+      lo = lo.cwiseMin(result.current.row(v).transpose());
+      hi = hi.cwiseMax(result.current.row(v).transpose());
+    }
+    const double size = (hi - lo).maxCoeff();
+    const double vol = deformed.CellVolume(c);
+    if (!(vol > 1e-12 * size * size * size)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "new cell ", c, " has ", vol < 0.0 ? "negative" : "zero", " volume ", vol,
+          " in the current (deformed) configuration (size ", size,
+          "); the faces do not face each other there"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::Status CheckState(const mesh::CellComplex& rest, const Points& current,
@@ -196,6 +222,7 @@ absl::StatusOr<EditResult> Finish(absl::string_view edit, EditResult result,
   absl::StatusOr<mesh::CellComplex> built = mesh::CellComplex::FromInput(result.mesh);
   if (!built.ok()) return fail(built.status());
   if (absl::Status s = CheckManifold(*built); !s.ok()) return fail(s);
+  if (absl::Status s = CheckNewCellsCurrent(*built, result); !s.ok()) return fail(s);
   std::vector<uint8_t> tags(built->num_edges(), 0);
   for (const auto& [a, b] : sharp_pairs) {
     const int32_t e = built->FindEdge(a, b);

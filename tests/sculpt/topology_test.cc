@@ -269,6 +269,60 @@ TEST(MergeTest, JoinsTwoBlocks) {
   EXPECT_TRUE(MergeFaces(two, two.positions(), kNoSharp, b, a).ok());
 }
 
+TEST(MergeTest, RefusesACellInvertedInTheCurrentConfiguration) {
+  const mesh::CellComplex two = Make(Voxels({{0, 0, 0}, {2, 0, 0}}));
+  // Currently the second block has moved to the left of the first one.
+  Points current = two.positions();
+  for (int32_t v = 0; v < current.rows(); ++v) {
+    if (current(v, 0) >= 2.0) current(v, 0) -= 4.0;
+  }
+  EXPECT_THAT(MergeFaces(two, current, kNoSharp, BoundaryFaceAt(two, Vec(1.0, 0.5, 0.5)),
+                         BoundaryFaceAt(two, Vec(2.0, 0.5, 0.5))),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       AllOf(HasSubstr("merge: new cell 2"), HasSubstr("current"))));
+}
+
+TEST(ExtrudeTest, TriangleAndPentagonFacesMakePrisms) {
+  // A pentagonal prism of height 1; extruding its top gives a second one.
+  mesh::MeshInput input;
+  input.vertices.resize(10, 3);
+  for (int i = 0; i < 5; ++i) {
+    const double a = 2.0 * M_PI * i / 5.0;
+    input.vertices.row(i) << std::cos(a), std::sin(a), 0.0;
+    input.vertices.row(i + 5) << std::cos(a), std::sin(a), 1.0;
+  }
+  std::vector<std::vector<int32_t>> faces = {{0, 4, 3, 2, 1}, {5, 6, 7, 8, 9}};
+  for (int i = 0; i < 5; ++i) faces.push_back({i, (i + 1) % 5, (i + 1) % 5 + 5, i + 5});
+  input.cells = {faces};
+  const mesh::CellComplex prism = Make(input);
+  const int32_t top = BoundaryFaceAt(prism, Vec(0, 0, 1));
+  ASSERT_GE(top, 0);
+  const int32_t one[] = {top};
+  absl::StatusOr<EditResult> r = ExtrudeFaces(prism, prism.positions(), kNoSharp, one, 0.5, 1);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ExpectConsistent(*r, 10, 1);
+  const mesh::CellComplex out = Make(r->mesh);
+  EXPECT_EQ(out.num_vertices(), 15);
+  EXPECT_EQ(out.cell_faces(1).size(), 7u) << "2 pentagons + 5 side quads";
+  EXPECT_NEAR(out.CellVolume(1), 0.5 * prism.CellVolume(0), 1e-12);
+
+  // A tetrahedron's face becomes a triangular prism of volume area x d.
+  mesh::MeshInput tet;
+  tet.vertices.resize(4, 3);
+  tet.vertices << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  tet.cells = {{{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}};
+  const mesh::CellComplex t = Make(tet);
+  const int32_t slanted = BoundaryFaceAt(t, Vec(1.0 / 3, 1.0 / 3, 1.0 / 3));
+  const int32_t base[] = {slanted};
+  r = ExtrudeFaces(t, t.positions(), kNoSharp, base, 0.2, 1);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ExpectConsistent(*r, 4, 1);
+  const mesh::CellComplex prism3 = Make(r->mesh);
+  EXPECT_EQ(prism3.num_vertices(), 7);
+  EXPECT_EQ(prism3.cell_faces(1).size(), 5u);
+  EXPECT_NEAR(prism3.CellVolume(1), std::sqrt(3.0) / 2.0 * 0.2, 1e-12);
+}
+
 TEST(MergeTest, MakesAHandle) {
   // A ring of 3 x 3 voxels in the xz plane around (1, 0, 1), open at the
   // top middle (1, 0, 2): the merge closes it.

@@ -14,7 +14,9 @@ namespace {
 // Fails naming the vertex when the normals cancel (or a face is degenerate).
 absl::StatusOr<std::vector<Eigen::Vector3d>> Directions(
     const mesh::CellComplex& rest, const Points& positions, std::span<const int32_t> faces,
-    const std::vector<int32_t>& slot, int32_t num_moved, absl::string_view config) {
+    const std::vector<int32_t>& slot, const std::vector<int32_t>& moved,
+    absl::string_view config) {
+  const int32_t num_moved = static_cast<int32_t>(moved.size());
   std::vector<Eigen::Vector3d> dir(num_moved, Eigen::Vector3d::Zero());
   for (size_t i = 0; i < faces.size(); ++i) {
     const auto loop = rest.face_vertices(faces[i]);
@@ -30,8 +32,8 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> Directions(
     const double len = dir[m].norm();
     if (!(len > 1e-9)) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "faces: the selected faces' normals cancel at a shared vertex in the ", config,
-          " configuration; extrude them separately"));
+          "faces: the selected faces' normals cancel at their shared vertex ", moved[m],
+          " in the ", config, " configuration; extrude them separately"));
     }
     dir[m] /= len;
   }
@@ -77,9 +79,9 @@ absl::StatusOr<EditResult> ExtrudeFaces(const mesh::CellComplex& rest, const Poi
   }
   const int32_t nm = static_cast<int32_t>(moved.size());
   ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3d> rest_dir,
-                   Directions(rest, rest.positions(), faces, slot, nm, "rest"));
+                   Directions(rest, rest.positions(), faces, slot, moved, "rest"));
   ASSIGN_OR_RETURN(const std::vector<Eigen::Vector3d> cur_dir,
-                   Directions(rest, current, faces, slot, nm, "current"));
+                   Directions(rest, current, faces, slot, moved, "current"));
 
   // Vertex of moved vertex m at layer l (layer 0: the old vertex).
   auto layer_vertex = [&](int32_t v, int l) {

@@ -49,6 +49,21 @@ TEST(PickTest, MissReturnsNotFound) {
       << "the cube is behind the origin";
 }
 
+TEST(PickTest, NearestOfTwoHitsWhateverTheirOrder) {
+  // Two parallel unit squares at z = 0 and z = 2; the far one listed first.
+  Points p(8, 3);
+  p << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 2, 1, 0, 2, 1, 1, 2, 0, 1, 2;
+  const std::vector<std::array<int32_t, 4>> quads = {{4, 5, 6, 7}, {0, 1, 2, 3}};
+  absl::StatusOr<PickHit> up = PickQuads(quads, p, {Vec(0.5, 0.5, -1), Vec(0, 0, 1)});
+  ASSERT_TRUE(up.ok()) << up.status();
+  EXPECT_EQ(up->quad, 1);
+  EXPECT_NEAR(up->distance, 1.0, 1e-14);
+  absl::StatusOr<PickHit> down = PickQuads(quads, p, {Vec(0.5, 0.5, 3), Vec(0, 0, -1)});
+  ASSERT_TRUE(down.ok()) << down.status();
+  EXPECT_EQ(down->quad, 0);
+  EXPECT_NEAR(down->distance, 1.0, 1e-14);
+}
+
 TEST(PickTest, FromInsideHitsTheFarSide) {
   const Cube cube;
   absl::StatusOr<PickHit> hit = PickQuads(cube.quads, cube.p, {Vec(0.5, 0.3, 0.5), Vec(1, 0, 0)});

@@ -55,6 +55,14 @@ void ExpectConsistent(const EditResult& r, int32_t old_vertices, int32_t old_cel
   for (int32_t c = 0; c < built.num_cells(); ++c) EXPECT_GT(built.CellVolume(c), 0.0) << "cell " << c;
 }
 
+// With current == rest in, current == mesh.vertices out (1e-12: subdivision
+// computes positions and stencils separately).
+void ExpectCurrentIsRest(const EditResult& r) {
+  ASSERT_EQ(r.current.rows(), r.mesh.vertices.rows());
+  EXPECT_LT((r.current - r.mesh.vertices).cwiseAbs().maxCoeff(), 1e-12)
+      << "current positions differ from rest ones though current == rest went in";
+}
+
 Points Rotated(const Points& p, double degrees) {
   const double a = degrees * M_PI / 180.0;
   Eigen::Matrix3d r;
@@ -197,6 +205,7 @@ TEST_F(Block3Test, DeleteCentreMakesACavity) {
   absl::StatusOr<EditResult> r = DeleteCells(block_, rest_, kNoSharp, cells);
   ASSERT_TRUE(r.ok()) << r.status();
   ExpectConsistent(*r, 64, 27);
+  ExpectCurrentIsRest(*r);
   EXPECT_EQ(r->mesh.vertices.rows(), 64) << "every vertex still used";
   const mesh::CellComplex out = Make(r->mesh);
   EXPECT_EQ(CountBoundaryFaces(out), 60);
@@ -243,6 +252,7 @@ TEST(DeleteTest, SplittingIntoTwoComponentsIsAllowed) {
   absl::StatusOr<EditResult> r = DeleteCells(beam, beam.positions(), kNoSharp, cells);
   ASSERT_TRUE(r.ok()) << r.status();
   ExpectConsistent(*r, 16, 3);
+  ExpectCurrentIsRest(*r);
   EXPECT_EQ(Make(r->mesh).CountBoundary().euler(), 4);
 }
 
@@ -256,6 +266,7 @@ TEST(MergeTest, JoinsTwoBlocks) {
   absl::StatusOr<EditResult> r = MergeFaces(two, two.positions(), kNoSharp, a, b);
   ASSERT_TRUE(r.ok()) << r.status();
   ExpectConsistent(*r, 16, 2);
+  ExpectCurrentIsRest(*r);
   const mesh::CellComplex out = Make(r->mesh);
   EXPECT_EQ(out.num_cells(), 3);
   EXPECT_EQ(out.num_vertices(), 16) << "merge adds no vertex";
@@ -441,6 +452,8 @@ TEST_F(Block3Test, SharpTagsSurviveEdits) {
   const int32_t cells[] = {0};
   absl::StatusOr<EditResult> refined = SubdivideCells(block_, rest_, tags, cells);
   ASSERT_TRUE(refined.ok()) << refined.status();
+  ExpectConsistent(*refined, 64, 27);
+  ExpectCurrentIsRest(*refined);
   EXPECT_EQ(refined->sharp_edges.size(), 2u) << "the tag goes to both child edges";
 }
 

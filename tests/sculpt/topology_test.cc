@@ -457,6 +457,26 @@ TEST_F(Block3Test, SharpTagsSurviveEdits) {
   EXPECT_EQ(refined->sharp_edges.size(), 2u) << "the tag goes to both child edges";
 }
 
+TEST_F(Block3Test, DeleteKeepsSurvivingSharpEdgesRenumbered) {
+  std::vector<uint8_t> tags(block_.num_edges(), 0);
+  tags[block_.FindEdge(0, 1)] = 1;  // goes with the corner vertex
+  tags[block_.FindEdge(1, 2)] = 1;  // survives as (0, 1)
+  const int32_t cells[] = {0};
+  absl::StatusOr<EditResult> r = DeleteCells(block_, rest_, tags, cells);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ(r->sharp_edges.size(), 1u);
+  EXPECT_EQ(r->sharp_edges[0], (std::array<int32_t, 2>{0, 1}));
+}
+
+TEST_F(Block3Test, ExtrudingFacesThatMeetAtACornerOnlyIsRefused) {
+  // Two top faces diagonal to each other: their new cells would share only
+  // the vertical edge over the common corner (non-manifold).
+  const int32_t faces[] = {BoundaryFaceAt(block_, Vec(0.5, 0.5, 3.0)),
+                           BoundaryFaceAt(block_, Vec(1.5, 1.5, 3.0))};
+  EXPECT_THAT(ExtrudeFaces(block_, rest_, kNoSharp, faces, 0.5, 1),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("extrude: non-manifold")));
+}
+
 TEST_F(Block3Test, Deterministic) {
   const Points current = Rotated(rest_, 17.0);
   const int32_t faces[] = {BoundaryFaceAt(block_, Vec(0.5, 0.5, 3.0)),

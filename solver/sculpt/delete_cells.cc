@@ -14,8 +14,8 @@ absl::StatusOr<EditResult> DeleteCells(const mesh::CellComplex& rest, const Poin
   const int32_t nc = rest.num_cells();
   RETURN_IF_ERROR(internal::CheckIds(cells, nc, "cells", "cell"));
   if (static_cast<int32_t>(cells.size()) == nc) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "cells: deleting all ", nc, " cells would leave nothing; keep at least one"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("cells: deleting all ", nc, " cells would leave nothing; keep at least one"));
   }
   std::vector<uint8_t> gone(nc, 0);
   for (int32_t c : cells) gone[c] = 1;
@@ -59,10 +59,10 @@ absl::StatusOr<EditResult> DeleteCells(const mesh::CellComplex& rest, const Poin
   for (const auto& [a, b] : internal::SharpPairs(rest, sharp)) {
     if (remap[a] >= 0 && remap[b] >= 0) pairs.push_back({remap[a], remap[b]});
   }
-  result.summary = absl::StrCat("deleted ", internal::Count(cells.size(), "cell"), ": -",
-                                internal::Count(nv - kept, "vertex"), ", ",
-                                internal::Count(nc - static_cast<int64_t>(cells.size()), "cell"),
-                                " left");
+  result.summary =
+      absl::StrCat("deleted ", internal::Count(cells.size(), "cell"), ": -",
+                   internal::Count(nv - kept, "vertex"), ", ",
+                   internal::Count(nc - static_cast<int64_t>(cells.size()), "cell"), " left");
   return internal::Finish("delete", std::move(result), pairs);
 }
 

@@ -5,11 +5,11 @@
 #include <cstdint>
 #include <span>
 #include <string>
-#include "absl/strings/string_view.h"
 #include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "solver/mesh/cell_complex.h"
 #include "solver/sculpt/topology.h"
 

@@ -14,8 +14,7 @@ namespace {
 // Fails naming the vertex when the normals cancel (or a face is degenerate).
 absl::StatusOr<std::vector<Eigen::Vector3d>> Directions(
     const mesh::CellComplex& rest, const Points& positions, std::span<const int32_t> faces,
-    const std::vector<int32_t>& slot, const std::vector<int32_t>& moved,
-    absl::string_view config) {
+    const std::vector<int32_t>& slot, const std::vector<int32_t>& moved, absl::string_view config) {
   const int32_t num_moved = static_cast<int32_t>(moved.size());
   std::vector<Eigen::Vector3d> dir(num_moved, Eigen::Vector3d::Zero());
   for (size_t i = 0; i < faces.size(); ++i) {
@@ -31,9 +30,9 @@ absl::StatusOr<std::vector<Eigen::Vector3d>> Directions(
   for (int32_t m = 0; m < num_moved; ++m) {
     const double len = dir[m].norm();
     if (!(len > 1e-9)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "faces: the selected faces' normals cancel at their shared vertex ", moved[m],
-          " in the ", config, " configuration; extrude them separately"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("faces: the selected faces' normals cancel at their shared vertex ",
+                       moved[m], " in the ", config, " configuration; extrude them separately"));
     }
     dir[m] /= len;
   }
@@ -51,9 +50,9 @@ absl::StatusOr<EditResult> ExtrudeFaces(const mesh::CellComplex& rest, const Poi
   for (size_t i = 0; i < faces.size(); ++i) {
     if (!rest.face_is_boundary(faces[i])) {
       const auto& fc = rest.face_cells(faces[i]);
-      return absl::InvalidArgumentError(absl::StrCat(
-          "faces[", i, "]: face ", faces[i], " is interior (shared by cells ", fc[0], " and ",
-          fc[1], "); only boundary faces can be extruded"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("faces[", i, "]: face ", faces[i], " is interior (shared by cells ", fc[0],
+                       " and ", fc[1], "); only boundary faces can be extruded"));
     }
   }
   if (!std::isfinite(distance) || !(distance > 0.0)) {
@@ -84,9 +83,7 @@ absl::StatusOr<EditResult> ExtrudeFaces(const mesh::CellComplex& rest, const Poi
                    Directions(rest, current, faces, slot, moved, "current"));
 
   // Vertex of moved vertex m at layer l (layer 0: the old vertex).
-  auto layer_vertex = [&](int32_t v, int l) {
-    return l == 0 ? v : nv + (l - 1) * nm + slot[v];
-  };
+  auto layer_vertex = [&](int32_t v, int l) { return l == 0 ? v : nv + (l - 1) * nm + slot[v]; };
   const int32_t total = nv + layers * nm;
   EditResult result;
   result.mesh = internal::ToInput(rest);
@@ -132,10 +129,10 @@ absl::StatusOr<EditResult> ExtrudeFaces(const mesh::CellComplex& rest, const Poi
     }
   }
   const int64_t new_cells = static_cast<int64_t>(faces.size()) * layers;
-  result.summary = absl::StrCat("extruded ", internal::Count(faces.size(), "face"), " by ",
-                                distance, " m in ", internal::Count(layers, "layer"), ": +",
-                                internal::Count(new_cells, "cell"), ", +",
-                                internal::Count(static_cast<int64_t>(layers) * nm, "vertex"));
+  result.summary =
+      absl::StrCat("extruded ", internal::Count(faces.size(), "face"), " by ", distance, " m in ",
+                   internal::Count(layers, "layer"), ": +", internal::Count(new_cells, "cell"),
+                   ", +", internal::Count(static_cast<int64_t>(layers) * nm, "vertex"));
   return internal::Finish("extrude", std::move(result), internal::SharpPairs(rest, sharp));
 }
 

@@ -11,14 +11,14 @@ namespace {
 
 absl::Status CheckFace(const mesh::CellComplex& rest, int32_t face, absl::string_view field) {
   if (face < 0 || face >= rest.num_faces()) {
-    return absl::InvalidArgumentError(absl::StrCat(field, ": face ", face, " is out of range [0, ",
-                                                   rest.num_faces(), ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, ": face ", face, " is out of range [0, ", rest.num_faces(), ")"));
   }
   if (!rest.face_is_boundary(face)) {
     const auto& fc = rest.face_cells(face);
     return absl::InvalidArgumentError(absl::StrCat(field, ": face ", face,
-                                                   " is interior (shared by cells ", fc[0],
-                                                   " and ", fc[1], "); only boundary faces merge"));
+                                                   " is interior (shared by cells ", fc[0], " and ",
+                                                   fc[1], "); only boundary faces merge"));
   }
   return absl::OkStatus();
 }
@@ -40,15 +40,15 @@ absl::StatusOr<EditResult> MergeFaces(const mesh::CellComplex& rest, const Point
   const int32_t k = static_cast<int32_t>(a.size());
   if (static_cast<int32_t>(b.size()) != k) {
     return absl::InvalidArgumentError(absl::StrCat("face_b: face ", face_b, " has ", b.size(),
-                                                   " vertices but face_a (face ", face_a,
-                                                   ") has ", k, "; merge needs equal counts"));
+                                                   " vertices but face_a (face ", face_a, ") has ",
+                                                   k, "; merge needs equal counts"));
   }
   for (int32_t v : a) {
     for (int32_t w : b) {
       if (v == w) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "face_b: faces ", face_a, " and ", face_b, " share vertex ", v,
-            "; the connecting cell would be degenerate"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("face_b: faces ", face_a, " and ", face_b, " share vertex ", v,
+                         "; the connecting cell would be degenerate"));
       }
     }
   }
@@ -95,13 +95,12 @@ absl::StatusOr<EditResult> MergeFaces(const mesh::CellComplex& rest, const Point
                    internal::Finish("merge", std::move(result), internal::SharpPairs(rest, sharp)));
   ASSIGN_OR_RETURN(const mesh::CellComplex merged, mesh::CellComplex::FromInput(done.mesh));
   const int64_t euler_after = merged.CountBoundary().euler();
-  done.summary = absl::StrCat("merged faces ", face_a, " and ", face_b, " (", k,
-                              " vertices) with 1 cell: ",
-                              joined                        ? "joined two components"
-                              : euler_after < euler_before ? "made a handle"
-                                                           : "filled a gap within one component",
-                              "; boundary Euler characteristic ", euler_before, " -> ",
-                              euler_after);
+  done.summary =
+      absl::StrCat("merged faces ", face_a, " and ", face_b, " (", k, " vertices) with 1 cell: ",
+                   joined                       ? "joined two components"
+                   : euler_after < euler_before ? "made a handle"
+                                                : "filled a gap within one component",
+                   "; boundary Euler characteristic ", euler_before, " -> ", euler_after);
   return done;
 }
 

@@ -19,8 +19,8 @@ Vec Row(const Points& p, int32_t v) { return p.row(v).transpose(); }
 
 // Distance along unit `dir` to triangle (p0, p1, p2), or +inf; (u, v) the
 // barycentric weights of p1 and p2 at the hit.
-double HitTriangle(const Vec& origin, const Vec& dir, const Vec& p0, const Vec& p1,
-                   const Vec& p2, double* u, double* v) {
+double HitTriangle(const Vec& origin, const Vec& dir, const Vec& p0, const Vec& p1, const Vec& p2,
+                   double* u, double* v) {
   const Vec e1 = p1 - p0, e2 = p2 - p0;
   const Vec q = dir.cross(e2);
   const double det = e1.dot(q);
@@ -92,16 +92,16 @@ absl::StatusOr<PickHit> PickQuads(const std::vector<std::array<int32_t, 4>>& qua
   }
   const double len = ray.direction.norm();
   if (!ray.direction.allFinite() || !(len > 0.0) || !std::isfinite(len)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "ray.direction: (", ray.direction.x(), ", ", ray.direction.y(), ", ", ray.direction.z(),
-        ") must be non-zero and finite"));
+    return absl::InvalidArgumentError(absl::StrCat("ray.direction: (", ray.direction.x(), ", ",
+                                                   ray.direction.y(), ", ", ray.direction.z(),
+                                                   ") must be non-zero and finite"));
   }
   const int32_t nv = static_cast<int32_t>(positions.rows());
   for (size_t i = 0; i < quads.size(); ++i) {
     for (int32_t v : quads[i]) {
       if (v < 0 || v >= nv) {
-        return absl::InvalidArgumentError(absl::StrCat("quads[", i, "]: vertex ", v,
-                                                       " is out of range [0, ", nv, ")"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("quads[", i, "]: vertex ", v, " is out of range [0, ", nv, ")"));
       }
     }
   }

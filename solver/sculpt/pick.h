@@ -44,7 +44,7 @@ absl::StatusOr<PickHit> PickQuads(const std::vector<std::array<int32_t, 4>>& qua
                                   const Points& positions, const Ray& ray);
 
 // B(s, t) on `positions` for one quad (see the header comment).
-Eigen::Vector3d BilinearPoint(const std::array<int32_t, 4>& quad, const Points& positions,
-                              double s, double t);
+Eigen::Vector3d BilinearPoint(const std::array<int32_t, 4>& quad, const Points& positions, double s,
+                              double t);
 
 }  // namespace dynsolid::sculpt

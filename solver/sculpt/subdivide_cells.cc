@@ -34,10 +34,9 @@ absl::StatusOr<EditResult> SubdivideCells(const mesh::CellComplex& rest, const P
     }
   }
   result.cell_source = level->parent_cell;
-  result.summary = absl::StrCat(
-      "subdivided ", internal::Count(cells.size(), "cell"), ": ", rest.num_cells(), " -> ",
-      internal::Count(fine.num_cells(), "cell"), ", ", rest.num_vertices(), " -> ",
-      internal::Count(nv, "vertex"));
+  result.summary = absl::StrCat("subdivided ", internal::Count(cells.size(), "cell"), ": ",
+                                rest.num_cells(), " -> ", internal::Count(fine.num_cells(), "cell"),
+                                ", ", rest.num_vertices(), " -> ", internal::Count(nv, "vertex"));
   std::vector<uint8_t> tags = level->sharp_edges;
   tags.resize(fine.num_edges(), 0);
   return internal::Finish("subdivide", std::move(result), internal::SharpPairs(fine, tags));

@@ -35,10 +35,10 @@ absl::Status CheckNewCellsCurrent(const mesh::CellComplex& built, const EditResu
     const double size = (hi - lo).maxCoeff();
     const double vol = deformed.CellVolume(c);
     if (!(vol > 1e-12 * size * size * size)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "new cell ", c, " has ", vol < 0.0 ? "negative" : "zero", " volume ", vol,
-          " in the current (deformed) configuration (size ", size,
-          "); the faces do not face each other there"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("new cell ", c, " has ", vol < 0.0 ? "negative" : "zero", " volume ", vol,
+                       " in the current (deformed) configuration (size ", size,
+                       "); the faces do not face each other there"));
     }
   }
   return absl::OkStatus();
@@ -49,9 +49,9 @@ absl::Status CheckNewCellsCurrent(const mesh::CellComplex& built, const EditResu
 absl::Status CheckState(const mesh::CellComplex& rest, const Points& current,
                         const std::vector<uint8_t>& sharp) {
   if (current.rows() != rest.num_vertices()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "current: ", current.rows(), " positions for a control mesh of ", rest.num_vertices(),
-        " vertices"));
+    return absl::InvalidArgumentError(absl::StrCat("current: ", current.rows(),
+                                                   " positions for a control mesh of ",
+                                                   rest.num_vertices(), " vertices"));
   }
   for (int32_t v = 0; v < current.rows(); ++v) {
     if (!current.row(v).allFinite()) {
@@ -60,9 +60,8 @@ absl::Status CheckState(const mesh::CellComplex& rest, const Points& current,
     }
   }
   if (!sharp.empty() && static_cast<int32_t>(sharp.size()) != rest.num_edges()) {
-    return absl::InvalidArgumentError(absl::StrCat("sharp: ", sharp.size(),
-                                                   " tags for a control mesh of ",
-                                                   rest.num_edges(), " edges"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "sharp: ", sharp.size(), " tags for a control mesh of ", rest.num_edges(), " edges"));
   }
   return absl::OkStatus();
 }
@@ -74,13 +73,12 @@ absl::Status CheckIds(std::span<const int32_t> ids, int32_t count, absl::string_
   for (size_t i = 0; i < ids.size(); ++i) {
     const int32_t id = ids[i];
     if (id < 0 || id >= count) {
-      return absl::InvalidArgumentError(absl::StrCat(field, "[", i, "]: ", item, " ", id,
-                                                     " is out of range [0, ", count, ")"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, "[", i, "]: ", item, " ", id, " is out of range [0, ", count, ")"));
     }
     if (first[id] >= 0) {
-      return absl::InvalidArgumentError(absl::StrCat(field, "[", i, "]: ", item, " ", id,
-                                                     " is repeated (also ", field, "[",
-                                                     first[id], "])"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, "[", i, "]: ", item, " ", id, " is repeated (also ", field, "[", first[id], "])"));
     }
     first[id] = static_cast<int32_t>(i);
   }
@@ -158,12 +156,13 @@ absl::Status CheckManifold(const mesh::CellComplex& complex) {
       }
     }
     int32_t fans = 0;
-    for (size_t i = 0; i < faces.size(); ++i) fans += find(static_cast<int32_t>(i)) == static_cast<int32_t>(i) ? 1 : 0;
+    for (size_t i = 0; i < faces.size(); ++i)
+      fans += find(static_cast<int32_t>(i)) == static_cast<int32_t>(i) ? 1 : 0;
     if (fans != 1) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "non-manifold result: vertex ", v, " at ", PointString(p, v),
-          " joins parts of the solid that touch only there (its boundary faces form ", fans,
-          " fans; a boundary vertex needs 1)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("non-manifold result: vertex ", v, " at ", PointString(p, v),
+                       " joins parts of the solid that touch only there (its boundary faces form ",
+                       fans, " fans; a boundary vertex needs 1)"));
     }
   }
   return absl::OkStatus();
@@ -245,8 +244,8 @@ absl::StatusOr<EditResult> SetSharp(const mesh::CellComplex& rest, const Points&
   for (size_t i = 0; i < edges.size(); ++i) {
     const auto& [a, b] = edges[i];
     if (a < 0 || a >= nv || b < 0 || b >= nv) {
-      return absl::InvalidArgumentError(absl::StrCat("edges[", i, "]: (", a, " ", b,
-                                                     "): vertex id out of range [0, ", nv, ")"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("edges[", i, "]: (", a, " ", b, "): vertex id out of range [0, ", nv, ")"));
     }
     const int32_t e = rest.FindEdge(a, b);
     if (e < 0) {

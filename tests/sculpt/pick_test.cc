@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <Eigen/Geometry>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -29,7 +30,8 @@ struct Cube {
 
 TEST(PickTest, HitsTheTopFaceAtTheRightParameters) {
   const Cube cube;
-  absl::StatusOr<PickHit> hit = PickQuads(cube.quads, cube.p, {Vec(0.25, 0.75, 5.0), Vec(0, 0, -2)});
+  absl::StatusOr<PickHit> hit =
+      PickQuads(cube.quads, cube.p, {Vec(0.25, 0.75, 5.0), Vec(0, 0, -2)});
   ASSERT_TRUE(hit.ok()) << hit.status();
   EXPECT_EQ(hit->quad, 1) << "the +z quad (4 5 7 6), nearer than the -z one";
   EXPECT_NEAR(hit->distance, 4.0, 1e-14);
@@ -96,8 +98,9 @@ TEST(PickTest, InverseBilinearOnAPlanarTrapezoid) {
   for (double s : {0.1, 0.37, 0.5, 0.93}) {
     for (double t : {0.05, 0.44, 0.8}) {
       const Vec target = BilinearPoint(quads[0], p, s, t);
-      absl::StatusOr<PickHit> hit =
-          PickQuads(quads, p, {target + 3.0 * normal + 0.2 * r * Vec(1, 0, 0), -3.0 * normal - 0.2 * r * Vec(1, 0, 0)});
+      absl::StatusOr<PickHit> hit = PickQuads(
+          quads, p,
+          {target + 3.0 * normal + 0.2 * r * Vec(1, 0, 0), -3.0 * normal - 0.2 * r * Vec(1, 0, 0)});
       ASSERT_TRUE(hit.ok()) << hit.status();
       EXPECT_NEAR(hit->s, s, 1e-9) << "t " << t;
       EXPECT_NEAR(hit->t, t, 1e-9) << "s " << s;

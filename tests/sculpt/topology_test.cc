@@ -15,11 +15,11 @@ namespace {
 
 using ::dynsolid::testing::StatusIs;
 using ::testing::AllOf;
-using ::testing::HasSubstr;
-using testing::BoundaryFaceAt;
 using testing::Block;
+using testing::BoundaryFaceAt;
 using testing::CountBoundaryFaces;
 using testing::FaceAt;
+using ::testing::HasSubstr;
 using testing::Voxels;
 using Vec = Eigen::Vector3d;
 
@@ -52,7 +52,8 @@ void ExpectConsistent(const EditResult& r, int32_t old_vertices, int32_t old_cel
     EXPECT_LT(c, old_cells);
   }
   const mesh::CellComplex built = Make(r.mesh);
-  for (int32_t c = 0; c < built.num_cells(); ++c) EXPECT_GT(built.CellVolume(c), 0.0) << "cell " << c;
+  for (int32_t c = 0; c < built.num_cells(); ++c)
+    EXPECT_GT(built.CellVolume(c), 0.0) << "cell " << c;
 }
 
 // With current == rest in, current == mesh.vertices out (1e-12: subdivision
@@ -337,8 +338,8 @@ TEST(ExtrudeTest, TriangleAndPentagonFacesMakePrisms) {
 TEST(MergeTest, MakesAHandle) {
   // A ring of 3 x 3 voxels in the xz plane around (1, 0, 1), open at the
   // top middle (1, 0, 2): the merge closes it.
-  const mesh::CellComplex u = Make(
-      Voxels({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 0, 1}, {2, 0, 1}, {0, 0, 2}, {2, 0, 2}}));
+  const mesh::CellComplex u =
+      Make(Voxels({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 0, 1}, {2, 0, 1}, {0, 0, 2}, {2, 0, 2}}));
   ASSERT_EQ(u.CountBoundary().euler(), 2);
   const int32_t a = BoundaryFaceAt(u, Vec(1.0, 0.5, 2.5));
   const int32_t b = BoundaryFaceAt(u, Vec(2.0, 0.5, 2.5));
@@ -354,9 +355,9 @@ TEST(MergeTest, FillingANotchIsNotAHandle) {
   // A U of five voxels: the merge fills the notch at (1, 0, 1), whose bottom
   // face then also becomes interior; still a ball.
   const mesh::CellComplex u = Make(Voxels({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 0, 1}, {2, 0, 1}}));
-  absl::StatusOr<EditResult> r = MergeFaces(u, u.positions(), kNoSharp,
-                                            BoundaryFaceAt(u, Vec(1.0, 0.5, 1.5)),
-                                            BoundaryFaceAt(u, Vec(2.0, 0.5, 1.5)));
+  absl::StatusOr<EditResult> r =
+      MergeFaces(u, u.positions(), kNoSharp, BoundaryFaceAt(u, Vec(1.0, 0.5, 1.5)),
+                 BoundaryFaceAt(u, Vec(2.0, 0.5, 1.5)));
   ASSERT_TRUE(r.ok()) << r.status();
   ExpectConsistent(*r, u.num_vertices(), 5);
   EXPECT_EQ(Make(r->mesh).CountBoundary().euler(), 2);
@@ -369,20 +370,22 @@ TEST(MergeTest, Refusals) {
   const int32_t t0 = 8;
   input.vertices.conservativeResize(12, 3);
   input.vertices.bottomRows(4) << 3, 0, 0, 4, 0, 0, 3, 1, 0, 3, 0, 1;
-  input.cells.push_back({{t0, t0 + 2, t0 + 1}, {t0, t0 + 1, t0 + 3}, {t0, t0 + 3, t0 + 2},
-                         {t0 + 1, t0 + 2, t0 + 3}});
+  input.cells.push_back(
+      {{t0, t0 + 2, t0 + 1}, {t0, t0 + 1, t0 + 3}, {t0, t0 + 3, t0 + 2}, {t0 + 1, t0 + 2, t0 + 3}});
   const mesh::CellComplex m = Make(input);
   const Points& p = m.positions();
   const int32_t quad = BoundaryFaceAt(m, Vec(1.0, 0.5, 0.5));
   const int32_t tri = m.cell_faces(1)[0];
   EXPECT_THAT(MergeFaces(m, p, kNoSharp, quad, quad),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("face_b: face " + std::to_string(quad))));
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("face_b: face " + std::to_string(quad))));
   EXPECT_THAT(MergeFaces(m, p, kNoSharp, quad, tri),
               StatusIs(absl::StatusCode::kInvalidArgument,
                        AllOf(HasSubstr("face_b: face " + std::to_string(tri) + " has 3 vertices"),
                              HasSubstr("has 4"))));
-  EXPECT_THAT(MergeFaces(m, p, kNoSharp, quad, 77),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("face_b: face 77 is out of range")));
+  EXPECT_THAT(
+      MergeFaces(m, p, kNoSharp, quad, 77),
+      StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("face_b: face 77 is out of range")));
   const int32_t other = BoundaryFaceAt(m, Vec(0.5, 0.5, 1.0));  // shares 2 vertices with quad
   EXPECT_THAT(MergeFaces(m, p, kNoSharp, quad, other),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("share vertex")));
@@ -392,11 +395,13 @@ TEST(MergeTest, Refusals) {
   EXPECT_THAT(MergeFaces(block, block.positions(), kNoSharp, interior,
                          BoundaryFaceAt(block, Vec(2.0, 0.5, 0.5))),
               StatusIs(absl::StatusCode::kInvalidArgument,
-                       AllOf(HasSubstr("face_a: face " + std::to_string(interior)), HasSubstr("interior"))));
+                       AllOf(HasSubstr("face_a: face " + std::to_string(interior)),
+                             HasSubstr("interior"))));
   // Two opposite faces of one block: the connecting cell would wrap around
   // the block and is inside out (its faces see it from outside): refused.
   const mesh::CellComplex cube = Make(Block(1, 1, 1));
-  EXPECT_FALSE(MergeFaces(cube, cube.positions(), kNoSharp, BoundaryFaceAt(cube, Vec(0.5, 0.5, 0.0)),
+  EXPECT_FALSE(MergeFaces(cube, cube.positions(), kNoSharp,
+                          BoundaryFaceAt(cube, Vec(0.5, 0.5, 0.0)),
                           BoundaryFaceAt(cube, Vec(0.5, 0.5, 1.0)))
                    .ok());
 }
@@ -431,8 +436,7 @@ TEST_F(Block3Test, SubdivideOneCell) {
 
 TEST_F(Block3Test, SharpTagsSurviveEdits) {
   const std::array<int32_t, 2> edge{0, 1};
-  absl::StatusOr<EditResult> tagged =
-      SetSharp(block_, rest_, kNoSharp, std::span(&edge, 1), true);
+  absl::StatusOr<EditResult> tagged = SetSharp(block_, rest_, kNoSharp, std::span(&edge, 1), true);
   ASSERT_TRUE(tagged.ok()) << tagged.status();
   ASSERT_EQ(tagged->sharp_edges.size(), 1u);
   EXPECT_EQ(tagged->sharp_edges[0], edge);
@@ -446,9 +450,9 @@ TEST_F(Block3Test, SharpTagsSurviveEdits) {
   ASSERT_TRUE(untagged.ok());
   EXPECT_TRUE(untagged->sharp_edges.empty());
   const std::array<int32_t, 2> not_edge{0, 63};
-  EXPECT_THAT(SetSharp(block_, rest_, kNoSharp, std::span(&not_edge, 1), true),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("edges[0]: (0 63) is not an edge")));
+  EXPECT_THAT(
+      SetSharp(block_, rest_, kNoSharp, std::span(&not_edge, 1), true),
+      StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("edges[0]: (0 63) is not an edge")));
   const int32_t cells[] = {0};
   absl::StatusOr<EditResult> refined = SubdivideCells(block_, rest_, tags, cells);
   ASSERT_TRUE(refined.ok()) << refined.status();

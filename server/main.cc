@@ -5,7 +5,7 @@
 //                   [--max_sessions 16] [--max_message_bytes 4194304]
 //                   [--max_cells 1000000] [--max_watchers_per_session 64]
 //                   [--max_commands_per_second 1000] [--watch_hz 60]
-//                   [--max_watch_hz 240] [--answer_cache 256]
+//                   [--max_watch_hz 240] [--answer_cache 256] [--undo_bytes N]
 //                   [--snapshot_every_steps 20000] [--build_threads 1]
 //                   [--encode_threads 2] [--stream_nice 10] [--stream_idle=true]
 //
@@ -59,6 +59,9 @@ ABSL_FLAG(double, max_commands_per_second, 1000,
 ABSL_FLAG(double, watch_hz, 60, "Frames per second for watchers that do not ask for a rate");
 ABSL_FLAG(double, max_watch_hz, 240, "Highest frame rate a watcher may ask for");
 ABSL_FLAG(int, answer_cache, 256, "Command answers remembered per client for resends");
+ABSL_FLAG(int64_t, undo_bytes, int64_t{256} << 20,
+          "Bytes each session's undo and redo lists may hold (whole solid states; the oldest "
+          "go first). Recover a session with the same value it ran with");
 ABSL_FLAG(int64_t, snapshot_every_steps, 20000,
           "With --data_dir, write a snapshot every this many steps (and on shutdown)");
 ABSL_FLAG(double, shutdown_grace_seconds, 5.0,
@@ -104,6 +107,7 @@ int main(int argc, char** argv) {
   options.loop.watch_hz = absl::GetFlag(FLAGS_watch_hz);
   options.loop.max_watch_hz = absl::GetFlag(FLAGS_max_watch_hz);
   options.loop.core.answer_cache = absl::GetFlag(FLAGS_answer_cache);
+  options.loop.core.undo_bytes = absl::GetFlag(FLAGS_undo_bytes);
   options.loop.snapshot_every_steps = absl::GetFlag(FLAGS_snapshot_every_steps);
   absl::StatusOr<std::unique_ptr<dynsolid::server::Server>> server =
       dynsolid::server::Server::Start(options);

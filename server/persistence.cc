@@ -54,7 +54,12 @@ absl::StatusOr<RecoveredSession> RecoverSession(const std::string& dir, const Bu
   absl::StatusOr<BuiltSolid> built = BuildSolid(SceneRequestOf(out.manifest), limits);
   if (!built.ok()) return built.status();
   out.built = *std::move(built);
-  out.core = std::make_unique<SimCore>(out.built.solid, core_options, out.manifest.start_paused());
+  const SceneRequest request = SceneRequestOf(out.manifest);
+  auto make_core = [&] {
+    return std::make_unique<SimCore>(out.built.solid, core_options, out.manifest.start_paused(),
+                                     request.scene, MakeSolidFactory(request, limits));
+  };
+  out.core = make_core();
 
   // The snapshot, if there is a whole one.
   uint64_t offset = 0;
@@ -74,8 +79,7 @@ absl::StatusOr<RecoveredSession> RecoverSession(const std::string& dir, const Bu
       absl::StatusOr<BuiltSolid> fresh = BuildSolid(SceneRequestOf(out.manifest), limits);
       if (!fresh.ok()) return fresh.status();
       out.built = *std::move(fresh);
-      out.core = std::make_unique<SimCore>(out.built.solid, core_options,
-                                           out.manifest.start_paused());
+      out.core = make_core();
     }
   }
   absl::StatusOr<JournalContents> journal = ReadJournal(absl::StrCat(dir, "/journal"), offset);

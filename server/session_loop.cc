@@ -31,6 +31,29 @@ void PushWindow(std::deque<double>& d, double v) {
   if (d.size() > kStepWindow) d.pop_front();
 }
 
+// The control mesh with the ids topology edits take.
+void FillControlMesh(const scene::Discretization& d, ControlMeshInfo* out) {
+  const mesh::CellComplex& c = d.control();
+  const Points& p = c.positions();
+  out->mutable_rest_positions()->Reserve(static_cast<int>(p.size()));
+  for (int32_t v = 0; v < c.num_vertices(); ++v) {
+    for (int a = 0; a < 3; ++a) out->add_rest_positions(p(v, a));
+  }
+  out->add_face_offsets(0);
+  for (int32_t f = 0; f < c.num_faces(); ++f) {
+    for (int32_t v : c.face_vertices(f)) out->add_face_vertices(v);
+    out->add_face_offsets(out->face_vertices_size());
+    out->add_face_cells(c.face_cells(f)[0]);
+    out->add_face_cells(c.face_cells(f)[1]);
+  }
+  for (int32_t e = 0; e < c.num_edges(); ++e) {
+    out->add_edge_vertices(c.edge_vertices(e)[0]);
+    out->add_edge_vertices(c.edge_vertices(e)[1]);
+    out->add_edge_sharp(static_cast<size_t>(e) < d.control_sharp.size() && d.control_sharp[e] != 0);
+  }
+  out->set_cells(c.num_cells());
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<SessionLoop>> SessionLoop::Start(std::string session_id,
@@ -208,6 +231,18 @@ void SessionLoop::Inspect(const InspectRequest& request,
     }
   }
   done(absl::UnavailableError("the session is closed"));
+}
+
+void SessionLoop::Query(std::function<void(const SimCore*)> fn) {
+  {
+    absl::MutexLock lock(&mu_);
+    if (!stop_) {
+      inspects_.push_back(PendingInspect{InspectRequest(), nullptr, nullptr, std::move(fn)});
+      wake_.Signal();
+      return;
+    }
+  }
+  fn(nullptr);
 }
 
 // ---- Simulation thread ----
@@ -420,6 +455,10 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
   if (waiting_inspects_.empty()) return;
   std::vector<PendingInspect> keep;
   for (PendingInspect& i : waiting_inspects_) {
+    if (i.query != nullptr) {
+      i.query(all_unavailable ? nullptr : core_.get());
+      continue;
+    }
     if (all_unavailable) {
       i.done(absl::UnavailableError("the session is closed"));
       continue;
@@ -448,6 +487,7 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
       const Points& p = s.control_positions();
       r.mutable_control_positions()->Assign(p.data(), p.data() + p.size());
     }
+    if (i.request.control_mesh()) FillControlMesh(s.discretization(), r.mutable_control_mesh());
     i.done(std::move(r));
   }
   waiting_inspects_ = std::move(keep);
@@ -464,6 +504,15 @@ void SessionLoop::UpdateCounters() {
   counters_.fields_version = core_->fields_version();
   counters_.applied = core_->commands_applied();
   counters_.rejected = core_->commands_rejected();
+  const History& h = core_->history();
+  counters_.undo_depth = h.undo_depth();
+  counters_.redo_depth = h.redo_depth();
+  counters_.history_bytes = h.bytes();
+  counters_.history_limit = h.limit_bytes();
+  counters_.topology_version = core_->solid().topology_version();
+  counters_.hold_ms = core_->last_hold_ms();
+  counters_.control_cells = core_->solid().discretization().control().num_cells();
+  counters_.control_vertices = core_->solid().discretization().control().num_vertices();
 }
 
 void SessionLoop::RecordStep(double ms) {
@@ -606,6 +655,14 @@ SessionStats SessionLoop::Stats() const {
   s.set_rollbacks(c.rollbacks);
   s.set_last_error(c.last_error);
   s.set_fields_version(c.fields_version);
+  s.set_undo_depth(c.undo_depth);
+  s.set_redo_depth(c.redo_depth);
+  s.set_history_bytes(c.history_bytes);
+  s.set_history_limit_bytes(c.history_limit);
+  s.set_topology_version(c.topology_version);
+  s.set_last_command_hold_ms(c.hold_ms);
+  s.set_control_cells(c.control_cells);
+  s.set_control_vertices(c.control_vertices);
   return s;
 }
 

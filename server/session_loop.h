@@ -122,6 +122,10 @@ class SessionLoop {
                std::function<void(absl::StatusOr<InspectReply>)> done,
                std::function<bool()> cancelled = nullptr);
 
+  // Runs `fn` on the simulation thread at the next step boundary with the
+  // core (read-only), or with nullptr when the session stops first.
+  void Query(std::function<void(const SimCore*)> fn);
+
   SessionStats Stats() const;
   double time_step() const { return time_step_; }
   // Shared by this session's watchers' encoders.
@@ -141,6 +145,7 @@ class SessionLoop {
     InspectRequest request;
     std::function<void(absl::StatusOr<InspectReply>)> done;
     std::function<bool()> cancelled;
+    std::function<void(const SimCore*)> query;  // set: a Query instead
   };
   // Work for the persistence thread: records to append and sync, maybe a
   // snapshot to write, then replies to release.
@@ -226,6 +231,10 @@ class SessionLoop {
     // Totals of watchers that left.
     int64_t gone_sent = 0, gone_skipped = 0, gone_keyframes = 0, gone_bytes = 0;
     int64_t journal_records = 0, journal_bytes = 0, snapshots = 0, last_snapshot_step = 0;
+    int32_t undo_depth = 0, redo_depth = 0;
+    int64_t history_bytes = 0, history_limit = 0, topology_version = 0;
+    double hold_ms = 0;
+    int32_t control_cells = 0, control_vertices = 0;
     std::deque<double> step_ms;  // last 1000
     std::vector<std::pair<std::string, std::deque<double>>> phases;
   } counters_ ABSL_GUARDED_BY(stats_mu_);

@@ -66,7 +66,8 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
   }
   CoreOptions core_options = options_.loop.core;
   core_options.can_save = !dir.empty();
-  auto core = std::make_unique<SimCore>(solid->solid, core_options, request.start_paused());
+  auto core = std::make_unique<SimCore>(solid->solid, core_options, request.start_paused(),
+                                        scene->scene, MakeSolidFactory(*scene, options_.build));
   absl::Status error;
   std::shared_ptr<const SolidSession> session =
       OpenLocked(id, std::move(token), scene->scene.name(), created, *std::move(solid),

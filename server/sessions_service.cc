@@ -1,5 +1,9 @@
 #include "server/sessions_service.h"
 
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 
@@ -108,6 +112,65 @@ grpc::ServerUnaryReactor* SessionsService::Inspect(grpc::CallbackServerContext* 
         reactor->Finish(ToGrpcStatus(r.status()));
       },
       [context] { return context->IsCancelled(); });
+  return reactor;
+}
+
+namespace {
+
+Vec3 ToVec3(const Eigen::Vector3d& v) {
+  Vec3 out;
+  out.set_x(v.x());
+  out.set_y(v.y());
+  out.set_z(v.z());
+  return out;
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* context,
+                                                const PickRequest* request, PickReply* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+      registry_.Get(request->session().id(), request->session().token());
+  if (!session.ok()) {
+    reactor->Finish(ToGrpcStatus(session.status()));
+    return reactor;
+  }
+  if (absl::Status s = CheckFinite(*request, "request"); !s.ok()) {
+    reactor->Finish(ToGrpcStatus(s));
+    return reactor;
+  }
+  const Eigen::Vector3d origin(request->origin().x(), request->origin().y(),
+                               request->origin().z());
+  const Eigen::Vector3d direction(request->direction().x(), request->direction().y(),
+                                  request->direction().z());
+  // Answered by the simulation thread between two steps.
+  (*session)->loop().Query([reactor, response, origin, direction](const SimCore* core) {
+    if (core == nullptr) {
+      reactor->Finish(ToGrpcStatus(absl::UnavailableError("the session is closed")));
+      return;
+    }
+    absl::StatusOr<std::optional<solid::Solid::PickHit>> hit =
+        core->solid().Pick(origin, direction);
+    if (!hit.ok()) {
+      reactor->Finish(ToGrpcStatus(absl::Status(
+          hit.status().code(), absl::StrCat("request.", hit.status().message()))));
+      return;
+    }
+    response->set_step(core->steps());
+    if (hit->has_value()) {
+      const solid::Solid::PickHit& h = **hit;
+      response->set_hit(true);
+      *response->mutable_point() = ToVec3(h.point);
+      *response->mutable_material_point() = ToVec3(h.material_point);
+      *response->mutable_normal() = ToVec3(h.normal);
+      response->set_surface_quad(h.quad);
+      response->set_control_cell(h.control_cell);
+      response->set_control_face(h.control_face);
+      response->set_distance(h.distance);
+    }
+    reactor->Finish(grpc::Status::OK);
+  });
   return reactor;
 }
 

@@ -46,6 +46,8 @@ class SessionsService final
                                      const SessionRef* request, SessionStats* response) override;
   grpc::ServerUnaryReactor* Inspect(grpc::CallbackServerContext* context,
                                     const InspectRequest* request, InspectReply* response) override;
+  grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
+                                 PickReply* response) override;
 
  private:
   SessionRegistry& registry_;

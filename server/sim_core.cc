@@ -1,12 +1,15 @@
 #include "server/sim_core.h"
 
 #include <algorithm>
+#include <chrono>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "server/finite_check.h"
+#include "solver/common/status_macros.h"
+#include "solver/sculpt/apply.h"
 
 namespace dynsolid::server {
 namespace {
@@ -26,6 +29,48 @@ absl::Status Rename(const absl::Status& s, absl::string_view solver_name,
     return absl::Status(s.code(), absl::StrCat(field, m.substr(solver_name.size())));
   }
   return absl::Status(s.code(), absl::StrCat(field, ": ", m));
+}
+
+// Commands that change the solid and can be undone (service.proto Undo).
+bool Undoable(const Command& c) {
+  switch (c.kind_case()) {
+    case Command::kAddPointForce:
+    case Command::kAddPressure:
+    case Command::kSetGravity:
+    case Command::kRemoveLoad:
+    case Command::kFixRegion:
+    case Command::kUnfix:
+    case Command::kPaintMaterial:
+    case Command::kEdit:
+    case Command::kDrag:
+    case Command::kCurve:
+      return true;
+    default:
+      return false;
+  }
+}
+
+// The command's field name ("add_point_force"), or the edit's ("edit
+// extrude_faces").
+std::string KindName(const Command& c) {
+  const google::protobuf::FieldDescriptor* f =
+      Command::descriptor()->FindFieldByNumber(c.kind_case());
+  std::string name = f != nullptr ? f->name() : "none";
+  if (c.kind_case() == Command::kEdit) {
+    const google::protobuf::FieldDescriptor* e =
+        TopologyEdit::descriptor()->FindFieldByNumber(c.edit().kind_case());
+    if (e != nullptr) absl::StrAppend(&name, " ", e->name());
+  }
+  return name;
+}
+
+std::vector<Eigen::Vector3d> Targets(const MoveDrag& m) {
+  std::vector<Eigen::Vector3d> out;
+  if (m.targets_size() == 0) {
+    out.emplace_back(m.target().x(), m.target().y(), m.target().z());
+  }
+  for (const Vec3& v : m.targets()) out.emplace_back(v.x(), v.y(), v.z());
+  return out;
 }
 
 void SetStatus(const absl::Status& s, CommandReply* reply) {
@@ -50,8 +95,15 @@ absl::Status CheckCommandEnvelope(const CommandRequest& request) {
   return absl::OkStatus();
 }
 
-SimCore::SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused)
-    : solid_(std::move(solid)), options_(options), paused_(start_paused) {}
+SimCore::SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused,
+                 Scene scene, SolidFactory factory)
+    : solid_(std::move(solid)),
+      options_(options),
+      paused_(start_paused),
+      original_(std::make_shared<const Scene>(std::move(scene))),
+      scene_(original_),
+      factory_(std::move(factory)),
+      history_(options.undo_bytes) {}
 
 void SimCore::Remember(Client& client, const CommandReply& reply) {
   client.last_seq = reply.seq();
@@ -84,7 +136,20 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
     return Outcome::kUnknown;
   }
   reply->set_applied_step(solid_->steps());
-  const absl::Status s = Apply(request.command(), reply);
+  const Command& command = request.command();
+  const bool undoable = Undoable(command);
+  HistoryItem before;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (undoable) {
+    before.state = solid_->SaveState();
+    before.scene = scene_;
+    before.what = absl::StrCat("client ", request.client_id(), " seq ", request.seq(), ": ",
+                               KindName(command));
+  }
+  const absl::Status s = Apply(command, reply);
+  if (s.ok() && undoable) history_.Record(std::move(before));
+  last_hold_ms_ =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   SetStatus(s, reply);
   Remember(client, *reply);
   if (s.ok()) {
@@ -161,10 +226,95 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
       save_requested_ = true;
       reply->mutable_saved()->set_step(solid_->steps());
       return absl::OkStatus();
+    case Command::kEdit:
+      return ApplyEdit(c.edit(), reply);
+    case Command::kDrag: {
+      absl::StatusOr<int64_t> id = solid_->AddDrag(c.drag());
+      if (!id.ok()) return Rename(id.status(), "drag", "drag");
+      reply->set_load_id(*id);
+      return absl::OkStatus();
+    }
+    case Command::kCurve: {
+      absl::StatusOr<int64_t> id = solid_->AddCurveDrag(c.curve());
+      if (!id.ok()) return Rename(id.status(), "curve", "curve");
+      reply->set_load_id(*id);
+      return absl::OkStatus();
+    }
+    case Command::kMoveDrag:
+      return Rename(solid_->MoveDrag(c.move_drag().load_id(), Targets(c.move_drag())),
+                    "move_drag", "move_drag");
+    case Command::kUndo:
+      return UndoRedo(true, reply);
+    case Command::kRedo:
+      return UndoRedo(false, reply);
     case Command::KIND_NOT_SET:
       break;
   }
   return absl::InvalidArgumentError("command: no command kind is set");
+}
+
+absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply) {
+  const auto t0 = std::chrono::steady_clock::now();
+  absl::StatusOr<sculpt::AppliedEdit> applied = sculpt::ApplyEdit(*scene_, *solid_, edit);
+  if (!applied.ok()) return Rename(applied.status(), "edit", "edit");
+  EditReport* r = reply->mutable_edit();
+  r->set_control_cells_before(applied->cells_before);
+  r->set_control_cells_after(applied->cells_after);
+  r->set_control_vertices_before(applied->vertices_before);
+  r->set_control_vertices_after(applied->vertices_after);
+  r->set_elements_after(applied->elements_after);
+  for (int64_t id : applied->transfer.dropped_loads) r->add_dropped_loads(id);
+  for (int64_t id : applied->transfer.dropped_constraints) r->add_dropped_constraints(id);
+  for (const std::string& name : applied->transfer.dropped_traced) r->add_dropped_traced(name);
+  r->set_summary(applied->summary);
+  solid_ = std::move(applied->solid);
+  scene_ = std::make_shared<const Scene>(std::move(applied->scene));
+  ++fields_version_;
+  r->set_hold_ms(
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  return absl::OkStatus();
+}
+
+absl::Status SimCore::Restore(const HistoryItem& item) {
+  if (item.scene == scene_) {
+    return solid_->RestoreStateAtClock(item.state, solid_->time(), solid_->steps());
+  }
+  if (factory_ == nullptr) {
+    return absl::FailedPreconditionError("this session cannot rebuild its solid (no factory)");
+  }
+  absl::StatusOr<std::shared_ptr<solid::Solid>> rebuilt =
+      factory_(item.scene == original_ ? nullptr : item.scene.get());
+  if (!rebuilt.ok()) return rebuilt.status();
+  RETURN_IF_ERROR((*rebuilt)->RestoreStateAtClock(item.state, solid_->time(), solid_->steps()));
+  (*rebuilt)->set_topology_version(solid_->topology_version() + 1);
+  solid_ = *std::move(rebuilt);
+  scene_ = item.scene;
+  return absl::OkStatus();
+}
+
+absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const char* field = undo ? "command.undo" : "command.redo";
+  if (undo ? !history_.can_undo() : !history_.can_redo()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        field, ": nothing to ", undo ? "undo" : "redo", " (undo list ", history_.undo_depth(),
+        ", redo list ", history_.redo_depth(), " entries; ", history_.bytes(), " of ",
+        history_.limit_bytes(), " bytes)"));
+  }
+  const HistoryItem& next = undo ? history_.next_undo() : history_.next_redo();
+  HistoryItem now{solid_->SaveState(), scene_, next.what};
+  RETURN_IF_ERROR(Restore(next));
+  const HistoryItem done = undo ? history_.Undo(std::move(now)) : history_.Redo(std::move(now));
+  ++fields_version_;
+  HistoryReport* r = reply->mutable_history();
+  r->set_undo_depth(history_.undo_depth());
+  r->set_redo_depth(history_.redo_depth());
+  r->set_bytes(history_.bytes());
+  r->set_limit_bytes(history_.limit_bytes());
+  r->set_what(done.what);
+  r->set_hold_ms(
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  return absl::OkStatus();
 }
 
 absl::Status SimCore::StepOnce() {
@@ -234,14 +384,51 @@ void SimCore::SaveTo(persist::Snapshot* snapshot) const {
     c->set_last_seq(entry->second.last_seq);
     for (const CommandReply& r : entry->second.replies) *c->add_replies() = r;
   }
+  // Edited scenes, each once, in order of first use.
+  std::vector<const Scene*> table;
+  auto index = [&](const std::shared_ptr<const Scene>& scene) -> int32_t {
+    if (scene == original_) return -1;
+    for (size_t i = 0; i < table.size(); ++i) {
+      if (table[i] == scene.get()) return static_cast<int32_t>(i);
+    }
+    table.push_back(scene.get());
+    *snapshot->add_scenes() = *scene;
+    return static_cast<int32_t>(table.size() - 1);
+  };
+  snapshot->set_scene(index(scene_));
+  history_.SaveTo(snapshot, index);
 }
 
 absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
-  if (absl::Status s = solid_->RestoreState(snapshot.solid_state()); !s.ok()) return s;
-  if (solid_->steps() != snapshot.step()) {
-    return absl::DataLossError(absl::StrCat("snapshot says step ", snapshot.step(),
-                                            ", its solid state is at step ", solid_->steps()));
+  std::vector<std::shared_ptr<const Scene>> scenes;
+  for (const Scene& sc : snapshot.scenes()) scenes.push_back(std::make_shared<const Scene>(sc));
+  auto scene_of = [&](int32_t i) -> absl::StatusOr<std::shared_ptr<const Scene>> {
+    if (i == -1) return original_;
+    if (i < 0 || i >= static_cast<int32_t>(scenes.size())) {
+      return absl::DataLossError(absl::StrCat("snapshot: scene index ", i, " of ",
+                                              scenes.size()));
+    }
+    return scenes[i];
+  };
+  for (const auto* list : {&snapshot.undo(), &snapshot.redo()}) {
+    for (const persist::HistoryEntry& e : *list) RETURN_IF_ERROR(scene_of(e.scene()).status());
   }
+  ASSIGN_OR_RETURN(std::shared_ptr<const Scene> scene, scene_of(snapshot.scene()));
+  std::shared_ptr<solid::Solid> solid = solid_;
+  if (scene != scene_) {
+    if (factory_ == nullptr) {
+      return absl::FailedPreconditionError("snapshot of an edited solid: no factory to build it");
+    }
+    ASSIGN_OR_RETURN(solid, factory_(scene == original_ ? nullptr : scene.get()));
+  }
+  if (absl::Status s = solid->RestoreState(snapshot.solid_state()); !s.ok()) return s;
+  if (solid->steps() != snapshot.step()) {
+    return absl::DataLossError(absl::StrCat("snapshot says step ", snapshot.step(),
+                                            ", its solid state is at step ", solid->steps()));
+  }
+  solid_ = std::move(solid);
+  scene_ = std::move(scene);
+  history_.RestoreFrom(snapshot, [&](int32_t i) { return *scene_of(i); });
   const persist::LoopState& loop = snapshot.loop();
   paused_ = loop.paused();
   steps_remaining_ = loop.steps_remaining();

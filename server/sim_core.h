@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -18,6 +19,7 @@
 #include "absl/status/status.h"
 #include "dynsolid/journal.pb.h"
 #include "dynsolid/service.pb.h"
+#include "server/history.h"
 #include "server/surface_codec.h"
 #include "solver/solid/solid.h"
 
@@ -28,11 +30,25 @@ struct CoreOptions {
   int answer_cache = 256;
   // Whether Save can work (the session has a data directory).
   bool can_save = false;
+  // Bytes the undo and redo lists may hold (history.h); the oldest entries
+  // go first. Part of the session's determinism: recover with the same.
+  int64_t undo_bytes = int64_t{256} << 20;
 };
+
+// Builds a solid of the session: its own scene (`edited` null: the scene
+// the session was created from, with its levels and files) or an edited
+// one (a topology edit's scene, self-contained). Used to undo across a
+// topology edit and to recover a snapshot taken after one.
+using SolidFactory =
+    std::function<absl::StatusOr<std::shared_ptr<solid::Solid>>(const Scene* edited)>;
 
 class SimCore {
  public:
-  SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused);
+  // `scene`: the scene `solid` was built from (topology edits start from
+  // it); `factory` rebuilds solids (see SolidFactory; may be null in tests
+  // that make no topology edit).
+  SimCore(std::shared_ptr<solid::Solid> solid, CoreOptions options, bool start_paused,
+          Scene scene = Scene(), SolidFactory factory = nullptr);
   SimCore(const SimCore&) = delete;
   SimCore& operator=(const SimCore&) = delete;
 
@@ -67,6 +83,8 @@ class SimCore {
   // On error nothing changed.
   absl::Status RestoreFrom(const persist::Snapshot& snapshot);
 
+  // The solid may be replaced by a topology edit, undo or redo: do not keep
+  // references across Process calls.
   solid::Solid& solid() { return *solid_; }
   const solid::Solid& solid() const { return *solid_; }
   int64_t steps() const { return solid_->steps(); }
@@ -76,6 +94,11 @@ class SimCore {
   int64_t fields_version() const { return fields_version_; }
   int64_t commands_applied() const { return applied_; }
   int64_t commands_rejected() const { return rejected_; }
+  const History& history() const { return history_; }
+  // The scene of the current solid (the session's own until a topology edit).
+  const Scene& scene() const { return *scene_; }
+  // Wall time the last command held the loop, ms.
+  double last_hold_ms() const { return last_hold_ms_; }
   // Set by a Save command; the loop writes the snapshot and clears it.
   bool TakeSaveRequest() {
     const bool s = save_requested_;
@@ -94,6 +117,11 @@ class SimCore {
     std::deque<CommandReply> replies;  // most recent last
   };
   absl::Status Apply(const Command& command, CommandReply* reply);
+  absl::Status ApplyEdit(const TopologyEdit& edit, CommandReply* reply);
+  // Undo or redo: puts the solid in `item`'s state (rebuilding it when the
+  // scene differs); on error nothing changed.
+  absl::Status Restore(const HistoryItem& item);
+  absl::Status UndoRedo(bool undo, CommandReply* reply);
   void Remember(Client& client, const CommandReply& reply);
 
   std::shared_ptr<solid::Solid> solid_;
@@ -107,6 +135,11 @@ class SimCore {
   bool save_requested_ = false;
   absl::flat_hash_map<std::string, Client> clients_;
   std::shared_ptr<const SurfaceTopology> topology_;
+  std::shared_ptr<const Scene> original_;  // the session's own scene
+  std::shared_ptr<const Scene> scene_;     // the current solid's
+  SolidFactory factory_;
+  History history_;
+  double last_hold_ms_ = 0;
 };
 
 // Stateless checks of a command's envelope, done when it arrives:

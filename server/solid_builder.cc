@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/scene_loader.h"
+#include "solver/sculpt/apply.h"
 
 namespace dynsolid::server {
 namespace {
@@ -204,6 +205,21 @@ SolidStats ComputeStats(const scene::Discretization& d, double build_millisecond
   s.set_boundary_euler(static_cast<int32_t>(boundary.euler()));
   s.set_build_milliseconds(build_milliseconds);
   return s;
+}
+
+SolidFactory MakeSolidFactory(SceneRequest request, BuildLimits limits) {
+  return [request = std::move(request),
+          limits](const Scene* edited) -> absl::StatusOr<std::shared_ptr<solid::Solid>> {
+    if (edited == nullptr) {
+      absl::StatusOr<BuiltSolid> built = BuildSolid(request, limits);
+      if (!built.ok()) return built.status();
+      return std::move(built->solid);
+    }
+    absl::StatusOr<std::unique_ptr<solid::Solid>> s =
+        sculpt::BuildEdited(*edited, SimThreads(limits.sim_threads));
+    if (!s.ok()) return s.status();
+    return std::shared_ptr<solid::Solid>(*std::move(s));
+  };
 }
 
 }  // namespace dynsolid::server

@@ -13,6 +13,7 @@
 #include "dynsolid/service.pb.h"
 #include "solver/mesh/cell_complex.h"
 #include "solver/scene/build.h"
+#include "server/sim_core.h"
 #include "solver/solid/solid.h"
 
 namespace dynsolid::server {
@@ -66,6 +67,10 @@ struct BuiltSolid {
 // limits.max_cells. Can take seconds for large solids: call it off the
 // RPC threads and without holding locks.
 absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLimits& limits);
+
+// Builds solids for a session made from `request` (sim_core.h
+// SolidFactory): the request's own scene, or an edited scene.
+SolidFactory MakeSolidFactory(SceneRequest request, BuildLimits limits);
 
 // The number of level-`levels` cells MacCracken-Joy makes from `control`
 // (after locally refining scene.mesh.refine_cells): a cell splits into one

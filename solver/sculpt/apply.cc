@@ -1,0 +1,174 @@
+#include "solver/sculpt/apply.h"
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/scene/build.h"
+#include "solver/scene/inline_mesh.h"
+#include "solver/scene/scene_loader.h"
+#include "solver/sculpt/topology.h"
+
+namespace dynsolid::sculpt {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// The edit's error with the command's field path in front: the topology
+// functions name their argument ("cells[2]: ..."), the reply names the
+// request field ("edit.delete_cells.cells[2]: ...").
+absl::Status Prefixed(const absl::Status& s, const char* kind) {
+  return absl::Status(s.code(), absl::StrCat("edit.", kind, ".", std::string(s.message())));
+}
+
+// The cell (faces: the boundary face) whose rest centroid is nearest x.
+int32_t NearestCell(const mesh::CellComplex& c, const Vec3& p) {
+  const Eigen::Vector3d x(p.x(), p.y(), p.z());
+  int32_t best = 0;
+  double d = INFINITY;
+  for (int32_t i = 0; i < c.num_cells(); ++i) {
+    const double e = (c.CellCentroid(i) - x).squaredNorm();
+    if (e < d) {
+      d = e;
+      best = i;
+    }
+  }
+  return best;
+}
+
+int32_t NearestBoundaryFace(const mesh::CellComplex& c, const Vec3& p) {
+  const Eigen::Vector3d x(p.x(), p.y(), p.z());
+  int32_t best = -1;
+  double d = INFINITY;
+  for (int32_t f = 0; f < c.num_faces(); ++f) {
+    if (!c.face_is_boundary(f)) continue;
+    const double e = (c.FaceCentroid(f) - x).squaredNorm();
+    if (e < d) {
+      d = e;
+      best = f;
+    }
+  }
+  return best;
+}
+
+// Ids, then the items nearest the `near` points.
+template <typename Ids, typename Points3, typename Nearest>
+std::vector<int32_t> Select(const Ids& ids, const Points3& near, Nearest nearest) {
+  std::vector<int32_t> out(ids.begin(), ids.end());
+  for (const Vec3& p : near) out.push_back(nearest(p));
+  return out;
+}
+
+absl::StatusOr<EditResult> Dispatch(const mesh::CellComplex& rest, const Points& current,
+                                    const std::vector<uint8_t>& sharp, const TopologyEdit& e) {
+  switch (e.kind_case()) {
+    case TopologyEdit::kDeleteCells: {
+      const std::vector<int32_t> cells =
+          Select(e.delete_cells().cells(), e.delete_cells().near(),
+                 [&](const Vec3& p) { return NearestCell(rest, p); });
+      absl::StatusOr<EditResult> r = DeleteCells(rest, current, sharp, cells);
+      if (!r.ok()) return Prefixed(r.status(), "delete_cells");
+      return r;
+    }
+    case TopologyEdit::kExtrudeFaces: {
+      const dynsolid::ExtrudeFaces& x = e.extrude_faces();
+      const std::vector<int32_t> faces = Select(
+          x.faces(), x.near(), [&](const Vec3& p) { return NearestBoundaryFace(rest, p); });
+      absl::StatusOr<EditResult> r = sculpt::ExtrudeFaces(
+          rest, current, sharp, faces, x.distance(), x.layers() == 0 ? 1 : x.layers());
+      if (!r.ok()) return Prefixed(r.status(), "extrude_faces");
+      return r;
+    }
+    case TopologyEdit::kMergeFaces: {
+      const dynsolid::MergeFaces& m = e.merge_faces();
+      int32_t a = m.face_a(), b = m.face_b();
+      if (m.near_size() != 0) {
+        if (m.near_size() != 2) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              "edit.merge_faces.near: two points (one per face), got ", m.near_size()));
+        }
+        a = NearestBoundaryFace(rest, m.near(0));
+        b = NearestBoundaryFace(rest, m.near(1));
+      }
+      absl::StatusOr<EditResult> r = sculpt::MergeFaces(rest, current, sharp, a, b);
+      if (!r.ok()) return Prefixed(r.status(), "merge_faces");
+      return r;
+    }
+    case TopologyEdit::kSubdivideCells: {
+      const std::vector<int32_t> cells =
+          Select(e.subdivide_cells().cells(), e.subdivide_cells().near(),
+                 [&](const Vec3& p) { return NearestCell(rest, p); });
+      absl::StatusOr<EditResult> r = SubdivideCells(rest, current, sharp, cells);
+      if (!r.ok()) return Prefixed(r.status(), "subdivide_cells");
+      return r;
+    }
+    case TopologyEdit::kSharpEdges: {
+      std::vector<std::array<int32_t, 2>> edges;
+      for (const EdgeRef& edge : e.sharp_edges().edges()) edges.push_back({edge.v0(), edge.v1()});
+      absl::StatusOr<EditResult> r =
+          SetSharp(rest, current, sharp, edges, e.sharp_edges().sharp());
+      if (!r.ok()) return Prefixed(r.status(), "sharp_edges");
+      return r;
+    }
+    case TopologyEdit::KIND_NOT_SET:
+      break;
+  }
+  return absl::InvalidArgumentError("edit: no edit kind is set");
+}
+
+}  // namespace
+
+absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& solid,
+                                      const TopologyEdit& edit) {
+  const auto t0 = Clock::now();
+  RETURN_IF_ERROR(scene::ValidateValues(edit, "edit"));
+  const scene::Discretization& d = solid.discretization();
+  ASSIGN_OR_RETURN(EditResult r,
+                   Dispatch(d.control(), solid.control_positions(), d.control_sharp, edit));
+
+  // The edited scene: the new control mesh inline (final positions: no
+  // scale, translation or local refinement left to apply), its sharp edges
+  // listed, the levels the solid was built with.
+  Scene edited = scene;
+  ControlMesh* m = edited.mutable_mesh();
+  m->Clear();
+  *m->mutable_inline_mesh() = scene::InlineFromMesh(r.mesh);
+  edited.mutable_subdivision()->set_levels(d.hierarchy.levels);
+  SharpFeatures* sharp = edited.mutable_sharp();
+  sharp->Clear();
+  for (const auto& [a, b] : r.sharp_edges) {
+    EdgeRef* e = sharp->add_edges();
+    e->set_v0(a);
+    e->set_v1(b);
+  }
+  absl::StatusOr<scene::Discretization> nd = scene::Discretize(edited, r.mesh, std::nullopt);
+  if (!nd.ok()) return absl::Status(nd.status().code(), absl::StrCat("edit: ", nd.status().message()));
+
+  AppliedEdit out;
+  out.cells_before = d.control().num_cells();
+  out.vertices_before = d.control().num_vertices();
+  out.cells_after = nd->control().num_cells();
+  out.vertices_after = nd->control().num_vertices();
+  out.elements_after =
+      nd->elements.num_cubic() + nd->elements.num_linear() + nd->elements.num_pyramid();
+  solid::Solid::TopologyTransfer t{r.current, r.vertex_sources, r.cell_source};
+  absl::StatusOr<std::unique_ptr<solid::Solid>> s =
+      solid.Remeshed(edited, *std::move(nd), t, &out.transfer);
+  if (!s.ok()) return absl::Status(s.status().code(), absl::StrCat("edit: ", s.status().message()));
+  out.solid = *std::move(s);
+  out.scene = out.transfer.scene;
+  out.summary = r.summary;
+  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return out;
+}
+
+absl::StatusOr<std::unique_ptr<solid::Solid>> BuildEdited(const Scene& scene, int threads) {
+  ASSIGN_OR_RETURN(scene::Discretization d, scene::BuildDiscretization(scene, "", std::nullopt));
+  return solid::Solid::Create(scene, std::move(d), threads);
+}
+
+}  // namespace dynsolid::sculpt

@@ -1,0 +1,43 @@
+// A topology edit of a live solid, end to end: the pure edit of its control
+// mesh (topology.h), the edited scene (an inline control mesh, explicit
+// sharp edges, the levels the solid was built with), its discretization,
+// and the solid rebuilt around it with its state carried over
+// (solid::Solid::Remeshed). Nothing about the network.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "dynsolid/scene.pb.h"
+#include "solver/solid/solid.h"
+
+namespace dynsolid::sculpt {
+
+struct AppliedEdit {
+  // The scene the new solid stands for (Solid::TransferReport::scene): a
+  // solid built from it with BuildEdited and given the new solid's
+  // SaveState() is the new solid again.
+  Scene scene;
+  std::unique_ptr<solid::Solid> solid;
+  solid::Solid::TransferReport transfer;
+  std::string summary;  // "extruded 1 face by 0.2 m in 1 layer: +1 cell, +4 vertices"
+  int32_t cells_before = 0, cells_after = 0;
+  int32_t vertices_before = 0, vertices_after = 0;
+  int32_t elements_after = 0;
+  double milliseconds = 0;  // wall time of the whole edit, rebuild included
+};
+
+// Applies `edit` to `solid`, which was built from `scene` (the session's
+// current scene: its settings, materials and traced points carry over).
+// Errors name the edit's field and the item ("edit.extrude_faces.faces[0]:
+// face 12 is interior ..."): InvalidArgument, and nothing is changed.
+absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& solid,
+                                      const TopologyEdit& edit);
+
+// The solid of an edited scene (its control mesh inline): Discretize and
+// Create with `threads` stepping threads.
+absl::StatusOr<std::unique_ptr<solid::Solid>> BuildEdited(const Scene& scene, int threads);
+
+}  // namespace dynsolid::sculpt

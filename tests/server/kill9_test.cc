@@ -18,6 +18,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "google/protobuf/text_format.h"
+
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "dynsolid/service.grpc.pb.h"
@@ -145,6 +147,16 @@ std::vector<std::pair<Command, int64_t>> Script() {
   Command gravity;
   gravity.mutable_set_gravity()->set_z(-9.81);
   s.emplace_back(gravity, 120);
+  // Sculpting: an extrude, a local subdivision taken back by undo, a drag.
+  for (const char* text :
+       {"edit { extrude_faces { near { x: 0.5 y: 1.5 z: 3 } distance: 0.5 layers: 2 } }",
+        "edit { subdivide_cells { near { x: 0.5 y: 0.5 z: 0.5 } } }", "undo {}",
+        "drag { material_point { x: 0.5 y: 1.5 z: 3.5 } target { x: 0.2 y: 1.5 z: 3.9 } "
+        "stiffness: 1e4 }"}) {
+    Command c;
+    EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &c)) << text;
+    s.emplace_back(c, 120);
+  }
   // The server is killed while this runs (after step 150).
   s.emplace_back(StepCommand(100), 150);
   return s;

@@ -82,17 +82,25 @@ def main():
           lat["max"], num(st["commands_applied"]), num(st["commands_rejected"]),
           num(st["commands_duplicate"])))
     p("")
-    p("| seq | line | command | applied at step | latency (ms) | result |")
-    p("| ---: | --- | --- | ---: | ---: | --- |")
+    p("| seq | line | command | applied at step | latency (ms) | held the loop (ms) | result |")
+    p("| ---: | --- | --- | ---: | ---: | ---: | --- |")
     for e in c["log"]:
         result = "ok" if e["code"] == 0 else "code %d: %s" % (e["code"], e["message"])
         for key in ("load_id", "constraint_id"):
             if key in e:
                 result += ", %s %d" % (key, e[key])
+        if "edit" in e:
+            result += ": %s (%d -> %d control cells, %d elements)" % (
+                e["edit"]["summary"], e["edit"]["cells_before"], e["edit"]["cells_after"],
+                e["edit"]["elements_after"])
+        if "history" in e:
+            result += ": %s (undo %d, redo %d)" % (
+                e["history"]["what"], e["history"]["undo_depth"], e["history"]["redo_depth"])
         if "saved_step" in e:
             result += ", snapshot at step %d (%d bytes)" % (e["saved_step"], e["saved_bytes"])
-        p("| %d | %s | %s | %d | %.3f | %s |" % (
-            e["seq"], e["where"], e["kind"], e["applied_step"], e["latency_ms"], result))
+        p("| %d | %s | %s | %d | %.3f | %.2f | %s |" % (
+            e["seq"], e["where"], e["kind"], e["applied_step"], e["latency_ms"],
+            e.get("hold_ms", 0.0), result))
     p("")
     p("## Frames (one watcher, keyframe + 16-bit deltas)")
     p("")

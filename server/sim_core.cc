@@ -151,6 +151,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
   last_hold_ms_ =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   SetStatus(s, reply);
+  reply->set_hold_ms(last_hold_ms_);
   Remember(client, *reply);
   if (s.ok()) {
     ++applied_;

@@ -560,6 +560,21 @@ std::string ReportJson(const RunReport& r) {
     if (c.reply.has_constraint_id()) {
       absl::StrAppend(&j, ", \"constraint_id\": ", c.reply.constraint_id());
     }
+    absl::StrAppend(&j, ", \"hold_ms\": ", JsonNumber(c.reply.hold_ms()));
+    if (c.reply.has_edit()) {
+      const EditReport& e = c.reply.edit();
+      absl::StrAppend(&j, ", \"edit\": {\"cells_before\": ", e.control_cells_before(),
+                      ", \"cells_after\": ", e.control_cells_after(),
+                      ", \"elements_after\": ", e.elements_after(), ", \"summary\": ");
+      JsonString(j, e.summary());
+      absl::StrAppend(&j, "}");
+    }
+    if (c.reply.has_history()) {
+      absl::StrAppend(&j, ", \"history\": {\"undo_depth\": ", c.reply.history().undo_depth(),
+                      ", \"redo_depth\": ", c.reply.history().redo_depth(), ", \"what\": ");
+      JsonString(j, c.reply.history().what());
+      absl::StrAppend(&j, "}");
+    }
     if (c.reply.has_saved()) {
       absl::StrAppend(&j, ", \"saved_step\": ", c.reply.saved().step(),
                       ", \"saved_bytes\": ", c.reply.saved().bytes());

@@ -1,0 +1,112 @@
+// Sculpting hold times: how long a topology edit (the pure edit, the edited
+// scene, the new solid with its state carried over) and a restore (what undo
+// does within one topology) hold a session's loop. Prints figures only.
+//   sculpt_bench [scene=block3] [levels=-1: the scene's]
+// Each edit is applied to the scene's solid after 20 steps, timed over 3
+// repetitions (median printed).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "google/protobuf/text_format.h"
+#include "solver/scene/build.h"
+#include "solver/scene/scene_loader.h"
+#include "solver/sculpt/apply.h"
+#include "solver/solid/solid.h"
+
+namespace {
+
+double Ms(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace dynsolid;
+  const std::string name = argc > 1 ? argv[1] : "block3";
+  const int levels = argc > 2 ? std::atoi(argv[2]) : -1;
+  absl::StatusOr<Scene> scene = scene::BuiltinScene(name);
+  if (!scene.ok()) {
+    std::printf("%s\n", std::string(scene.status().message()).c_str());
+    return 1;
+  }
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(),
+                                      levels >= 0 ? std::optional<int>(levels) : std::nullopt);
+  if (!d.ok()) {
+    std::printf("%s\n", std::string(d.status().message()).c_str());
+    return 1;
+  }
+  if (levels >= 0) scene->mutable_subdivision()->set_levels(levels);
+  auto s = solid::Solid::Create(*scene, *std::move(d));
+  if (!s.ok()) {
+    std::printf("%s\n", std::string(s.status().message()).c_str());
+    return 1;
+  }
+  solid::Solid& solid = **s;
+  for (int i = 0; i < 20; ++i) (void)solid.Step();
+  const mesh::CellComplex& c = solid.discretization().control();
+  // Targets picked on this mesh: the boundary face with the highest
+  // centroid, the cell with the highest centroid, and the cell nearest the
+  // middle.
+  int32_t top_face = -1, top_cell = 0, mid_cell = 0;
+  Eigen::Vector3d lo = c.positions().colwise().minCoeff(), hi = c.positions().colwise().maxCoeff();
+  const Eigen::Vector3d mid = 0.5 * (lo + hi);
+  for (int32_t f = 0; f < c.num_faces(); ++f) {
+    if (c.face_is_boundary(f) &&
+        (top_face < 0 || c.FaceCentroid(f).z() > c.FaceCentroid(top_face).z())) {
+      top_face = f;
+    }
+  }
+  for (int32_t k = 0; k < c.num_cells(); ++k) {
+    if (c.CellCentroid(k).z() > c.CellCentroid(top_cell).z()) top_cell = k;
+    if ((c.CellCentroid(k) - mid).norm() < (c.CellCentroid(mid_cell) - mid).norm()) mid_cell = k;
+  }
+  const double size = (hi - lo).maxCoeff();
+  const std::vector<std::pair<std::string, std::string>> edits = {
+      {"extrude", "extrude_faces { faces: " + std::to_string(top_face) +
+                      " distance: " + std::to_string(0.2 * size / 3) + " }"},
+      {"delete", "delete_cells { cells: " + std::to_string(top_cell) + " }"},
+      {"subdivide", "subdivide_cells { cells: " + std::to_string(mid_cell) + " }"},
+  };
+  std::printf("sculpt_bench: %s at %d levels: %d control cells, %lld elements, %d threads\n",
+              name.c_str(), solid.discretization().hierarchy.levels, c.num_cells(),
+              static_cast<long long>(solid.discretization().elements.cubic_cell.size() + solid.discretization().elements.linear_cell.size() + solid.discretization().elements.pyramid_cell.size()), solid.threads());
+  std::printf("| what | median ms (of 3) | result |\n| --- | ---: | --- |\n");
+  for (const auto& [what, text] : edits) {
+    TopologyEdit e;
+    google::protobuf::TextFormat::ParseFromString(text, &e);
+    std::vector<double> ms;
+    std::string result;
+    for (int r = 0; r < 3; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      absl::StatusOr<sculpt::AppliedEdit> a = sculpt::ApplyEdit(*scene, solid, e);
+      ms.push_back(Ms(t0));
+      result = a.ok() ? a->summary : std::string(a.status().message());
+    }
+    std::printf("| %s | %.1f | %s |\n", what.c_str(), Median(ms), result.c_str());
+  }
+  // Undo within one topology: restore a saved state.
+  const std::string state = solid.SaveState();
+  std::vector<double> save_ms, restore_ms;
+  for (int r = 0; r < 3; ++r) {
+    auto t0 = std::chrono::steady_clock::now();
+    const std::string bytes = solid.SaveState();
+    save_ms.push_back(Ms(t0));
+    t0 = std::chrono::steady_clock::now();
+    (void)solid.RestoreStateAtClock(state, solid.time(), solid.steps());
+    restore_ms.push_back(Ms(t0));
+  }
+  std::printf("| save state (every undoable command) | %.2f | %zu bytes |\n", Median(save_ms),
+              state.size());
+  std::printf("| restore state (undo, redo) | %.2f | |\n", Median(restore_ms));
+  return 0;
+}

@@ -264,7 +264,7 @@ void SessionLoop::Run() {
     {
       absl::MutexLock lock(&mu_);
       for (;;) {
-        if (stop_ || !commands_.empty() || !inspects_.empty()) break;
+        if (stop_ || !commands_.empty() || !inspects_.empty() || build_done_) break;
         const Clock::time_point now = Clock::now();
         Clock::time_point deadline = Clock::time_point::max();
         if (core_->WantsStep()) deadline = anchored ? next_step : now;
@@ -285,14 +285,47 @@ void SessionLoop::Run() {
       has_watchers = !watchers_.empty();
     }
     if (stop) {
-      // Commands not yet applied are not answered (the client resends).
-      for (PendingCommand& c : commands) {
-        absl::MutexLock lock(&mu_);
-        commands_.push_back(std::move(c));
+      // Commands not yet applied are not answered (the client resends): a
+      // build under way is waited for and dropped.
+      std::deque<PendingCommand> unapplied;
+      if (building_.has_value()) {
+        builder_.join();
+        unapplied.push_back(*std::move(building_));
+        building_.reset();
       }
+      for (PendingCommand& c : held_) unapplied.push_back(std::move(c));
+      held_.clear();
+      for (PendingCommand& c : commands) unapplied.push_back(std::move(c));
+      absl::MutexLock lock(&mu_);
+      built_.reset();
+      build_done_ = false;
+      for (PendingCommand& c : commands_) unapplied.push_back(std::move(c));
+      commands_.swap(unapplied);
       break;
     }
-    ApplyCommands(commands);
+    std::shared_ptr<SimCore::Prebuilt> finished;
+    {
+      absl::MutexLock lock(&mu_);
+      if (build_done_) {
+        finished = std::move(built_);
+        build_done_ = false;
+      }
+    }
+    if (finished != nullptr) {
+      // The build is done: its command first, then the ones held behind it.
+      builder_.join();
+      std::deque<PendingCommand> next;
+      next.push_back(*std::move(building_));
+      building_.reset();
+      for (PendingCommand& c : held_) next.push_back(std::move(c));
+      held_.clear();
+      for (PendingCommand& c : commands) next.push_back(std::move(c));
+      commands.swap(next);
+    } else if (building_.has_value()) {
+      for (PendingCommand& c : commands) held_.push_back(std::move(c));
+      commands.clear();
+    }
+    ApplyCommands(commands, std::move(finished));
     AnswerInspects(false);
 
     Clock::time_point now = Clock::now();
@@ -365,13 +398,36 @@ void SessionLoop::Run() {
   AnswerInspects(true);
 }
 
-void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands) {
+void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
+                                std::shared_ptr<SimCore::Prebuilt> prebuilt) {
   if (commands.empty()) return;
   PersistBatch batch;
   int64_t duplicates = 0;
-  for (PendingCommand& c : commands) {
+  for (size_t k = 0; k < commands.size(); ++k) {
+    PendingCommand& c = commands[k];
+    if (prebuilt == nullptr && core_->NeedsBuild(c.request)) {
+      // Build off the loop; this command and the rest wait for it.
+      std::function<std::shared_ptr<SimCore::Prebuilt>()> job = core_->Prebuild(c.request);
+      for (size_t r = k; r < commands.size(); ++r) {
+        if (r == k) {
+          building_ = std::move(commands[r]);
+        } else {
+          held_.push_back(std::move(commands[r]));
+        }
+      }
+      builder_ = std::thread([this, job = std::move(job)]() {
+        NameThisThread("build");
+        std::shared_ptr<SimCore::Prebuilt> result = job();
+        absl::MutexLock lock(&mu_);
+        built_ = std::move(result);
+        build_done_ = true;
+        wake_.Signal();
+      });
+      break;
+    }
     CommandReply reply;
-    const SimCore::Outcome outcome = core_->Process(c.request, &reply);
+    const SimCore::Outcome outcome = core_->Process(c.request, &reply, std::move(prebuilt));
+    prebuilt = nullptr;
     if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
       if (!dir_.empty()) {
         persist::JournalRecord record;

@@ -20,6 +20,7 @@
 #include <deque>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -157,8 +158,13 @@ class SessionLoop {
     std::vector<std::pair<std::shared_ptr<ReplySink>, CommandReply>> replies;
   };
 
-  // Simulation-thread helpers.
-  void ApplyCommands(std::deque<PendingCommand>& commands);
+  // Simulation-thread helpers. ApplyCommands applies commands in order
+  // until one needs a solid built (SimCore::NeedsBuild): that one starts its
+  // build on a thread of its own, and it and every command after it wait
+  // (held_) while the loop goes on stepping; `prebuilt` is the finished
+  // build for the first command.
+  void ApplyCommands(std::deque<PendingCommand>& commands,
+                     std::shared_ptr<SimCore::Prebuilt> prebuilt = nullptr);
   std::string MakeSnapshotBytes();
   void Publish(std::chrono::steady_clock::time_point now);
   void AnswerInspects(bool all_unavailable);
@@ -198,7 +204,14 @@ class SessionLoop {
   };
   absl::flat_hash_map<std::string, Bucket> buckets_ ABSL_GUARDED_BY(mu_);
 
+  // A solid being built for a command (ApplyCommands).
+  std::shared_ptr<SimCore::Prebuilt> built_ ABSL_GUARDED_BY(mu_);
+  bool build_done_ ABSL_GUARDED_BY(mu_) = false;
+
   // Simulation-thread state.
+  std::optional<PendingCommand> building_;  // the command whose solid is being built
+  std::thread builder_;
+  std::deque<PendingCommand> held_;  // commands behind it, in order
   std::vector<PendingInspect> waiting_inspects_;
   int64_t last_published_step_ = -1;
   int64_t last_published_fields_ = -1;

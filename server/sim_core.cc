@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -80,6 +81,51 @@ void SetStatus(const absl::Status& s, CommandReply* reply) {
 
 }  // namespace
 
+struct SimCore::Prebuilt {
+  // A topology edit's prepared solid, or the error preparing it gave.
+  std::optional<absl::StatusOr<sculpt::PreparedEdit>> edit;
+  // An undo's or redo's solid for `for_scene`, or the factory's error.
+  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid>>> solid;
+  std::shared_ptr<const Scene> for_scene;
+};
+
+bool SimCore::NeedsBuild(const CommandRequest& request) const {
+  auto it = clients_.find(request.client_id());
+  if (it != clients_.end() && request.seq() <= it->second.last_seq) return false;  // an old seq
+  const Command& c = request.command();
+  if (c.kind_case() == Command::kEdit) return true;
+  if (factory_ == nullptr) return false;
+  if (c.kind_case() == Command::kUndo && history_.can_undo()) {
+    return history_.next_undo().scene != scene_;
+  }
+  if (c.kind_case() == Command::kRedo && history_.can_redo()) {
+    return history_.next_redo().scene != scene_;
+  }
+  return false;
+}
+
+std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
+    const CommandRequest& request) const {
+  const Command& c = request.command();
+  if (c.kind_case() == Command::kEdit) {
+    // Keeps the scene and the solid alive; reads only what stepping leaves
+    // alone (sculpt::PrepareEdit).
+    return [scene = scene_, solid = solid_, edit = c.edit()]() {
+      auto out = std::make_shared<Prebuilt>();
+      out->edit = sculpt::PrepareEdit(*scene, *solid, edit);
+      return out;
+    };
+  }
+  std::shared_ptr<const Scene> target =
+      c.kind_case() == Command::kUndo ? history_.next_undo().scene : history_.next_redo().scene;
+  return [factory = factory_, target, original = original_]() {
+    auto out = std::make_shared<Prebuilt>();
+    out->for_scene = target;
+    out->solid = factory(target == original ? nullptr : target.get());
+    return out;
+  };
+}
+
 absl::Status CheckCommandEnvelope(const CommandRequest& request) {
   const std::string& id = request.client_id();
   if (id.empty() || id.size() > 64) {
@@ -113,7 +159,8 @@ void SimCore::Remember(Client& client, const CommandReply& reply) {
   }
 }
 
-SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* reply) {
+SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* reply,
+                                  std::shared_ptr<Prebuilt> prebuilt) {
   reply->Clear();
   reply->set_client_id(request.client_id());
   reply->set_seq(request.seq());
@@ -146,7 +193,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
     before.what = absl::StrCat("client ", request.client_id(), " seq ", request.seq(), ": ",
                                KindName(command));
   }
-  const absl::Status s = Apply(command, reply);
+  const absl::Status s = Apply(command, reply, prebuilt.get());
   if (s.ok() && undoable) history_.Record(std::move(before));
   last_hold_ms_ =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -161,7 +208,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
   return Outcome::kRejected;
 }
 
-absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
+absl::Status SimCore::Apply(const Command& c, CommandReply* reply, Prebuilt* prebuilt) {
   if (absl::Status s = CheckFinite(c, "command"); !s.ok()) return s;
   switch (c.kind_case()) {
     case Command::kAddPointForce: {
@@ -228,7 +275,7 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
       reply->mutable_saved()->set_step(solid_->steps());
       return absl::OkStatus();
     case Command::kEdit:
-      return ApplyEdit(c.edit(), reply);
+      return ApplyEdit(c.edit(), reply, prebuilt);
     case Command::kDrag: {
       absl::StatusOr<int64_t> id = solid_->AddDrag(c.drag());
       if (!id.ok()) return Rename(id.status(), "drag", "drag");
@@ -245,18 +292,28 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply) {
       return Rename(solid_->MoveDrag(c.move_drag().load_id(), Targets(c.move_drag())),
                     "move_drag", "move_drag");
     case Command::kUndo:
-      return UndoRedo(true, reply);
+      return UndoRedo(true, reply, prebuilt);
     case Command::kRedo:
-      return UndoRedo(false, reply);
+      return UndoRedo(false, reply, prebuilt);
     case Command::KIND_NOT_SET:
       break;
   }
   return absl::InvalidArgumentError("command: no command kind is set");
 }
 
-absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply) {
+absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply,
+                               Prebuilt* prebuilt) {
   const auto t0 = std::chrono::steady_clock::now();
-  absl::StatusOr<sculpt::AppliedEdit> applied = sculpt::ApplyEdit(*scene_, *solid_, edit);
+  absl::StatusOr<sculpt::AppliedEdit> applied;
+  if (prebuilt != nullptr && prebuilt->edit.has_value()) {
+    if (prebuilt->edit->ok()) {
+      applied = sculpt::FinishEdit(*std::move(*prebuilt->edit), *solid_);
+    } else {
+      applied = prebuilt->edit->status();
+    }
+  } else {
+    applied = sculpt::ApplyEdit(*scene_, *solid_, edit);
+  }
   if (!applied.ok()) return Rename(applied.status(), "edit", "edit");
   EditReport* r = reply->mutable_edit();
   r->set_control_cells_before(applied->cells_before);
@@ -268,6 +325,7 @@ absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply) {
   for (int64_t id : applied->transfer.dropped_constraints) r->add_dropped_constraints(id);
   for (const std::string& name : applied->transfer.dropped_traced) r->add_dropped_traced(name);
   r->set_summary(applied->summary);
+  r->set_build_ms(applied->prepare_milliseconds);
   solid_ = std::move(applied->solid);
   scene_ = std::make_shared<const Scene>(std::move(applied->scene));
   ++fields_version_;
@@ -276,7 +334,7 @@ absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply) {
   return absl::OkStatus();
 }
 
-absl::Status SimCore::Restore(const HistoryItem& item) {
+absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
   if (item.scene == scene_) {
     return solid_->RestoreStateAtClock(item.state, solid_->time(), solid_->steps());
   }
@@ -284,7 +342,9 @@ absl::Status SimCore::Restore(const HistoryItem& item) {
     return absl::FailedPreconditionError("this session cannot rebuild its solid (no factory)");
   }
   absl::StatusOr<std::shared_ptr<solid::Solid>> rebuilt =
-      factory_(item.scene == original_ ? nullptr : item.scene.get());
+      prebuilt != nullptr && prebuilt->solid.has_value() && prebuilt->for_scene == item.scene
+          ? *std::move(prebuilt->solid)
+          : factory_(item.scene == original_ ? nullptr : item.scene.get());
   if (!rebuilt.ok()) return rebuilt.status();
   RETURN_IF_ERROR((*rebuilt)->RestoreStateAtClock(item.state, solid_->time(), solid_->steps()));
   (*rebuilt)->set_topology_version(solid_->topology_version() + 1);
@@ -293,7 +353,7 @@ absl::Status SimCore::Restore(const HistoryItem& item) {
   return absl::OkStatus();
 }
 
-absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply) {
+absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuilt) {
   const auto t0 = std::chrono::steady_clock::now();
   const char* field = undo ? "command.undo" : "command.redo";
   if (undo ? !history_.can_undo() : !history_.can_redo()) {
@@ -304,7 +364,7 @@ absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply) {
   }
   const HistoryItem& next = undo ? history_.next_undo() : history_.next_redo();
   HistoryItem now{solid_->SaveState(), scene_, next.what};
-  RETURN_IF_ERROR(Restore(next));
+  RETURN_IF_ERROR(Restore(next, prebuilt));
   const HistoryItem done = undo ? history_.Undo(std::move(now)) : history_.Redo(std::move(now));
   ++fields_version_;
   HistoryReport* r = reply->mutable_history();

@@ -59,10 +59,25 @@ class SimCore {
     kUnknown,    // an old seq with no answer kept: not recorded
   };
 
+  // A solid built ahead for a command that needs one (Prebuild).
+  struct Prebuilt;
+
   // Applies (or refuses) one command at the current step boundary and fills
   // `reply` (applied_step = steps()). client_id and seq must already be
-  // valid (CheckCommandEnvelope). Deterministic.
-  Outcome Process(const CommandRequest& request, CommandReply* reply);
+  // valid (CheckCommandEnvelope). Deterministic; with `prebuilt` (from
+  // Prebuild for this request, with nothing applied in between) the result
+  // is the same, bit for bit, only the expensive part is already done.
+  Outcome Process(const CommandRequest& request, CommandReply* reply,
+                  std::shared_ptr<Prebuilt> prebuilt = nullptr);
+
+  // ---- Building off the loop. A topology edit, and an undo or redo into
+  // another topology, build a new solid (hundreds of ms). NeedsBuild says
+  // whether `request` is such a new command; Prebuild returns the build to
+  // run on another thread while the loop goes on stepping. The caller must
+  // apply no other command until it hands the result to Process (the build
+  // reads the current solid's materials and topology, and the history).
+  bool NeedsBuild(const CommandRequest& request) const;
+  std::function<std::shared_ptr<Prebuilt>()> Prebuild(const CommandRequest& request) const;
 
   // Whether the loop should take a step now: running, or a Step count left.
   bool WantsStep() const { return !paused_ || steps_remaining_ > 0; }
@@ -116,12 +131,12 @@ class SimCore {
     uint64_t last_seq = 0;
     std::deque<CommandReply> replies;  // most recent last
   };
-  absl::Status Apply(const Command& command, CommandReply* reply);
-  absl::Status ApplyEdit(const TopologyEdit& edit, CommandReply* reply);
+  absl::Status Apply(const Command& command, CommandReply* reply, Prebuilt* prebuilt);
+  absl::Status ApplyEdit(const TopologyEdit& edit, CommandReply* reply, Prebuilt* prebuilt);
   // Undo or redo: puts the solid in `item`'s state (rebuilding it when the
-  // scene differs); on error nothing changed.
-  absl::Status Restore(const HistoryItem& item);
-  absl::Status UndoRedo(bool undo, CommandReply* reply);
+  // scene differs, or taking the prebuilt solid); on error nothing changed.
+  absl::Status Restore(const HistoryItem& item, Prebuilt* prebuilt);
+  absl::Status UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuilt);
   void Remember(Client& client, const CommandReply& reply);
 
   std::shared_ptr<solid::Solid> solid_;

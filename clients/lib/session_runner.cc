@@ -565,7 +565,8 @@ std::string ReportJson(const RunReport& r) {
       const EditReport& e = c.reply.edit();
       absl::StrAppend(&j, ", \"edit\": {\"cells_before\": ", e.control_cells_before(),
                       ", \"cells_after\": ", e.control_cells_after(),
-                      ", \"elements_after\": ", e.elements_after(), ", \"summary\": ");
+                      ", \"elements_after\": ", e.elements_after(),
+                      ", \"build_ms\": ", JsonNumber(e.build_ms()), ", \"summary\": ");
       JsonString(j, e.summary());
       absl::StrAppend(&j, "}");
     }

@@ -122,18 +122,24 @@ absl::StatusOr<EditResult> Dispatch(const mesh::CellComplex& rest, const Points&
 
 }  // namespace
 
-absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& solid,
-                                      const TopologyEdit& edit) {
+absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid& solid,
+                                         const TopologyEdit& edit) {
   const auto t0 = Clock::now();
   RETURN_IF_ERROR(scene::ValidateValues(edit, "edit"));
   const scene::Discretization& d = solid.discretization();
-  ASSIGN_OR_RETURN(EditResult r,
-                   Dispatch(d.control(), solid.control_positions(), d.control_sharp, edit));
+  // The edit at rest (rest positions stand in for the current ones here:
+  // nothing decided at rest depends on them; FinishEdit places the new
+  // points where the solid is then).
+  const mesh::CellComplex& rest = d.control();
+  ASSIGN_OR_RETURN(EditResult r, Dispatch(rest, rest.positions(), d.control_sharp, edit));
 
   // The edited scene: the new control mesh inline (final positions: no
   // scale, translation or local refinement left to apply), its sharp edges
   // listed, the levels the solid was built with.
-  Scene edited = scene;
+  PreparedEdit out;
+  out.edit = edit;
+  Scene& edited = out.scene;
+  edited = scene;
   ControlMesh* m = edited.mutable_mesh();
   m->Clear();
   *m->mutable_inline_mesh() = scene::InlineFromMesh(r.mesh);
@@ -147,21 +153,57 @@ absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& so
   }
   absl::StatusOr<scene::Discretization> nd = scene::Discretize(edited, r.mesh, std::nullopt);
   if (!nd.ok()) return absl::Status(nd.status().code(), absl::StrCat("edit: ", nd.status().message()));
-
-  AppliedEdit out;
-  out.cells_before = d.control().num_cells();
-  out.vertices_before = d.control().num_vertices();
+  out.cells_before = rest.num_cells();
+  out.vertices_before = rest.num_vertices();
   out.cells_after = nd->control().num_cells();
   out.vertices_after = nd->control().num_vertices();
   out.elements_after =
       nd->elements.num_cubic() + nd->elements.num_linear() + nd->elements.num_pyramid();
+  absl::StatusOr<std::unique_ptr<solid::Solid>> built =
+      solid.BuildRemeshed(edited, *std::move(nd), r.cell_source);
+  if (!built.ok()) {
+    return absl::Status(built.status().code(), absl::StrCat("edit: ", built.status().message()));
+  }
+  out.built = *std::move(built);
+  out.rest_mesh = std::move(r.mesh);
+  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return out;
+}
+
+absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid& solid) {
+  const auto t0 = Clock::now();
+  const scene::Discretization& d = solid.discretization();
+  // The same edit again, now with the current positions (cheap: the control
+  // mesh only). Its rest mesh is the prepared one's.
+  ASSIGN_OR_RETURN(EditResult r, Dispatch(d.control(), solid.control_positions(),
+                                          d.control_sharp, prepared.edit));
+  if (r.mesh.vertices != prepared.rest_mesh.vertices || r.mesh.cells != prepared.rest_mesh.cells) {
+    return absl::InternalError(
+        "edit: the solid's control mesh changed between preparing and finishing the edit");
+  }
+  AppliedEdit out;
+  out.cells_before = prepared.cells_before;
+  out.cells_after = prepared.cells_after;
+  out.vertices_before = prepared.vertices_before;
+  out.vertices_after = prepared.vertices_after;
+  out.elements_after = prepared.elements_after;
   solid::Solid::TopologyTransfer t{r.current, r.vertex_sources, r.cell_source};
   absl::StatusOr<std::unique_ptr<solid::Solid>> s =
-      solid.Remeshed(edited, *std::move(nd), t, &out.transfer);
+      solid.CarryOver(std::move(prepared.built), prepared.scene, t, &out.transfer);
   if (!s.ok()) return absl::Status(s.status().code(), absl::StrCat("edit: ", s.status().message()));
   out.solid = *std::move(s);
   out.scene = out.transfer.scene;
   out.summary = r.summary;
+  out.prepare_milliseconds = prepared.milliseconds;
+  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return out;
+}
+
+absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& solid,
+                                      const TopologyEdit& edit) {
+  const auto t0 = Clock::now();
+  ASSIGN_OR_RETURN(PreparedEdit prepared, PrepareEdit(scene, solid, edit));
+  ASSIGN_OR_RETURN(AppliedEdit out, FinishEdit(std::move(prepared), solid));
   out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   return out;
 }

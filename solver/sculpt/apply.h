@@ -11,6 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "dynsolid/scene.pb.h"
+#include "solver/mesh/cell_complex.h"
 #include "solver/solid/solid.h"
 
 namespace dynsolid::sculpt {
@@ -26,15 +27,43 @@ struct AppliedEdit {
   int32_t cells_before = 0, cells_after = 0;
   int32_t vertices_before = 0, vertices_after = 0;
   int32_t elements_after = 0;
-  double milliseconds = 0;  // wall time of the whole edit, rebuild included
+  // Wall time: ApplyEdit's whole edit, rebuild included; FinishEdit's
+  // finishing only (the prepared part in prepare_milliseconds).
+  double milliseconds = 0;
+  double prepare_milliseconds = 0;
+};
+
+// An edit prepared at rest: the edited scene and the new solid built around
+// it, not yet carrying any state.
+struct PreparedEdit {
+  TopologyEdit edit;
+  Scene scene;                 // the edited scene
+  mesh::MeshInput rest_mesh;   // its control mesh
+  std::unique_ptr<solid::Solid> built;
+  int32_t cells_before = 0, cells_after = 0;
+  int32_t vertices_before = 0, vertices_after = 0;
+  int32_t elements_after = 0;
+  double milliseconds = 0;
 };
 
 // Applies `edit` to `solid`, which was built from `scene` (the session's
 // current scene: its settings, materials and traced points carry over).
 // Errors name the edit's field and the item ("edit.extrude_faces.faces[0]:
 // face 12 is interior ..."): InvalidArgument, and nothing is changed.
+// ApplyEdit == FinishEdit(PrepareEdit(...)), bit for bit.
 absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& solid,
                                       const TopologyEdit& edit);
+
+// The expensive part (the edit at rest, the discretization, the new
+// solid's matrices), which reads only what stepping leaves alone
+// (solid::Solid::BuildRemeshed): a session runs it on another thread while
+// `solid` goes on stepping, and holds back commands that would change the
+// solid's materials or topology until FinishEdit.
+absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid& solid,
+                                         const TopologyEdit& edit);
+// The cheap part, at a step boundary: the edit with the current positions,
+// the state carried over onto the prepared solid.
+absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid& solid);
 
 // The solid of an edited scene (its control mesh inline): Discretize and
 // Create with `threads` stepping threads.

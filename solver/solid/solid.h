@@ -355,6 +355,23 @@ class Solid {
                                                   scene::Discretization discretization,
                                                   const TopologyTransfer& transfer,
                                                   TransferReport* report) const;
+  // Remeshed in two parts, so that a session can build the new solid while
+  // this one goes on stepping:
+  //  - BuildRemeshed: the new solid at rest with this solid's materials
+  //    carried over (the expensive part: element matrices, mass, the stable
+  //    step). Reads only what stepping does not change (the discretization,
+  //    the materials, the thread count): it may run on another thread while
+  //    this solid steps, but not while it is painted.
+  //  - CarryOver: this solid's state (positions, velocities, loads, drags,
+  //    constraints, traced points, clock) moved onto `built`. Cheap.
+  // Remeshed(...) == CarryOver(BuildRemeshed(...), ...) bit for bit.
+  absl::StatusOr<std::unique_ptr<Solid>> BuildRemeshed(
+      const Scene& scene, scene::Discretization discretization,
+      const std::vector<int32_t>& cell_source) const;
+  absl::StatusOr<std::unique_ptr<Solid>> CarryOver(std::unique_ptr<Solid> built,
+                                                   const Scene& scene,
+                                                   const TopologyTransfer& transfer,
+                                                   TransferReport* report) const;
 
   // ---- Picking: the nearest hit of the ray origin + t direction (t > 0)
   // on the current boundary surface. InvalidArgument for a non-finite or

@@ -103,35 +103,45 @@ Region RemapRegion(const Region& r, const std::vector<int32_t>& cell_source) {
   return out;
 }
 
+// The scene a remeshed solid is created from: its own items only (the
+// runtime ones are carried over with their ids); penalty springs' control
+// cells renumbered.
+Scene CleanScene(const Scene& scene, const std::vector<int32_t>& cell_source) {
+  Scene clean = scene;
+  clean.mutable_loads()->clear_point_forces();
+  clean.mutable_loads()->clear_pressures();
+  clean.mutable_loads()->clear_gravity();
+  clean.mutable_constraints()->clear_fixed();
+  clean.clear_traced();
+  clean.mutable_materials()->clear_regions();
+  for (PenaltySpring& s : *clean.mutable_constraints()->mutable_springs()) {
+    *s.mutable_region() = RemapRegion(s.region(), cell_source);
+  }
+  return clean;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Remeshed(const Scene& scene,
                                                        scene::Discretization discretization,
                                                        const TopologyTransfer& t,
                                                        TransferReport* report) const {
+  ASSIGN_OR_RETURN(std::unique_ptr<Solid> built,
+                   BuildRemeshed(scene, std::move(discretization), t.cell_source));
+  return CarryOver(std::move(built), scene, t, report);
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
+    const Scene& scene, scene::Discretization discretization,
+    const std::vector<int32_t>& cell_source) const {
   const Impl& old = *impl_;
   const mesh::CellComplex& control = discretization.control();
-  const int32_t nv = control.num_vertices();
-  if (t.current.rows() != nv || static_cast<int32_t>(t.vertex_sources.size()) != nv ||
-      static_cast<int32_t>(t.cell_source.size()) != control.num_cells()) {
-    return absl::InternalError(absl::StrCat(
-        "topology transfer: ", t.current.rows(), " positions and ", t.vertex_sources.size(),
-        " vertex sources for ", nv, " control points, ", t.cell_source.size(),
-        " cell sources for ", control.num_cells(), " cells"));
-  }
-  const int32_t old_nc = static_cast<int32_t>(p_.rows());
   const int32_t old_cells = d_.control().num_cells();
-  for (int32_t v = 0; v < nv; ++v) {
-    if (t.vertex_sources[v].empty()) {
-      return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " has no source"));
-    }
-    for (const auto& [src, w] : t.vertex_sources[v]) {
-      if (src < 0 || src >= old_nc || !std::isfinite(w)) {
-        return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " source ", src));
-      }
-    }
+  if (static_cast<int32_t>(cell_source.size()) != control.num_cells()) {
+    return absl::InternalError(absl::StrCat("topology transfer: ", cell_source.size(),
+                                            " cell sources for ", control.num_cells(), " cells"));
   }
-  for (int32_t c : t.cell_source) {
+  for (int32_t c : cell_source) {
     if (c >= old_cells) return absl::InternalError(absl::StrCat("topology transfer: cell source ", c));
   }
 
@@ -163,27 +173,41 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Remeshed(const Scene& scene,
     }
     for (CellSamples& c : by_cell) c.Index();
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
-      const int32_t src = t.cell_source[cell];
+      const int32_t src = cell_source[cell];
       if (src < 0 || by_cell[src].empty()) return base;
       return by_cell[src].Nearest(x);
     };
   }
+  return CreateWith(CleanScene(scene, cell_source), std::move(discretization), old.pool->size(),
+                    uniform ? nullptr : &sampler);
+}
 
-  // The scene the new solid is created from: its own items only (the
-  // runtime ones are carried over below, with their ids).
-  Scene clean = scene;
-  clean.mutable_loads()->clear_point_forces();
-  clean.mutable_loads()->clear_pressures();
-  clean.mutable_loads()->clear_gravity();
-  clean.mutable_constraints()->clear_fixed();
-  clean.clear_traced();
-  clean.mutable_materials()->clear_regions();
-  for (PenaltySpring& s : *clean.mutable_constraints()->mutable_springs()) {
-    *s.mutable_region() = RemapRegion(s.region(), t.cell_source);
+absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> out,
+                                                        const Scene& scene,
+                                                        const TopologyTransfer& t,
+                                                        TransferReport* report) const {
+  const Impl& old = *impl_;
+  const mesh::CellComplex& control = out->discretization().control();
+  const int32_t nv = control.num_vertices();
+  if (t.current.rows() != nv || static_cast<int32_t>(t.vertex_sources.size()) != nv ||
+      static_cast<int32_t>(t.cell_source.size()) != control.num_cells()) {
+    return absl::InternalError(absl::StrCat(
+        "topology transfer: ", t.current.rows(), " positions and ", t.vertex_sources.size(),
+        " vertex sources for ", nv, " control points, ", t.cell_source.size(),
+        " cell sources for ", control.num_cells(), " cells"));
   }
-  ASSIGN_OR_RETURN(std::unique_ptr<Solid> out,
-                   CreateWith(clean, std::move(discretization), old.pool->size(),
-                              uniform ? nullptr : &sampler));
+  const int32_t old_nc = static_cast<int32_t>(p_.rows());
+  for (int32_t v = 0; v < nv; ++v) {
+    if (t.vertex_sources[v].empty()) {
+      return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " has no source"));
+    }
+    for (const auto& [src, w] : t.vertex_sources[v]) {
+      if (src < 0 || src >= old_nc || !std::isfinite(w)) {
+        return absl::InternalError(absl::StrCat("topology transfer: vertex ", v, " source ", src));
+      }
+    }
+  }
+  Scene clean = CleanScene(scene, t.cell_source);
   Solid& s = *out;
   Impl& im = *s.impl_;
   TransferReport local;

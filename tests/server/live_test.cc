@@ -16,6 +16,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "google/protobuf/text_format.h"
+
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
 #include "dynsolid/journal.pb.h"
@@ -708,6 +710,51 @@ TEST_F(LiveTest, StatsReportStepTimesPhasesAndCounts) {
   EXPECT_THAT(names, ::testing::IsSupersetOf({"measure", "solve"}));
   EXPECT_EQ(st.watchers(), 0);
   EXPECT_EQ(st.journal_records(), 0);  // no data dir
+}
+
+// A topology edit builds its new solid off the loop: the running session
+// keeps stepping meanwhile, the edit applies at a later step boundary with a
+// short hold, and commands sent behind it (by its client and by another)
+// wait and apply after it, in order.
+TEST_F(LiveTest, ATopologyEditBuildsOffTheLoopWhileTheSolidStepsAndLaterCommandsWait) {
+  const Session s = Create("block3", 2, /*paused=*/false);
+  CommandStream a(*stub_, s, "editor"), b(*stub_, s, "other");
+  const int64_t before = StatsOf(*stub_, s).step();
+  Command extrude, gravity, force, undo;
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "edit { extrude_faces { near { x: 1.5 y: 1.5 z: 3 } distance: 0.5 } }", &extrude));
+  gravity.mutable_set_gravity()->set_z(-9.81);
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "add_point_force { position { x: 1.5 y: 1.5 z: 3.3 } force { x: 10 } }", &force));
+  undo.mutable_undo();
+  ASSERT_TRUE(a.Write(1, extrude));
+  ASSERT_TRUE(a.Write(2, gravity));
+  CommandReply r1, r2;
+  ASSERT_TRUE(a.Read(&r1));
+  ASSERT_TRUE(a.Read(&r2));
+  ASSERT_EQ(r1.code(), 0) << r1.message();
+  ASSERT_EQ(r2.code(), 0) << r2.message();
+  EXPECT_EQ(r1.edit().control_cells_after(), 28);
+  EXPECT_GT(r1.edit().build_ms(), 0);
+  EXPECT_GT(r1.applied_step(), before);             // the solid stepped while it built
+  EXPECT_GE(r2.applied_step(), r1.applied_step());  // and the next command came after
+  const CommandReply r3 = b.Send(1, force);
+  EXPECT_EQ(r3.code(), 0) << r3.message();  // the force's point is in the new column
+  // Undo across the topology builds too, and comes back to 27 cells.
+  // (Undo is the session's: the other client's force, the gravity, then
+  // the extrude.)
+  for (uint64_t seq : {3, 4}) ASSERT_EQ(a.Send(seq, undo).code(), 0);
+  const CommandReply u2 = a.Send(5, undo);
+  ASSERT_EQ(u2.code(), 0) << u2.message();
+  EXPECT_THAT(u2.history().what(), ::testing::HasSubstr("edit extrude_faces"));
+  InspectRequest ir;
+  *ir.mutable_session() = RefOf(s);
+  ir.set_control_mesh(true);
+  grpc::ClientContext ic;
+  ic.set_deadline(Deadline());
+  InspectReply info;
+  ASSERT_TRUE(stub_->Inspect(&ic, ir, &info).ok());
+  EXPECT_EQ(info.control_mesh().cells(), 27);
 }
 
 TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {

@@ -183,6 +183,38 @@ void SessionLoop::UnregisterCommandStream(ReplySink* sink) {
   if (it == command_streams_.end()) return;
   gone = std::move(it->second);
   command_streams_.erase(it);
+  // Its drags go with it (on the simulation thread, as commands).
+  ended_streams_.push_back(sink);
+  wake_.Signal();
+}
+
+void SessionLoop::ReleaseDragsOf(std::deque<PendingCommand>& commands) {
+  if (streams_to_release_.empty()) return;
+  std::vector<int64_t> ids;
+  for (auto it = drag_owner_.begin(); it != drag_owner_.end();) {
+    if (std::find(streams_to_release_.begin(), streams_to_release_.end(), it->second) !=
+        streams_to_release_.end()) {
+      ids.push_back(it->first);
+      drag_owner_.erase(it++);
+    } else {
+      ++it;
+    }
+  }
+  streams_to_release_.clear();
+  std::sort(ids.begin(), ids.end());
+  const std::vector<int64_t> live = core_->solid().load_ids();
+  std::deque<PendingCommand> releases;
+  for (int64_t id : ids) {
+    if (!std::binary_search(live.begin(), live.end(), id)) continue;  // released already
+    PendingCommand c;
+    c.request.set_client_id(kReleaseClient);  // seq: given when applied
+    c.request.mutable_command()->mutable_remove_load()->set_load_id(id);
+    releases.push_back(std::move(c));
+  }
+  // Before what arrived since (the stream ended before those were read).
+  for (auto it = releases.rbegin(); it != releases.rend(); ++it) {
+    commands.push_front(std::move(*it));
+  }
 }
 
 absl::StatusOr<int64_t> SessionLoop::AddWatcher(std::shared_ptr<WatchSink> sink) {
@@ -264,7 +296,10 @@ void SessionLoop::Run() {
     {
       absl::MutexLock lock(&mu_);
       for (;;) {
-        if (stop_ || !commands_.empty() || !inspects_.empty() || build_done_) break;
+        if (stop_ || !commands_.empty() || !inspects_.empty() || build_done_ ||
+            !ended_streams_.empty()) {
+          break;
+        }
         const Clock::time_point now = Clock::now();
         Clock::time_point deadline = Clock::time_point::max();
         if (core_->WantsStep()) deadline = anchored ? next_step : now;
@@ -279,6 +314,8 @@ void SessionLoop::Run() {
       }
       stop = stop_;
       commands.swap(commands_);
+      for (ReplySink* ended : ended_streams_) streams_to_release_.push_back(ended);
+      ended_streams_.clear();
       for (PendingInspect& i : inspects_) waiting_inspects_.push_back(std::move(i));
       inspects_.clear();
       publish_requested = publish_requested_;
@@ -325,6 +362,8 @@ void SessionLoop::Run() {
       for (PendingCommand& c : commands) held_.push_back(std::move(c));
       commands.clear();
     }
+    // Releases wait for a build (the drags it holds back are not acting yet).
+    if (!building_.has_value() || finished != nullptr) ReleaseDragsOf(commands);
     ApplyCommands(commands, std::move(finished));
     AnswerInspects(false);
 
@@ -425,9 +464,17 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       });
       break;
     }
+    if (c.request.seq() == 0 && c.request.client_id() == kReleaseClient) {
+      c.request.set_seq(core_->LastSeq(kReleaseClient) + 1);
+    }
     CommandReply reply;
     const SimCore::Outcome outcome = core_->Process(c.request, &reply, std::move(prebuilt));
     prebuilt = nullptr;
+    const Command::KindCase kind = c.request.command().kind_case();
+    if (outcome == SimCore::Outcome::kApplied && c.sink != nullptr &&
+        (kind == Command::kDrag || kind == Command::kCurve)) {
+      drag_owner_[reply.load_id()] = c.sink.get();
+    }
     if (outcome == SimCore::Outcome::kApplied || outcome == SimCore::Outcome::kRejected) {
       if (!dir_.empty()) {
         persist::JournalRecord record;
@@ -475,7 +522,9 @@ std::string SessionLoop::MakeSnapshotBytes() {
 
 void SessionLoop::Deliver(PersistBatch batch) {
   if (dir_.empty()) {
-    for (auto& [sink, reply] : batch.replies) sink->Reply(reply);
+    for (auto& [sink, reply] : batch.replies) {
+      if (sink != nullptr) sink->Reply(reply);
+    }
     return;
   }
   absl::MutexLock lock(&persist_mu_);
@@ -626,6 +675,7 @@ void SessionLoop::Persist() {
       }
       persist_error_ = s;
       for (auto& [sink, reply] : batch.replies) {
+        if (sink == nullptr) continue;  // the server's own (a release)
         sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
                                                     s.message())));
       }
@@ -644,7 +694,9 @@ void SessionLoop::Persist() {
         counters_.last_snapshot_step = batch.snapshot_step;
       }
     }
-    for (auto& [sink, reply] : batch.replies) sink->Reply(reply);
+    for (auto& [sink, reply] : batch.replies) {
+      if (sink != nullptr) sink->Reply(reply);
+    }
   }
 }
 

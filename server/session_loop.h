@@ -207,11 +207,20 @@ class SessionLoop {
   // A solid being built for a command (ApplyCommands).
   std::shared_ptr<SimCore::Prebuilt> built_ ABSL_GUARDED_BY(mu_);
   bool build_done_ ABSL_GUARDED_BY(mu_) = false;
+  // Command streams that ended: the drags and curves they started are
+  // released (ReleaseDragsOf).
+  std::vector<ReplySink*> ended_streams_ ABSL_GUARDED_BY(mu_);
 
   // Simulation-thread state.
   std::optional<PendingCommand> building_;  // the command whose solid is being built
   std::thread builder_;
   std::deque<PendingCommand> held_;  // commands behind it, in order
+  // Drags and curves by load id -> the command stream that started them.
+  absl::flat_hash_map<int64_t, ReplySink*> drag_owner_;
+  std::vector<ReplySink*> streams_to_release_;  // ended, waiting for a build
+  // Queues remove_load commands (client kReleaseClient) for the drags and
+  // curves the ended streams started that are still acting.
+  void ReleaseDragsOf(std::deque<PendingCommand>& commands);
   std::vector<PendingInspect> waiting_inspects_;
   int64_t last_published_step_ = -1;
   int64_t last_published_fields_ = -1;

@@ -89,6 +89,11 @@ struct SimCore::Prebuilt {
   std::shared_ptr<const Scene> for_scene;
 };
 
+uint64_t SimCore::LastSeq(const std::string& client_id) const {
+  auto it = clients_.find(client_id);
+  return it == clients_.end() ? 0 : it->second.last_seq;
+}
+
 bool SimCore::NeedsBuild(const CommandRequest& request) const {
   auto it = clients_.find(request.client_id());
   if (it != clients_.end() && request.seq() <= it->second.last_seq) return false;  // an old seq
@@ -136,6 +141,11 @@ absl::Status CheckCommandEnvelope(const CommandRequest& request) {
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
       return absl::InvalidArgumentError("client_id: must not contain control characters");
     }
+  }
+  if (absl::StartsWith(id, "server:")) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "client_id: \"", id, "\" starts with \"server:\", which the server keeps for its own "
+        "commands"));
   }
   if (request.seq() < 1) return absl::InvalidArgumentError("seq: must be >= 1, got 0");
   return absl::OkStatus();

@@ -77,6 +77,9 @@ class SimCore {
   // apply no other command until it hands the result to Process (the build
   // reads the current solid's materials and topology, and the history).
   bool NeedsBuild(const CommandRequest& request) const;
+
+  // The last seq applied for `client_id` (0: none).
+  uint64_t LastSeq(const std::string& client_id) const;
   std::function<std::shared_ptr<Prebuilt>()> Prebuild(const CommandRequest& request) const;
 
   // Whether the loop should take a step now: running, or a Step count left.
@@ -157,8 +160,14 @@ class SimCore {
   double last_hold_ms_ = 0;
 };
 
+// The client id of the server's own commands: the release of a drag or
+// curve whose command stream ended (session_loop.cc). Clients may not use
+// ids starting with "server:".
+inline constexpr char kReleaseClient[] = "server:release";
+
 // Stateless checks of a command's envelope, done when it arrives:
-// client_id 1..64 characters without control characters, seq >= 1.
+// client_id 1..64 characters without control characters, not starting
+// with "server:", seq >= 1.
 // InvalidArgument naming the field.
 absl::Status CheckCommandEnvelope(const CommandRequest& request);
 

@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include <chrono>
 #include <gmock/gmock.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
@@ -755,6 +756,63 @@ TEST_F(LiveTest, ATopologyEditBuildsOffTheLoopWhileTheSolidStepsAndLaterCommands
   InspectReply info;
   ASSERT_TRUE(stub_->Inspect(&ic, ir, &info).ok());
   EXPECT_EQ(info.control_mesh().cells(), 27);
+}
+
+// A drag or curve lasts as long as the command stream that started it: when
+// the stream ends (finished or broken), the server releases it with a
+// journaled remove_load of its own; other loads stay.
+TEST_F(LiveTest, DragsAndCurvesAreReleasedWhenTheirCommandStreamEnds) {
+  const Session s = Create("block3", 1, /*paused=*/false);
+  Command drag, curve, force;
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "drag { material_point { x: 1.5 y: 1.5 z: 3 } target { x: 1.5 y: 1.5 z: 3.3 } "
+      "stiffness: 1e4 }",
+      &drag));
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "curve { material_points { x: 0 y: 0 z: 3 } material_points { x: 3 y: 0 z: 3 } "
+      "targets { x: 0 y: 0 z: 3.1 } targets { x: 3 y: 0 z: 3.1 } stiffness: 1e4 }",
+      &curve));
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "add_point_force { position { x: 1.5 y: 1.5 z: 3 } force { x: 10 } }", &force));
+  int64_t drag_id = 0, curve_id = 0, force_id = 0;
+  // Waits (bounded) until the session has applied `n` commands.
+  auto applied = [&](int64_t n) {
+    int64_t got = 0;
+    for (int i = 0; i < 500 && got < n; ++i) {
+      got = StatsOf(*stub_, s).commands_applied();
+      if (got < n) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return got;
+  };
+  {
+    CommandStream a(*stub_, s, "hand");
+    drag_id = a.Send(1, drag).load_id();
+    force_id = a.Send(2, force).load_id();
+    ASSERT_GT(drag_id, 0);
+    ASSERT_GT(force_id, 0);
+    ASSERT_TRUE(a.Finish().ok());
+  }
+  EXPECT_EQ(applied(3), 3);  // drag, force, the server's release of the drag
+  {
+    CommandStream b(*stub_, s, "broken");
+    curve_id = b.Send(1, curve).load_id();
+    ASSERT_GT(curve_id, 0);
+    b.Cancel();  // a broken connection
+  }
+  EXPECT_EQ(applied(5), 5);  // the curve and its release
+  CommandStream c(*stub_, s, "check");
+  Command remove;
+  remove.mutable_remove_load()->set_load_id(drag_id);
+  EXPECT_EQ(c.Send(1, remove).code(), static_cast<int>(grpc::StatusCode::NOT_FOUND));
+  remove.mutable_remove_load()->set_load_id(curve_id);
+  EXPECT_EQ(c.Send(2, remove).code(), static_cast<int>(grpc::StatusCode::NOT_FOUND));
+  remove.mutable_remove_load()->set_load_id(force_id);
+  EXPECT_EQ(c.Send(3, remove).code(), 0);  // a force outlives its stream
+  // And nobody may pose as the server.
+  CommandStream d(*stub_, s, "server:release");
+  const CommandReply r = d.Send(1, force);
+  EXPECT_EQ(r.code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
+  EXPECT_THAT(r.message(), ::testing::HasSubstr("starts with \"server:\""));
 }
 
 TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {

@@ -2,7 +2,8 @@
 # The main job: builds dynsolid, starts dynsolid-server on a free port with a
 # temporary --data_dir, runs the scripted sculpting session of
 # clients/scripts/sculpt_block3.txt on the default scene (block3) with
-# dynsolid-client (pull, inflate, paint, pin, pause/resume/step, save),
+# dynsolid-client (pull, inflate, paint, pin; extrude, merge, drag, curve,
+# subdivide, delete, mass paint, undo/redo; pause/resume/step, save),
 # recording frames, then stops the server with SIGTERM and checks that it
 # exits 0. Writes under out/main/ (OUT=...):
 #   session/report.json     the client's report (commands, latency, frames, stats)
@@ -13,6 +14,7 @@
 #   offline/<scene>/        dynsolid-sim of every built-in scene for STEPS (20)
 #                           steps: the Table-1 style table (OFFLINE=0: skip;
 #                           about a minute on two cores)
+#   sculpt.png              the block before and after sculpting (four frames)
 #   summary.md              the session summary and the Table-1 style table
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -77,6 +79,12 @@ if [ "$SERVER_EXIT" != 0 ]; then
 fi
 echo "run_main: dynsolid-server stopped cleanly (exit 0)" >&2
 
+# The sculpting, before and after (scripts/render_frames.py).
+F="$S/frames"
+/usr/bin/python3 scripts/render_frames.py "$OUT/sculpt.png" \
+  "$F/pinned.obj:before sculpting" "$F/dragged.obj:extruded, joined, dragged" \
+  "$F/bent.obj:bent by a curve" "$F/sculpted.obj:refined, cut, painted" >&2
+
 SCENES="block3 block4 chair bridge nozzle torus mixed beam"
 if [ "$OFFLINE" != 0 ]; then
   SIM=$BIN/solver/tools/dynsolid-sim
@@ -98,6 +106,8 @@ fi
 
 {
   /usr/bin/python3 scripts/summarize_session.py "$S/report.json" --server-exit "$SERVER_EXIT"
+  echo
+  echo "Before and after sculpting: ![sculpt](sculpt.png) (\`sculpt.png\`)"
   if [ "$OFFLINE" != 0 ]; then
     echo
     echo "## Offline: every built-in scene, $STEPS steps with dynsolid-sim (Table-1 style)"

@@ -93,19 +93,25 @@ grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext*
   return reactor;
 }
 
+std::shared_ptr<const SolidSession> SessionsService::SessionOrFinish(
+    const SessionRef& ref, grpc::ServerUnaryReactor* reactor) {
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session = registry_.Get(ref.id(), ref.token());
+  if (!session.ok()) {
+    reactor->Finish(ToGrpcStatus(session.status()));
+    return nullptr;
+  }
+  return *std::move(session);
+}
+
 grpc::ServerUnaryReactor* SessionsService::Inspect(grpc::CallbackServerContext* context,
                                                    const InspectRequest* request,
                                                    InspectReply* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
-      registry_.Get(request->session().id(), request->session().token());
-  if (!session.ok()) {
-    reactor->Finish(ToGrpcStatus(session.status()));
-    return reactor;
-  }
+  std::shared_ptr<const SolidSession> session = SessionOrFinish(request->session(), reactor);
+  if (session == nullptr) return reactor;
   // Answered by the simulation thread at a step boundary; response and
   // reactor stay valid until Finish.
-  (*session)->loop().Inspect(
+  session->loop().Inspect(
       *request,
       [reactor, response](absl::StatusOr<InspectReply> r) {
         if (r.ok()) *response = *std::move(r);
@@ -130,12 +136,8 @@ Vec3 ToVec3(const Eigen::Vector3d& v) {
 grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* context,
                                                 const PickRequest* request, PickReply* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
-      registry_.Get(request->session().id(), request->session().token());
-  if (!session.ok()) {
-    reactor->Finish(ToGrpcStatus(session.status()));
-    return reactor;
-  }
+  std::shared_ptr<const SolidSession> session = SessionOrFinish(request->session(), reactor);
+  if (session == nullptr) return reactor;
   if (absl::Status s = CheckFinite(*request, "request"); !s.ok()) {
     reactor->Finish(ToGrpcStatus(s));
     return reactor;
@@ -145,7 +147,7 @@ grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* con
   const Eigen::Vector3d direction(request->direction().x(), request->direction().y(),
                                   request->direction().z());
   // Answered by the simulation thread between two steps.
-  (*session)->loop().Query([reactor, response, origin, direction](const SimCore* core) {
+  session->loop().Query([reactor, response, origin, direction](const SimCore* core) {
     if (core == nullptr) {
       reactor->Finish(ToGrpcStatus(absl::UnavailableError("the session is closed")));
       return;

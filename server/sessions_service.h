@@ -50,6 +50,10 @@ class SessionsService final
                                  PickReply* response) override;
 
  private:
+  // The session `ref` names, or null after finishing the call with why not.
+  std::shared_ptr<const SolidSession> SessionOrFinish(const SessionRef& ref,
+                                                      grpc::ServerUnaryReactor* reactor);
+
   SessionRegistry& registry_;
   WorkQueue& builds_;
   WorkQueue& encoders_;

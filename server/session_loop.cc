@@ -136,7 +136,7 @@ void SessionLoop::Stop(const absl::Status& status) {
   stopped_ = true;
 }
 
-bool SessionLoop::AllowCommand(const std::string& client_id) {
+bool SessionLoop::AllowCommand(const std::string& client_id, uint64_t seq) {
   const Clock::time_point now = Clock::now();
   const double rate = options_.commands_per_second;
   absl::MutexLock lock(&mu_);
@@ -149,7 +149,13 @@ bool SessionLoop::AllowCommand(const std::string& client_id) {
     b.tokens = std::min(rate, b.tokens + dt * rate);
   }
   b.last = now;
-  if (b.tokens < 1.0) return false;
+  // Behind a refused seq: wait for it (its resend comes first).
+  if (b.refused_from != 0 && seq > b.refused_from) return false;
+  if (b.tokens < 1.0) {
+    b.refused_from = b.refused_from == 0 ? seq : std::min(b.refused_from, seq);
+    return false;
+  }
+  if (seq == b.refused_from) b.refused_from = 0;
   b.tokens -= 1.0;
   return true;
 }
@@ -257,7 +263,7 @@ void SessionLoop::Inspect(const InspectRequest& request,
   {
     absl::MutexLock lock(&mu_);
     if (!stop_) {
-      inspects_.push_back(PendingInspect{request, std::move(done), std::move(cancelled)});
+      inspects_.push_back(PendingInspect{request, std::move(done), std::move(cancelled), nullptr});
       wake_.Signal();
       return;
     }

@@ -99,8 +99,11 @@ class SessionLoop {
   // command stream with `status`. Idempotent.
   void Stop(const absl::Status& status);
 
-  // ---- Commands. Rate check (per client_id, call once per command).
-  bool AllowCommand(const std::string& client_id);
+  // ---- Commands. Rate check (per client_id, call once per command). Keeps
+  // each client's order: once a seq is refused, the client's higher seqs
+  // are refused too (without spending tokens) until that seq comes again
+  // and passes, so a pipelining client's resends apply in seq order.
+  bool AllowCommand(const std::string& client_id, uint64_t seq);
   // Queues a command; its reply goes to `sink` (after it is durable).
   void Submit(const CommandRequest& request, std::shared_ptr<ReplySink> sink);
   // Command streams to finish when the session stops. Register fails with
@@ -200,6 +203,7 @@ class SessionLoop {
       ABSL_GUARDED_BY(mu_);
   struct Bucket {
     double tokens = 0;
+    uint64_t refused_from = 0;  // lowest refused seq not yet let through (0: none)
     std::chrono::steady_clock::time_point last;
   };
   absl::flat_hash_map<std::string, Bucket> buckets_ ABSL_GUARDED_BY(mu_);

@@ -5,6 +5,8 @@
 #include "absl/strings/str_cat.h"
 #include "server/finite_check.h"
 #include "server/grpc_status.h"
+#include "dynsolid/journal.pb.h"
+#include "server/journal.h"
 #include "server/log.h"
 
 namespace dynsolid::server {
@@ -170,6 +172,53 @@ grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* con
       response->set_control_cell(h.control_cell);
       response->set_control_face(h.control_face);
       response->set_distance(h.distance);
+    }
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::GetCommandLog(grpc::CallbackServerContext* context,
+                                                         const CommandLogRequest* request,
+                                                         CommandLog* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  std::shared_ptr<const SolidSession> session = SessionOrFinish(request->session(), reactor);
+  if (session == nullptr) return reactor;
+  if (session->dir().empty()) {
+    reactor->Finish(ToGrpcStatus(absl::FailedPreconditionError(
+        "this server runs without --data_dir: it keeps no journal to list")));
+    return reactor;
+  }
+  // Reading the journal can take a while: off the RPC threads.
+  builds_.Post([session, request, response, reactor](bool run) {
+    if (!run) {
+      reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+      return;
+    }
+    // The durable prefix: a record being appended right now is a torn tail
+    // to this reader, and its answer has not been sent yet.
+    absl::StatusOr<JournalContents> journal = ReadJournal(session->dir() + "/journal", 0);
+    if (!journal.ok()) {
+      reactor->Finish(ToGrpcStatus(journal.status()));
+      return;
+    }
+    response->set_records(static_cast<int64_t>(journal->records.size()));
+    persist::JournalRecord record;
+    for (const std::string& payload : journal->records) {
+      if (!record.ParseFromString(payload)) {
+        reactor->Finish(ToGrpcStatus(absl::DataLossError(
+            absl::StrCat("session ", session->id(), ": a journal record does not parse"))));
+        return;
+      }
+      if (!request->client_id().empty() && record.client_id() != request->client_id()) continue;
+      CommandLogEntry* e = response->add_entries();
+      e->set_client_id(record.client_id());
+      e->set_seq(record.seq());
+      e->set_step(record.step());
+      e->set_code(record.reply().code());
+      const google::protobuf::FieldDescriptor* f =
+          Command::descriptor()->FindFieldByNumber(record.command().kind_case());
+      e->set_kind(f != nullptr ? f->name() : "none");
     }
     reactor->Finish(grpc::Status::OK);
   });

@@ -49,6 +49,11 @@ class SessionsService final
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
 
+  // GetCommandLog: reads the session's journal on the builds queue.
+  grpc::ServerUnaryReactor* GetCommandLog(grpc::CallbackServerContext* context,
+                                          const CommandLogRequest* request,
+                                          CommandLog* response) override;
+
  private:
   // The session `ref` names, or null after finishing the call with why not.
   std::shared_ptr<const SolidSession> SessionOrFinish(const SessionRef& ref,

@@ -450,7 +450,7 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
       state_->ReplyNow(Refusal(s));
       return absl::OkStatus();
     }
-    if (!loop.AllowCommand(request_.client_id())) {
+    if (!loop.AllowCommand(request_.client_id(), request_.seq())) {
       loop.CountRateLimited();
       state_->ReplyNow(Refusal(absl::ResourceExhaustedError(absl::StrCat(
           "client ", request_.client_id(),

@@ -95,6 +95,7 @@ void Watcher::Loop() {
         }
       }
       if (record) Record(to_record);
+      if (options_.on_frame) options_.on_frame(frame.step(), now);
     }
     const grpc::Status status = reader->Finish();
     absl::MutexLock lock(&mu_);

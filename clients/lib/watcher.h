@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <thread>
@@ -37,6 +38,10 @@ struct WatcherOptions {
   absl::Duration reconnect_timeout = absl::Seconds(30);
   // Progress messages (reconnects); may be empty.
   LogFn log;
+  // Called on the watcher's thread for every frame decoded, with its step
+  // and when it arrived (a load tester's command-to-visible latency); may
+  // be empty.
+  std::function<void(int64_t step, std::chrono::steady_clock::time_point at)> on_frame;
 };
 
 struct WatcherCounts {

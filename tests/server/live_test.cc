@@ -306,7 +306,9 @@ TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsis
     absl::MutexLock lock(&mu);
     EXPECT_TRUE(fast_ok);
     EXPECT_GE(fast_last_step, step0 + 1500) << "the fast watcher fell behind the loop";
-    EXPECT_GT(fast_frames - fast0, 20) << "the fast watcher got too few frames";
+    // (Streaming threads run under SCHED_IDLE: on a machine busy with other
+    // work they get little CPU, so the count is only required to grow.)
+    EXPECT_GT(fast_frames - fast0, 5) << "the fast watcher got too few frames";
   }
   // The slow watcher never queues: every frame published since it joined
   // was sent to it once, skipped (replaced in its one-frame slot), or is
@@ -627,8 +629,12 @@ TEST_F(LiveTest, CommandsBeyondTheRateLimitAreRefusedAndCanBeResent) {
   CommandStream c(*stub_, s, "hasty");
   int ok = 0, limited = 0;
   uint64_t first_limited = 0;
+  // All 20 written at once (well within one second, however busy the
+  // machine), then the answers read.
+  for (uint64_t i = 1; i <= 20; ++i) ASSERT_TRUE(c.Write(i, StepCommand(1)));
   for (uint64_t i = 1; i <= 20; ++i) {
-    const CommandReply r = c.Send(i, StepCommand(1));
+    CommandReply r;
+    ASSERT_TRUE(c.Read(&r));
     if (r.code() == 0) ++ok;
     if (r.code() == 8) {
       ++limited;
@@ -641,11 +647,17 @@ TEST_F(LiveTest, CommandsBeyondTheRateLimitAreRefusedAndCanBeResent) {
   EXPECT_GE(limited, 10);
   EXPECT_EQ(StatsOf(*stub_, s).commands_rate_limited(), limited);
   EXPECT_EQ(StatsOf(*stub_, s).commands_applied(), ok);
-  // A refused command was not consumed: the same seq is applied later.
+  // A refused command was not consumed: the same seq is applied later. And
+  // order is kept: while seq 6 waits for its resend, a later seq is
+  // refused too (so a pipelining client's resends apply in seq order).
+  EXPECT_EQ(first_limited, 6u);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));
-  const CommandReply later = c.Send(21, StepCommand(1));
-  EXPECT_EQ(later.code(), 0);
+  const CommandReply ahead = c.Send(21, StepCommand(1));
+  EXPECT_EQ(ahead.code(), 8) << ahead.message();
+  const CommandReply later = c.Send(6, StepCommand(1));
+  EXPECT_EQ(later.code(), 0) << later.message();
   EXPECT_FALSE(later.duplicate());
+  EXPECT_EQ(c.Send(7, StepCommand(1)).code(), 0);
 }
 
 TEST_F(LiveTest, NonFiniteWatchRatesAndTooManyWatchersAreRefused) {

@@ -793,6 +793,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
 }
 
 void Solid::Impl::InstallMaterial(MaterialBuild b) {
+  gravity_mass.resize(0);  // per material
   // The old model references the old layout: replace the model first.
   model = std::move(b.model);
   corotational = b.corotational;

@@ -133,6 +133,11 @@ struct Solid::Impl {
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
+  // A^T w, w_i = int mu N_i dV: the control-space body force per unit
+  // acceleration (RebuildConstantLoads). Empty until needed; cleared when
+  // the material changes.
+  Eigen::VectorXd gravity_mass;
+  const Eigen::VectorXd& GravityMass();
   bool has_const_force = false;
   // Penalty springs on control points.
   std::vector<int32_t> spring_point;

@@ -27,32 +27,40 @@ void Solid::Impl::RebuildConstantLoads() {
       fd.row(ids[k]) += shape[k] * V(load.msg.force()).transpose();
     }
   }
+  f_const = d->node_matrix.transpose() * fd;
   if (gravity.squaredNorm() > 0) {
-    // Body force mu g: f_i = g int mu N_i dV.
-    fem::NodeMatrixX3 gr;
-    for (int kind = 0; kind < 3; ++kind) {
-      const models::ElementBlock& block = layout->blocks[kind];
-      const fem::KindTable& table = layout->tables[kind];
-      std::vector<Eigen::VectorXd> weights(block.groups.size());
-      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-        const auto& grp = block.groups[gi];
-        weights[gi] = Eigen::VectorXd::Zero(block.nodes);
-        for (int q = 0; q < table.points; ++q) {
-          const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
-          weights[gi] += (layout->materials[grp.material][q].density * std::max(det, 0.0) *
-                          table.weight[q]) *
-                         Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
-        }
-      }
-      for (int32_t e = 0; e < block.size(); ++e) {
-        const int32_t* ids = block.element_nodes(e);
-        for (int k = 0; k < block.nodes; ++k) {
-          fd.row(ids[k]) += weights[block.group[e]][k] * gravity.transpose();
-        }
+    // Body force mu g: f = A^T w g^T with w_i = int mu N_i dV, kept per
+    // material (GravityMass), so that a new force or gravity costs no
+    // integration over the solid.
+    f_const += GravityMass() * gravity.transpose();
+  }
+}
+
+const Eigen::VectorXd& Solid::Impl::GravityMass() {
+  if (gravity_mass.size() == d->node_matrix.cols()) return gravity_mass;
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(d->node_matrix.rows());
+  fem::NodeMatrixX3 gr;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout->blocks[kind];
+    const fem::KindTable& table = layout->tables[kind];
+    std::vector<Eigen::VectorXd> weights(block.groups.size());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      const auto& grp = block.groups[gi];
+      weights[gi] = Eigen::VectorXd::Zero(block.nodes);
+      for (int q = 0; q < table.points; ++q) {
+        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
+        weights[gi] += (layout->materials[grp.material][q].density * std::max(det, 0.0) *
+                        table.weight[q]) *
+                       Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
       }
     }
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t* ids = block.element_nodes(e);
+      for (int k = 0; k < block.nodes; ++k) w[ids[k]] += weights[block.group[e]][k];
+    }
   }
-  f_const = d->node_matrix.transpose() * fd;
+  gravity_mass = d->node_matrix.transpose() * w;
+  return gravity_mass;
 }
 
 void Solid::Impl::RebuildPressure() {

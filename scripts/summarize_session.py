@@ -90,10 +90,11 @@ def main():
             if key in e:
                 result += ", %s %d" % (key, e[key])
         if "edit" in e:
-            result += ": %s (%d -> %d control cells, %d elements; new solid built in %.0f ms "
+            result += (": %s (%d -> %d control cells, %d elements; new solid built in %.0f ms "
                        "while the old one went on)" % (
-                e["edit"]["summary"], e["edit"]["cells_before"], e["edit"]["cells_after"],
-                e["edit"]["elements_after"], e["edit"].get("build_ms", 0.0))
+                           e["edit"]["summary"], e["edit"]["cells_before"],
+                           e["edit"]["cells_after"], e["edit"]["elements_after"],
+                           e["edit"].get("build_ms", 0.0)))
         if "history" in e:
             result += ": %s (undo %d, redo %d)" % (
                 e["history"]["what"], e["history"]["undo_depth"], e["history"]["redo_depth"])

@@ -133,9 +133,9 @@ struct Solid::Impl {
   std::vector<uint8_t> fixed;
   // Constant external control forces (point forces, gravity): #control x 3.
   Points f_const;
-  // A^T w, w_i = int mu N_i dV: the control-space body force per unit
-  // acceleration (RebuildConstantLoads). Empty until needed; cleared when
-  // the material changes.
+  // A^T w, w_i = int mu N_i dV (= Mt 1): the control-space body force per
+  // unit acceleration (RebuildConstantLoads). Empty until needed; cleared
+  // when the material changes.
   Eigen::VectorXd gravity_mass;
   const Eigen::VectorXd& GravityMass();
   bool has_const_force = false;

@@ -37,29 +37,13 @@ void Solid::Impl::RebuildConstantLoads() {
 }
 
 const Eigen::VectorXd& Solid::Impl::GravityMass() {
-  if (gravity_mass.size() == d->node_matrix.cols()) return gravity_mass;
-  Eigen::VectorXd w = Eigen::VectorXd::Zero(d->node_matrix.rows());
-  fem::NodeMatrixX3 gr;
-  for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout->blocks[kind];
-    const fem::KindTable& table = layout->tables[kind];
-    std::vector<Eigen::VectorXd> weights(block.groups.size());
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      const auto& grp = block.groups[gi];
-      weights[gi] = Eigen::VectorXd::Zero(block.nodes);
-      for (int q = 0; q < table.points; ++q) {
-        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, block.nodes, gr);
-        weights[gi] += (layout->materials[grp.material][q].density * std::max(det, 0.0) *
-                        table.weight[q]) *
-                       Eigen::Map<const Eigen::VectorXd>(table.N(q), block.nodes);
-      }
-    }
-    for (int32_t e = 0; e < block.size(); ++e) {
-      const int32_t* ids = block.element_nodes(e);
-      for (int k = 0; k < block.nodes; ++k) w[ids[k]] += weights[block.group[e]][k];
-    }
+  // A^T w = A^T M 1 = A^T M A 1 = Mt 1: the nodes' basis functions sum to
+  // one (so M 1 = w), and so do the rows of A (subdivision and the
+  // pyramids' virtual nodes are affine combinations). One product with the
+  // control mass matrix instead of an integration over every element.
+  if (gravity_mass.size() != mt.rows()) {
+    gravity_mass = mt * Eigen::VectorXd::Ones(mt.cols());
   }
-  gravity_mass = d->node_matrix.transpose() * w;
   return gravity_mass;
 }
 

@@ -62,7 +62,26 @@ def main():
                 header = rows[:2]
                 lines += header
             lines += rows[2:]
-    lines += ["", "![latency, step rate, CPU and memory](load.png)", ""]
+    lines += ["", "![latency, step rate, CPU and memory](load.png)", "",
+              "## Where the stepping thread went", "",
+              "Each command holds the session's loop while it applies (`CommandReply.hold_ms`); "
+              "summed over a run and divided by its length, that is the share of the simulation "
+              "thread's time that commands took from steps. The server process's CPU is the "
+              "`server CPU %` column (100 % = one core: the stepping thread's core; the "
+              "streaming and gRPC threads run at lowered priority on the other, shared with "
+              "the clients).", "",
+              "| scene | clients | commands held the loop (ms per s) | the most holding kinds (total ms, count, max ms) |",
+              "| --- | ---: | ---: | --- |"]
+    for s in scenes:
+        for r in data[s]:
+            hold = r.get("hold", {})
+            total = sum(h["total_ms"] for h in hold.values())
+            top = sorted(hold.items(), key=lambda kv: -kv[1]["total_ms"])[:3]
+            lines.append("| %s | %d | %.0f | %s |" % (
+                s, r["clients"], total / max(r["seconds"], 1e-9),
+                ", ".join("%s %.0f ms (%d, max %.0f)" % (k, h["total_ms"], h["count"], h["max_ms"])
+                          for k, h in top)))
+    lines.append("")
     with open(os.path.join(directory, "README.md"), "w") as f:
         f.write("\n".join(lines))
 

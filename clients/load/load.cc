@@ -653,6 +653,14 @@ absl::StatusOr<Report> LoadRun::Run() {
       if (rec.reply.applied_step() < 0) continue;
       ++rep.acknowledged;
       (rec.reply.code() == 0 ? rep.applied : rep.rejected) += 1;
+      if (!rec.reply.duplicate()) {
+        const google::protobuf::FieldDescriptor* f =
+            Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
+        Report::Hold& h = rep.hold[f != nullptr ? f->name() : "none"];
+        ++h.count;
+        h.total_ms += rec.reply.hold_ms();
+        h.max_ms = std::max(h.max_ms, rec.reply.hold_ms());
+      }
       ack.push_back(rec.latency_ms);
       // Visible: the first frame at or after the applied step received
       // after the command was sent.
@@ -774,6 +782,12 @@ std::string ReportJson(const Report& r) {
   };
   std::string codes;
   for (const auto& [k, v] : r.codes) absl::StrAppend(&codes, codes.empty() ? "" : ", ", "\"", k, "\": ", v);
+  std::string hold;
+  for (const auto& [k, h] : r.hold) {
+    absl::StrAppend(&hold, hold.empty() ? "" : ", ",
+                    absl::StrFormat("\"%s\": {\"count\": %d, \"total_ms\": %.1f, \"max_ms\": %.2f}",
+                                    k, h.count, h.total_ms, h.max_ms));
+  }
   std::string samples;
   for (const auto& s : r.server_samples) {
     absl::StrAppend(&samples, samples.empty() ? "" : ", ", absl::StrFormat("[%.3f, %.1f, %.0f]", s[0], s[1], s[2]));
@@ -797,7 +811,7 @@ std::string ReportJson(const Report& r) {
       ",\n  \"sent\": ", r.sent, ", \"acknowledged\": ", r.acknowledged, ", \"applied\": ", r.applied,
       ", \"rejected\": ", r.rejected, ", \"commands_per_second\": ", absl::StrFormat("%.1f", r.commands_per_second),
       ",\n  \"ack_ms\": ", pct(r.ack_ms), ",\n  \"visible_ms\": ", pct(r.visible_ms),
-      ",\n  \"codes\": {", codes, "}",
+      ",\n  \"codes\": {", codes, "}", ",\n  \"hold\": {", hold, "}",
       ",\n  \"frames\": ", r.frames, ", \"frames_skipped\": ", r.frames_skipped,
       ", \"frames_per_second\": ", absl::StrFormat("%.1f", r.frames_per_second),
       ", \"reconnects\": ", r.reconnects, ", \"resends\": ", r.resends, ", \"rate_limited\": ", r.rate_limited,

@@ -58,6 +58,14 @@ struct Report {
   double commands_per_second = 0;
   Percentiles ack_ms, visible_ms;
   std::map<std::string, int64_t> codes;  // status name -> answers (and stream errors of faults)
+  // Per command kind: answers, and the time they held the session's loop
+  // (CommandReply.hold_ms), total ms: what the stepping thread spent on
+  // commands instead of steps.
+  struct Hold {
+    int64_t count = 0;
+    double total_ms = 0, max_ms = 0;
+  };
+  std::map<std::string, Hold> hold;
   double frames_per_second = 0;          // mean over watchers
   int64_t frames = 0, frames_skipped = 0;
   int64_t reconnects = 0, resends = 0, rate_limited = 0;

@@ -368,6 +368,13 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
     // gives the same bits as the build before it.
     std::map<std::vector<int64_t>, int32_t> shape_index;
     std::vector<fem::NodeMatrixX3> shape_rest;
+    struct ShapeData {
+      fem::NodeMatrixX3 centre_gradient;
+      double volume = 0;
+      bool inverted = false;
+    };
+    std::vector<ShapeData> shape_data;
+    std::vector<int32_t> group_shape;  // group -> shape
     x.resize(n, 3);
     for (int32_t e = 0; e < count; ++e) {
       const int32_t* ids = block.element_nodes(e);
@@ -399,7 +406,19 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
       }
       auto [sit, new_shape] =
           shape_index.try_emplace(shape_key, static_cast<int32_t>(shape_rest.size()));
-      if (new_shape) shape_rest.push_back(x);
+      if (new_shape) {
+        // Per shape, once: the centre gradients, the rest volume and
+        // whether it is inverted (groups of one shape share them).
+        shape_rest.push_back(x);
+        ShapeData sd;
+        fem::PhysicalGradients(table.centre_dn.data(), x, n, sd.centre_gradient);
+        for (int q = 0; q < table.points; ++q) {
+          const double det = fem::PhysicalGradients(table.dN(q), x, n, g);
+          sd.inverted |= det <= 0;
+          sd.volume += det * table.weight[q];
+        }
+        shape_data.push_back(std::move(sd));
+      }
       const std::vector<int64_t> group_key{mit->second, sit->second};
       auto [git, new_group] =
           group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
@@ -409,8 +428,9 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
         grp.representative = e;
         grp.material = mit->second;
         grp.rest = shape_rest[sit->second];
-        fem::PhysicalGradients(table.centre_dn.data(), grp.rest, n, grp.centre_gradient);
+        grp.centre_gradient = shape_data[sit->second].centre_gradient;
         block.groups.push_back(std::move(grp));
+        group_shape.push_back(sit->second);
       }
     }
     // Elements sorted by group, and within a group along a Z-order curve
@@ -428,19 +448,12 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
                 block.by_group.begin() + block.group_start[gi + 1],
                 [&](int32_t a, int32_t b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
     }
-    // Rest volume and inversion, once per group.
+    // Rest volume and inversion, from each group's shape.
     for (int32_t gi = 0; gi < ng; ++gi) {
-      const ElementGroup& grp = block.groups[gi];
-      double volume = 0;
-      bool inverted = false;
-      for (int q = 0; q < table.points; ++q) {
-        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
-        inverted |= det <= 0;
-        volume += det * table.weight[q];
-      }
+      const ShapeData& sd = shape_data[group_shape[gi]];
       const int32_t members = block.group_start[gi + 1] - block.group_start[gi];
-      layout.rest_volume += volume * members;
-      if (inverted) layout.inverted_elements += members;
+      layout.rest_volume += sd.volume * members;
+      if (sd.inverted) layout.inverted_elements += members;
     }
   }
   return layout;

@@ -336,19 +336,37 @@ class OrderedSampler {
 
 absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, const Points& rest,
                                                      bool snap) const {
+  // The elements' rest bounding boxes, once per layout (InstallMaterial
+  // clears them) and rest nodes.
+  if (boxes_rest != &rest || element_boxes[0].size() != layout->blocks[0].cell.size() ||
+      element_boxes[1].size() != layout->blocks[1].cell.size() ||
+      element_boxes[2].size() != layout->blocks[2].cell.size()) {
+    for (int kind = 0; kind < 3; ++kind) {
+      const models::ElementBlock& block = layout->blocks[kind];
+      std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
+      boxes.resize(block.size());
+      for (int32_t e = 0; e < block.size(); ++e) {
+        const int32_t* ids = block.element_nodes(e);
+        Eigen::Vector3d lo = rest.row(ids[0]), hi = lo;
+        for (int i = 1; i < block.nodes; ++i) {
+          lo = lo.cwiseMin(rest.row(ids[i]).transpose());
+          hi = hi.cwiseMax(rest.row(ids[i]).transpose());
+        }
+        boxes[e] = Eigen::AlignedBox3d(lo, hi);
+      }
+    }
+    boxes_rest = &rest;
+  }
   std::vector<double> n, dn;
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = layout->blocks[kind];
     const int nn = block.nodes;
     n.resize(nn);
     dn.resize(3 * nn);
+    const std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
     for (int32_t e = 0; e < block.size(); ++e) {
       const int32_t* ids = block.element_nodes(e);
-      Eigen::Vector3d lo = rest.row(ids[0]), hi = lo;
-      for (int i = 1; i < nn; ++i) {
-        lo = lo.cwiseMin(rest.row(ids[i]).transpose());
-        hi = hi.cwiseMax(rest.row(ids[i]).transpose());
-      }
+      const Eigen::Vector3d lo = boxes[e].min(), hi = boxes[e].max();
       const double tol = 1e-9 * (hi - lo).maxCoeff();
       if (((x - lo).array() < -tol).any() || ((x - hi).array() > tol).any()) continue;
       // Newton on the element map X(u) = x.
@@ -794,6 +812,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
 
 void Solid::Impl::InstallMaterial(MaterialBuild b) {
   gravity_mass.resize(0);  // per material
+  for (auto& boxes : element_boxes) boxes.clear();  // per layout (Locate)
   // The old model references the old layout: replace the model first.
   model = std::move(b.model);
   corotational = b.corotational;

@@ -277,6 +277,10 @@ struct Solid::Impl {
   }
   Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
 
+  // Locate's cache: each element's rest bounding box, for the current
+  // layout (cleared by InstallMaterial) and the rest nodes they came from.
+  mutable std::array<std::vector<Eigen::AlignedBox3d>, 3> element_boxes;
+  mutable const Points* boxes_rest = nullptr;
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
   static void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,

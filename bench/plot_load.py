@@ -63,6 +63,7 @@ def main():
                 lines += header
             lines += rows[2:]
     lines += ["", "![latency, step rate, CPU and memory](load.png)", "",
+              "What ran out, and why: [ANALYSIS.md](ANALYSIS.md) (written by hand after the run).", "",
               "## Where the stepping thread went", "",
               "Each command holds the session's loop while it applies (`CommandReply.hold_ms`); "
               "summed over a run and divided by its length, that is the share of the simulation "

@@ -12,7 +12,7 @@ PACKAGES=(
   libspdlog-dev libfmt-dev
   libgtest-dev libgmock-dev
   gmsh
-  python3 python3-meshio python3-numpy python3-matplotlib
+  python3 python3-meshio python3-numpy python3-matplotlib python3-yaml
   openssl
 )
 

@@ -33,6 +33,9 @@
 
 ABSL_FLAG(std::string, listen, "127.0.0.1:50051",
           "HOST:PORT to listen on (plaintext); port 0 picks a free port");
+ABSL_FLAG(std::string, health_listen, "",
+          "HOST:PORT of a plaintext listener serving only the gRPC health service (for probes "
+          "that cannot speak TLS, e.g. Kubernetes' gRPC probes); empty: none");
 ABSL_FLAG(int, max_sessions, 16, "Most sessions open (or being created) at once");
 ABSL_FLAG(int, max_message_bytes, 4 << 20, "Largest gRPC message received or sent, in bytes");
 ABSL_FLAG(int64_t, max_cells, 1'000'000,
@@ -91,6 +94,7 @@ int main(int argc, char** argv) {
 
   dynsolid::server::ServerOptions options;
   options.listen = absl::GetFlag(FLAGS_listen);
+  options.health_listen = absl::GetFlag(FLAGS_health_listen);
   options.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_cells = absl::GetFlag(FLAGS_max_cells);

@@ -131,20 +131,33 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     builder.SetMaxSendMessageSize(options.max_message_bytes);
     builder.RegisterService(&server->service_);
     server->server_ = builder.BuildAndStart();
+    if (server->server_ != nullptr && !options.health_listen.empty()) {
+      // Health only (the default health service every server built here
+      // has), in plaintext.
+      grpc::ServerBuilder health;
+      health.AddListeningPort(options.health_listen, grpc::InsecureServerCredentials(),
+                              &server->health_port_);
+      health.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+      server->health_server_ = health.BuildAndStart();
+    }
   });
   starter.join();
   if (!nice_status.ok()) {
     ServerLog().warn("streaming threads keep the server's priority: {}",
                      std::string(nice_status.message()));
   }
-  if (server->server_ == nullptr || server->port_ == 0) {
+  const bool health_failed = !options.health_listen.empty() &&
+                             (server->health_server_ == nullptr || server->health_port_ == 0);
+  if (server->server_ == nullptr || server->port_ == 0 || health_failed) {
     server->registry_.StopAll(absl::UnavailableError("the server could not start"));
     server->builds_.Join();
     server->encoders_.Join();
     if (server->server_ != nullptr) server->server_->Shutdown();
+    if (server->health_server_ != nullptr) server->health_server_->Shutdown();
     absl::MutexLock lock(&server->shutdown_mu_);
     server->shut_down_ = true;
-    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
+    return absl::UnavailableError(absl::StrCat(
+        "cannot listen on ", health_failed ? options.health_listen : options.listen));
   }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
   ServerLog().info(
@@ -169,6 +182,11 @@ void Server::Shutdown(absl::Duration deadline) {
     shut_down_ = true;
   }
   ServerLog().info("shutting down ({} sessions open)", registry_.size());
+  // 0. Health says NOT_SERVING at once (readiness probes fail: a load
+  //    balancer stops sending new calls while the sessions drain).
+  for (grpc::Server* s : {server_.get(), health_server_.get()}) {
+    if (s != nullptr && s->GetHealthCheckService() != nullptr) s->GetHealthCheckService()->Shutdown();
+  }
   // 1. No new sessions; queued builds Finish with UNAVAILABLE.
   registry_.StopAccepting();
   builds_.Stop();
@@ -179,6 +197,10 @@ void Server::Shutdown(absl::Duration deadline) {
   server_->Shutdown(std::chrono::system_clock::now() +
                     absl::ToChronoMilliseconds(deadline));
   server_->Wait();
+  if (health_server_ != nullptr) {
+    health_server_->Shutdown(std::chrono::system_clock::now());
+    health_server_->Wait();
+  }
   // 4. No call can post work any more.
   builds_.Join();
   encoders_.Join();

@@ -20,6 +20,11 @@ namespace dynsolid::server {
 struct ServerOptions {
   // HOST:PORT to listen on (insecure credentials); port 0 picks a free port.
   std::string listen = "127.0.0.1:50051";
+  // HOST:PORT of a plaintext listener serving only the gRPC health service
+  // (empty: none): for probes that cannot speak TLS, such as the kubelet's
+  // native gRPC probes. It reports what the main port does: SERVING until
+  // shutdown starts, NOT_SERVING while the server drains.
+  std::string health_listen;
   // Open sessions (plus creations in progress) at most.
   int max_sessions = 16;
   // Largest message received or sent, in bytes.
@@ -78,6 +83,7 @@ class Server {
 
   // The port actually bound, and "HOST:PORT" with it.
   int port() const { return port_; }
+  int health_port() const { return health_port_; }
   const std::string& address() const { return address_; }
 
   // Stops creating sessions (queued builds finish with UNAVAILABLE), stops
@@ -101,6 +107,8 @@ class Server {
   int recovered_ = 0;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
+  std::unique_ptr<grpc::Server> health_server_;  // ServerOptions::health_listen
+  int health_port_ = 0;
   std::string address_;
   absl::Mutex shutdown_mu_;
   bool shut_down_ ABSL_GUARDED_BY(shutdown_mu_) = false;

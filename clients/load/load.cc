@@ -205,6 +205,14 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
     if (!r.ok() || r->code() != 0) return -1;
     return r->has_load_id() ? r->load_id() : r->constraint_id();
   };
+  // One of the client's own items, picked at random and forgotten: its id
+  // (0 when it was refused, which the server then refuses by name).
+  auto take = [&](std::vector<uint64_t>& seqs) -> int64_t {
+    const size_t k = mix.Index(seqs.size());
+    const int64_t id = id_of(seqs[k]);
+    seqs.erase(seqs.begin() + static_cast<int64_t>(k));
+    return std::max<int64_t>(id, 0);
+  };
   enum { kForce, kRemove, kDrag, kMove, kRelease, kCurve, kPaint, kFix, kUnfix, kGravity,
          kPressure, kUndo, kRedo, kEdit };
   const std::vector<double> w = {
@@ -220,13 +228,9 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       *f->mutable_force() = V(mix.Uniform(-1, 1) * 1e3, mix.Uniform(-1, 1) * 1e3, 0);
       return c;
     }
-    case kRemove: {
-      const size_t k = mix.Index(owned.loads.size());
-      const int64_t id = id_of(owned.loads[k]);
-      owned.loads.erase(owned.loads.begin() + static_cast<int64_t>(k));
-      c.mutable_remove_load()->set_load_id(std::max<int64_t>(id, 0));
+    case kRemove:
+      c.mutable_remove_load()->set_load_id(take(owned.loads));
       return c;
-    }
     case kDrag: {
       Drag* d = c.mutable_drag();
       *d->mutable_material_point() = mix.Inside();
@@ -248,13 +252,9 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       }
       return c;
     }
-    case kRelease: {
-      const size_t k = mix.Index(owned.drags.size());
-      const int64_t id = id_of(owned.drags[k]);
-      owned.drags.erase(owned.drags.begin() + static_cast<int64_t>(k));
-      c.mutable_remove_load()->set_load_id(std::max<int64_t>(id, 0));
+    case kRelease:
+      c.mutable_remove_load()->set_load_id(take(owned.drags));
       return c;
-    }
     case kCurve: {
       CurveDrag* cd = c.mutable_curve();
       for (int k = 0; k < 2; ++k) {
@@ -280,13 +280,9 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       r->mutable_sphere()->set_radius(0.2 * size);
       return c;
     }
-    case kUnfix: {
-      const size_t k = mix.Index(owned.fixes.size());
-      const int64_t id = id_of(owned.fixes[k]);
-      owned.fixes.erase(owned.fixes.begin() + static_cast<int64_t>(k));
-      c.mutable_unfix()->set_constraint_id(std::max<int64_t>(id, 0));
+    case kUnfix:
+      c.mutable_unfix()->set_constraint_id(take(owned.fixes));
       return c;
-    }
     case kGravity:
       *c.mutable_set_gravity() = V(0, 0, -mix.Uniform(0, 9.81));
       return c;

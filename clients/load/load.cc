@@ -459,45 +459,7 @@ void LoadRun::Verify(const Session& session, const std::string& client_id,
     problems->push_back(absl::StrCat(client_id, ": GetCommandLog: ", st.error_message()));
     return;
   }
-  std::map<uint64_t, const client::CommandRecord*> by_seq;
-  for (const client::CommandRecord& rec : records) by_seq[rec.seq] = &rec;
-  std::map<uint64_t, int> seen;
-  uint64_t last = 0;
-  for (const CommandLogEntry& e : log.entries()) {
-    auto it = by_seq.find(e.seq());
-    const std::string what = absl::StrCat(client_id, " seq ", e.seq(), " (", e.kind(), ")");
-    if (it == by_seq.end()) {
-      problems->push_back(absl::StrCat(what, ": in the journal but never sent"));
-      continue;
-    }
-    if (++seen[e.seq()] > 1) problems->push_back(absl::StrCat(what, ": applied twice"));
-    if (e.seq() <= last) {
-      problems->push_back(absl::StrCat(what, ": applied after seq ", last, " (out of order)"));
-    }
-    last = std::max(last, e.seq());
-    const CommandReply& reply = it->second->reply;
-    if (it->second->answered && reply.code() != e.code()) {
-      problems->push_back(absl::StrCat(what, ": answered ", CodeName(reply.code()),
-                                       ", journaled ", CodeName(e.code())));
-    }
-  }
-  for (const client::CommandRecord& rec : records) {
-    if (rec.answered && rec.reply.applied_step() < 0) {
-      // Refused before it was considered, for good (a rate-limited answer
-      // is resent by the channel and never ends here).
-      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, ": never applied: ",
-                                       CodeName(rec.reply.code()), ": ", rec.reply.message()));
-    }
-    if (!rec.answered || rec.reply.applied_step() < 0) continue;  // not acknowledged
-    if (seen.count(rec.seq) == 0) {
-      const google::protobuf::FieldDescriptor* f =
-          Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
-      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, " (",
-                                       f != nullptr ? f->name() : "none",
-                                       "): acknowledged at step ", rec.reply.applied_step(),
-                                       " but not in the journal (lost)"));
-    }
-  }
+  for (std::string& p : CheckAgainstJournal(client_id, records, log)) problems->push_back(std::move(p));
 }
 
 absl::StatusOr<Report> LoadRun::Run() {
@@ -728,6 +690,53 @@ absl::StatusOr<Report> LoadRun::Run() {
 }
 
 }  // namespace
+
+std::vector<std::string> CheckAgainstJournal(const std::string& client_id,
+                                             const std::vector<client::CommandRecord>& records,
+                                             const CommandLog& log) {
+  std::vector<std::string> out;
+  std::vector<std::string>* problems = &out;
+  std::map<uint64_t, const client::CommandRecord*> by_seq;
+  for (const client::CommandRecord& rec : records) by_seq[rec.seq] = &rec;
+  std::map<uint64_t, int> seen;
+  uint64_t last = 0;
+  for (const CommandLogEntry& e : log.entries()) {
+    auto it = by_seq.find(e.seq());
+    const std::string what = absl::StrCat(client_id, " seq ", e.seq(), " (", e.kind(), ")");
+    if (it == by_seq.end()) {
+      problems->push_back(absl::StrCat(what, ": in the journal but never sent"));
+      continue;
+    }
+    if (++seen[e.seq()] > 1) problems->push_back(absl::StrCat(what, ": applied twice"));
+    if (e.seq() <= last) {
+      problems->push_back(absl::StrCat(what, ": applied after seq ", last, " (out of order)"));
+    }
+    last = std::max(last, e.seq());
+    const CommandReply& reply = it->second->reply;
+    if (it->second->answered && reply.code() != e.code()) {
+      problems->push_back(absl::StrCat(what, ": answered ", CodeName(reply.code()),
+                                       ", journaled ", CodeName(e.code())));
+    }
+  }
+  for (const client::CommandRecord& rec : records) {
+    if (rec.answered && rec.reply.applied_step() < 0) {
+      // Refused before it was considered, for good (a rate-limited answer
+      // is resent by the channel and never ends here).
+      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, ": never applied: ",
+                                       CodeName(rec.reply.code()), ": ", rec.reply.message()));
+    }
+    if (!rec.answered || rec.reply.applied_step() < 0) continue;  // not acknowledged
+    if (seen.count(rec.seq) == 0) {
+      const google::protobuf::FieldDescriptor* f =
+          Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
+      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, " (",
+                                       f != nullptr ? f->name() : "none",
+                                       "): acknowledged at step ", rec.reply.applied_step(),
+                                       " but not in the journal (lost)"));
+    }
+  }
+  return out;
+}
 
 absl::StatusOr<Faults> ParseFaults(const std::string& list) {
   Faults f;

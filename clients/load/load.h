@@ -10,6 +10,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "clients/lib/command_channel.h"
+#include "dynsolid/service.pb.h"
 
 namespace dynsolid::load {
 
@@ -87,6 +89,17 @@ struct Report {
 // Runs the load; OK unless setting up failed (the report's `problems` say
 // what the verification found).
 absl::StatusOr<Report> Run(const Options& options);
+
+// The journal check of one client: `records` as its command channel kept
+// them, `log` as GetCommandLog listed its client id's journal entries (in
+// the order applied). Returns the problems, each naming the client, the
+// seq and the command: an acknowledged command missing (lost) or there
+// twice, entries out of seq order, entries never sent, a status that
+// differs from the answer, a command refused for good before it was
+// considered. Empty: nothing lost, duplicated or reordered.
+std::vector<std::string> CheckAgainstJournal(const std::string& client_id,
+                                             const std::vector<client::CommandRecord>& records,
+                                             const CommandLog& log);
 
 std::string ReportJson(const Report& r);
 std::string ReportMarkdown(const Report& r);

@@ -6,6 +6,7 @@
 #include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
+#include "server/probe.h"
 
 namespace dynsolid::server {
 
@@ -80,6 +81,11 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* SessionsService::Watch(
 grpc::ServerBidiReactor<CommandRequest, CommandReply>* SessionsService::Commands(
     grpc::CallbackServerContext* context) {
   return StartCommands(context, registry_);
+}
+
+grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* SessionsService::Probe(
+    grpc::CallbackServerContext* context) {
+  return StartProbe(context, registry_);
 }
 
 grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext* context,

@@ -48,6 +48,8 @@ class SessionsService final
                                     const InspectRequest* request, InspectReply* response) override;
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
+  grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* Probe(
+      grpc::CallbackServerContext* context) override;
 
  private:
   SessionRegistry& registry_;

@@ -96,6 +96,10 @@ SessionLoop::SessionLoop(std::string session_id, std::unique_ptr<SimCore> core,
   counters_.rejected = core_->commands_rejected();
   counters_.fields_version = core_->fields_version();
   counters_.last_error = core_->last_error();
+  probes_.set_wake([this] {
+    absl::MutexLock lock(&mu_);
+    wake_.Signal();
+  });
 }
 
 SessionLoop::~SessionLoop() { Stop(absl::UnavailableError("the session is closed")); }
@@ -131,6 +135,7 @@ void SessionLoop::Stop(const absl::Status& status) {
   }
   for (auto& w : watchers) w->Stop(status);
   for (auto& s : streams) s->Stop(status);
+  probes_.StopAll(status);
   for (PendingCommand& c : unanswered) c.sink->Stop(status);
   absl::MutexLock lock(&mu_);
   stopped_ = true;
@@ -294,6 +299,7 @@ void SessionLoop::Run() {
   Clock::time_point rate_start = Clock::now();
   int64_t rate_steps = 0;
   next_publish_ = Clock::now();
+  Clock::time_point next_probe_refresh{};  // while paused: probes refresh every h
   for (;;) {
     std::deque<PendingCommand> commands;
     bool stop = false;
@@ -308,7 +314,11 @@ void SessionLoop::Run() {
         }
         const Clock::time_point now = Clock::now();
         Clock::time_point deadline = Clock::time_point::max();
-        if (core_->WantsStep()) deadline = anchored ? next_step : now;
+        if (core_->WantsStep()) {
+          deadline = anchored ? next_step : now;
+        } else if (probes_.busy()) {
+          deadline = next_probe_refresh;
+        }
         const bool dirty = publish_requested_ || core_->steps() != last_published_step_ ||
                            core_->fields_version() != last_published_fields_;
         if (!watchers_.empty() && dirty) deadline = std::min(deadline, next_publish_);
@@ -380,6 +390,7 @@ void SessionLoop::Run() {
         anchored = true;
       }
       if (now >= next_step) {
+        UpdateProbes();  // before the step: its loads act during it
         const Clock::time_point t0 = Clock::now();
         if (absl::Status s = core_->StepOnce(); !s.ok()) {
           SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
@@ -419,6 +430,10 @@ void SessionLoop::Run() {
       }
     } else {
       anchored = false;
+      if (probes_.busy() && now >= next_probe_refresh) {
+        UpdateProbes();
+        next_probe_refresh = now + std::min<Clock::duration>(h, std::chrono::milliseconds(2));
+      }
     }
     if (now - rate_start >= std::chrono::seconds(1)) {
       absl::MutexLock lock(&stats_mu_);
@@ -626,12 +641,24 @@ void SessionLoop::UpdateCounters() {
   counters_.control_vertices = core_->solid().discretization().control().num_vertices();
 }
 
+void SessionLoop::UpdateProbes() {
+  const ProbeHub::UpdateResult r = probes_.Update(*core_);
+  contact_ms_ = r.ms;
+  if (r.contact_ended && !dir_.empty()) {
+    // Probe loads are not journaled: make what they did durable.
+    PersistBatch batch;
+    batch.snapshot = MakeSnapshotBytes();
+    batch.snapshot_step = core_->steps();
+    Deliver(std::move(batch));
+  }
+}
+
 void SessionLoop::RecordStep(double ms) {
   const solid::PhaseTimes& p = core_->solid().last_phases();
   const std::pair<const char*, double> phases[] = {
       {"nodes", p.nodes},         {"measure", p.measure}, {"stiffness", p.stiffness},
       {"project", p.project},     {"loads", p.loads},     {"damping", p.damping},
-      {"solve", p.solve}};
+      {"solve", p.solve},         {"contact", contact_ms_}};
   absl::MutexLock lock(&stats_mu_);
   PushWindow(counters_.step_ms, ms);
   for (const auto& [name, value] : phases) {
@@ -777,6 +804,7 @@ SessionStats SessionLoop::Stats() const {
   s.set_last_command_hold_ms(c.hold_ms);
   s.set_control_cells(c.control_cells);
   s.set_control_vertices(c.control_vertices);
+  probes_.FillStats(&s);
   return s;
 }
 

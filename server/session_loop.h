@@ -33,6 +33,7 @@
 #include "absl/synchronization/mutex.h"
 #include "dynsolid/service.pb.h"
 #include "server/journal.h"
+#include "server/probe.h"
 #include "server/sim_core.h"
 #include "server/surface_codec.h"
 
@@ -132,6 +133,8 @@ class SessionLoop {
 
   SessionStats Stats() const;
   double time_step() const { return time_step_; }
+  // The session's haptic probes (probe.h; rpc Probe).
+  ProbeHub& probes() { return probes_; }
   // Shared by this session's watchers' encoders.
   const std::shared_ptr<EncodeCache>& encode_cache() const { return encode_cache_; }
 
@@ -172,6 +175,10 @@ class SessionLoop {
   void Publish(std::chrono::steady_clock::time_point now);
   void AnswerInspects(bool all_unavailable);
   void RecordStep(double ms);
+  // The probes' work at a step boundary (probe.h); with a data directory a
+  // snapshot when the last probe that pushed has left.
+  void UpdateProbes();
+  double contact_ms_ = -1;  // the last UpdateProbes' time, -1: none
   // Copies the core's state into the stats (before replies and inspections
   // go out, so a client never sees stats older than an answer it got).
   void UpdateCounters();
@@ -183,6 +190,7 @@ class SessionLoop {
   const double time_step_;
   std::unique_ptr<SimCore> core_;  // simulation thread only (after Start)
   const std::shared_ptr<EncodeCache> encode_cache_ = std::make_shared<EncodeCache>();
+  ProbeHub probes_;
 
   // Queues and membership.
   mutable absl::Mutex mu_;

@@ -8,6 +8,7 @@
 #include "dynsolid/journal.pb.h"
 #include "server/journal.h"
 #include "server/log.h"
+#include "server/probe.h"
 
 namespace dynsolid::server {
 
@@ -82,6 +83,11 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* SessionsService::Watch(
 grpc::ServerBidiReactor<CommandRequest, CommandReply>* SessionsService::Commands(
     grpc::CallbackServerContext* context) {
   return StartCommands(context, registry_);
+}
+
+grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* SessionsService::Probe(
+    grpc::CallbackServerContext* context) {
+  return StartProbe(context, registry_);
 }
 
 grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext* context,

@@ -48,6 +48,8 @@ class SessionsService final
                                     const InspectRequest* request, InspectReply* response) override;
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
+  grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* Probe(
+      grpc::CallbackServerContext* context) override;
 
   // GetCommandLog: reads the session's journal on the builds queue.
   grpc::ServerUnaryReactor* GetCommandLog(grpc::CallbackServerContext* context,

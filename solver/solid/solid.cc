@@ -568,9 +568,10 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
   FromNodes(g, out);
   out = -out;
   phases.project = MsSince(t0);
-  if (has_const_force || !spring_point.empty() || has_pressure) {
+  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) {
     t0 = Clock::now();
     if (has_const_force) out += f_const;
+    if (contact.active) out += contact.force;
     for (size_t s = 0; s < spring_point.size(); ++s) {
       const int32_t i = spring_point[s];
       out.row(i) -= spring_k[s] * (p.row(i) - rest_control.row(i));
@@ -614,15 +615,18 @@ void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
     PressureForces(p, pressure);
     out += pressure;
   }
+  if (contact.active) out += contact.force;
   loads_changed = false;
-  if (has_const_force || !spring_point.empty() || has_pressure) phases.loads = MsSince(t0);
+  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) {
+    phases.loads = MsSince(t0);
+  }
 }
 
 absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
   sum.nodes = sum.stiffness = sum.project = sum.measure = sum.solve = 0;
-  if (has_const_force || !spring_point.empty() || has_pressure) sum.loads = 0;
+  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) sum.loads = 0;
   auto add = [&](const PhaseTimes& t) {
     sum.nodes += t.nodes;
     sum.stiffness += t.stiffness;
@@ -709,6 +713,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                  (p_next.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
     }
     if (has_const_force) ledger.work += (f_const.array() * (p_next - p).array()).sum();
+    if (contact.active) ledger.work += ContactWork(p, p_next);
     // Follower pressure: trapezoidal work over the sub-step.
     if (has_pressure) {
       ledger.work += 0.5 * ((f_press + f_press_next).array() * (p_next - p).array()).sum();
@@ -820,6 +825,7 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   mt = std::move(b.mt);
   dt = std::move(b.dt);
   has_damping = b.has_damping;
+  ++contact.epoch;  // the contact stiffness depends on the material
   ConfigureLinearized();
 }
 
@@ -1537,7 +1543,11 @@ std::string Solid::SaveState() const {
   w.Put<uint8_t>(im.ledger.started);
   w.Matrix(p_);
   w.Matrix(p_prev_);
-  w.Matrix(im.f);
+  if (im.contact.active && im.f.rows() == im.contact.force.rows()) {
+    w.Matrix(im.f - im.contact.force);  // contact loads are not state
+  } else {
+    w.Matrix(im.f);
+  }
   w.Put<uint8_t>(im.has_pressure);
   if (im.has_pressure) w.Matrix(im.f_press);
   w.Matrix(im.hold);
@@ -1892,6 +1902,8 @@ absl::Status Solid::Restore(std::string_view bytes, const std::pair<double, int6
   p_prev_ = std::move(p_prev);
   im.f = std::move(f);
   im.forces_valid = forces_valid;
+  im.ClearContact();  // the restored `f` carries no contact load
+  ++im.contact.epoch;      // and its fixed set or material may differ
   im.loads_changed = true;  // not saved: recomputing the loads changes no bit
   im.last_strain_energy = strain;
   im.ledger = ledger;

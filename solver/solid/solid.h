@@ -386,6 +386,77 @@ class Solid {
   absl::StatusOr<std::optional<PickHit>> Pick(const Eigen::Vector3d& origin,
                                               const Eigen::Vector3d& direction) const;
 
+  // ---- Haptic contact (MODEL.md 9; solid_contact.cc). What a haptic probe
+  // needs from the solid: the closest point of the current boundary
+  // surface, the solid's local response there, and a reaction load at that
+  // exact material point. The surface's quads are the boundary faces of
+  // level-L trilinear (or pyramid) elements, so a point (quad, u, v) with
+  // x(u, v) = (1-u)(1-v) x0 + u(1-v) x1 + u v x2 + (1-u) v x3 over the
+  // quad's loop is a material point of the solid, the same at rest and
+  // now: its control row is sum_k N_k(u, v) A_(node k), exactly J_c.
+  struct SurfacePoint {
+    int32_t quad = -1;  // surface quad (Surface::quads)
+    double u = 0, v = 0;
+    // Current position, rest position (material point) and current outward
+    // unit normal (metres).
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    Eigen::Vector3d material_point = Eigen::Vector3d::Zero();
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    // Signed distance of the query point along the normal (negative:
+    // inside), metres; 0 for SurfacePointAt.
+    double distance = 0;
+  };
+  // The point of the current boundary surface closest to x (every quad as a
+  // bilinear patch; a degenerate quad (a, b, c, c) as its triangle).
+  // InvalidArgument for a non-finite x.
+  absl::StatusOr<SurfacePoint> ClosestSurfacePoint(const Eigen::Vector3d& x) const;
+  // The surface point (quad, u, v) at the current state. InvalidArgument
+  // for a quad out of range or (u, v) outside [0, 1]^2.
+  absl::StatusOr<SurfacePoint> SurfacePointAt(int32_t quad, double u, double v) const;
+
+  // The solid's response at a surface point over a horizon tau (MODEL.md
+  // 9): W = J_c S^-1 J_c^T with S = Mt / tau^2 + Dt / tau + K on the free
+  // control points. K is the model's stiffness: for the corotational model
+  // A^T K A at rest (the matrix its implicit step is preconditioned with,
+  // penalty springs included); for the local-frame model the finite-
+  // difference Jacobian of A^T g(A p) (and the springs) at the state the
+  // cache was built in, one column per free control coordinate (forward
+  // differences, step 1e-6 of the solid's size, symmetrized). Built on the
+  // first call and again after a paint, restore, fix or unfix (or for
+  // another tau: S only); each call then costs three solves with the
+  // factored S. The normal answer splits exactly over the displacement
+  // field u_bar of a unit normal displacement (Ritz): stiffness = mass /
+  // tau^2 + damping / tau + elastic. FailedPrecondition when the
+  // local-frame model has more than kMaxContactDenseDofs free coordinates.
+  struct ContactResponse {
+    Eigen::Matrix3d compliance = Eigen::Matrix3d::Zero();  // W, m/N
+    double stiffness = 0;         // k = 1 / (n^T W n), N/m
+    double damping = 0;           // u_bar^T D u_bar, N s/m
+    double mass = 0;              // u_bar^T M u_bar, kg
+    double elastic = 0;           // u_bar^T K u_bar, N/m
+    double static_stiffness = 0;  // 1 / (n^T J_c K^-1 J_c^T n); 0 if K is singular
+    Eigen::Vector3d velocity = Eigen::Vector3d::Zero();  // of the material point, m/s
+    double horizon = 0;           // tau, seconds
+    double build_ms = 0;          // time spent (re)building the cache in this call
+  };
+  absl::StatusOr<ContactResponse> ContactResponseAt(const SurfacePoint& c, double horizon);
+  static constexpr int kMaxContactDenseDofs = 3000;
+
+  // Contact loads: constant forces (newtons) at surface material points,
+  // acting in every force evaluation of the following steps until replaced
+  // (like a point force; their work is counted in the energy ledger). Each
+  // call replaces the whole set; an empty set removes them. Not part of the
+  // saved state (a probe's real-time input: SaveState leaves them out and
+  // RestoreState clears them). InvalidArgument naming the index for a bad
+  // quad, (u, v) or a non-finite force; nothing changes then.
+  struct ContactLoad {
+    int32_t quad = -1;
+    double u = 0, v = 0;
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();
+  };
+  absl::Status SetContactLoads(const std::vector<ContactLoad>& loads);
+  bool has_contact_loads() const;
+
   // ---- Boundary surface for watchers (MODEL.md 7): the level-L boundary
   // faces. Topology is fixed until a topology edit; topology_version()
   // counts those (Remeshed gives the new solid this one's + 1).

@@ -206,6 +206,36 @@ struct Solid::Impl {
   std::vector<int32_t> fix_count;  // per control point: active constraints holding it
   Points hold;                     // rows of fixed points: where they are held
 
+  // ---- Haptic contact (solid_contact.cc). `force` is the control-space
+  // sum J_c^T f of the contact loads (#control x 3; non-zero only on
+  // `rows`), added to the external forces in ControlForces and
+  // ExternalForces; the carried `f` includes it (SetContactLoads patches it
+  // by the change). `epoch` counts changes of what the contact stiffness
+  // depends on (material, fixed set); the cache is rebuilt when it moved.
+  struct ContactCache;  // solid_contact.cc
+  struct ContactState {
+    bool active = false;
+    Points force;
+    std::vector<int32_t> rows;
+    int64_t epoch = 0;
+    std::shared_ptr<ContactCache> cache;
+  };
+  ContactState contact;
+  // Work of the contact loads over a move from p to p_next (constant
+  // forces: exact).
+  double ContactWork(const Points& p, const Points& p_next) const {
+    double w = 0;
+    for (int32_t i : contact.rows) w += contact.force.row(i).dot(p_next.row(i) - p.row(i));
+    return w;
+  }
+  // Drops the contact loads without touching `f` (after a restore, whose
+  // `f` has none).
+  void ClearContact() {
+    for (int32_t i : contact.rows) contact.force.row(i).setZero();
+    contact.rows.clear();
+    contact.active = false;
+  }
+
   // ---- Boundary surface (quads of Solid::surface_).
   SparseMatrix surface_rows;                  // node_matrix rows of the surface vertices
   std::vector<int32_t> quad_cell;             // level-L cell of each quad

@@ -154,6 +154,7 @@ void Solid::ApplyFixed() {
   for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
   report_.fixed_control_points =
       static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  ++im.contact.epoch;  // the contact stiffness depends on the fixed set
   im.SetSubsteps(im.substeps, h_);
 }
 

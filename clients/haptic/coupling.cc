@@ -56,10 +56,9 @@ Eigen::Vector3d Coupling::ModelForce(const LocalModel& m, double age, const Devi
   const Eigen::Vector3d xs = m.point + a * m.velocity;
   const double depth = (xs - d.position).dot(n);
   const double carried = std::max(0.0, -m.applied_force.dot(n));  // F_s, pushing in
-  double kc = std::min(p_.max_stiffness, p_.PassiveStiffness());
+  const double kc = std::min(p_.max_stiffness, p_.PassiveStiffness());
   double pre;
   if (m.stiffness > 0) {
-    kc = std::min(kc, m.stiffness);
     const double k_ser = kc * m.stiffness / (kc + m.stiffness);
     pre = k_ser * (depth + carried / m.stiffness);
   } else {
@@ -111,7 +110,10 @@ RenderedForce Coupling::Compute(double now, const DeviceSample& device) {
   }
   Eigen::Vector3d f;
   if (safe_) {
-    const double s = std::max(0.0, 1.0 - (now - ramp_start_) / p_.ramp_time);
+    // The first tick that sees the silence already lowers the force; the
+    // last of ramp_time / T ticks reaches zero.
+    double s = 1.0 - (now - ramp_start_ + p_.period) / p_.ramp_time;
+    if (s < 1e-9) s = 0;
     f = s * ramp_from_;
     out.ramping = true;
   } else {

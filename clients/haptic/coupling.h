@@ -19,7 +19,7 @@
 // the solid's own response makes.
 //
 // Limits, in this order:
-//  - K_c = min(k, max_stiffness, passivity_margin * 2 (b - B) / T):
+//  - K_c = min(max_stiffness, passivity_margin * 2 (b - B) / T):
 //    Colgate and Schenkel's bound for a sampled virtual spring K and
 //    damper B on a device with physical damping b, period T: the coupling
 //    is passive when b > K T / 2 + |B|;
@@ -33,7 +33,9 @@
 //    step exceeds the bound, whatever happens before it);
 //  - safety: when no model arrived for model_timeout, or the link to the
 //    server is down, the force ramps linearly to zero over ramp_time and
-//    stays zero until a model arrives on a working link again (then it is
+//    (the first tick that sees the silence lowers it, the ramp_time / T-th
+//    reaches zero) and stays zero until a model arrives on a working link
+//    again (then it is
 //    blended in from zero). Params::Validate checks that max_force_step
 //    lets the ramp finish in time.
 #pragma once

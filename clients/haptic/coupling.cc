@@ -122,6 +122,7 @@ RenderedForce Coupling::Compute(double now, const DeviceSample& device) {
     out.in_contact = f.squaredNorm() > 0;
     const double w = std::max(0.0, 1.0 - (now - blend_start_) / p_.blend_time);
     f += w * offset_;
+    if (f.dot(m.normal) < 0) f.setZero();  // a blend never pulls
     out.model_step = m.step;
   }
   // The device's limit, then the step bound.

@@ -50,7 +50,7 @@ ABSL_FLAG(double, device_damping, 20.0, "the device's physical damping b, N s/m"
 ABSL_FLAG(double, virtual_damping, 2.0, "rendered damping B, N s/m (at most b / 2)");
 ABSL_FLAG(double, max_stiffness, 1e9, "cap on the coupling stiffness K_c, N/m");
 ABSL_FLAG(double, passivity_margin, 0.8, "K_c <= margin * 2 (b - B) / T");
-ABSL_FLAG(double, max_force_step, 5.0, "largest force change per tick, N");
+ABSL_FLAG(double, max_force_step, 10.0, "largest force change per tick, N");
 ABSL_FLAG(double, blend_ms, 3.0, "a new contact model is blended in over this, ms");
 ABSL_FLAG(double, model_timeout_ms, 10.0, "no model for this long: ramp the force to zero, ms");
 ABSL_FLAG(double, ramp_ms, 10.0, "the safety ramp to zero takes this long, ms");

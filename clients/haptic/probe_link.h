@@ -48,8 +48,9 @@ class ProbeLink {
   // The newest pose to send (replaces one not yet written). False when
   // the lock was busy (post again next tick).
   bool PostPose(const ProbePose& pose);
-  // The newest model not taken yet, with its arrival time (steady clock).
-  // False when there is none (or the lock was busy).
+  // The newest model not taken yet (copied into *model, reusing its
+  // storage), with its arrival time (steady clock). False when there is
+  // none (or the lock was busy).
   bool TakeModel(ContactModel* model, std::chrono::steady_clock::time_point* arrival);
   // A stream is open (it broke: false until the next one is).
   bool up() const { return up_.load(std::memory_order_acquire); }
@@ -78,10 +79,15 @@ class ProbeLink {
 
   mutable absl::Mutex mu_;
   absl::CondVar pose_ready_;
-  std::optional<ProbePose> pose_ ABSL_GUARDED_BY(mu_);
+  // The pose and model slots stay allocated (a flag says whether they
+  // hold something new), so the loop's copies reuse their storage: the
+  // loop neither allocates nor frees.
+  ProbePose pose_ ABSL_GUARDED_BY(mu_);
+  bool has_pose_ ABSL_GUARDED_BY(mu_) = false;
   std::shared_ptr<Stream> stream_ ABSL_GUARDED_BY(mu_);
   bool first_written_ ABSL_GUARDED_BY(mu_) = false;  // the session/options request
-  std::optional<ContactModel> model_ ABSL_GUARDED_BY(mu_);
+  ContactModel model_ ABSL_GUARDED_BY(mu_);
+  bool has_model_ ABSL_GUARDED_BY(mu_) = false;
   std::chrono::steady_clock::time_point model_arrival_ ABSL_GUARDED_BY(mu_);
   bool stop_ ABSL_GUARDED_BY(mu_) = false;
   Counters counters_ ABSL_GUARDED_BY(mu_);

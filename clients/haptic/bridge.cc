@@ -12,6 +12,13 @@ namespace {
 
 Eigen::Vector3d V(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
+// Touches 256 KB of this thread's stack, so mlockall(MCL_CURRENT) finds it
+// mapped and the loop never faults a new stack page in.
+__attribute__((noinline)) void PrefaultStack() {
+  volatile char buffer[256 * 1024];
+  for (size_t i = 0; i < sizeof(buffer); i += 4096) buffer[i] = 0;
+}
+
 }  // namespace
 
 LocalModel ToLocalModel(const ContactModel& m) {
@@ -45,12 +52,13 @@ LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
   // After the reservations: mlockall(MCL_CURRENT) faults them in, so the
   // loop takes no page fault writing its samples (a fault can wait for the
   // mmap lock behind another thread's mapping: measured, 5-10 ms gaps).
+  PrefaultStack();
   const std::string realtime =
       options_.rt_priority > 0 ? TryRealtime(options_.rt_priority) : "SCHED_OTHER (not asked)";
 
-  DeadlineClock clock(cp.period);
+  DeadlineClock clock(cp.period, options_.spin_margin);
   clock.Start();
-  uint64_t seq = 0;
+  uint64_t seq = options_.first_seq - 1;
   double model_time = -1;  // loop time the model in use arrived
   bool was_ramping = false, ramp_open = false;
   ContactModel incoming;
@@ -101,12 +109,16 @@ LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
     const double age = using_model && model_time >= 0 ? tick.woke - model_time : -1;
     metrics.Tick(tick.woke, tick.deadline, (c1 - c0) * 1e-9, r.step, age);
     metrics.MaxForce(r.force.norm());
-    if (r.ramping && !was_ramping && r.force.squaredNorm() > 0) {
+    if (r.ramping && !was_ramping) {
       metrics.RampStarted(tick.woke);
-      ramp_open = true;
+      ramp_open = r.force.squaredNorm() > 0;  // else nothing to ramp down
     }
     if (ramp_open && r.force.squaredNorm() == 0) {
       metrics.ForceZeroAfterRamp(tick.woke);
+      ramp_open = false;
+    }
+    if (ramp_open && !r.ramping) {
+      metrics.RampInterrupted();  // a model came back before zero
       ramp_open = false;
     }
     was_ramping = r.ramping;

@@ -60,6 +60,7 @@ ABSL_FLAG(double, near, 0, "contact models while the probe is within this of the
                            "(0: the server's default, 10 % of the solid's size)");
 ABSL_FLAG(double, horizon, 0, "the contact model's horizon tau, s (0: the server's 0.03)");
 ABSL_FLAG(int, rt_priority, 80, "SCHED_FIFO priority to ask for (0: do not ask)");
+ABSL_FLAG(double, spin_us, 100, "sleep to this long before each deadline, then spin, us");
 ABSL_FLAG(bool, verbose, false, "log reconnects and refusals to stderr");
 
 namespace {
@@ -170,6 +171,7 @@ int main(int argc, char** argv) {
   bo.seconds = absl::GetFlag(FLAGS_seconds);
   bo.rt_priority = absl::GetFlag(FLAGS_rt_priority);
   bo.trace = !absl::GetFlag(FLAGS_trace).empty();
+  bo.spin_margin = absl::GetFlag(FLAGS_spin_us) * 1e-6;
   dh::Bridge bridge(**device, &link, bo);
   std::fprintf(stderr, "bridge: %s device, K_c <= %.0f N/m (passivity: 2 (b - B) / T x %.2f), "
                        "max force %.1f N, step bound %.2f N\n",

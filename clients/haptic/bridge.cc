@@ -69,6 +69,7 @@ LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
     if (stop.load(std::memory_order_relaxed)) break;
     if (options_.seconds > 0 && tick.woke > options_.seconds) break;
     if (options_.seconds <= 0 && device_.Finished(tick.woke)) break;
+    if (link_ != nullptr && link_->failed()) break;  // refused for good
     if (tick.skipped > 0) metrics.Skipped(tick.skipped);
     const DeviceState ds = device_.Read(tick.woke);
     const int64_t c0 = MonotonicNs();

@@ -181,6 +181,7 @@ void ProbeLink::ReaderLoop() {
       stop = stop_;
       if (!stop && client::IsFinalStreamStatus(status.error_code())) {
         counters_.final_status = client::ToAbslStatus(status, "Probe");
+        failed_.store(true, std::memory_order_release);
         stop = true;
       }
     }

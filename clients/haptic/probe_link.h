@@ -54,6 +54,8 @@ class ProbeLink {
   bool TakeModel(ContactModel* model, std::chrono::steady_clock::time_point* arrival);
   // A stream is open (it broke: false until the next one is).
   bool up() const { return up_.load(std::memory_order_acquire); }
+  // Reconnecting stopped for good (Counters::final_status says why).
+  bool failed() const { return failed_.load(std::memory_order_acquire); }
 
   struct Counters {
     int64_t replies = 0, models = 0, poses_sent = 0, rejected = 0, reconnects = 0,
@@ -76,6 +78,7 @@ class ProbeLink {
 
   const ProbeLinkOptions options_;
   std::atomic<bool> up_{false};
+  std::atomic<bool> failed_{false};
 
   mutable absl::Mutex mu_;
   absl::CondVar pose_ready_;

@@ -220,8 +220,12 @@ TEST(CouplingTest, BrokenLinkRampsToZeroWithinRampTime) {
   std::vector<double> f = Ticks(c, t, 15, d);
   // Zero at most ramp_time after the break.
   for (size_t i = 0; i < f.size(); ++i) {
-    if ((i + 1) * kT >= p.ramp_time - 1e-12) EXPECT_EQ(f[i], 0.0) << "tick " << i;
-    if (i > 0) EXPECT_LE(f[i], f[i - 1]);
+    if ((i + 1) * kT >= p.ramp_time - 1e-12) {
+      EXPECT_EQ(f[i], 0.0) << "tick " << i;
+    }
+    if (i > 0) {
+      EXPECT_LE(f[i], f[i - 1]);
+    }
   }
   EXPECT_NEAR(f[0], 0.9 * f0, 1e-9) << "the first tick after the break lowers it";
 }

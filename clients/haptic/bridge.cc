@@ -110,9 +110,11 @@ LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
     const double age = using_model && model_time >= 0 ? tick.woke - model_time : -1;
     metrics.Tick(tick.woke, tick.deadline, (c1 - c0) * 1e-9, r.step, age);
     metrics.MaxForce(r.force.norm());
-    if (r.ramping && !was_ramping) {
+    if (r.ramping && !was_ramping && r.force.squaredNorm() > 0) {
+      // A ramp from zero (before the first model, or out of contact) is
+      // no safety event.
       metrics.RampStarted(tick.woke);
-      ramp_open = r.force.squaredNorm() > 0;  // else nothing to ramp down
+      ramp_open = true;
     }
     if (ramp_open && r.force.squaredNorm() == 0) {
       metrics.ForceZeroAfterRamp(tick.woke);

@@ -40,7 +40,7 @@ struct LoopSummary {
   // Time in the force computation (model intake, coupling, limits) per
   // tick, microseconds.
   double compute_p50_us = 0, compute_p99_us = 0, compute_p999_us = 0, compute_max_us = 0;
-  int64_t safety_ramps = 0;       // times the safety ramp started (from a non-zero force or not)
+  int64_t safety_ramps = 0;       // times the safety ramp started from a non-zero force
   int64_t ramps_interrupted = 0;  // of those, cut short by a model before zero
   double longest_ramp_ms = 0;     // from a ramp's start to zero force
   std::string realtime;           // what TryRealtime obtained

@@ -12,6 +12,7 @@
 //
 //   haptic_bench [--seconds 20] [--levels L] [--server_flags "..."] [--json F]
 #include <fcntl.h>
+#include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
@@ -23,8 +24,6 @@
 #include <fstream>
 #include <string>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
@@ -113,8 +112,9 @@ class ServerProcess {
 std::string HandScript(double seconds) {
   std::string s;
   for (double t = 0; t < seconds + 4; t += 4) {
-    absl::StrAppendFormat(&s, "%g 1.5 1.5 3.03\n%g 1.5 1.5 3.03\n%g 1.5 1.5 2.95\n"
-                              "%g 1.5 1.5 2.95\n",
+    absl::StrAppendFormat(&s,
+                          "%g 1.5 1.5 3.03\n%g 1.5 1.5 3.03\n%g 1.5 1.5 2.95\n"
+                          "%g 1.5 1.5 2.95\n",
                           t, t + 0.5, t + 2.0, t + 3.5);
   }
   return s;
@@ -171,11 +171,12 @@ int main(int argc, char** argv) {
   dynsolid::SessionRef ref;
   ref.set_id(session.id());
   ref.set_token(session.token());
-  std::printf("server %s (%s), session of %s at %d levels: %d cells, %d control points; h = "
-              "%g s\n",
-              server.address().c_str(), absl::GetFlag(FLAGS_server_flags).c_str(),
-              session.scene_name().c_str(), session.stats().levels(), session.stats().cells(),
-              session.stats().control_vertices(), session.time_step());
+  std::printf(
+      "server %s (%s), session of %s at %d levels: %d cells, %d control points; h = "
+      "%g s\n",
+      server.address().c_str(), absl::GetFlag(FLAGS_server_flags).c_str(),
+      session.scene_name().c_str(), session.stats().levels(), session.stats().cells(),
+      session.stats().control_vertices(), session.time_step());
 
   std::vector<std::unique_ptr<dc::Watcher>> watchers;
   for (int i = 0; i < absl::GetFlag(FLAGS_watchers); ++i) {
@@ -228,10 +229,11 @@ int main(int argc, char** argv) {
   }
   int64_t frames = 0;
   for (auto& w : watchers) frames += w->Counts().frames;
-  std::printf("server: %.1f steps/s over the run (%.1f%% of real time), step %.3f ms median, "
-              "p99 %.3f ms, contact phase %.3f ms median; watcher frames %ld\n",
-              step_rate, 100.0 * step_rate * session.time_step(), after.step_ms_median(),
-              after.step_ms_p99(), contact_ms, static_cast<long>(frames));
+  std::printf(
+      "server: %.1f steps/s over the run (%.1f%% of real time), step %.3f ms median, "
+      "p99 %.3f ms, contact phase %.3f ms median; watcher frames %ld\n",
+      step_rate, 100.0 * step_rate * session.time_step(), after.step_ms_median(),
+      after.step_ms_p99(), contact_ms, static_cast<long>(frames));
   std::printf("\n| figure | measured | target |\n| --- | ---: | ---: |\n");
   std::printf("| loop period error p99 | %.1f us | <= 100 us |\n", s.period_error_p99_us);
   std::printf("| loop period error p99.9 | %.1f us | <= 250 us |\n", s.period_error_p999_us);
@@ -240,16 +242,18 @@ int main(int argc, char** argv) {
   std::printf("| deadline misses (> %.0f us late or skipped) | %ld of %ld | |\n",
               s.miss_threshold_us, static_cast<long>(s.deadline_misses),
               static_cast<long>(s.ticks));
-  std::printf("| contact model refresh | %.1f Hz (server steps %.1f/s) | >= 200 Hz, the step "
-              "rate |\n",
-              s.model_refresh_hz, step_rate);
+  std::printf(
+      "| contact model refresh | %.1f Hz (server steps %.1f/s) | >= 200 Hz, the step "
+      "rate |\n",
+      s.model_refresh_hz, step_rate);
   std::printf("| contact model age p50 / p99 | %.2f / %.2f ms | |\n", s.model_age_p50_ms,
               s.model_age_p99_ms);
-  std::printf("| force computation per tick p50 / p99 / p99.9 / max | %.2f / %.2f / %.2f / %.2f "
-              "us | <= 20 us |\n",
-              s.compute_p50_us, s.compute_p99_us, s.compute_p999_us, s.compute_max_us);
-  std::printf("| largest force step | %.3f N | <= %.1f N (the bound) |\n",
-              s.largest_force_step_n, s.force_step_bound_n);
+  std::printf(
+      "| force computation per tick p50 / p99 / p99.9 / max | %.2f / %.2f / %.2f / %.2f "
+      "us | <= 20 us |\n",
+      s.compute_p50_us, s.compute_p99_us, s.compute_p999_us, s.compute_max_us);
+  std::printf("| largest force step | %.3f N | <= %.1f N (the bound) |\n", s.largest_force_step_n,
+              s.force_step_bound_n);
   std::printf("| safety ramps | %ld | |\n", static_cast<long>(s.safety_ramps));
   // Time the machine's hypervisor took from this VM's CPUs (/proc/stat
   // steal): a loop stalled while its vCPU was descheduled shows as a long

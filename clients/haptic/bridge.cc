@@ -43,9 +43,9 @@ Bridge::Bridge(Device& device, ProbeLink* link, BridgeOptions options)
 LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
   const CouplingParams& cp = options_.coupling;
   Coupling coupling(cp);
-  const double expected = options_.seconds > 0 ? options_.seconds
-                         : device_.duration() > 0 ? device_.duration() + 1.0
-                                                  : 600.0;
+  const double expected = options_.seconds > 0     ? options_.seconds
+                          : device_.duration() > 0 ? device_.duration() + 1.0
+                                                   : 600.0;
   const size_t reserve = static_cast<size_t>(expected / cp.period * 1.1) + 16;
   LoopMetrics metrics(cp.period, reserve);
   if (options_.trace) trace_.reserve(reserve);
@@ -175,8 +175,9 @@ std::string Bridge::TraceCsv() const {
     const double fn = has ? r.force.dot(r.normal) : 0;
     const double depth = has ? (r.material_point - r.device).dot(r.normal) : 0;
     const double dent = has ? (r.material_point - r.point).dot(r.normal) : 0;
-    absl::StrAppendFormat(&out, "%.6f,%.7f,%.7f,%.7f,%.5f,%.5f,%.5f,%.5f,%.7f,%.7f,%d,%.6g,%.6g,"
-                                "%.6g,%.6f,%d,%d,%d\n",
+    absl::StrAppendFormat(&out,
+                          "%.6f,%.7f,%.7f,%.7f,%.5f,%.5f,%.5f,%.5f,%.7f,%.7f,%d,%.6g,%.6g,"
+                          "%.6g,%.6f,%d,%d,%d\n",
                           r.t, r.device.x(), r.device.y(), r.device.z(), r.force.x(), r.force.y(),
                           r.force.z(), fn, depth, dent, r.model_step, r.stiffness,
                           r.static_stiffness, r.coupling_stiffness, r.model_age,

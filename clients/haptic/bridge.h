@@ -5,12 +5,11 @@
 // do the gRPC calls).
 #pragma once
 
+#include <Eigen/Core>
 #include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "clients/haptic/coupling.h"
 #include "clients/haptic/device.h"

@@ -61,7 +61,8 @@ LoopSummary LoopMetrics::Summarize(double seconds) const {
   s.period_p50_us = Percentile(period_us_, 0.5);
   s.period_p99_us = Percentile(period_us_, 0.99);
   s.period_p999_us = Percentile(period_us_, 0.999);
-  s.period_max_us = period_us_.empty() ? 0 : *std::max_element(period_us_.begin(), period_us_.end());
+  s.period_max_us =
+      period_us_.empty() ? 0 : *std::max_element(period_us_.begin(), period_us_.end());
   std::vector<double> err(period_us_.size());
   for (size_t i = 0; i < err.size(); ++i) err[i] = std::abs(period_us_[i] - period_ * 1e6);
   s.period_error_p50_us = Percentile(err, 0.5);
@@ -122,13 +123,12 @@ std::string LoopSummary::Text() const {
                         "us p50 %.2f  p99 %.2f  p99.9 %.2f  max %.2f\n",
                         largest_force_step_n, force_step_bound_n, max_force_n, compute_p50_us,
                         compute_p99_us, compute_p999_us, compute_max_us);
-  absl::StrAppendFormat(&out,
-                        "  safety ramps: %d (%d cut short by a model; longest to zero %.1f ms); "
-                        "link: %d replies, %d poses sent, %d refused, %d reconnects%s\n",
-                        safety_ramps, ramps_interrupted, longest_ramp_ms, replies, poses_sent,
-                        poses_rejected,
-                        reconnects,
-                        last_rejection.empty() ? "" : absl::StrCat(" (last: ", last_rejection, ")"));
+  absl::StrAppendFormat(
+      &out,
+      "  safety ramps: %d (%d cut short by a model; longest to zero %.1f ms); "
+      "link: %d replies, %d poses sent, %d refused, %d reconnects%s\n",
+      safety_ramps, ramps_interrupted, longest_ramp_ms, replies, poses_sent, poses_rejected,
+      reconnects, last_rejection.empty() ? "" : absl::StrCat(" (last: ", last_rejection, ")"));
   return out;
 }
 
@@ -154,8 +154,7 @@ std::string JsonString(const std::string& s) {
 std::string LoopSummary::Json() const {
   std::string o = "{\n";
   auto num = [&](const char* k, double v, bool last = false) {
-    absl::StrAppendFormat(&o, "  \"%s\": %.6g%s\n", k, std::isfinite(v) ? v : 0.0,
-                          last ? "" : ",");
+    absl::StrAppendFormat(&o, "  \"%s\": %.6g%s\n", k, std::isfinite(v) ? v : 0.0, last ? "" : ",");
   };
   num("seconds", seconds);
   num("ticks", static_cast<double>(ticks));

@@ -62,7 +62,10 @@ class LoopMetrics {
   void ModelReceived(double t);
   void RampStarted(double t);
   void ForceZeroAfterRamp(double t);
-  void RampInterrupted() { ramp_start_ = -1; ++ramps_interrupted_; }
+  void RampInterrupted() {
+    ramp_start_ = -1;
+    ++ramps_interrupted_;
+  }
   void MaxForce(double f);
   LoopSummary Summarize(double seconds) const;
 

@@ -149,8 +149,8 @@ void ProbeLink::ReaderLoop() {
           while (!sent_.empty() && sent_.front().first < seq) sent_.pop_front();
           if (!sent_.empty() && sent_.front().first == seq) {
             if (round_trips_.size() < kMaxRoundTrips) {
-              round_trips_.push_back(std::chrono::duration<double>(now - sent_.front().second)
-                                         .count());
+              round_trips_.push_back(
+                  std::chrono::duration<double>(now - sent_.front().second).count());
             }
             sent_.pop_front();
           }
@@ -192,9 +192,9 @@ void ProbeLink::ReaderLoop() {
       return;
     }
     if (options_.log) {
-      options_.log(absl::StrCat("probe stream broke (", static_cast<int>(status.error_code()),
-                                " ", status.error_message(), "); reconnecting in ",
-                                backoff.count(), " ms"));
+      options_.log(absl::StrCat("probe stream broke (", static_cast<int>(status.error_code()), " ",
+                                status.error_message(), "); reconnecting in ", backoff.count(),
+                                " ms"));
     }
     if (delivered) backoff = std::chrono::milliseconds(50);
     {

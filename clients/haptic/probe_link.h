@@ -8,6 +8,8 @@
 // reconnecting cannot help (wrong token, no such session) are final.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -15,8 +17,6 @@
 #include <optional>
 #include <string>
 #include <thread>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
@@ -95,8 +95,7 @@ class ProbeLink {
   bool stop_ ABSL_GUARDED_BY(mu_) = false;
   Counters counters_ ABSL_GUARDED_BY(mu_);
   // Sent poses (seq, when) awaiting their first model.
-  std::deque<std::pair<uint64_t, std::chrono::steady_clock::time_point>> sent_
-      ABSL_GUARDED_BY(mu_);
+  std::deque<std::pair<uint64_t, std::chrono::steady_clock::time_point>> sent_ ABSL_GUARDED_BY(mu_);
   std::vector<double> round_trips_ ABSL_GUARDED_BY(mu_);
   std::thread reader_, writer_;
 };

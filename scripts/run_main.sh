@@ -15,7 +15,10 @@
 #                           steps: the Table-1 style table (OFFLINE=0: skip;
 #                           about a minute on two cores)
 #   sculpt.png              the block before and after sculpting (four frames)
-#   summary.md              the session summary and the Table-1 style table
+#   haptic/                 the haptic segment (HAPTIC=0: skip): traces, loop
+#                           metrics, force_depth.png (docs/haptic.md)
+#   summary.md              the session summary, the Table-1 style table and
+#                           the haptic segment
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PRESET="${PRESET:-release}"
@@ -116,4 +119,19 @@ fi
     /usr/bin/python3 scripts/summarize.py "$OUT/offline" $SCENES
   fi
 } > "$OUT/summary.md"
+
+# The haptic segment (docs/haptic.md; HAPTIC=0 skips it, about 40 s): the
+# bridge with a virtual hand probes the soft and the painted half of a
+# block3 session on a server of its own, then the server is frozen, killed
+# and restarted under it; the summary gains the force-depth curves
+# (haptic/force_depth.png) and the loop metrics.
+if [ "${HAPTIC:-1}" != 0 ]; then
+  bash scripts/build.sh dynsolid-haptic-bridge
+  rm -rf "$OUT/haptic"
+  mkdir -p "$OUT/haptic"
+  /usr/bin/python3 tests/haptic/haptic_loopback_test.py --server "$SERVER" --client "$CLIENT" \
+    --bridge "$BIN/clients/haptic/dynsolid-haptic-bridge" --out "$OUT/haptic" \
+    > "$OUT/haptic/run.txt" 2>&1 || { cat "$OUT/haptic/run.txt" >&2; exit 1; }
+  { echo; /usr/bin/python3 scripts/haptic_report.py "$OUT/haptic"; } >> "$OUT/summary.md"
+fi
 cat "$OUT/summary.md"

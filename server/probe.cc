@@ -218,21 +218,21 @@ absl::StatusOr<std::shared_ptr<ProbeChannel>> ProbeHub::Attach(
         "options.near_distance: must be >= 0 (0: the default), got ", options.near_distance()));
   }
   if (options.horizon() != 0 && !(options.horizon() >= 0.001 && options.horizon() <= 1.0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.horizon: must be in [0.001, 1] s (0: the default ", limits_.horizon, "), got ",
-        options.horizon()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.horizon: must be in [0.001, 1] s (0: the default ", limits_.horizon,
+                     "), got ", options.horizon()));
   }
   std::shared_ptr<ProbeChannel> channel;
   {
     absl::MutexLock lock(&mu_);
     if (stopped_) return stop_status_;
     if (static_cast<int>(channels_.size()) >= limits_.max_probes) {
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "the session already has its maximum of ", limits_.max_probes, " probes"));
+      return absl::ResourceExhaustedError(
+          absl::StrCat("the session already has its maximum of ", limits_.max_probes, " probes"));
     }
-    channel = std::make_shared<ProbeChannel>(
-        reactor, next_id_++, options.near_distance(),
-        options.horizon() > 0 ? options.horizon() : limits_.horizon);
+    channel =
+        std::make_shared<ProbeChannel>(reactor, next_id_++, options.near_distance(),
+                                       options.horizon() > 0 ? options.horizon() : limits_.horizon);
     channels_.push_back(channel);
     ++total_;
   }
@@ -295,8 +295,8 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
   std::vector<Sim> sims;
   sims.reserve(channels.size());
   for (auto& c : channels) {
-    auto it = std::find_if(sims_.begin(), sims_.end(),
-                           [&](const Sim& s) { return s.channel == c; });
+    auto it =
+        std::find_if(sims_.begin(), sims_.end(), [&](const Sim& s) { return s.channel == c; });
     if (it != sims_.end()) {
       sims.push_back(std::move(*it));
     } else {
@@ -323,11 +323,11 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
       const Eigen::Vector3d x = FromVec3(p->position());
       const Eigen::Vector3d lo = bounds.min.array() - far, hi = bounds.max.array() + far;
       if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) {
-        s.channel->Reject(p->seq(), absl::OutOfRangeError(absl::StrCat(
-                                        "pose.position (", x.x(), ", ", x.y(), ", ", x.z(),
-                                        ") is more than ", limits_.far_factor,
-                                        " times the solid's extent (", extent,
-                                        " m) outside its bounds")));
+        s.channel->Reject(p->seq(),
+                          absl::OutOfRangeError(absl::StrCat(
+                              "pose.position (", x.x(), ", ", x.y(), ", ", x.z(), ") is more than ",
+                              limits_.far_factor, " times the solid's extent (", extent,
+                              " m) outside its bounds")));
       } else {
         s.pose = std::move(p);
         s.pose_time = t0;
@@ -335,9 +335,9 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
     }
     // A pose not renewed for pose_timeout: its force no longer acts (a
     // bridge that stopped sending); the model still follows the last one.
-    const bool fresh = s.pose.has_value() &&
-                       std::chrono::duration<double>(t0 - s.pose_time).count() <=
-                           limits_.pose_timeout;
+    const bool fresh =
+        s.pose.has_value() &&
+        std::chrono::duration<double>(t0 - s.pose_time).count() <= limits_.pose_timeout;
     ProbeReply reply;
     reply.set_step(step);
     reply.set_time(solid.time());
@@ -374,8 +374,8 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
           }
           *m->mutable_velocity() = ToVec3(r->velocity);
           if (r->build_ms > 50) {
-            SessionLog().info("probe {}: contact stiffness built in {:.0f} ms",
-                              s.channel->id(), r->build_ms);
+            SessionLog().info("probe {}: contact stiffness built in {:.0f} ms", s.channel->id(),
+                              r->build_ms);
           }
         } else {
           SessionLog().warn("probe {}: no contact stiffness: {}", s.channel->id(),
@@ -422,8 +422,8 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
     result.contact_ended = true;
     pushed_ = false;
   }
-  result.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                  .count();
+  result.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }
 
@@ -481,8 +481,8 @@ class ProbeReactor final : public grpc::ServerBidiReactor<ProbeRequest, ProbeRep
     if (channel_ != nullptr) {
       const ProbeStats st = channel_->Stats();
       SessionLog().info("session {}: probe {} left after {} poses ({} refused), {} models",
-                        session_->id(), st.probe_id(), st.poses_received(),
-                        st.poses_rejected(), st.models_sent());
+                        session_->id(), st.probe_id(), st.poses_received(), st.poses_rejected(),
+                        st.models_sent());
       session_->loop().probes().Detach(channel_.get());
     }
     delete this;

@@ -25,6 +25,9 @@
 // what the probes did durable.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
+#include <Eigen/Core>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -33,9 +36,6 @@
 #include <memory>
 #include <optional>
 #include <vector>
-
-#include <Eigen/Core>
-#include <grpcpp/grpcpp.h>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
@@ -128,8 +128,9 @@ class ProbeChannel {
   absl::Status status_ ABSL_GUARDED_BY(mu_);
   // Stats.
   int64_t received_ ABSL_GUARDED_BY(mu_) = 0, accepted_ ABSL_GUARDED_BY(mu_) = 0,
-          superseded_ ABSL_GUARDED_BY(mu_) = 0, models_sent_ ABSL_GUARDED_BY(mu_) = 0,
-          replies_sent_ ABSL_GUARDED_BY(mu_) = 0, replies_skipped_ ABSL_GUARDED_BY(mu_) = 0;
+                    superseded_ ABSL_GUARDED_BY(mu_) = 0, models_sent_ ABSL_GUARDED_BY(mu_) = 0,
+                    replies_sent_ ABSL_GUARDED_BY(mu_) = 0,
+                    replies_skipped_ ABSL_GUARDED_BY(mu_) = 0;
   uint32_t buttons_ ABSL_GUARDED_BY(mu_) = 0;
   Eigen::Vector3d applied_ ABSL_GUARDED_BY(mu_) = Eigen::Vector3d::Zero();
 };
@@ -176,7 +177,7 @@ class ProbeHub {
   // Simulation-thread state of one probe.
   struct Sim {
     std::shared_ptr<ProbeChannel> channel;
-    std::optional<ProbePose> pose;  // the newest accepted and in bounds
+    std::optional<ProbePose> pose;                    // the newest accepted and in bounds
     std::chrono::steady_clock::time_point pose_time;  // when it was taken
     // Contact points of recent models: (step, quad, u, v).
     struct Located {

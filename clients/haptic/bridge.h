@@ -5,12 +5,11 @@
 // do the gRPC calls).
 #pragma once
 
+#include <Eigen/Core>
 #include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
 
 #include "clients/haptic/coupling.h"
 #include "clients/haptic/device.h"
@@ -31,6 +30,11 @@ struct BridgeOptions {
   int rt_priority = 80;
   // Keep a per-tick trace (for force-depth curves; TraceCsv).
   bool trace = false;
+  // The first pose's sequence number (a link that already sent poses).
+  uint64_t first_seq = 1;
+  // The clock sleeps to this long before each deadline and spins the rest,
+  // seconds.
+  double spin_margin = 100e-6;
 };
 
 // One tick of the trace.

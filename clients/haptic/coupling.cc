@@ -14,11 +14,15 @@ absl::Status CouplingParams::Validate() const {
     }
     return absl::OkStatus();
   };
-  for (const auto& [v, name] :
-       {std::pair{period, "period"}, {device_damping, "device_damping"},
-        {passivity_margin, "passivity_margin"}, {max_stiffness, "max_stiffness"},
-        {max_force, "max_force"}, {max_force_step, "max_force_step"}, {blend_time, "blend_time"},
-        {model_timeout, "model_timeout"}, {ramp_time, "ramp_time"}}) {
+  for (const auto& [v, name] : {std::pair{period, "period"},
+                                {device_damping, "device_damping"},
+                                {passivity_margin, "passivity_margin"},
+                                {max_stiffness, "max_stiffness"},
+                                {max_force, "max_force"},
+                                {max_force_step, "max_force_step"},
+                                {blend_time, "blend_time"},
+                                {model_timeout, "model_timeout"},
+                                {ramp_time, "ramp_time"}}) {
     if (absl::Status s = positive(v, name); !s.ok()) return s;
   }
   if (passivity_margin > 1) {
@@ -26,9 +30,9 @@ absl::Status CouplingParams::Validate() const {
         absl::StrCat("passivity_margin must be in (0, 1], got ", passivity_margin));
   }
   if (!(virtual_damping >= 0) || virtual_damping > 0.5 * device_damping) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "virtual_damping must be in [0, device_damping / 2 = ", 0.5 * device_damping, "], got ",
-        virtual_damping));
+    return absl::InvalidArgumentError(
+        absl::StrCat("virtual_damping must be in [0, device_damping / 2 = ", 0.5 * device_damping,
+                     "], got ", virtual_damping));
   }
   if (!(max_prediction >= 0)) {
     return absl::InvalidArgumentError(
@@ -37,10 +41,10 @@ absl::Status CouplingParams::Validate() const {
   // The ramp takes ceil(ramp_time / period) ticks from at most max_force.
   const double ticks = std::max(1.0, std::floor(ramp_time / period + 1e-9));
   if (max_force_step * ticks < max_force * (1 - 1e-12)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "max_force_step (", max_force_step, " N per tick) cannot take max_force (", max_force,
-        " N) to zero within ramp_time (", ramp_time, " s = ", ticks, " ticks): it must be >= ",
-        max_force / ticks));
+    return absl::InvalidArgumentError(
+        absl::StrCat("max_force_step (", max_force_step, " N per tick) cannot take max_force (",
+                     max_force, " N) to zero within ramp_time (", ramp_time, " s = ", ticks,
+                     " ticks): it must be >= ", max_force / ticks));
   }
   return absl::OkStatus();
 }
@@ -122,6 +126,7 @@ RenderedForce Coupling::Compute(double now, const DeviceSample& device) {
     out.in_contact = f.squaredNorm() > 0;
     const double w = std::max(0.0, 1.0 - (now - blend_start_) / p_.blend_time);
     f += w * offset_;
+    if (f.dot(m.normal) < 0) f.setZero();  // a blend never pulls
     out.model_step = m.step;
   }
   // The device's limit, then the step bound.

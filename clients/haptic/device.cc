@@ -133,8 +133,7 @@ DeviceState VirtualHand::Read(double t) {
   return s;
 }
 
-absl::StatusOr<std::unique_ptr<Device>> MakeDevice(const std::string& kind,
-                                                   const std::string& path,
+absl::StatusOr<std::unique_ptr<Device>> MakeDevice(const std::string& kind, const std::string& path,
                                                    const DeviceParams& params) {
   if (kind == "trajectory" || kind == "virtual_hand") {
     absl::StatusOr<Trajectory> t = Trajectory::Load(path);
@@ -146,8 +145,8 @@ absl::StatusOr<std::unique_ptr<Device>> MakeDevice(const std::string& kind,
   //   #ifdef DYNSOLID_HAPTIC_HD
   //   if (kind == "hd") return MakeHdDevice(params);   // device_hd.cc
   //   #endif
-  return absl::InvalidArgumentError(absl::StrCat(
-      "--device: unknown device \"", kind, "\" (this build has: trajectory, virtual_hand)"));
+  return absl::InvalidArgumentError(absl::StrCat("--device: unknown device \"", kind,
+                                                 "\" (this build has: trajectory, virtual_hand)"));
 }
 
 }  // namespace dynsolid::haptic

@@ -22,13 +22,12 @@
 // required to build or test dynsolid.
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -137,8 +136,7 @@ class VirtualHand final : public Device {
 
 // "trajectory" or "virtual_hand" with the script at `path`; the place a
 // real backend is added (device.cc).
-absl::StatusOr<std::unique_ptr<Device>> MakeDevice(const std::string& kind,
-                                                   const std::string& path,
+absl::StatusOr<std::unique_ptr<Device>> MakeDevice(const std::string& kind, const std::string& path,
                                                    const DeviceParams& params);
 
 }  // namespace dynsolid::haptic

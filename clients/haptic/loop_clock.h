@@ -18,10 +18,10 @@ class DeadlineClock {
         margin_ns_(static_cast<int64_t>(spin_margin * 1e9)) {}
 
   struct Tick {
-    int64_t index = 0;      // deadline number since Start
-    double deadline = 0;    // seconds since Start
-    double woke = 0;        // when Wait returned, seconds since Start
-    int64_t skipped = 0;    // deadlines given up before this one
+    int64_t index = 0;    // deadline number since Start
+    double deadline = 0;  // seconds since Start
+    double woke = 0;      // when Wait returned, seconds since Start
+    int64_t skipped = 0;  // deadlines given up before this one
   };
   // Anchors the clock: the first deadline is one period from now.
   void Start();

@@ -9,6 +9,7 @@
 // Prints the loop metrics at exit (and writes them as JSON with --json).
 // Exit codes: 0 done; 1 the server refused the probe (wrong token, no such
 // session); 2 bad flags or script.
+#include <grpcpp/grpcpp.h>
 #include <signal.h>
 
 #include <atomic>
@@ -17,8 +18,6 @@
 #include <iostream>
 #include <memory>
 #include <string>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
@@ -40,7 +39,8 @@ ABSL_FLAG(int, levels, -1, "with --scene: subdivision levels (-1: the scene's)")
 ABSL_FLAG(std::string, device, "virtual_hand",
           "virtual_hand (a mass on a spring driven to the script's target) or trajectory (the "
           "script's poses, open loop)");
-ABSL_FLAG(std::string, script, "", "the device's script: lines \"t x y z [qw qx qy qz [buttons]]\"");
+ABSL_FLAG(std::string, script, "",
+          "the device's script: lines \"t x y z [qw qx qy qz [buttons]]\"");
 ABSL_FLAG(double, seconds, 0, "run this long; 0: until the script ends");
 ABSL_FLAG(std::string, json, "", "write the loop metrics here as JSON");
 ABSL_FLAG(std::string, trace, "", "write a per-tick CSV trace here (force-depth curves)");
@@ -50,16 +50,18 @@ ABSL_FLAG(double, device_damping, 20.0, "the device's physical damping b, N s/m"
 ABSL_FLAG(double, virtual_damping, 2.0, "rendered damping B, N s/m (at most b / 2)");
 ABSL_FLAG(double, max_stiffness, 1e9, "cap on the coupling stiffness K_c, N/m");
 ABSL_FLAG(double, passivity_margin, 0.8, "K_c <= margin * 2 (b - B) / T");
-ABSL_FLAG(double, max_force_step, 5.0, "largest force change per tick, N");
+ABSL_FLAG(double, max_force_step, 10.0, "largest force change per tick, N");
 ABSL_FLAG(double, blend_ms, 3.0, "a new contact model is blended in over this, ms");
 ABSL_FLAG(double, model_timeout_ms, 10.0, "no model for this long: ramp the force to zero, ms");
 ABSL_FLAG(double, ramp_ms, 10.0, "the safety ramp to zero takes this long, ms");
 ABSL_FLAG(double, hand_mass, 0.5, "virtual_hand: mass, kg");
 ABSL_FLAG(double, hand_stiffness, 2000.0, "virtual_hand: spring to the target, N/m");
-ABSL_FLAG(double, near, 0, "contact models while the probe is within this of the surface, m "
-                           "(0: the server's default, 10 % of the solid's size)");
+ABSL_FLAG(double, near, 0,
+          "contact models while the probe is within this of the surface, m "
+          "(0: the server's default, 10 % of the solid's size)");
 ABSL_FLAG(double, horizon, 0, "the contact model's horizon tau, s (0: the server's 0.03)");
 ABSL_FLAG(int, rt_priority, 80, "SCHED_FIFO priority to ask for (0: do not ask)");
+ABSL_FLAG(double, spin_us, 100, "sleep to this long before each deadline, then spin, us");
 ABSL_FLAG(bool, verbose, false, "log reconnects and refusals to stderr");
 
 namespace {
@@ -85,11 +87,11 @@ void PrintServerStats(dynsolid::Sessions::Stub& stub, const dynsolid::SessionRef
   for (const auto& p : st.phases()) {
     if (p.name() == "contact") contact = absl::StrCat(p.median_ms(), " ms median");
   }
-  std::printf("server: session %s at step %ld, %.1f steps/s, step %.3f ms median; probes now %d "
-              "(%ld in all); contact phase %s\n",
-              ref.id().c_str(), static_cast<long>(st.step()), st.steps_per_second(),
-              st.step_ms_median(), st.probes(), static_cast<long>(st.probes_total()),
-              contact.c_str());
+  std::printf(
+      "server: session %s at step %ld, %.1f steps/s, step %.3f ms median; probes now %d "
+      "(%ld in all); contact phase %s\n",
+      ref.id().c_str(), static_cast<long>(st.step()), st.steps_per_second(), st.step_ms_median(),
+      st.probes(), static_cast<long>(st.probes_total()), contact.c_str());
 }
 
 }  // namespace
@@ -144,8 +146,8 @@ int main(int argc, char** argv) {
     }
     ref.set_id(session.id());
     ref.set_token(session.token());
-    std::printf("session %s token %s (scene %s)\n", session.id().c_str(),
-                session.token().c_str(), session.scene_name().c_str());
+    std::printf("session %s token %s (scene %s)\n", session.id().c_str(), session.token().c_str(),
+                session.scene_name().c_str());
   } else {
     if (absl::GetFlag(FLAGS_id).empty() || absl::GetFlag(FLAGS_token).empty()) {
       return Usage("give --id and --token, or --scene");
@@ -170,11 +172,13 @@ int main(int argc, char** argv) {
   bo.seconds = absl::GetFlag(FLAGS_seconds);
   bo.rt_priority = absl::GetFlag(FLAGS_rt_priority);
   bo.trace = !absl::GetFlag(FLAGS_trace).empty();
+  bo.spin_margin = absl::GetFlag(FLAGS_spin_us) * 1e-6;
   dh::Bridge bridge(**device, &link, bo);
-  std::fprintf(stderr, "bridge: %s device, K_c <= %.0f N/m (passivity: 2 (b - B) / T x %.2f), "
-                       "max force %.1f N, step bound %.2f N\n",
-               (*device)->name().c_str(), cp.PassiveStiffness(), cp.passivity_margin,
-               cp.max_force, cp.max_force_step);
+  std::fprintf(stderr,
+               "bridge: %s device, K_c <= %.0f N/m (passivity: 2 (b - B) / T x %.2f), "
+               "max force %.1f N, step bound %.2f N\n",
+               (*device)->name().c_str(), cp.PassiveStiffness(), cp.passivity_margin, cp.max_force,
+               cp.max_force_step);
   const dh::LoopSummary summary = bridge.Run(g_stop);
   link.Stop();
   std::cout << summary.Text();

@@ -61,7 +61,8 @@ LoopSummary LoopMetrics::Summarize(double seconds) const {
   s.period_p50_us = Percentile(period_us_, 0.5);
   s.period_p99_us = Percentile(period_us_, 0.99);
   s.period_p999_us = Percentile(period_us_, 0.999);
-  s.period_max_us = period_us_.empty() ? 0 : *std::max_element(period_us_.begin(), period_us_.end());
+  s.period_max_us =
+      period_us_.empty() ? 0 : *std::max_element(period_us_.begin(), period_us_.end());
   std::vector<double> err(period_us_.size());
   for (size_t i = 0; i < err.size(); ++i) err[i] = std::abs(period_us_[i] - period_ * 1e6);
   s.period_error_p50_us = Percentile(err, 0.5);
@@ -88,9 +89,11 @@ LoopSummary LoopMetrics::Summarize(double seconds) const {
   s.max_force_n = max_force_;
   s.compute_p50_us = Percentile(compute_us_, 0.5);
   s.compute_p99_us = Percentile(compute_us_, 0.99);
+  s.compute_p999_us = Percentile(compute_us_, 0.999);
   s.compute_max_us =
       compute_us_.empty() ? 0 : *std::max_element(compute_us_.begin(), compute_us_.end());
   s.safety_ramps = ramps_;
+  s.ramps_interrupted = ramps_interrupted_;
   s.longest_ramp_ms = longest_ramp_ * 1e3;
   return s;
 }
@@ -117,15 +120,15 @@ std::string LoopSummary::Text() const {
                         model_age_max_ms, round_trip_p50_ms, round_trip_p99_ms);
   absl::StrAppendFormat(&out,
                         "  force: largest step %.3f N (bound %.3f N), largest %.2f N; compute "
-                        "us p50 %.2f  p99 %.2f  max %.2f\n",
+                        "us p50 %.2f  p99 %.2f  p99.9 %.2f  max %.2f\n",
                         largest_force_step_n, force_step_bound_n, max_force_n, compute_p50_us,
-                        compute_p99_us, compute_max_us);
-  absl::StrAppendFormat(&out,
-                        "  safety ramps: %d (longest to zero %.1f ms); link: %d replies, %d poses "
-                        "sent, %d refused, %d reconnects%s\n",
-                        safety_ramps, longest_ramp_ms, replies, poses_sent, poses_rejected,
-                        reconnects,
-                        last_rejection.empty() ? "" : absl::StrCat(" (last: ", last_rejection, ")"));
+                        compute_p99_us, compute_p999_us, compute_max_us);
+  absl::StrAppendFormat(
+      &out,
+      "  safety ramps: %d (%d cut short by a model; longest to zero %.1f ms); "
+      "link: %d replies, %d poses sent, %d refused, %d reconnects%s\n",
+      safety_ramps, ramps_interrupted, longest_ramp_ms, replies, poses_sent, poses_rejected,
+      reconnects, last_rejection.empty() ? "" : absl::StrCat(" (last: ", last_rejection, ")"));
   return out;
 }
 
@@ -151,8 +154,7 @@ std::string JsonString(const std::string& s) {
 std::string LoopSummary::Json() const {
   std::string o = "{\n";
   auto num = [&](const char* k, double v, bool last = false) {
-    absl::StrAppendFormat(&o, "  \"%s\": %.6g%s\n", k, std::isfinite(v) ? v : 0.0,
-                          last ? "" : ",");
+    absl::StrAppendFormat(&o, "  \"%s\": %.6g%s\n", k, std::isfinite(v) ? v : 0.0, last ? "" : ",");
   };
   num("seconds", seconds);
   num("ticks", static_cast<double>(ticks));
@@ -182,8 +184,10 @@ std::string LoopSummary::Json() const {
   num("max_force_n", max_force_n);
   num("compute_p50_us", compute_p50_us);
   num("compute_p99_us", compute_p99_us);
+  num("compute_p999_us", compute_p999_us);
   num("compute_max_us", compute_max_us);
   num("safety_ramps", static_cast<double>(safety_ramps));
+  num("ramps_interrupted", static_cast<double>(ramps_interrupted));
   num("longest_ramp_ms", longest_ramp_ms);
   num("replies", static_cast<double>(replies));
   num("poses_sent", static_cast<double>(poses_sent));

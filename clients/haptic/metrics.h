@@ -39,9 +39,10 @@ struct LoopSummary {
   double max_force_n = 0;
   // Time in the force computation (model intake, coupling, limits) per
   // tick, microseconds.
-  double compute_p50_us = 0, compute_p99_us = 0, compute_max_us = 0;
-  int64_t safety_ramps = 0;       // times the safety ramp started
-  double longest_ramp_ms = 0;     // from the ramp's start to zero force
+  double compute_p50_us = 0, compute_p99_us = 0, compute_p999_us = 0, compute_max_us = 0;
+  int64_t safety_ramps = 0;       // times the safety ramp started from a non-zero force
+  int64_t ramps_interrupted = 0;  // of those, cut short by a model before zero
+  double longest_ramp_ms = 0;     // from a ramp's start to zero force
   std::string realtime;           // what TryRealtime obtained
   // Link.
   int64_t replies = 0, poses_sent = 0, poses_rejected = 0, reconnects = 0;
@@ -61,6 +62,10 @@ class LoopMetrics {
   void ModelReceived(double t);
   void RampStarted(double t);
   void ForceZeroAfterRamp(double t);
+  void RampInterrupted() {
+    ramp_start_ = -1;
+    ++ramps_interrupted_;
+  }
   void MaxForce(double f);
   LoopSummary Summarize(double seconds) const;
 
@@ -72,7 +77,7 @@ class LoopMetrics {
   int64_t skipped_ = 0, ticks_ = 0;
   int64_t models_ = 0;
   double first_model_ = -1, last_model_ = -1;
-  int64_t ramps_ = 0;
+  int64_t ramps_ = 0, ramps_interrupted_ = 0;
   double ramp_start_ = -1, longest_ramp_ = 0;
 };
 

@@ -40,7 +40,8 @@ void ProbeLink::Stop() {
 
 bool ProbeLink::PostPose(const ProbePose& pose) {
   if (!mu_.TryLock()) return false;
-  pose_ = pose;
+  pose_.CopyFrom(pose);
+  has_pose_ = true;
   pose_ready_.Signal();
   mu_.Unlock();
   return true;
@@ -49,10 +50,10 @@ bool ProbeLink::PostPose(const ProbePose& pose) {
 bool ProbeLink::TakeModel(ContactModel* model, Clock::time_point* arrival) {
   if (!mu_.TryLock()) return false;
   bool got = false;
-  if (model_.has_value()) {
-    *model = std::move(*model_);
+  if (has_model_) {
+    model->CopyFrom(model_);
     *arrival = model_arrival_;
-    model_.reset();
+    has_model_ = false;
     got = true;
   }
   mu_.Unlock();
@@ -75,12 +76,12 @@ void ProbeLink::WriterLoop() {
     std::shared_ptr<Stream> s;
     {
       absl::MutexLock lock(&mu_);
-      while (!stop_ && !(pose_.has_value() && stream_ != nullptr && first_written_)) {
+      while (!stop_ && !(has_pose_ && stream_ != nullptr && first_written_)) {
         pose_ready_.Wait(&mu_);
       }
       if (stop_) return;
-      pose = std::move(*pose_);
-      pose_.reset();
+      pose.CopyFrom(pose_);
+      has_pose_ = false;
       s = stream_;
     }
     ProbeRequest request;
@@ -148,12 +149,13 @@ void ProbeLink::ReaderLoop() {
           while (!sent_.empty() && sent_.front().first < seq) sent_.pop_front();
           if (!sent_.empty() && sent_.front().first == seq) {
             if (round_trips_.size() < kMaxRoundTrips) {
-              round_trips_.push_back(std::chrono::duration<double>(now - sent_.front().second)
-                                         .count());
+              round_trips_.push_back(
+                  std::chrono::duration<double>(now - sent_.front().second).count());
             }
             sent_.pop_front();
           }
-          model_ = std::move(*reply.mutable_model());
+          model_.Swap(reply.mutable_model());
+          has_model_ = true;
           model_arrival_ = now;
         }
       }
@@ -179,6 +181,7 @@ void ProbeLink::ReaderLoop() {
       stop = stop_;
       if (!stop && client::IsFinalStreamStatus(status.error_code())) {
         counters_.final_status = client::ToAbslStatus(status, "Probe");
+        failed_.store(true, std::memory_order_release);
         stop = true;
       }
     }
@@ -189,9 +192,9 @@ void ProbeLink::ReaderLoop() {
       return;
     }
     if (options_.log) {
-      options_.log(absl::StrCat("probe stream broke (", static_cast<int>(status.error_code()),
-                                " ", status.error_message(), "); reconnecting in ",
-                                backoff.count(), " ms"));
+      options_.log(absl::StrCat("probe stream broke (", static_cast<int>(status.error_code()), " ",
+                                status.error_message(), "); reconnecting in ", backoff.count(),
+                                " ms"));
     }
     if (delivered) backoff = std::chrono::milliseconds(50);
     {

@@ -8,6 +8,8 @@
 // reconnecting cannot help (wrong token, no such session) are final.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -15,8 +17,6 @@
 #include <optional>
 #include <string>
 #include <thread>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
@@ -48,11 +48,14 @@ class ProbeLink {
   // The newest pose to send (replaces one not yet written). False when
   // the lock was busy (post again next tick).
   bool PostPose(const ProbePose& pose);
-  // The newest model not taken yet, with its arrival time (steady clock).
-  // False when there is none (or the lock was busy).
+  // The newest model not taken yet (copied into *model, reusing its
+  // storage), with its arrival time (steady clock). False when there is
+  // none (or the lock was busy).
   bool TakeModel(ContactModel* model, std::chrono::steady_clock::time_point* arrival);
   // A stream is open (it broke: false until the next one is).
   bool up() const { return up_.load(std::memory_order_acquire); }
+  // Reconnecting stopped for good (Counters::final_status says why).
+  bool failed() const { return failed_.load(std::memory_order_acquire); }
 
   struct Counters {
     int64_t replies = 0, models = 0, poses_sent = 0, rejected = 0, reconnects = 0,
@@ -75,19 +78,24 @@ class ProbeLink {
 
   const ProbeLinkOptions options_;
   std::atomic<bool> up_{false};
+  std::atomic<bool> failed_{false};
 
   mutable absl::Mutex mu_;
   absl::CondVar pose_ready_;
-  std::optional<ProbePose> pose_ ABSL_GUARDED_BY(mu_);
+  // The pose and model slots stay allocated (a flag says whether they
+  // hold something new), so the loop's copies reuse their storage: the
+  // loop neither allocates nor frees.
+  ProbePose pose_ ABSL_GUARDED_BY(mu_);
+  bool has_pose_ ABSL_GUARDED_BY(mu_) = false;
   std::shared_ptr<Stream> stream_ ABSL_GUARDED_BY(mu_);
   bool first_written_ ABSL_GUARDED_BY(mu_) = false;  // the session/options request
-  std::optional<ContactModel> model_ ABSL_GUARDED_BY(mu_);
+  ContactModel model_ ABSL_GUARDED_BY(mu_);
+  bool has_model_ ABSL_GUARDED_BY(mu_) = false;
   std::chrono::steady_clock::time_point model_arrival_ ABSL_GUARDED_BY(mu_);
   bool stop_ ABSL_GUARDED_BY(mu_) = false;
   Counters counters_ ABSL_GUARDED_BY(mu_);
   // Sent poses (seq, when) awaiting their first model.
-  std::deque<std::pair<uint64_t, std::chrono::steady_clock::time_point>> sent_
-      ABSL_GUARDED_BY(mu_);
+  std::deque<std::pair<uint64_t, std::chrono::steady_clock::time_point>> sent_ ABSL_GUARDED_BY(mu_);
   std::vector<double> round_trips_ ABSL_GUARDED_BY(mu_);
   std::thread reader_, writer_;
 };

@@ -8,15 +8,14 @@
 // in a cache (Impl::ContactCache) rebuilt when the material or the fixed
 // set changed (Impl::contact.epoch) or tau changed (S only): a contact
 // query then costs three triangular solves.
+#include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <vector>
-
-#include <Eigen/Dense>
-#include <Eigen/SparseCholesky>
 
 #include "absl/strings/str_cat.h"
 #include "solver/solid/solid.h"
@@ -29,10 +28,10 @@ namespace dynsolid::solid {
 // answer) and S's for the cached tau.
 struct Solid::Impl::ContactCache {
   int64_t epoch = -1;
-  std::vector<int32_t> free_index;  // control point -> free number, or -1
-  std::vector<int32_t> free_points; // free number -> control point
-  Eigen::MatrixXd k;                // 3 #free square, N/m
-  Eigen::MatrixXd mass, damping;    // #free square (the same on x, y, z)
+  std::vector<int32_t> free_index;   // control point -> free number, or -1
+  std::vector<int32_t> free_points;  // free number -> control point
+  Eigen::MatrixXd k;                 // 3 #free square, N/m
+  Eigen::MatrixXd mass, damping;     // #free square (the same on x, y, z)
   Eigen::LDLT<Eigen::MatrixXd> k_ldlt;
   bool k_definite = false;
   double horizon = 0;
@@ -174,8 +173,8 @@ double Ms(Clock::time_point t0) {
 
 absl::StatusOr<Solid::SurfacePoint> Solid::ClosestSurfacePoint(const Eigen::Vector3d& x) const {
   if (!x.allFinite()) {
-    return absl::InvalidArgumentError(absl::StrCat("contact query point (", x.x(), ", ", x.y(),
-                                                   ", ", x.z(), ") must be finite"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("contact query point (", x.x(), ", ", x.y(), ", ", x.z(), ") must be finite"));
   }
   const Impl& im = *impl_;
   const Points pos = SurfacePositions();
@@ -207,11 +206,10 @@ absl::StatusOr<Solid::SurfacePoint> Solid::ClosestSurfacePoint(const Eigen::Vect
   return out;
 }
 
-absl::StatusOr<Solid::SurfacePoint> Solid::SurfacePointAt(int32_t quad, double u,
-                                                          double v) const {
+absl::StatusOr<Solid::SurfacePoint> Solid::SurfacePointAt(int32_t quad, double u, double v) const {
   if (quad < 0 || quad >= static_cast<int32_t>(surface_.quads.size())) {
-    return absl::InvalidArgumentError(absl::StrCat("surface quad ", quad, " is not in [0, ",
-                                                   surface_.quads.size(), ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("surface quad ", quad, " is not in [0, ", surface_.quads.size(), ")"));
   }
   if (!(u >= 0 && u <= 1 && v >= 0 && v <= 1)) {
     return absl::InvalidArgumentError(
@@ -263,9 +261,11 @@ absl::StatusOr<Solid::ContactResponse> Solid::ContactResponseAt(const SurfacePoi
     const int64_t n = 3 * nf;
     if (n == 0) return absl::FailedPreconditionError("contact: every control point is fixed");
     if (n > kMaxContactDenseDofs) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "contact: ", n, " free control coordinates; the contact stiffness is built densely "
-          "for at most ", kMaxContactDenseDofs));
+      return absl::FailedPreconditionError(
+          absl::StrCat("contact: ", n,
+                       " free control coordinates; the contact stiffness is built densely "
+                       "for at most ",
+                       kMaxContactDenseDofs));
     }
     cache.k.setZero(n, n);
     if (im.corotational != nullptr) {
@@ -373,8 +373,8 @@ absl::StatusOr<Solid::ContactResponse> Solid::ContactResponseAt(const SurfacePoi
   out.stiffness = 1.0 / wn;
   // Ritz split over u_bar = k S^-1 J^T n (a unit normal displacement).
   const Eigen::VectorXd ubar = out.stiffness * (u * nrm);
-  const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> ub(
-      ubar.data(), nf, 3);
+  const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> ub(ubar.data(),
+                                                                                       nf, 3);
   for (int a = 0; a < 3; ++a) {
     out.mass += ub.col(a).dot(cache.mass * ub.col(a));
     out.damping += ub.col(a).dot(cache.damping * ub.col(a));
@@ -397,13 +397,13 @@ absl::Status Solid::SetContactLoads(const std::vector<ContactLoad>& loads) {
   for (size_t k = 0; k < loads.size(); ++k) {
     const ContactLoad& l = loads[k];
     if (l.quad < 0 || l.quad >= static_cast<int32_t>(surface_.quads.size())) {
-      return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": surface quad ",
-                                                     l.quad, " is not in [0, ",
-                                                     surface_.quads.size(), ")"));
+      return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": surface quad ", l.quad,
+                                                     " is not in [0, ", surface_.quads.size(),
+                                                     ")"));
     }
     if (!(l.u >= 0 && l.u <= 1 && l.v >= 0 && l.v <= 1)) {
-      return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": (u, v) = (", l.u,
-                                                     ", ", l.v, ") must lie in [0, 1]^2"));
+      return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": (u, v) = (", l.u, ", ",
+                                                     l.v, ") must lie in [0, 1]^2"));
     }
     if (!l.force.allFinite()) {
       return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": force must be finite"));

@@ -1,13 +1,14 @@
 // The bridge's rendering logic (clients/haptic/coupling.h) and simulated
 // devices, on a simulated clock: passivity bound, series coupling, model
 // blend, force step bound, clamp, safety ramp. No wall time anywhere.
-#include <cmath>
-#include <vector>
+#include "clients/haptic/coupling.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "clients/haptic/coupling.h"
+#include <cmath>
+#include <vector>
+
 #include "clients/haptic/device.h"
 #include "clients/haptic/metrics.h"
 
@@ -101,7 +102,7 @@ TEST(CouplingTest, ViscousTermOpposesApproachVelocity) {
 // Runs `ticks` ticks from time t (advanced), with `model` delivered at the
 // first tick when given; returns the forces (z).
 std::vector<double> Ticks(Coupling& c, double& t, int ticks, const DeviceSample& d,
-                        const LocalModel* model = nullptr, double* largest_step = nullptr) {
+                          const LocalModel* model = nullptr, double* largest_step = nullptr) {
   std::vector<double> out;
   for (int i = 0; i < ticks; ++i) {
     t += kT;
@@ -262,7 +263,7 @@ TEST(CouplingTest, ClosedLoopOnASimulatedSolidSettlesAtTheSeriesForce) {
   double t = 0;
   Eigen::Vector3d f = Eigen::Vector3d::Zero();
   std::vector<std::pair<double, LocalModel>> in_flight;  // delivery time, model
-  double applied = 0;  // force on the solid (pushing in)
+  double applied = 0;                                    // force on the solid (pushing in)
   double next_model = 0;
   std::vector<double> forces;
   for (int i = 0; i < 4000; ++i) {

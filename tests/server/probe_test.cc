@@ -2,16 +2,16 @@
 // loopback gRPC against an in-process server: contact model values on
 // block3, painted stiffness, the reaction load denting the solid, refused
 // poses, and the "contact" phase only while a probe is connected.
+#include <gmock/gmock.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
 #include <chrono>
 #include <cmath>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <gmock/gmock.h>
-#include <grpcpp/grpcpp.h>
-#include <gtest/gtest.h>
 
 #include "dynsolid/service.grpc.pb.h"
 #include "server/server.h"
@@ -126,9 +126,8 @@ class ProbeTest : public ::testing::Test {
     EXPECT_TRUE(st.ok()) << st.error_message();
   }
   static ProbeReply ModelFor(Probe& p, uint64_t seq) {
-    return ReadUntil(p, [seq](const ProbeReply& r) {
-      return r.has_model() && r.model().pose_seq() >= seq;
-    });
+    return ReadUntil(
+        p, [seq](const ProbeReply& r) { return r.has_model() && r.model().pose_seq() >= seq; });
   }
 
   // A command on its own stream; returns the reply.
@@ -208,9 +207,10 @@ TEST_F(ProbeTest, ContactModelOnBlock3IsTheBoxsPointAndNormal) {
   EXPECT_GT(m.effective_mass(), 0);
   EXPECT_EQ(m.compliance_size(), 9);
   EXPECT_NEAR(m.horizon(), 0.03, 1e-15);
-  std::printf("block3 top (1.3, 1.7): k %.4g N/m at tau %.3f s, static %.4g N/m, b %.4g N s/m, "
-              "m %.4g kg\n",
-              m.stiffness(), m.horizon(), m.static_stiffness(), m.damping(), m.effective_mass());
+  std::printf(
+      "block3 top (1.3, 1.7): k %.4g N/m at tau %.3f s, static %.4g N/m, b %.4g N s/m, "
+      "m %.4g kg\n",
+      m.stiffness(), m.horizon(), m.static_stiffness(), m.damping(), m.effective_mass());
   // Beside the +x face.
   SendPose(p, 3.1, 1.0, 1.5);
   const ContactModel side = ModelFor(p, 2).model();
@@ -219,9 +219,8 @@ TEST_F(ProbeTest, ContactModelOnBlock3IsTheBoxsPointAndNormal) {
   EXPECT_NEAR(side.distance(), 0.1, 1e-9);
   // Far above (default near distance: 10 % of 3 m): replies without a model.
   SendPose(p, 1.5, 1.5, 4.5);
-  const ProbeReply far = ReadUntil(p, [](const ProbeReply& r) {
-    return r.last_pose_seq() >= 3 && !r.has_model();
-  });
+  const ProbeReply far =
+      ReadUntil(p, [](const ProbeReply& r) { return r.last_pose_seq() >= 3 && !r.has_model(); });
   EXPECT_FALSE(far.has_model());
   Close(p);
 }
@@ -246,13 +245,13 @@ TEST_F(ProbeTest, PaintedStifferHalfHasLargerEffectiveStiffness) {
     paint->set_falloff(0.1);
   });
   const ContactModel soft1 = static_at(0.75, 1.5), stiff1 = static_at(2.25, 1.5);
-  std::printf("static stiffness before / after painting x > 1.5 ten times stiffer: soft side "
-              "%.4g / %.4g, painted side %.4g / %.4g N/m; over tau: %.4g / %.4g, %.4g / %.4g\n",
-              soft0.static_stiffness(), soft1.static_stiffness(), stiff0.static_stiffness(),
-              stiff1.static_stiffness(), soft0.stiffness(), soft1.stiffness(),
-              stiff0.stiffness(), stiff1.stiffness());
-  EXPECT_NEAR(soft0.static_stiffness(), stiff0.static_stiffness(),
-              0.01 * soft0.static_stiffness())
+  std::printf(
+      "static stiffness before / after painting x > 1.5 ten times stiffer: soft side "
+      "%.4g / %.4g, painted side %.4g / %.4g N/m; over tau: %.4g / %.4g, %.4g / %.4g\n",
+      soft0.static_stiffness(), soft1.static_stiffness(), stiff0.static_stiffness(),
+      stiff1.static_stiffness(), soft0.stiffness(), soft1.stiffness(), stiff0.stiffness(),
+      stiff1.stiffness());
+  EXPECT_NEAR(soft0.static_stiffness(), stiff0.static_stiffness(), 0.01 * soft0.static_stiffness())
       << "symmetric before the paint";
   EXPECT_GT(stiff1.static_stiffness(), 3.0 * soft1.static_stiffness());
   EXPECT_GT(stiff1.stiffness(), 1.2 * soft1.stiffness());
@@ -274,10 +273,10 @@ TEST_F(ProbeTest, PushingProbeDentsTheSolidAtTheContactPoint) {
   SendPose(p, 1.5, 1.5, 2.99, V3(0, 0, 200.0), m0.step());
   // The pose before the steps went stale during them (ProbeLimits::
   // pose_timeout); the next refresh shows the renewed force acting.
-  const ContactModel m1 = ReadUntil(p, [](const ProbeReply& r) {
-                            return r.has_model() && r.model().pose_seq() >= 3 &&
-                                   r.model().applied_force().z() < 0;
-                          }).model();
+  const ContactModel m1 =
+      ReadUntil(p, [](const ProbeReply& r) {
+        return r.has_model() && r.model().pose_seq() >= 3 && r.model().applied_force().z() < 0;
+      }).model();
   EXPECT_NEAR(m1.applied_force().z(), -200.0, 1e-9) << "the load that acted";
   EXPECT_LT(m1.point().z(), 3.0 - 1e-4) << "the contact point moved along the push";
   EXPECT_NEAR(m1.material_point().x(), 1.5, 1e-6);
@@ -286,9 +285,10 @@ TEST_F(ProbeTest, PushingProbeDentsTheSolidAtTheContactPoint) {
   for (int i = 2; i < after.control_positions_size(); i += 3) {
     dz = std::min(dz, after.control_positions(i) - before.control_positions(i));
   }
-  std::printf("after 300 steps at 200 N: contact point z %.6f (dent %.3g mm), lowest control "
-              "point moved %.3g mm\n",
-              m1.point().z(), 1e3 * (3.0 - m1.point().z()), 1e3 * dz);
+  std::printf(
+      "after 300 steps at 200 N: contact point z %.6f (dent %.3g mm), lowest control "
+      "point moved %.3g mm\n",
+      m1.point().z(), 1e3 * (3.0 - m1.point().z()), 1e3 * dz);
   EXPECT_LT(dz, -1e-5);
   const SessionStats st = StatsOf(s);
   EXPECT_EQ(st.probes(), 1);
@@ -307,16 +307,19 @@ TEST_F(ProbeTest, BadPosesAreRefusedAndChangeNothing) {
   Probe p = OpenProbe(s);
   const Vec3 push = V3(0, 0, 500.0);
   std::vector<PoseRejection> refused;
-  SendPose(p, NAN, 1.5, 2.9, push);                    // 1: non-finite position
-  SendPose(p, 1.5, 1.5, 2.9, V3(0, INFINITY, 0));      // 2: non-finite force
-  SendPose(p, 1.5, 1.5, 2.9, V3(0, 0, 1e9));           // 3: force above the limit
-  SendPose(p, 100.0, 1.5, 2.9, push);                  // 4: far outside the bounds
-  ReadUntil(p, [](const ProbeReply& r) { return r.rejected_total() >= 4; }, &refused);
-  SendPose(p, 1.5, 1.5, 3.5, Vec3(), 0, 10);           // seq 10: fine, no force, far away
-  ReadUntil(p, [](const ProbeReply& r) { return r.last_pose_seq() >= 10; }, &refused);
-  SendPose(p, 1.5, 1.5, 2.9, push, 0, 7);              // seq 7 < 10: out of order
-  SendPose(p, 1.5, 1.5, 2.9, push, 0, 10);             // seq 10 again
-  ReadUntil(p, [](const ProbeReply& r) { return r.rejected_total() >= 6; }, &refused);
+  SendPose(p, NAN, 1.5, 2.9, push);                // 1: non-finite position
+  SendPose(p, 1.5, 1.5, 2.9, V3(0, INFINITY, 0));  // 2: non-finite force
+  SendPose(p, 1.5, 1.5, 2.9, V3(0, 0, 1e9));       // 3: force above the limit
+  SendPose(p, 100.0, 1.5, 2.9, push);              // 4: far outside the bounds
+  ReadUntil(
+      p, [](const ProbeReply& r) { return r.rejected_total() >= 4; }, &refused);
+  SendPose(p, 1.5, 1.5, 3.5, Vec3(), 0, 10);  // seq 10: fine, no force, far away
+  ReadUntil(
+      p, [](const ProbeReply& r) { return r.last_pose_seq() >= 10; }, &refused);
+  SendPose(p, 1.5, 1.5, 2.9, push, 0, 7);   // seq 7 < 10: out of order
+  SendPose(p, 1.5, 1.5, 2.9, push, 0, 10);  // seq 10 again
+  ReadUntil(
+      p, [](const ProbeReply& r) { return r.rejected_total() >= 6; }, &refused);
   ASSERT_EQ(refused.size(), 6u);
   EXPECT_EQ(refused[0].code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
   EXPECT_THAT(refused[0].message(), HasSubstr("pose.position.x: must be finite"));

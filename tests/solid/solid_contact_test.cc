@@ -1,15 +1,15 @@
 // Haptic contact (solid.h "Haptic contact", MODEL.md 9): the closest point
 // of the surface, the local response at it, and contact loads.
+#include <gmock/gmock.h>
+#include <google/protobuf/text_format.h>
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <Eigen/Eigenvalues>
-#include <gmock/gmock.h>
-#include <google/protobuf/text_format.h>
-#include <gtest/gtest.h>
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
@@ -69,10 +69,10 @@ TEST(SolidContactTest, ClosestPointAndNormalOnBlock3AreTheBoxs) {
     double distance;
   };
   const Case cases[] = {
-      {{1.3, 1.7, 3.5}, {1.3, 1.7, 3.0}, {0, 0, 1}, 0.5},     // above the top face
-      {{1.3, 1.7, 2.9}, {1.3, 1.7, 3.0}, {0, 0, 1}, -0.1},    // just inside under it
-      {{3.2, 1.0, 1.5}, {3.0, 1.0, 1.5}, {1, 0, 0}, 0.2},     // beside the +x face
-      {{0.4, -0.3, 2.2}, {0.4, 0.0, 2.2}, {0, -1, 0}, 0.3},   // beside the -y face
+      {{1.3, 1.7, 3.5}, {1.3, 1.7, 3.0}, {0, 0, 1}, 0.5},    // above the top face
+      {{1.3, 1.7, 2.9}, {1.3, 1.7, 3.0}, {0, 0, 1}, -0.1},   // just inside under it
+      {{3.2, 1.0, 1.5}, {3.0, 1.0, 1.5}, {1, 0, 0}, 0.2},    // beside the +x face
+      {{0.4, -0.3, 2.2}, {0.4, 0.0, 2.2}, {0, -1, 0}, 0.3},  // beside the -y face
       {{2.71, 0.37, 3.05}, {2.71, 0.37, 3.0}, {0, 0, 1}, 0.05},
   };
   for (const Case& c : cases) {
@@ -104,7 +104,9 @@ TEST(SolidContactTest, ResponseSplitsExactlyAndIsStifferThanStatic) {
     ASSERT_OK_AND_ASSIGN(Solid::ContactResponse r, s->ContactResponseAt(c, tau));
     // W symmetric positive definite.
     EXPECT_LT((r.compliance - r.compliance.transpose()).norm(), 1e-12 * r.compliance.norm());
-    EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(r.compliance).eigenvalues().minCoeff(), 0) << "W at tau " << tau;
+    EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(r.compliance).eigenvalues().minCoeff(),
+              0)
+        << "W at tau " << tau;
     // k = m / tau^2 + b / tau + elastic (the Ritz split is exact).
     const double sum = r.mass / (tau * tau) + r.damping / tau + r.elastic;
     EXPECT_NEAR(sum, r.stiffness, 1e-8 * r.stiffness) << "tau " << tau;
@@ -113,9 +115,10 @@ TEST(SolidContactTest, ResponseSplitsExactlyAndIsStifferThanStatic) {
     // Inertia and damping only add: k >= the static stiffness.
     EXPECT_GT(r.static_stiffness, 0);
     EXPECT_GE(r.stiffness, r.static_stiffness);
-    std::printf("tau %.3f s: k %.4g N/m (mass %.4g kg, damping %.4g N s/m, elastic %.4g N/m), "
-                "static %.4g N/m\n",
-                tau, r.stiffness, r.mass, r.damping, r.elastic, r.static_stiffness);
+    std::printf(
+        "tau %.3f s: k %.4g N/m (mass %.4g kg, damping %.4g N s/m, elastic %.4g N/m), "
+        "static %.4g N/m\n",
+        tau, r.stiffness, r.mass, r.damping, r.elastic, r.static_stiffness);
   }
   // A long horizon tends to the static answer.
   ASSERT_OK_AND_ASSIGN(Solid::ContactResponse slow, s->ContactResponseAt(c, 100.0));
@@ -143,8 +146,8 @@ TEST(SolidContactTest, StaticStiffnessMatchesTheStaticSolution) {
   s->SetAtRest(p);
   ASSERT_OK_AND_ASSIGN(Solid::SurfacePoint moved, s->SurfacePointAt(c.quad, c.u, c.v));
   const double dent = (c.point - moved.point).dot(c.normal);
-  std::printf("static: F %.1f N, dent %.6g m, F / dent %.6g N/m, k_static %.6g N/m\n", force,
-              dent, force / dent, r.static_stiffness);
+  std::printf("static: F %.1f N, dent %.6g m, F / dent %.6g N/m, k_static %.6g N/m\n", force, dent,
+              force / dent, r.static_stiffness);
   EXPECT_NEAR(force / dent, r.static_stiffness, 1e-6 * r.static_stiffness);
 }
 
@@ -165,12 +168,13 @@ TEST(SolidContactTest, PaintedStifferRegionIsFeltStiffer) {
       "material { young_modulus: 1e6 } strength: 1")));
   ASSERT_OK_AND_ASSIGN(Solid::ContactResponse a1, s->ContactResponseAt(a, 0.03));
   ASSERT_OK_AND_ASSIGN(Solid::ContactResponse b1, s->ContactResponseAt(b, 0.03));
-  std::printf("static stiffness: soft point %.4g -> %.4g N/m, painted point %.4g -> %.4g N/m "
-              "(x%.2f); at tau 30 ms %.4g -> %.4g and %.4g -> %.4g N/m (elastic part %.4g -> "
-              "%.4g)\n",
-              a0.static_stiffness, a1.static_stiffness, b0.static_stiffness, b1.static_stiffness,
-              b1.static_stiffness / b0.static_stiffness, a0.stiffness, a1.stiffness, b0.stiffness,
-              b1.stiffness, b0.elastic, b1.elastic);
+  std::printf(
+      "static stiffness: soft point %.4g -> %.4g N/m, painted point %.4g -> %.4g N/m "
+      "(x%.2f); at tau 30 ms %.4g -> %.4g and %.4g -> %.4g N/m (elastic part %.4g -> "
+      "%.4g)\n",
+      a0.static_stiffness, a1.static_stiffness, b0.static_stiffness, b1.static_stiffness,
+      b1.static_stiffness / b0.static_stiffness, a0.stiffness, a1.stiffness, b0.stiffness,
+      b1.stiffness, b0.elastic, b1.elastic);
   EXPECT_GT(b1.static_stiffness, 3.0 * b0.static_stiffness);
   EXPECT_GT(b1.stiffness, 1.2 * b0.stiffness);
   EXPECT_GT(b1.elastic, 2.0 * b0.elastic);
@@ -254,9 +258,10 @@ TEST(SolidContactTest, LocalFrameStaticStiffnessPredictsTheSettledDent) {
   ASSERT_OK(s->SetContactLoads({{c.quad, c.u, c.v, -force * c.normal}}));
   for (int i = 0; i < 4000; ++i) ASSERT_OK(s->Step());
   const double dent = (c.point - PointNow(*s, c)).dot(c.normal);
-  std::printf("local frame: F %.1f N, settled dent %.6g m, F / dent %.6g N/m, k_static %.6g "
-              "N/m\n",
-              force, dent, force / dent, r.static_stiffness);
+  std::printf(
+      "local frame: F %.1f N, settled dent %.6g m, F / dent %.6g N/m, k_static %.6g "
+      "N/m\n",
+      force, dent, force / dent, r.static_stiffness);
   EXPECT_NEAR(force / dent, r.static_stiffness, 0.03 * r.static_stiffness);
 }
 

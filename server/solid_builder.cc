@@ -170,6 +170,12 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
   const double ms = std::chrono::duration<double, std::milli>(
                         std::chrono::steady_clock::now() - start).count();
   stats.set_build_milliseconds(ms);
+  const solid::BuildReport& report = (*solid)->build_report();
+  stats.set_model(scene::ResolvedSolverSettings(request.scene).model() == SolverSettings::COROTATIONAL
+                      ? "corotational"
+                      : "local_frame");
+  stats.set_integrator(report.implicit ? "backward_euler" : "central_difference");
+  stats.set_substeps(report.substeps);
   BuiltSolid out;
   out.stats = std::move(stats);
   out.solid = std::shared_ptr<solid::Solid>(*std::move(solid));

@@ -1,0 +1,56 @@
+// The gateway's gRPC side: the dynsolid.Sessions client built from the
+// project's .proto files at start-up (no generated code), the unary calls a
+// page may make, and Watch with the frames left as the server's bytes.
+
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+import grpc from '@grpc/grpc-js';
+import protoLoader from '@grpc/proto-loader';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+export const DEFAULT_PROTO_ROOT = path.resolve(here, '../../../proto');
+
+// Unary calls a page may make, as service.proto names them.
+export const UNARY_METHODS = new Set([
+  'CreateSession', 'GetSession', 'ListSessions', 'CloseSession', 'GetStats', 'Inspect', 'Pick',
+]);
+
+export function loadService(protoRoot = DEFAULT_PROTO_ROOT) {
+  const definition = protoLoader.loadSync('dynsolid/service.proto', {
+    includeDirs: [protoRoot],
+    keepCase: true,      // field names exactly as in the .proto (the page uses them)
+    longs: Number,       // steps, ids and counts stay far below 2^53
+    enums: String,
+    defaults: false,
+    oneofs: true,        // replies name their set oneof member ("result": "load_id")
+    bytes: Array,
+  });
+  const pkg = grpc.loadPackageDefinition(definition);
+  return { definition, Sessions: pkg.dynsolid.Sessions };
+}
+
+export function makeClient(service, address) {
+  const options = {
+    'grpc.max_receive_message_length': 64 << 20,
+    'grpc.max_send_message_length': 16 << 20,
+    // Reconnect quickly after the server comes back.
+    'grpc.initial_reconnect_backoff_ms': 200,
+    'grpc.max_reconnect_backoff_ms': 1000,
+  };
+  return new service.Sessions(address, grpc.credentials.createInsecure(), options);
+}
+
+// Watch with the Frame bytes passed through untouched: the page decodes
+// them (clients/web/public/js/surface.js).
+export function watchRaw(service, client, request) {
+  const method = service.definition['dynsolid.Sessions'].Watch;
+  return client.makeServerStreamRequest(method.path, method.requestSerialize,
+                                        (bytes) => bytes, request, new grpc.Metadata(), {});
+}
+
+export function statusName(code) {
+  for (const [name, value] of Object.entries(grpc.status)) if (value === code) return name;
+  return String(code);
+}
+
+export { grpc };

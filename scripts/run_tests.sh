@@ -4,5 +4,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/build.sh
+bash scripts/setup_web.sh
 PRESET="${PRESET:-release}"
 ctest --preset "$PRESET" -j2 --timeout 600

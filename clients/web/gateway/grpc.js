@@ -21,7 +21,7 @@ export function loadService(protoRoot = DEFAULT_PROTO_ROOT) {
     keepCase: true,      // field names exactly as in the .proto (the page uses them)
     longs: Number,       // steps, ids and counts stay far below 2^53
     enums: String,
-    defaults: false,
+    defaults: true,      // every scalar present (0, "", false), as the page expects
     oneofs: true,        // replies name their set oneof member ("result": "load_id")
     bytes: Array,
   });

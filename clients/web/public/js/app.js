@@ -29,7 +29,7 @@ class App {
     this.metrics = {
       framesReceived: 0, framesRendered: 0, keyframes: 0, skipped: 0, frameErrors: 0,
       joinedAt: null, firstPictureMs: null, frameTimes: [], dragRoundTrips: [], lastError: null,
-      messages: [], watchEnds: 0, reconnects: 0,
+      messages: [], watchEnds: 0, reconnects: 0, presses: [],
     };
     this.fps = 0;
     this.bindUi();
@@ -310,7 +310,10 @@ class App {
   bindPointer() {
     const canvas = this.view.canvas;
     canvas.addEventListener('pointerdown', (e) => {
-      if (!this.tools.wantsPress(e)) return;
+      const wants = this.tools.wantsPress(e);
+      this.metrics.presses.push({ x: e.clientX, y: e.clientY, button: e.button, tool: this.tools.tool, wants });
+      if (this.metrics.presses.length > 20) this.metrics.presses.shift();
+      if (!wants) return;
       this.view.controls.enabled = false;
       canvas.setPointerCapture(e.pointerId);
       this.tools.down(e);

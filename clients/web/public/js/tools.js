@@ -6,16 +6,16 @@ import * as C from './commands.js';
 
 // Parameters per tool: [key, label, default, step].
 export const PARAMS = {
-  drag: [['dragStiffness', 'stiffness (N/m)', 2000, 100]],
-  inflate: [['pressure', 'pressure (Pa)', 2000, 100], ['radius', 'radius (m)', 0.3, 0.05]],
-  deflate: [['pressure', 'pressure (Pa)', 2000, 100], ['radius', 'radius (m)', 0.3, 0.05]],
-  stiffness: [['radius', 'radius (m)', 0.3, 0.05], ['strength', 'strength', 1, 0.05],
+  drag: [['dragStiffness', 'stiffness (N/m)', 5e4, 1e4]],
+  inflate: [['pressure', 'pressure (Pa)', 3000, 500], ['radius', 'radius (m)', 0.8, 0.1]],
+  deflate: [['pressure', 'pressure (Pa)', 3000, 500], ['radius', 'radius (m)', 0.8, 0.1]],
+  stiffness: [['radius', 'radius (m)', 0.8, 0.1], ['strength', 'strength', 1, 0.05],
     ['falloff', 'falloff', 0.25, 0.05], ['stiffnessValue', 'value (Pa)', 1e6, 1e5]],
-  mass: [['radius', 'radius (m)', 0.3, 0.05], ['strength', 'strength', 1, 0.05],
+  mass: [['radius', 'radius (m)', 0.8, 0.1], ['strength', 'strength', 1, 0.05],
     ['falloff', 'falloff', 0.25, 0.05], ['massValue', 'value (kg/m³)', 5000, 500]],
-  pin: [['pinRadius', 'radius (m)', 0.15, 0.05]],
-  curve: [['curveStiffness', 'stiffness (N/m)', 2000, 100]],
-  extrude: [['extrudeDistance', 'distance (m)', 0.4, 0.05], ['extrudeLayers', 'layers', 1, 1]],
+  pin: [['pinRadius', 'radius (m)', 0.5, 0.1]],
+  curve: [['curveStiffness', 'stiffness (N/m)', 2e4, 5e3]],
+  extrude: [['extrudeDistance', 'distance (m)', 0.8, 0.1], ['extrudeLayers', 'layers', 1, 1]],
 };
 
 const MOVE_INTERVAL_MS = 1000 / 120;  // at most 120 target updates a second
@@ -161,6 +161,8 @@ export class Tools {
       const reply = await commandPromise;
       if (reply) await this.conn.command(C.removeLoad(reply.load_id));
     };
+    // Released before the pick and the command came back: let go now.
+    if (press.done) press.onUp().catch((err) => this.app.showError(err));
     return commandPromise.then((reply) => {
       loadId = reply.load_id;
       if (press.done) return;
@@ -188,6 +190,7 @@ export class Tools {
       const reply = await cmd;
       await this.conn.command(C.removeLoad(reply.load_id));
     };
+    if (press.done) press.onUp().catch((err) => this.app.showError(err));
     await cmd;
   }
 

@@ -19,10 +19,12 @@ export class View {
 
     this.scene = new THREE.Scene();
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.001, 1000);
-    this.camera.position.set(2, 1.5, 3);
+    // The scenes are z-up (gravity along -z, the ground at z = 0).
+    this.camera.up.set(0, 0, 1);
+    this.camera.position.set(6, -8, 5);
     this.scene.add(new THREE.HemisphereLight(0xdde6ff, 0x30302a, 1.2));
     const key = new THREE.DirectionalLight(0xffffff, 1.8);
-    key.position.set(1, 2, 1.5);
+    key.position.set(1, 1.5, 1);  // camera space: right, above, behind
     this.camera.add(key);
     this.scene.add(this.camera);
 
@@ -139,7 +141,7 @@ export class View {
     const c = s.center;
     const r = Math.max(s.radius, 1e-3);
     const d = r / Math.sin((this.camera.fov * Math.PI) / 360) * 1.15;
-    const dir = new THREE.Vector3(0.55, 0.45, 0.7).normalize();
+    const dir = new THREE.Vector3(0.62, -0.95, 0.55).normalize();
     this.camera.position.copy(c).addScaledVector(dir, d);
     this.camera.near = d / 100;
     this.camera.far = d * 100;
@@ -153,7 +155,8 @@ export class View {
     if (this.grid) this.scene.remove(this.grid);
     const box = this.geometry.boundingBox;
     this.grid = new THREE.GridHelper(r * 6, 12, 0x3a4150, 0x2c323c);
-    this.grid.position.set(c.x, box.min.y - 1e-3 * r, c.z);
+    this.grid.rotation.x = Math.PI / 2;  // the xy plane, under the solid
+    this.grid.position.set(c.x, c.y, box.min.z - 1e-3 * r);
     this.scene.add(this.grid);
   }
 

@@ -1,0 +1,174 @@
+// End-to-end harness: a real dynsolid-server, the real gateway and Debian's
+// Chromium driven by playwright-core (no browser download), all on
+// loopback. Used by the end-to-end tests and bench/viewer_bench.mjs.
+//
+// Environment: DYNSOLID_SERVER (the dynsolid-server binary; default
+// build/release/server/dynsolid-server), DYNSOLID_CHROMIUM (default
+// /usr/bin/chromium), DYNSOLID_E2E_OUT (screenshots; default a temp dir).
+
+import { spawn } from 'node:child_process';
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+import { loadService, makeClient } from '../../gateway/grpc.js';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+export const WEB_ROOT = path.resolve(here, '../..');
+export const REPO = path.resolve(WEB_ROOT, '../..');
+
+export function serverBinary() {
+  const bin = process.env.DYNSOLID_SERVER || path.join(REPO, 'build/release/server/dynsolid-server');
+  if (!fs.existsSync(bin)) throw new Error(`no dynsolid-server at ${bin} (build it, or set DYNSOLID_SERVER)`);
+  return bin;
+}
+
+export function outDir(name) {
+  const base = process.env.DYNSOLID_E2E_OUT || fs.mkdtempSync(path.join(os.tmpdir(), 'dynsolid_e2e_'));
+  const dir = path.join(base, name);
+  fs.mkdirSync(dir, { recursive: true });
+  return dir;
+}
+
+// Starts a process and waits for a stdout line matching `ready`; returns
+// {proc, match, log()}.
+function startProcess(cmd, args, ready, logFile, timeoutMs = 60000) {
+  return new Promise((resolve, reject) => {
+    const proc = spawn(cmd, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    const log = fs.createWriteStream(logFile, { flags: 'a' });
+    let out = '';
+    const timer = setTimeout(() => {
+      proc.kill('SIGKILL');
+      reject(new Error(`${path.basename(cmd)} did not start in ${timeoutMs} ms (see ${logFile})`));
+    }, timeoutMs);
+    proc.stderr.on('data', (d) => log.write(d));
+    proc.stdout.on('data', (d) => {
+      log.write(d);
+      out += d.toString();
+      const m = out.match(ready);
+      if (m && timer) {
+        clearTimeout(timer);
+        resolve({ proc, match: m });
+      }
+    });
+    proc.on('exit', (code, signal) => {
+      clearTimeout(timer);
+      reject(new Error(`${path.basename(cmd)} exited (${code ?? signal}) before it was ready (see ${logFile})`));
+    });
+  });
+}
+
+export class Server {
+  constructor(dir) {
+    this.dir = dir;
+    this.data = path.join(dir, 'data');
+    fs.mkdirSync(this.data, { recursive: true });
+    this.address = null;
+    this.proc = null;
+  }
+
+  // Starts (or restarts, on the same address and data dir) the server.
+  async start() {
+    const listen = this.address || '127.0.0.1:0';
+    // Snapshots often, so a restart replays few steps.
+    const { proc, match } = await startProcess(serverBinary(), ['--listen', listen, '--data_dir', this.data,
+      '--snapshot_every_steps', '500'],
+      /listening on (\S+)/, path.join(this.dir, 'server.log'));
+    this.proc = proc;
+    this.address = match[1];
+    proc.removeAllListeners('exit');
+    return this.address;
+  }
+
+  kill(signal = 'SIGKILL') {
+    return new Promise((resolve) => {
+      if (!this.proc || this.proc.exitCode !== null || this.proc.signalCode !== null) {
+        resolve();
+        return;
+      }
+      this.proc.once('exit', () => resolve());
+      this.proc.kill(signal);
+    });
+  }
+}
+
+export class Gateway {
+  constructor(dir, serverAddress) {
+    this.dir = dir;
+    this.serverAddress = serverAddress;
+  }
+
+  async start() {
+    const { proc, match } = await startProcess(process.execPath,
+      [path.join(WEB_ROOT, 'gateway/main.js'), '--server', this.serverAddress, '--listen', '127.0.0.1:0'],
+      /listening on (\S+)/, path.join(this.dir, 'gateway.log'));
+    this.proc = proc;
+    proc.removeAllListeners('exit');
+    this.url = match[1];
+    return this.url;
+  }
+
+  stop() {
+    return new Promise((resolve) => {
+      if (!this.proc || this.proc.exitCode !== null) {
+        resolve();
+        return;
+      }
+      this.proc.once('exit', () => resolve());
+      this.proc.kill('SIGTERM');
+    });
+  }
+}
+
+export async function launchBrowser() {
+  const executablePath = process.env.DYNSOLID_CHROMIUM || '/usr/bin/chromium';
+  if (!fs.existsSync(executablePath)) {
+    throw new Error(`no Chromium at ${executablePath} (scripts/setup_web.sh installs Debian's chromium)`);
+  }
+  return chromium.launch({
+    executablePath,
+    // WebGL without a GPU: SwiftShader through ANGLE.
+    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist',
+      '--no-sandbox'],
+  });
+}
+
+// A page of the viewer, with its console and errors collected.
+export async function openViewer(browser, url, { width = 1280, height = 800 } = {}) {
+  const page = await browser.newPage({ viewport: { width, height } });
+  page.consoleLines = [];
+  page.on('console', (m) => page.consoleLines.push(`${m.type()}: ${m.text()}`));
+  page.on('pageerror', (e) => page.consoleLines.push(`pageerror: ${e.message}`));
+  await page.goto(url);
+  await page.waitForFunction(() => window.__dynsolid && window.__dynsolid.conn.open, null, { timeout: 20000 });
+  return page;
+}
+
+// A gRPC client of the server for the tests' own checks (GetStats, Inspect).
+export function grpcClient(address) {
+  const service = loadService();
+  const client = makeClient(service, address);
+  const call = (method, request) => new Promise((resolve, reject) => {
+    client[method](request, { deadline: new Date(Date.now() + 30000) }, (err, r) => (err ? reject(err) : resolve(r)));
+  });
+  return { client, call, close: () => client.close() };
+}
+
+export const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+// Waits until `predicate()` (async) is truthy; returns its value.
+export async function until(predicate, what, timeoutMs = 30000, everyMs = 100) {
+  const end = Date.now() + timeoutMs;
+  let last;
+  for (;;) {
+    try {
+      last = await predicate();
+      if (last) return last;
+    } catch (e) {
+      last = e;
+    }
+    if (Date.now() > end) throw new Error(`timed out waiting for ${what} (last: ${last && last.message ? last.message : JSON.stringify(last)})`);
+    await sleep(everyMs);
+  }
+}

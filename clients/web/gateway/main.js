@@ -20,17 +20,19 @@ const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..');
 
 function parseArgs(argv) {
-  const args = { server: '127.0.0.1:50051', listen: '127.0.0.1:8080', proto: DEFAULT_PROTO_ROOT };
+  const args = { server: '127.0.0.1:50051', listen: '127.0.0.1:8080', proto: DEFAULT_PROTO_ROOT,
+    create: '', levels: '' };
   for (let i = 0; i < argv.length; ++i) {
     const a = argv[i];
     const eq = a.indexOf('=');
     const key = a.replace(/^--/, '').slice(0, eq > 0 ? eq - 2 : undefined);
     if (!a.startsWith('--') || !(key in args)) {
       if (a === '--help' || a === '-h') {
-        console.log('usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]');
+        console.log('usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]\n' +
+          '         [--create SCENE [--levels N]]   open a session on a built-in scene and print its URL');
         process.exit(0);
       }
-      console.error(`gateway: unknown argument ${a} (--server, --listen, --proto)`);
+      console.error(`gateway: unknown argument ${a} (--server, --listen, --proto, --create, --levels)`);
       process.exit(2);
     }
     args[key] = eq > 0 ? a.slice(eq + 1) : argv[++i];
@@ -87,6 +89,26 @@ function serveStatic(req, res, extra) {
   res.end(`not found: ${pathname}\n`);
 }
 
+// --create: a session on a built-in scene, its URL printed (the server may
+// still be starting: try for a minute).
+function createSession(client, tokens, args, base, log, attempt = 0) {
+  const request = { builtin_scene: args.create };
+  if (args.levels !== '') request.levels_override = Number(args.levels);
+  client.CreateSession(request, { deadline: new Date(Date.now() + 600000) }, (err, s) => {
+    if (err) {
+      if (err.code === 14 && attempt < 60) {
+        setTimeout(() => createSession(client, tokens, args, base, log, attempt + 1), 1000);
+        return;
+      }
+      log(`could not create ${args.create}: ${err.details || err.message}`);
+      process.exitCode = 1;
+      return;
+    }
+    tokens.byId.set(s.id, s.token);
+    console.log(`session ${s.id} (${s.scene_name}): ${base}#session=${s.id}&token=${s.token}`);
+  });
+}
+
 function main() {
   const args = parseArgs(process.argv.slice(2));
   const service = loadService(args.proto);
@@ -115,8 +137,10 @@ function main() {
   });
   server.listen(Number(portText), host, () => {
     const a = server.address();
-    console.log(`listening on http://${a.address}:${a.port}/`);
+    const base = `http://${a.address}:${a.port}/`;
+    console.log(`listening on ${base}`);
     log(`serving the viewer, dynsolid-server at ${args.server}`);
+    if (args.create) createSession(client, tokens, args, base, log);
   });
   const stop = () => {
     log('stopping');

@@ -338,11 +338,6 @@ class App {
 
   frame(t) {
     requestAnimationFrame((tt) => this.frame(tt));
-    if (this.lastFrameTime !== undefined) {
-      this.metrics.frameTimes.push(t - this.lastFrameTime);
-      if (this.metrics.frameTimes.length > 600) this.metrics.frameTimes.shift();
-    }
-    this.lastFrameTime = t;
     if (this.dirty && this.decoder.hasKeyframe) {
       this.dirty = false;
       this.view.updateSurface(this.decoder);
@@ -358,11 +353,17 @@ class App {
       }
       this.updateLegend();
     }
-    this.view.render();
-    this.countFps(t);
+    if (this.view.render()) this.countFps(t);
   }
 
+  // Frames drawn per second, and the intervals between drawn frames while
+  // drawing continuously (the benchmark's frame time).
   countFps(t) {
+    if (this.lastDrawTime !== undefined && t - this.lastDrawTime < 1000) {
+      this.metrics.frameTimes.push(t - this.lastDrawTime);
+      if (this.metrics.frameTimes.length > 600) this.metrics.frameTimes.shift();
+    }
+    this.lastDrawTime = t;
     this.fpsCount = (this.fpsCount || 0) + 1;
     if (!this.fpsStart) this.fpsStart = t;
     if (t - this.fpsStart >= 1000) {
@@ -423,7 +424,8 @@ class App {
       }
       const lat = this.conn.latencyMedian();
       parts.push(`command ${lat === null ? '–' : lat.toFixed(0) + ' ms'}`);
-      parts.push(`${this.fps.toFixed(0)} fps`);
+      const idle = this.lastDrawTime === undefined || performance.now() - this.lastDrawTime > 1000;
+      parts.push(idle ? 'idle (nothing moved)' : `${this.fps.toFixed(0)} fps`);
       parts.push(`${this.metrics.skipped} skipped`);
       parts.push(`${this.decoder.vertexCount} vertices`);
     } else {

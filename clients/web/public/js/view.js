@@ -8,10 +8,29 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { colorize, fieldRange } from './colormap.js';
 
+// Whether WebGL runs on the CPU (SwiftShader, llvmpipe).
+function softwareRenderer() {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl');
+    if (!gl) return false;
+    const ext = gl.getExtension('WEBGL_debug_renderer_info');
+    const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+    gl.getExtension('WEBGL_lose_context')?.loseContext();
+    return /swiftshader|llvmpipe|software/i.test(String(name));
+  } catch (e) {
+    return false;
+  }
+}
+
 export class View {
   constructor(container) {
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    // Multisampling costs a software renderer (SwiftShader: no GPU) most of
+    // its frame time; ?aa=1 / ?aa=0 overrides.
+    const aa = new URLSearchParams(location.search).get('aa');
+    this.software = softwareRenderer();
+    const antialias = aa === null ? !this.software : aa === '1';
+    this.renderer = new THREE.WebGLRenderer({ antialias, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.renderer.setClearColor(0x20242c);
     container.appendChild(this.renderer.domElement);
@@ -48,6 +67,9 @@ export class View {
     this.field = null;          // the coloured field's name, or null
     this.range = null;
     this.framed = false;
+    // Drawn only when something changed (a frame, the camera, an overlay):
+    // an idle viewer leaves the CPU to everything else.
+    this.needsRender = true;
     this.resize();
     window.addEventListener('resize', () => this.resize());
   }
@@ -57,6 +79,7 @@ export class View {
   attachControls() {
     this.controls = new OrbitControls(this.camera, this.canvas);
     this.controls.enableDamping = false;
+    this.controls.addEventListener('change', () => { this.needsRender = true; });
     this.controls.mouseButtons = { LEFT: THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.PAN, RIGHT: THREE.MOUSE.PAN };
   }
 
@@ -66,6 +89,7 @@ export class View {
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
+    this.needsRender = true;
   }
 
   // Updates the surface from a SurfaceDecoder after a frame.
@@ -102,6 +126,7 @@ export class View {
       for (let i = 0; i < 3 * n; ++i) arr[i] = p[i];
     }
     pos.needsUpdate = true;
+    this.needsRender = true;
     this.geometry.computeVertexNormals();
     this.geometry.computeBoundingSphere();
     this.geometry.computeBoundingBox();
@@ -146,6 +171,7 @@ export class View {
     this.camera.near = d / 100;
     this.camera.far = d * 100;
     this.camera.updateProjectionMatrix();
+    this.needsRender = true;
     if (this.controls) {
       this.controls.target.copy(c);
       this.controls.update();
@@ -196,6 +222,7 @@ export class View {
   }
 
   showCursor(point, radius) {
+    this.needsRender = true;
     if (!point) {
       this.cursor.visible = false;
       return;
@@ -208,6 +235,7 @@ export class View {
   // The control mesh overlay from Inspect: control_mesh (edges) and
   // control_positions (current positions).
   setControlMesh(mesh, positions, visible) {
+    this.needsRender = true;
     if (this.controlLines) {
       this.overlay.remove(this.controlLines);
       this.controlLines.geometry.dispose();
@@ -235,6 +263,7 @@ export class View {
   // Pins and loads from Inspect (loads = true), and this page's curve in
   // progress.
   setMarkers({ loads = [], constraints = [], curvePoints = [] }, scale) {
+    this.needsRender = true;
     for (const c of [...this.markers.children]) {
       this.markers.remove(c);
       c.traverse((o) => { if (o.geometry) o.geometry.dispose(); });
@@ -302,7 +331,11 @@ export class View {
     }
   }
 
-  render() {
+  // Draws if anything changed; returns whether it drew.
+  render(force = false) {
+    if (!this.needsRender && !force) return false;
+    this.needsRender = false;
     this.renderer.render(this.scene, this.camera);
+    return true;
   }
 }

@@ -71,9 +71,12 @@ export class Server {
   // Starts (or restarts, on the same address and data dir) the server.
   async start() {
     const listen = this.address || '127.0.0.1:0';
-    // Snapshots often, so a restart replays few steps.
+    // Snapshots often, so a restart replays few steps. Streaming threads at
+    // normal priority: here the browser shares the machine's cores with the
+    // server, and its software WebGL would starve SCHED_IDLE threads (the
+    // server's default, for a server whose viewers sit elsewhere).
     const { proc, match } = await startProcess(serverBinary(), ['--listen', listen, '--data_dir', this.data,
-      '--snapshot_every_steps', '500'],
+      '--snapshot_every_steps', '500', '--stream_idle=false', '--stream_nice=0'],
       /listening on (\S+)/, path.join(this.dir, 'server.log'));
     this.proc = proc;
     this.address = match[1];

@@ -51,6 +51,9 @@ export class SurfaceDecoder {
     // What the last frame changed: 'keyframe', 'topology' (a keyframe with
     // new quads), or the listed vertex indices of a delta.
     this.lastChange = null;
+    // Counts topology changes (new quads): a view that draws less often
+    // than frames arrive compares it to know when to rebuild its mesh.
+    this.topologySerial = (this.topologySerial || 0) + 1;
     this.lastSkipped = 0;
     this.lastRice = false;
     this.lastMoved = 0;
@@ -114,7 +117,10 @@ export class SurfaceDecoder {
     this.time = frame.time;
     this.topologyVersion = k.topology_version;
     this.vertexCount = n;
-    if (topologyChanged) this.quads = Int32Array.from(k.quads);
+    if (topologyChanged) {
+      this.quads = Int32Array.from(k.quads);
+      this.topologySerial++;
+    }
     this.nodes = Int32Array.from(k.nodes);
     for (const name of FIELD_NAMES) {
       this.fields[name] = k.fields[name].length ? Float32Array.from(k.fields[name]) : null;

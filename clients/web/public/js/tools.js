@@ -13,7 +13,7 @@ export const PARAMS = {
     ['falloff', 'falloff', 0.25, 0.05], ['stiffnessValue', 'value (Pa)', 1e6, 1e5]],
   mass: [['radius', 'radius (m)', 0.8, 0.1], ['strength', 'strength', 1, 0.05],
     ['falloff', 'falloff', 0.25, 0.05], ['massValue', 'value (kg/m³)', 5000, 500]],
-  pin: [['pinRadius', 'radius (m)', 0.5, 0.1]],
+  pin: [['pinRadius', 'radius (m)', 0.8, 0.1]],
   curve: [['curveStiffness', 'stiffness (N/m)', 2e4, 5e3]],
   extrude: [['extrudeDistance', 'distance (m)', 0.8, 0.1], ['extrudeLayers', 'layers', 1, 1]],
 };
@@ -60,6 +60,7 @@ export class Tools {
     const ray = this.view.ray(clientX, clientY);
     const reply = await this.conn.call('Pick', { session: this.app.session, origin: ray.origin,
       direction: ray.direction });
+    if (!reply.hit) this.app.message(`${this.tool}: the server found no solid under the cursor`);
     return reply.hit ? reply : null;
   }
 

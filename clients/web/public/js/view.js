@@ -95,8 +95,11 @@ export class View {
   // Updates the surface from a SurfaceDecoder after a frame.
   updateSurface(decoder) {
     const n = decoder.vertexCount;
-    const topology = decoder.lastChange === 'topology' || !this.geometry ||
+    // Several frames may have arrived since the last draw: rebuild on any
+    // topology change among them, and copy every position.
+    const topology = decoder.topologySerial !== this.topologySerial || !this.geometry ||
       this.geometry.getAttribute('position').count !== n;
+    this.topologySerial = decoder.topologySerial;
     if (topology) {
       if (this.mesh) {
         this.scene.remove(this.mesh);
@@ -118,13 +121,7 @@ export class View {
     const pos = this.geometry.getAttribute('position');
     const p = decoder.positions;
     const arr = pos.array;
-    if (Array.isArray(decoder.lastChange)) {
-      for (const v of decoder.lastChange) {
-        arr[3 * v] = p[3 * v]; arr[3 * v + 1] = p[3 * v + 1]; arr[3 * v + 2] = p[3 * v + 2];
-      }
-    } else {
-      for (let i = 0; i < 3 * n; ++i) arr[i] = p[i];
-    }
+    for (let i = 0; i < 3 * n; ++i) arr[i] = p[i];
     pos.needsUpdate = true;
     this.needsRender = true;
     this.geometry.computeVertexNormals();
@@ -188,6 +185,7 @@ export class View {
 
   // The ray under a pointer at client coordinates: {origin, direction}.
   ray(clientX, clientY) {
+    this.camera.updateMatrixWorld();  // the camera may have moved since the last draw
     const rect = this.canvas.getBoundingClientRect();
     const ndc = new THREE.Vector2(((clientX - rect.left) / rect.width) * 2 - 1,
       -((clientY - rect.top) / rect.height) * 2 + 1);
@@ -216,6 +214,7 @@ export class View {
 
   // Screen position (client px) of a world point.
   project(p) {
+    this.camera.updateMatrixWorld();
     const v = new THREE.Vector3(p.x, p.y, p.z).project(this.camera);
     const rect = this.canvas.getBoundingClientRect();
     return { x: rect.left + ((v.x + 1) / 2) * rect.width, y: rect.top + ((1 - v.y) / 2) * rect.height };

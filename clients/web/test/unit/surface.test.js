@@ -167,3 +167,16 @@ test('shared vectors: the page decodes the server encoder\'s frames exactly like
       assert.ok(count > 0, `the vectors hold no ${kind} frame: ${JSON.stringify(seen)}`);
     }
   });
+
+test('a view drawing less often than frames arrive can tell a topology change happened', () => {
+  const d = start();
+  const serial = d.topologySerial;
+  // Same quads again: no topology change.
+  d.apply(keyframe({ step: 6, codes: CODES, quads: QUADS }));
+  assert.equal(d.topologySerial, serial);
+  // New quads, then a delta before anyone looked: the serial still says so.
+  d.apply(keyframe({ step: 7, topology: 2, codes: CODES, quads: [0, 1, 4, 3] }));
+  d.apply(delta({ step: 8, baseStep: 7, listed: [0], diffs: [1, 1, 1], bits: 2 }));
+  assert.equal(d.topologySerial, serial + 1);
+  assert.deepEqual(d.lastChange, [0]);
+});

@@ -544,6 +544,7 @@ std::shared_ptr<const SurfaceSnapshot> SimCore::MakeSnapshot(bool with_fields) {
     snap->displacement = std::move(f.displacement);
     snap->strain = std::move(f.strain);
     snap->stiffness = std::move(f.stiffness);
+    snap->mass = std::move(f.mass);
   }
   return snap;
 }

@@ -9,7 +9,7 @@
 //   dynsolid-client [--server HOST:PORT] run --script FILE
 //       (--scene NAME | --scene_file FILE | --id ID --token TOKEN)
 //       [--frames_dir DIR] [--format obj,vtu] [--record_every N]
-//       [--fields displacement,strain,stiffness] [--json FILE] ...
+//       [--fields displacement,strain,stiffness,mass] [--json FILE] ...
 //   dynsolid-client check --script FILE
 //
 // create/get/list/close/stats print the result as JSON on stdout (the proto3 JSON
@@ -64,7 +64,7 @@ ABSL_FLAG(bool, watch, true, "run: watch the surface (--nowatch: commands only)"
 ABSL_FLAG(double, watch_hz, 0, "run: frames per second asked for (0: the server's default)");
 ABSL_FLAG(std::string, fields, "",
           "run: per-vertex fields to watch and record, comma separated: displacement, strain, "
-          "stiffness");
+          "stiffness, mass");
 ABSL_FLAG(std::string, frames_dir, "",
           "run: directory for recorded frames and snapshots (created if missing)");
 ABSL_FLAG(std::string, format, "obj", "run: frame file formats, comma separated: obj, vtu");
@@ -294,9 +294,11 @@ class Client {
         o.watcher.strain = true;
       } else if (f == "stiffness") {
         o.watcher.stiffness = true;
+      } else if (f == "mass") {
+        o.watcher.mass = true;
       } else {
         return UsageError(absl::StrCat("--fields: unknown field \"", f,
-                                       "\" (displacement, strain, stiffness)"));
+                                       "\" (displacement, strain, stiffness, mass)"));
       }
     }
     o.write_obj = o.write_vtu = false;

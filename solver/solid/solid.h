@@ -482,9 +482,11 @@ class Solid {
   //    edges and quad diagonals at the vertex (membrane stretch and shear of
   //    the surface, dimensionless);
   //  stiffness: Young's modulus (Pa), the mean over the quadrature points
-  //    of the elements of the boundary cells around the vertex.
+  //    of the elements of the boundary cells around the vertex;
+  //  mass: the mass density (kg/m^3), the same mean (it shows painted
+  //    densities as stiffness shows painted moduli).
   struct SurfaceFields {
-    std::vector<float> displacement, strain, stiffness;
+    std::vector<float> displacement, strain, stiffness, mass;
   };
   SurfaceFields ComputeSurfaceFields() const;
   // The axis-aligned box of the current surface positions (metres).

@@ -97,6 +97,7 @@ const char kUsage[] =
     "  close --id ID --token TOKEN\n"
     "  stats --id ID --token TOKEN\n"
     "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
+    "  loads --id ID --token TOKEN    (the active loads and constraints, every client's)\n"
     "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
     "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
     "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
@@ -240,6 +241,22 @@ class Client {
     auto context = NewContext();
     const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
     return Report(status, reply.control_mesh());
+  }
+
+  int Loads() {
+    dynsolid::InspectRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    request.set_loads(true);
+    dynsolid::InspectReply reply;
+    auto context = NewContext();
+    const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
+    dynsolid::InspectReply out;
+    out.set_step(reply.step());
+    out.set_time(reply.time());
+    *out.mutable_loads() = reply.loads();
+    *out.mutable_constraints() = reply.constraints();
+    *out.mutable_gravity() = reply.gravity();
+    return Report(status, out);
   }
 
   int Pick() {
@@ -436,6 +453,7 @@ int main(int argc, char** argv) {
   if (command == "close") return client.Close();
   if (command == "stats") return client.Stats();
   if (command == "mesh") return client.Mesh();
+  if (command == "loads") return client.Loads();
   if (command == "pick") return client.Pick();
   if (command == "run") {
     dynsolid::client::Script script;

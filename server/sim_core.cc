@@ -74,6 +74,12 @@ std::vector<Eigen::Vector3d> Targets(const MoveDrag& m) {
   return out;
 }
 
+void SetVec3(const Eigen::Vector3d& x, Vec3* v) {
+  v->set_x(x.x());
+  v->set_y(x.y());
+  v->set_z(x.z());
+}
+
 void SetStatus(const absl::Status& s, CommandReply* reply) {
   reply->set_code(static_cast<int32_t>(s.code()));
   reply->set_message(std::string(s.message()));
@@ -204,14 +210,6 @@ const std::string& SimCore::owner(int64_t id) const {
   auto it = owners_.find(id);
   return it == owners_.end() ? *kNone : it->second;
 }
-
-namespace {
-void SetVec3(const Eigen::Vector3d& x, Vec3* v) {
-  v->set_x(x.x());
-  v->set_y(x.y());
-  v->set_z(x.z());
-}
-}  // namespace
 
 void SimCore::DescribeLoads(InspectReply* reply) const {
   using Kind = solid::Solid::LoadInfo::Kind;

@@ -638,8 +638,7 @@ std::string ReportJson(const RunReport& r) {
     }
     if (!f.mass.empty()) {
       const auto [lo, hi] = std::minmax_element(f.mass.begin(), f.mass.end());
-      absl::StrAppend(&j, ", \"mass_min\": ", JsonNumber(*lo), ", \"mass_max\": ",
-                      JsonNumber(*hi));
+      absl::StrAppend(&j, ", \"mass_min\": ", JsonNumber(*lo), ", \"mass_max\": ", JsonNumber(*hi));
     }
   }
   j += "}";

@@ -15,9 +15,9 @@ std::array<double, 3> ToArray(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 // Fields of a frame: each empty or `count` values.
 absl::Status CheckFields(const SurfaceFields& f, int64_t count, const char* where) {
   const std::pair<const char*, int> sizes[] = {{"displacement", f.displacement_size()},
-                                              {"strain", f.strain_size()},
-                                              {"stiffness", f.stiffness_size()},
-                                              {"mass", f.mass_size()}};
+                                               {"strain", f.strain_size()},
+                                               {"stiffness", f.stiffness_size()},
+                                               {"mass", f.mass_size()}};
   for (const auto& [name, size] : sizes) {
     if (size != 0 && size != count) {
       return absl::InvalidArgumentError(absl::StrCat(where, ".fields.", name, ": ", size,

@@ -85,9 +85,8 @@ void Watcher::Loop() {
         c.bytes += static_cast<int64_t>(frame.ByteSizeLong());
         const SurfaceFields& f =
             frame.has_keyframe() ? frame.keyframe().fields() : frame.delta().fields();
-        c.field_bytes +=
-            int64_t{4} * (f.displacement_size() + f.strain_size() + f.stiffness_size() +
-                          f.mass_size());
+        c.field_bytes += int64_t{4} * (f.displacement_size() + f.strain_size() +
+                                       f.stiffness_size() + f.mass_size());
         c.raw_float32_bytes += int64_t{12} * decoder_.surface().vertex_count();
         c.last_step = frame.step();
         c.seconds = std::chrono::duration<double>(now - first_time_).count();

@@ -137,7 +137,8 @@ TEST(SurfaceDecoderTest, DeltaMovesOnlyTheListedVertices) {
 TEST(SurfaceDecoderTest, MassFieldComesWithKeyframesAndListedVerticesAndGoesIntoTheVtu) {
   SurfaceDecoder d;
   Frame key = Key(7, kCodes);
-  for (float m : {100.f, 200.f, 300.f, 400.f}) key.mutable_keyframe()->mutable_fields()->add_mass(m);
+  for (float m : {100.f, 200.f, 300.f, 400.f})
+    key.mutable_keyframe()->mutable_fields()->add_mass(m);
   ASSERT_TRUE(d.Apply(key).ok());
   EXPECT_THAT(d.surface().mass, ::testing::ElementsAre(100, 200, 300, 400));
   Frame f;
@@ -171,9 +172,9 @@ TEST(SurfaceDecoderTest, MassFieldComesWithKeyframesAndListedVerticesAndGoesInto
   std::ifstream in(path);
   std::stringstream text;
   text << in.rdbuf();
-  EXPECT_THAT(text.str(), ::testing::HasSubstr(
-                              "<DataArray type=\"Float32\" Name=\"mass\" format=\"ascii\">\n"
-                              "100\n200\n950\n400\n</DataArray>"));
+  EXPECT_THAT(text.str(),
+              ::testing::HasSubstr("<DataArray type=\"Float32\" Name=\"mass\" format=\"ascii\">\n"
+                                   "100\n200\n950\n400\n</DataArray>"));
 }
 
 TEST(SurfaceDecoderTest, SmallBitWidthsRoundTrip) {

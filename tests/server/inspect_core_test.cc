@@ -3,16 +3,16 @@
 // (InspectRequest.loads: SimCore::DescribeLoads, what the session loop
 // answers Inspect with), through removal, undo, redo and a snapshot; and the
 // mass field of its surface snapshots after a density paint.
+#include <gmock/gmock.h>
+#include <google/protobuf/text_format.h>
+#include <google/protobuf/util/message_differencer.h>
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <gmock/gmock.h>
-#include <google/protobuf/text_format.h>
-#include <google/protobuf/util/message_differencer.h>
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "dynsolid/journal.pb.h"
@@ -45,8 +45,8 @@ Core Make(const std::string& builtin = "block3", int levels = 1) {
   c.factory = MakeSolidFactory(*request, limits);
   absl::StatusOr<std::shared_ptr<solid::Solid>> solid = c.factory(nullptr);
   EXPECT_OK(solid);
-  c.core = std::make_unique<SimCore>(*solid, CoreOptions(), /*start_paused=*/true, c.scene,
-                                     c.factory);
+  c.core =
+      std::make_unique<SimCore>(*solid, CoreOptions(), /*start_paused=*/true, c.scene, c.factory);
   return c;
 }
 
@@ -99,7 +99,8 @@ std::vector<int64_t> ConstraintIds(const InspectReply& r) {
 }
 
 constexpr char kPressureRegion[] = "sphere { center { x: 1.5 y: 1.5 z: 3 } radius: 0.8 }";
-constexpr char kFixRegion[] = "box { min { x: 2.99 y: -0.01 z: -0.01 } max { x: 3.01 y: 3.01 z: 3.01 } }";
+constexpr char kFixRegion[] =
+    "box { min { x: 2.99 y: -0.01 z: -0.01 } max { x: 3.01 y: 3.01 z: 3.01 } }";
 
 TEST(InspectCoreTest, LoadsAndConstraintsOfEveryClientWithIdsKindsPointsTargetsAndRegions) {
   Core c = Make();
@@ -135,7 +136,8 @@ TEST(InspectCoreTest, LoadsAndConstraintsOfEveryClientWithIdsKindsPointsTargetsA
   Send(c, "carol",
        absl::StrCat("move_drag { load_id: ", curve,
                     " targets { x: 0.5 y: 0.4 z: 3.3 } targets { x: 2.5 y: 0.6 z: 3.5 } }"));
-  const int64_t fix = Send(c, "bob", absl::StrCat("fix_region { ", kFixRegion, " }")).constraint_id();
+  const int64_t fix =
+      Send(c, "bob", absl::StrCat("fix_region { ", kFixRegion, " }")).constraint_id();
   Send(c, "dave", "set_gravity { z: -9.81 }");
   EXPECT_THAT(std::vector<int64_t>({force, pressure, drag, curve, fix}),
               ::testing::ElementsAre(2, 3, 4, 5, 6));
@@ -223,8 +225,9 @@ TEST(InspectCoreTest, LoadsAndConstraintsOfEveryClientWithIdsKindsPointsTargetsA
   // Undone: back as they were, owners included.
   for (int i = 0; i < 3; ++i) Send(c, "erin", "undo {}");
   const InspectReply undone = Loads(c);
-  EXPECT_TRUE(MessageDifferencer::Equals(undone, r))
-      << "before:\n" << r.DebugString() << "after undo:\n" << undone.DebugString();
+  EXPECT_TRUE(MessageDifferencer::Equals(undone, r)) << "before:\n"
+                                                     << r.DebugString() << "after undo:\n"
+                                                     << undone.DebugString();
   // Redone: gone again.
   for (int i = 0; i < 3; ++i) Send(c, "erin", "redo {}");
   EXPECT_TRUE(MessageDifferencer::Equals(Loads(c), removed));
@@ -273,11 +276,28 @@ TEST(InspectCoreTest, ScenePointForcesAndPressuresAreListedFirstWithoutAClient) 
     subdivision { levels: 1 }
     materials { base { young_modulus: 1e5 density: 1000 } }
     loads {
-      point_forces { position { x: 1.5 y: 0.5 z: 0.5 } force { z: -10 } }
-      pressures { region { box { min { x: -1 y: -1 z: 0.9 } max { x: 3 y: 2 z: 2 } } }
-                  pascals: -50 }
+      point_forces {
+        position { x: 1.5 y: 0.5 z: 0.5 }
+        force { z: -10 }
+      }
+      pressures {
+        region {
+          box {
+            min { x: -1 y: -1 z: 0.9 }
+            max { x: 3 y: 2 z: 2 }
+          }
+        }
+        pascals: -50
+      }
     }
-    constraints { fixed { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 2 z: 2 } } } }
+    constraints {
+      fixed {
+        box {
+          min { x: -0.01 y: -1 z: -1 }
+          max { x: 0.01 y: 2 z: 2 }
+        }
+      }
+    }
   )pb");
   absl::StatusOr<SceneRequest> request = ResolveSceneRequest(create);
   ASSERT_OK(request);

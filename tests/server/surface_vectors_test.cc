@@ -41,6 +41,10 @@
 // Every decoded position is within error_bound of its true position (checked
 // here), and the frames include each kind above (checked here too, so the
 // vectors cannot silently lose coverage).
+#include <gmock/gmock.h>
+#include <google/protobuf/text_format.h>
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -55,10 +59,6 @@
 #include <string>
 #include <type_traits>
 #include <vector>
-
-#include <gmock/gmock.h>
-#include <google/protobuf/text_format.h>
-#include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -405,9 +405,9 @@ TEST(SurfaceVectorsTest, EveryKindOfFrameDecodesWithinItsBoundAndIsWrittenOut) {
   EXPECT_EQ(w.frames(), 17);
 
   const char* env = std::getenv("DYNSOLID_VECTORS_DIR");
-  const std::filesystem::path dir =
-      env != nullptr && *env != '\0' ? std::filesystem::path(env)
-                                     : std::filesystem::current_path() / "surface_vectors";
+  const std::filesystem::path dir = env != nullptr && *env != '\0'
+                                        ? std::filesystem::path(env)
+                                        : std::filesystem::current_path() / "surface_vectors";
   w.Write(dir);
   std::cout << "surface vectors: " << w.frames() << " frames in " << dir << "\n";
   EXPECT_GT(std::filesystem::file_size(dir / "frames.bin"), 0u);

@@ -692,9 +692,9 @@ TEST(SolidRuntimeTest, MassFieldShowsPaintedDensityInsideASphereOnly) {
   // A hard-edged sphere of density 900 around the corner (0, 0, 0).
   const Eigen::Vector3d centre(0, 0, 0);
   const double radius = 0.9;
-  ASSERT_OK(s->PaintMaterial(Parse<MaterialPaint>(
-      "region { sphere { center { x: 0 y: 0 z: 0 } radius: 0.9 } } "
-      "material { density: 900 } strength: 1 falloff: 0.05")));
+  ASSERT_OK(s->PaintMaterial(
+      Parse<MaterialPaint>("region { sphere { center { x: 0 y: 0 z: 0 } radius: 0.9 } } "
+                           "material { density: 900 } strength: 1 falloff: 0.05")));
   const Solid::SurfaceFields painted = s->ComputeSurfaceFields();
   ASSERT_EQ(painted.mass.size(), nv);
   const Points x = s->SurfacePositions();
@@ -715,8 +715,7 @@ TEST(SolidRuntimeTest, MassFieldShowsPaintedDensityInsideASphereOnly) {
     EXPECT_FLOAT_EQ(painted.stiffness[i], 1e4f) << "vertex " << i;
   }
   // The corner vertex: its one boundary cell lies almost all in the sphere.
-  EXPECT_GT(painted.mass[nearest], 600.0f)
-      << "vertex " << nearest << " at " << x.row(nearest);
+  EXPECT_GT(painted.mass[nearest], 600.0f) << "vertex " << nearest << " at " << x.row(nearest);
   EXPECT_GT(far, static_cast<int>(nv) / 2);
   EXPECT_GT(s->total_mass(), mass_before);
 }

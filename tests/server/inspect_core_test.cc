@@ -222,16 +222,24 @@ TEST(InspectCoreTest, LoadsAndConstraintsOfEveryClientWithIdsKindsPointsTargetsA
   const InspectReply removed = Loads(c);
   EXPECT_THAT(LoadIds(removed), ::testing::ElementsAre(pressure, curve));
   EXPECT_THAT(ConstraintIds(removed), ::testing::ElementsAre(1));
-  // Undone: back as they were, owners included.
+  Send(c, "erin", absl::StrCat("remove_load { load_id: ", pressure, " }"));
+  Send(c, "erin", absl::StrCat("remove_load { load_id: ", curve, " }"));
+  const InspectReply none = Loads(c);
+  EXPECT_EQ(none.loads_size(), 0);
+  EXPECT_THAT(ConstraintIds(none), ::testing::ElementsAre(1));
+  // Undone: back as they were (points, targets, regions), owners included.
+  for (int i = 0; i < 2; ++i) Send(c, "erin", "undo {}");
+  EXPECT_TRUE(MessageDifferencer::Equals(Loads(c), removed));
   for (int i = 0; i < 3; ++i) Send(c, "erin", "undo {}");
   const InspectReply undone = Loads(c);
   EXPECT_TRUE(MessageDifferencer::Equals(undone, r)) << "before:\n"
                                                      << r.DebugString() << "after undo:\n"
                                                      << undone.DebugString();
   // Redone: gone again.
-  for (int i = 0; i < 3; ++i) Send(c, "erin", "redo {}");
-  EXPECT_TRUE(MessageDifferencer::Equals(Loads(c), removed));
-  for (int i = 0; i < 3; ++i) Send(c, "erin", "undo {}");
+  for (int i = 0; i < 5; ++i) Send(c, "erin", "redo {}");
+  EXPECT_TRUE(MessageDifferencer::Equals(Loads(c), none));
+  for (int i = 0; i < 5; ++i) Send(c, "erin", "undo {}");
+  EXPECT_TRUE(MessageDifferencer::Equals(Loads(c), r));
 
   // A snapshot keeps who added what.
   persist::Snapshot snap;

@@ -614,6 +614,7 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
       r.mutable_control_positions()->Assign(p.data(), p.data() + p.size());
     }
     if (i.request.control_mesh()) FillControlMesh(s.discretization(), r.mutable_control_mesh());
+    if (i.request.loads()) core_->DescribeLoads(&r);
     i.done(std::move(r));
   }
   waiting_inspects_ = std::move(keep);

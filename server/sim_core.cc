@@ -74,6 +74,12 @@ std::vector<Eigen::Vector3d> Targets(const MoveDrag& m) {
   return out;
 }
 
+void SetVec3(const Eigen::Vector3d& x, Vec3* v) {
+  v->set_x(x.x());
+  v->set_y(x.y());
+  v->set_z(x.z());
+}
+
 void SetStatus(const absl::Status& s, CommandReply* reply) {
   reply->set_code(static_cast<int32_t>(s.code()));
   reply->set_message(std::string(s.message()));
@@ -169,6 +175,90 @@ void SimCore::Remember(Client& client, const CommandReply& reply) {
   }
 }
 
+void SimCore::RecordOwner(const std::string& client_id, const CommandReply& reply) {
+  int64_t id = 0;
+  switch (reply.result_case()) {
+    case CommandReply::kLoadId:
+      id = reply.load_id();
+      break;
+    case CommandReply::kConstraintId:
+      id = reply.constraint_id();
+      break;
+    default:
+      return;
+  }
+  owners_[id] = client_id;
+  // Forget the oldest owners of items no longer active, in batches (an
+  // undo may bring a removed item back: keep the newest kKeptOwners).
+  const std::vector<int64_t> loads = solid_->load_ids();
+  const std::vector<int64_t> constraints = solid_->constraint_ids();
+  if (owners_.size() <= loads.size() + constraints.size() + 2 * kKeptOwners) return;
+  std::vector<int64_t> inactive;
+  for (const auto& [item, client] : owners_) {
+    if (!std::binary_search(loads.begin(), loads.end(), item) &&
+        !std::binary_search(constraints.begin(), constraints.end(), item)) {
+      inactive.push_back(item);
+    }
+  }
+  if (inactive.size() <= kKeptOwners) return;
+  std::sort(inactive.begin(), inactive.end());
+  for (size_t i = 0; i + kKeptOwners < inactive.size(); ++i) owners_.erase(inactive[i]);
+}
+
+const std::string& SimCore::owner(int64_t id) const {
+  static const std::string* const kNone = new std::string();
+  auto it = owners_.find(id);
+  return it == owners_.end() ? *kNone : it->second;
+}
+
+void SimCore::DescribeLoads(InspectReply* reply) const {
+  using Kind = solid::Solid::LoadInfo::Kind;
+  for (const solid::Solid::LoadInfo& l : solid_->ActiveLoads()) {
+    ActiveLoad* a = reply->add_loads();
+    a->set_id(l.id);
+    switch (l.kind) {
+      case Kind::kPointForce:
+        a->set_kind("point_force");
+        SetVec3(l.force, a->mutable_force());
+        break;
+      case Kind::kPressure:
+        a->set_kind("pressure");
+        a->set_pressure(l.pascals);
+        *a->mutable_region() = l.region;
+        a->mutable_surface_quads()->Assign(l.quads.begin(), l.quads.end());
+        break;
+      case Kind::kDrag:
+        a->set_kind("drag");
+        a->set_stiffness(l.stiffness);
+        break;
+      case Kind::kCurve:
+        a->set_kind("curve");
+        a->set_stiffness(l.stiffness);
+        *a->mutable_curve() = l.curve;
+        break;
+    }
+    if (l.kind == Kind::kCurve) {
+      for (const Eigen::Vector3d& x : l.material_points) SetVec3(x, a->add_material_points());
+      for (const Eigen::Vector3d& x : l.positions) SetVec3(x, a->add_positions());
+      for (const Eigen::Vector3d& x : l.targets) SetVec3(x, a->add_targets());
+    } else {
+      if (!l.material_points.empty()) SetVec3(l.material_points[0], a->mutable_material_point());
+      if (!l.positions.empty()) SetVec3(l.positions[0], a->mutable_position());
+      if (!l.targets.empty()) SetVec3(l.targets[0], a->mutable_target());
+    }
+    a->set_client_id(owner(l.id));
+  }
+  for (const solid::Solid::ConstraintInfo& c : solid_->ActiveConstraints()) {
+    ActiveConstraint* a = reply->add_constraints();
+    a->set_id(c.id);
+    *a->mutable_region() = c.region;
+    a->set_control_points(static_cast<int32_t>(c.control_points.size()));
+    a->mutable_control_point_indices()->Assign(c.control_points.begin(), c.control_points.end());
+    a->set_client_id(owner(c.id));
+  }
+  SetVec3(solid_->gravity(), reply->mutable_gravity());
+}
+
 SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* reply,
                                   std::shared_ptr<Prebuilt> prebuilt) {
   reply->Clear();
@@ -205,6 +295,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
   }
   const absl::Status s = Apply(command, reply, prebuilt.get());
   if (s.ok() && undoable) history_.Record(std::move(before));
+  if (s.ok()) RecordOwner(request.client_id(), *reply);
   last_hold_ms_ =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   SetStatus(s, reply);
@@ -444,6 +535,14 @@ void SimCore::SaveTo(persist::Snapshot* snapshot) const {
   loop->set_fields_version(fields_version_);
   loop->set_commands_applied(applied_);
   loop->set_commands_rejected(rejected_);
+  std::vector<std::pair<int64_t, const std::string*>> owners;
+  for (const auto& [id, client] : owners_) owners.emplace_back(id, &client);
+  std::sort(owners.begin(), owners.end());
+  for (const auto& [id, client] : owners) {
+    persist::ItemOwner* o = loop->add_owners();
+    o->set_id(id);
+    o->set_client_id(*client);
+  }
   // Clients in id order: the same state gives the same bytes.
   std::vector<const std::pair<const std::string, Client>*> sorted;
   for (const auto& entry : clients_) sorted.push_back(&entry);
@@ -507,6 +606,8 @@ absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
   fields_version_ = loop.fields_version();
   applied_ = loop.commands_applied();
   rejected_ = loop.commands_rejected();
+  owners_.clear();
+  for (const persist::ItemOwner& o : loop.owners()) owners_[o.id()] = o.client_id();
   clients_.clear();
   for (const persist::ClientAnswers& c : snapshot.clients()) {
     Client& client = clients_[c.client_id()];
@@ -544,6 +645,7 @@ std::shared_ptr<const SurfaceSnapshot> SimCore::MakeSnapshot(bool with_fields) {
     snap->displacement = std::move(f.displacement);
     snap->strain = std::move(f.strain);
     snap->stiffness = std::move(f.stiffness);
+    snap->mass = std::move(f.mass);
   }
   return snap;
 }

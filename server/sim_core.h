@@ -124,6 +124,16 @@ class SimCore {
     return s;
   }
 
+  // The client that added load or constraint `id` (its command's
+  // client_id), or "" for the scene's own items and ids it no longer
+  // knows: the owners of the active items and of at least the kKeptOwners
+  // newest removed ones are kept (an undo may bring those back).
+  const std::string& owner(int64_t id) const;
+  static constexpr size_t kKeptOwners = 2048;
+  // The active loads and constraints with their owners, and the gravity
+  // (InspectRequest.loads): fills reply.loads, constraints and gravity.
+  void DescribeLoads(InspectReply* reply) const;
+
   // The surface connectivity (rebuilt when the solid's topology changes).
   std::shared_ptr<const SurfaceTopology> Topology();
   // A snapshot of the surface at the current step; fields only if asked.
@@ -141,6 +151,9 @@ class SimCore {
   absl::Status Restore(const HistoryItem& item, Prebuilt* prebuilt);
   absl::Status UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuilt);
   void Remember(Client& client, const CommandReply& reply);
+  // Records the owner of the item an applied command added (if it added
+  // one) and forgets the oldest owners of removed items beyond kKeptOwners.
+  void RecordOwner(const std::string& client_id, const CommandReply& reply);
 
   std::shared_ptr<solid::Solid> solid_;
   const CoreOptions options_;
@@ -152,6 +165,8 @@ class SimCore {
   int64_t rejected_ = 0;
   bool save_requested_ = false;
   absl::flat_hash_map<std::string, Client> clients_;
+  // Load or constraint id -> the client_id of the command that added it.
+  absl::flat_hash_map<int64_t, std::string> owners_;
   std::shared_ptr<const SurfaceTopology> topology_;
   std::shared_ptr<const Scene> original_;  // the session's own scene
   std::shared_ptr<const Scene> scene_;     // the current solid's

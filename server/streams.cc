@@ -225,7 +225,8 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       return;
     }
     session_ = *std::move(session);
-    FieldChoice fields{request.displacement(), request.strain(), request.stiffness()};
+    FieldChoice fields{request.displacement(), request.strain(), request.stiffness(),
+                       request.mass()};
     state_ = std::make_shared<WatchState>(this, encoders, fields, rate,
                                           session_->loop().encode_cache());
     absl::StatusOr<int64_t> id = session_->loop().AddWatcher(state_);

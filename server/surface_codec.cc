@@ -240,6 +240,7 @@ void SurfaceEncoder::MakeKeyframe(const SurfaceSnapshot& s, EncodeCache::Result*
   if (fields_.displacement) f->mutable_displacement()->Assign(s.displacement.begin(), s.displacement.end());
   if (fields_.strain) f->mutable_strain()->Assign(s.strain.begin(), s.strain.end());
   if (fields_.stiffness) f->mutable_stiffness()->Assign(s.stiffness.begin(), s.stiffness.end());
+  if (fields_.mass) f->mutable_mass()->Assign(s.mass.begin(), s.mass.end());
   if (!fields_.any()) k->clear_fields();
   r->codes = std::move(codes);
 }
@@ -303,7 +304,7 @@ std::shared_ptr<EncodeCache::Result> SurfaceEncoder::Compute(const SurfaceSnapsh
     const bool rice = rice_bits < fixed_bits;
     size_t delta_bytes = ((rice ? rice_bits : fixed_bits) + 7) / 8;
     for (uint32_t x : runs) delta_bytes += VarintSize(x);
-    const int field_count = fields_.displacement + fields_.strain + fields_.stiffness;
+    const int field_count = fields_.count();
     delta_bytes += static_cast<size_t>(moved) * 4 * field_count;
     const size_t key_bytes = 6 * n + 4 * n * field_count;
     if (delta_bytes > key_bytes) {
@@ -337,6 +338,7 @@ std::shared_ptr<EncodeCache::Result> SurfaceEncoder::Compute(const SurfaceSnapsh
         if (fields_.displacement) f->add_displacement(s.displacement[i]);
         if (fields_.strain) f->add_strain(s.strain[i]);
         if (fields_.stiffness) f->add_stiffness(s.stiffness[i]);
+        if (fields_.mass) f->add_mass(s.mass[i]);
       }
       if (!fields_.any()) d->clear_fields();
       r->grid_id = grid_id_;
@@ -351,7 +353,7 @@ std::shared_ptr<EncodeCache::Result> SurfaceEncoder::Compute(const SurfaceSnapsh
 std::shared_ptr<const EncodeCache::Result> SurfaceEncoder::EncodeShared(
     std::shared_ptr<const SurfaceSnapshot> s) {
   const EncodeCache::Key key{s.get(), base_.get(), base_ != nullptr ? grid_id_ : -1,
-                             fields_.displacement + 2 * fields_.strain + 4 * fields_.stiffness};
+                             fields_.bits()};
   std::shared_ptr<const EncodeCache::Result> r =
       cache_ != nullptr ? cache_->Find(key) : nullptr;
   if (r == nullptr) {
@@ -402,6 +404,7 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
     displacement_.assign(k.fields().displacement().begin(), k.fields().displacement().end());
     strain_.assign(k.fields().strain().begin(), k.fields().strain().end());
     stiffness_.assign(k.fields().stiffness().begin(), k.fields().stiffness().end());
+    mass_.assign(k.fields().mass().begin(), k.fields().mass().end());
     topology_version_ = k.topology_version();
     has_keyframe_ = true;
     step_ = frame.step();
@@ -442,6 +445,7 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
         if (d.fields().displacement_size() > listed) displacement_[v] = d.fields().displacement(listed);
         if (d.fields().strain_size() > listed) strain_[v] = d.fields().strain(listed);
         if (d.fields().stiffness_size() > listed) stiffness_[v] = d.fields().stiffness(listed);
+        if (d.fields().mass_size() > listed) mass_[v] = d.fields().mass(listed);
         ++listed;
       }
     }

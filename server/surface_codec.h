@@ -40,14 +40,19 @@ struct SurfaceSnapshot {
   std::shared_ptr<const SurfaceTopology> topology;
   std::vector<double> positions;  // 3 per vertex, metres
   // Per-vertex fields; empty when no watcher asked for them.
-  std::vector<float> displacement, strain, stiffness;
+  std::vector<float> displacement, strain, stiffness, mass;
 };
 
 struct FieldChoice {
   bool displacement = false;
   bool strain = false;
   bool stiffness = false;
-  bool any() const { return displacement || strain || stiffness; }
+  bool mass = false;
+  bool any() const { return displacement || strain || stiffness || mass; }
+  // How many are chosen (each costs 4 bytes per vertex sent).
+  int count() const { return displacement + strain + stiffness + mass; }
+  // One bit per field (EncodeCache::Key::fields).
+  int bits() const { return displacement + 2 * strain + 4 * stiffness + 8 * mass; }
 };
 
 // The quantization grid of a keyframe (service.proto QuantizationGrid).
@@ -182,6 +187,7 @@ class SurfaceDecoder {
   const std::vector<float>& displacement() const { return displacement_; }
   const std::vector<float>& strain() const { return strain_; }
   const std::vector<float>& stiffness() const { return stiffness_; }
+  const std::vector<float>& mass() const { return mass_; }
 
  private:
   bool has_keyframe_ = false;
@@ -191,7 +197,7 @@ class SurfaceDecoder {
   Vec3 error_bound_;
   std::vector<int32_t> quads_;
   std::vector<uint32_t> codes_;
-  std::vector<float> displacement_, strain_, stiffness_;
+  std::vector<float> displacement_, strain_, stiffness_, mass_;
 };
 
 }  // namespace dynsolid::server

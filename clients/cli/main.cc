@@ -9,7 +9,7 @@
 //   dynsolid-client [--server HOST:PORT] run --script FILE
 //       (--scene NAME | --scene_file FILE | --id ID --token TOKEN)
 //       [--frames_dir DIR] [--format obj,vtu] [--record_every N]
-//       [--fields displacement,strain,stiffness] [--json FILE] ...
+//       [--fields displacement,strain,stiffness,mass] [--json FILE] ...
 //   dynsolid-client check --script FILE
 //
 // create/get/list/close/stats print the result as JSON on stdout (the proto3 JSON
@@ -64,7 +64,7 @@ ABSL_FLAG(bool, watch, true, "run: watch the surface (--nowatch: commands only)"
 ABSL_FLAG(double, watch_hz, 0, "run: frames per second asked for (0: the server's default)");
 ABSL_FLAG(std::string, fields, "",
           "run: per-vertex fields to watch and record, comma separated: displacement, strain, "
-          "stiffness");
+          "stiffness, mass");
 ABSL_FLAG(std::string, frames_dir, "",
           "run: directory for recorded frames and snapshots (created if missing)");
 ABSL_FLAG(std::string, format, "obj", "run: frame file formats, comma separated: obj, vtu");
@@ -97,6 +97,7 @@ const char kUsage[] =
     "  close --id ID --token TOKEN\n"
     "  stats --id ID --token TOKEN\n"
     "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
+    "  loads --id ID --token TOKEN    (the active loads and constraints, every client's)\n"
     "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
     "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
     "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
@@ -242,6 +243,22 @@ class Client {
     return Report(status, reply.control_mesh());
   }
 
+  int Loads() {
+    dynsolid::InspectRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    request.set_loads(true);
+    dynsolid::InspectReply reply;
+    auto context = NewContext();
+    const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
+    dynsolid::InspectReply out;
+    out.set_step(reply.step());
+    out.set_time(reply.time());
+    *out.mutable_loads() = reply.loads();
+    *out.mutable_constraints() = reply.constraints();
+    *out.mutable_gravity() = reply.gravity();
+    return Report(status, out);
+  }
+
   int Pick() {
     dynsolid::PickRequest request;
     if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
@@ -294,9 +311,11 @@ class Client {
         o.watcher.strain = true;
       } else if (f == "stiffness") {
         o.watcher.stiffness = true;
+      } else if (f == "mass") {
+        o.watcher.mass = true;
       } else {
         return UsageError(absl::StrCat("--fields: unknown field \"", f,
-                                       "\" (displacement, strain, stiffness)"));
+                                       "\" (displacement, strain, stiffness, mass)"));
       }
     }
     o.write_obj = o.write_vtu = false;
@@ -434,6 +453,7 @@ int main(int argc, char** argv) {
   if (command == "close") return client.Close();
   if (command == "stats") return client.Stats();
   if (command == "mesh") return client.Mesh();
+  if (command == "loads") return client.Loads();
   if (command == "pick") return client.Pick();
   if (command == "run") {
     dynsolid::client::Script script;

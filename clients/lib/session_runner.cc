@@ -636,6 +636,10 @@ std::string ReportJson(const RunReport& r) {
       absl::StrAppend(&j, ", \"stiffness_min\": ", JsonNumber(*lo),
                       ", \"stiffness_max\": ", JsonNumber(*hi));
     }
+    if (!f.mass.empty()) {
+      const auto [lo, hi] = std::minmax_element(f.mass.begin(), f.mass.end());
+      absl::StrAppend(&j, ", \"mass_min\": ", JsonNumber(*lo), ", \"mass_max\": ", JsonNumber(*hi));
+    }
   }
   j += "}";
   absl::StrAppend(&j, ",\n  \"check\": {\"done\": ", r.checked ? "true" : "false",

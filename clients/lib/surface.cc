@@ -15,8 +15,9 @@ std::array<double, 3> ToArray(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 // Fields of a frame: each empty or `count` values.
 absl::Status CheckFields(const SurfaceFields& f, int64_t count, const char* where) {
   const std::pair<const char*, int> sizes[] = {{"displacement", f.displacement_size()},
-                                              {"strain", f.strain_size()},
-                                              {"stiffness", f.stiffness_size()}};
+                                               {"strain", f.strain_size()},
+                                               {"stiffness", f.stiffness_size()},
+                                               {"mass", f.mass_size()}};
   for (const auto& [name, size] : sizes) {
     if (size != 0 && size != count) {
       return absl::InvalidArgumentError(absl::StrCat(where, ".fields.", name, ": ", size,
@@ -137,6 +138,7 @@ absl::Status SurfaceDecoder::ApplyKeyframe(const Frame& frame) {
   surface_.displacement.assign(k.fields().displacement().begin(), k.fields().displacement().end());
   surface_.strain.assign(k.fields().strain().begin(), k.fields().strain().end());
   surface_.stiffness.assign(k.fields().stiffness().begin(), k.fields().stiffness().end());
+  surface_.mass.assign(k.fields().mass().begin(), k.fields().mass().end());
   surface_.error_bound = ToArray(k.error_bound());
   surface_.positions.resize(3 * n);
   std::vector<int> all(n);
@@ -180,7 +182,8 @@ absl::Status SurfaceDecoder::ApplyDelta(const Frame& frame) {
   const std::pair<const char*, std::pair<int, size_t>> field_sizes[] = {
       {"displacement", {d.fields().displacement_size(), surface_.displacement.size()}},
       {"strain", {d.fields().strain_size(), surface_.strain.size()}},
-      {"stiffness", {d.fields().stiffness_size(), surface_.stiffness.size()}}};
+      {"stiffness", {d.fields().stiffness_size(), surface_.stiffness.size()}},
+      {"mass", {d.fields().mass_size(), surface_.mass.size()}}};
   for (const auto& [name, sizes] : field_sizes) {
     if (sizes.first != 0 && sizes.second == 0) {
       return absl::InvalidArgumentError(
@@ -273,6 +276,7 @@ absl::Status SurfaceDecoder::ApplyDelta(const Frame& frame) {
   set_field(d.fields().displacement(), surface_.displacement);
   set_field(d.fields().strain(), surface_.strain);
   set_field(d.fields().stiffness(), surface_.stiffness);
+  set_field(d.fields().mass(), surface_.mass);
   surface_.step = frame.step();
   surface_.time = frame.time();
   DecodePositions(listed);
@@ -325,7 +329,10 @@ absl::Status WriteVtu(const Surface& s, const std::string& path) {
     t += "</DataArray>\n";
   }
   const std::pair<const char*, const std::vector<float>*> fields[] = {
-      {"displacement", &s.displacement}, {"strain", &s.strain}, {"stiffness", &s.stiffness}};
+      {"displacement", &s.displacement},
+      {"strain", &s.strain},
+      {"stiffness", &s.stiffness},
+      {"mass", &s.mass}};
   for (const auto& [name, values] : fields) {
     if (values->empty()) continue;
     absl::StrAppend(&t, "<DataArray type=\"Float32\" Name=\"", name, "\" format=\"ascii\">\n");

@@ -29,7 +29,7 @@ struct Surface {
   // The fine-mesh node of each vertex.
   std::vector<int32_t> nodes;
   // Per-vertex fields; each empty or one value per vertex.
-  std::vector<float> displacement, strain, stiffness;
+  std::vector<float> displacement, strain, stiffness, mass;
   // Half a grid step per axis, metres.
   std::array<double, 3> error_bound{};
 
@@ -76,7 +76,7 @@ class SurfaceDecoder {
 absl::Status WriteObj(const Surface& s, const std::string& path);
 // Writes `s` as a VTK XML UnstructuredGrid (.vtu, ASCII): quads, and
 // point data "node" and every non-empty field (displacement, strain,
-// stiffness).
+// stiffness, mass).
 absl::Status WriteVtu(const Surface& s, const std::string& path);
 
 }  // namespace dynsolid::client

@@ -35,6 +35,7 @@ void Watcher::Loop() {
   request.set_displacement(options_.displacement);
   request.set_strain(options_.strain);
   request.set_stiffness(options_.stiffness);
+  request.set_mass(options_.mass);
   Clock::time_point broken_since{};
   bool broken = false;
   int backoff_ms = 50;
@@ -84,8 +85,8 @@ void Watcher::Loop() {
         c.bytes += static_cast<int64_t>(frame.ByteSizeLong());
         const SurfaceFields& f =
             frame.has_keyframe() ? frame.keyframe().fields() : frame.delta().fields();
-        c.field_bytes +=
-            int64_t{4} * (f.displacement_size() + f.strain_size() + f.stiffness_size());
+        c.field_bytes += int64_t{4} * (f.displacement_size() + f.strain_size() +
+                                       f.stiffness_size() + f.mass_size());
         c.raw_float32_bytes += int64_t{12} * decoder_.surface().vertex_count();
         c.last_step = frame.step();
         c.seconds = std::chrono::duration<double>(now - first_time_).count();

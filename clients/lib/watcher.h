@@ -29,6 +29,7 @@ struct WatcherOptions {
   bool displacement = false;
   bool strain = false;
   bool stiffness = false;
+  bool mass = false;
   // Record every n-th frame received (0: none) into frames_dir as
   // frame_<step>.obj / .vtu.
   int record_every = 0;

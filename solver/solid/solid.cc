@@ -1959,9 +1959,11 @@ Solid::SurfaceFields Solid::ComputeSurfaceFields() const {
     stretch(q[1], q[3]);
   }
   out.strain.assign(strain.begin(), strain.end());
-  // Stiffness: mean Young's modulus of the boundary cells' elements.
+  // Stiffness and mass: mean Young's modulus and density of the boundary
+  // cells' elements' quadrature points, then the mean over the cells of the
+  // quads around each vertex.
   const int32_t ncells = d_.fine().num_cells();
-  std::vector<double> cell_sum(ncells, 0.0);
+  std::vector<double> cell_young(ncells, 0.0), cell_density(ncells, 0.0);
   std::vector<int32_t> cell_count(ncells, 0);
   std::vector<uint8_t> boundary_cell(ncells, 0);
   for (int32_t c : im.quad_cell) boundary_cell[c] = 1;
@@ -1969,28 +1971,34 @@ Solid::SurfaceFields Solid::ComputeSurfaceFields() const {
     for (int32_t e = 0; e < block.size(); ++e) {
       const int32_t c = block.cell[e];
       if (!boundary_cell[c]) continue;
-      for (const models::MaterialPoint& m : im.layout->materials[block.groups[block.group[e]].material]) {
-        cell_sum[c] += m.young;
+      for (const models::MaterialPoint& m :
+           im.layout->materials[block.groups[block.group[e]].material]) {
+        cell_young[c] += m.young;
+        cell_density[c] += m.density;
         ++cell_count[c];
       }
     }
   }
-  std::vector<double> vsum(nv, 0.0);
+  std::vector<double> vyoung(nv, 0.0), vdensity(nv, 0.0);
   std::vector<int32_t> vcount(nv, 0);
   for (size_t q = 0; q < surface_.quads.size(); ++q) {
     const int32_t c = im.quad_cell[q];
     if (cell_count[c] == 0) continue;
-    const double e = cell_sum[c] / cell_count[c];
+    const double young = cell_young[c] / cell_count[c];
+    const double density = cell_density[c] / cell_count[c];
     const auto& v = surface_.quads[q];
     for (int k = 0; k < 4; ++k) {
       if (k == 3 && v[3] == v[2]) continue;  // degenerate quad: a triangle
-      vsum[v[k]] += e;
+      vyoung[v[k]] += young;
+      vdensity[v[k]] += density;
       ++vcount[v[k]];
     }
   }
   out.stiffness.resize(nv);
+  out.mass.resize(nv);
   for (int64_t i = 0; i < nv; ++i) {
-    out.stiffness[i] = vcount[i] > 0 ? static_cast<float>(vsum[i] / vcount[i]) : 0.0f;
+    out.stiffness[i] = vcount[i] > 0 ? static_cast<float>(vyoung[i] / vcount[i]) : 0.0f;
+    out.mass[i] = vcount[i] > 0 ? static_cast<float>(vdensity[i] / vcount[i]) : 0.0f;
   }
   return out;
 }

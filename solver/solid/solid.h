@@ -299,6 +299,46 @@ class Solid {
   std::vector<int64_t> constraint_ids() const;
   Eigen::Vector3d gravity() const;
 
+  // The active loads and constraints as they are now, ascending by id (the
+  // scene's own included: they have the first ids). Read-only, for
+  // inspection (a viewer draws them). Contact loads (SetContactLoads) are
+  // not id items and are not listed.
+  struct LoadInfo {
+    enum class Kind { kPointForce, kPressure, kDrag, kCurve };
+    int64_t id = 0;
+    Kind kind = Kind::kPointForce;
+    // Rest positions of the load's material points, metres: a point
+    // force's (PointForce.position) or a drag's one point; a curve's
+    // samples (the points its springs hold: evenly spaced by arc length
+    // along its material polyline, the first and last at its ends); none
+    // for a pressure.
+    std::vector<Eigen::Vector3d> material_points;
+    // Where those points are now (at the current control positions); a
+    // point force snapped to a quadrature point (solver.
+    // snap_forces_to_quadrature): where it acts.
+    std::vector<Eigen::Vector3d> positions;
+    // A drag's target, or the target of each curve sample (from the
+    // latest target polyline), metres; same order as material_points.
+    std::vector<Eigen::Vector3d> targets;
+    Eigen::Vector3d force = Eigen::Vector3d::Zero();  // a point force, newtons
+    // A pressure: pascals, the region it was given and the surface quads
+    // (Surface::quads) it acts on, ascending.
+    double pascals = 0;
+    Region region;
+    std::vector<int32_t> quads;
+    double stiffness = 0;  // a drag's or curve's spring, N/m
+    // A curve as it was started, with its latest target polyline (what
+    // MoveDrag takes).
+    CurveDrag curve;
+  };
+  std::vector<LoadInfo> ActiveLoads() const;
+  struct ConstraintInfo {
+    int64_t id = 0;
+    Region region;                        // as given to FixRegion (or the scene)
+    std::vector<int32_t> control_points;  // the control points it holds, ascending
+  };
+  std::vector<ConstraintInfo> ActiveConstraints() const;
+
   // ---- Exact state. SaveState() captures everything that influences
   // future steps: p, p_prev, time, steps, sub-step count and stable-step
   // estimate, rollback counter, the forces and energy carried to the next
@@ -482,9 +522,11 @@ class Solid {
   //    edges and quad diagonals at the vertex (membrane stretch and shear of
   //    the surface, dimensionless);
   //  stiffness: Young's modulus (Pa), the mean over the quadrature points
-  //    of the elements of the boundary cells around the vertex.
+  //    of the elements of the boundary cells around the vertex;
+  //  mass: the mass density (kg/m^3), the same mean (it shows painted
+  //    densities as stiffness shows painted moduli).
   struct SurfaceFields {
-    std::vector<float> displacement, strain, stiffness;
+    std::vector<float> displacement, strain, stiffness, mass;
   };
   SurfaceFields ComputeSurfaceFields() const;
   // The axis-aligned box of the current surface positions (metres).

@@ -264,6 +264,65 @@ std::vector<int64_t> Solid::constraint_ids() const {
 
 Eigen::Vector3d Solid::gravity() const { return impl_->gravity; }
 
+std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
+  const Impl& im = *impl_;
+  std::vector<LoadInfo> out;
+  std::vector<double> shape;
+  for (const Impl::PointLoad& load : im.point_loads) {
+    LoadInfo info;
+    info.id = load.id;
+    info.kind = LoadInfo::Kind::kPointForce;
+    info.material_points.push_back(V(load.msg.position()));
+    // Where it acts: its element's shape values over the node rows of A.
+    im.ShapeAt(load.at, shape);
+    const int32_t* ids = im.layout->blocks[load.at.kind].element_nodes(load.at.element);
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < shape.size(); ++k) {
+      for (SparseMatrix::InnerIterator it(d_.node_matrix, ids[k]); it; ++it) {
+        x += (shape[k] * it.value()) * p_.row(it.col()).transpose();
+      }
+    }
+    info.positions.push_back(x);
+    info.force = V(load.msg.force());
+    out.push_back(std::move(info));
+  }
+  for (const Impl::PressureLoad& load : im.pressures) {
+    LoadInfo info;
+    info.id = load.id;
+    info.kind = LoadInfo::Kind::kPressure;
+    info.pascals = load.msg.pascals();
+    info.region = load.msg.region();
+    info.quads = load.quads;
+    out.push_back(std::move(info));
+  }
+  for (const Impl::DragLoad& load : im.drags) {
+    LoadInfo info;
+    info.id = load.id;
+    info.kind = load.curve ? LoadInfo::Kind::kCurve : LoadInfo::Kind::kDrag;
+    info.material_points = load.material;
+    for (const auto& row : load.rows) {
+      Eigen::Vector3d x = Eigen::Vector3d::Zero();
+      for (const auto& [i, w] : row) x += w * p_.row(i).transpose();
+      info.positions.push_back(x);
+    }
+    info.targets = load.targets;
+    info.stiffness = load.stiffness;
+    if (load.curve) info.curve = load.shape;
+    out.push_back(std::move(info));
+  }
+  std::sort(out.begin(), out.end(),
+            [](const LoadInfo& a, const LoadInfo& b) { return a.id < b.id; });
+  return out;
+}
+
+std::vector<Solid::ConstraintInfo> Solid::ActiveConstraints() const {
+  std::vector<ConstraintInfo> out;
+  for (const Impl::FixConstraint& c : impl_->fixes) out.push_back({c.id, c.region, c.points});
+  std::sort(out.begin(), out.end(),
+            [](const ConstraintInfo& a, const ConstraintInfo& b) { return a.id < b.id; });
+  return out;
+}
+
 // ---- Constraints.
 
 absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {

@@ -134,6 +134,49 @@ TEST(SurfaceDecoderTest, DeltaMovesOnlyTheListedVertices) {
   EXPECT_EQ(d.surface().positions[3], 1 + 13 * 0.5);
 }
 
+TEST(SurfaceDecoderTest, MassFieldComesWithKeyframesAndListedVerticesAndGoesIntoTheVtu) {
+  SurfaceDecoder d;
+  Frame key = Key(7, kCodes);
+  for (float m : {100.f, 200.f, 300.f, 400.f})
+    key.mutable_keyframe()->mutable_fields()->add_mass(m);
+  ASSERT_TRUE(d.Apply(key).ok());
+  EXPECT_THAT(d.surface().mass, ::testing::ElementsAre(100, 200, 300, 400));
+  Frame f;
+  f.set_step(8);
+  Delta* delta = f.mutable_delta();
+  delta->set_base_step(7);
+  for (uint32_t r : {2, 1}) delta->add_runs(r);  // vertex 2 only
+  delta->set_moved(1);
+  delta->set_bits(2);
+  delta->set_packed(Pack({ZigZag(1), ZigZag(0), ZigZag(0)}, 2));
+  delta->mutable_fields()->add_mass(950);
+  delta->mutable_fields()->add_displacement(4);
+  ASSERT_TRUE(d.Apply(f).ok());
+  EXPECT_THAT(d.surface().mass, ::testing::ElementsAre(100, 200, 950, 400));
+  EXPECT_THAT(d.surface().displacement, ::testing::ElementsAre(0, 0.5f, 4, 1.5f));
+  // Wrong counts, or mass in a delta when the keyframe had none: refused.
+  f.set_step(9);
+  delta->set_base_step(8);
+  delta->mutable_fields()->add_mass(1);
+  EXPECT_EQ(d.Apply(f).message(), "delta.fields.mass: 2 values for 1 vertices");
+  SurfaceDecoder no_mass;
+  ASSERT_TRUE(no_mass.Apply(Key(8, kCodes)).ok());
+  delta->mutable_fields()->clear_mass();
+  delta->mutable_fields()->add_mass(1);
+  EXPECT_EQ(no_mass.Apply(f).message(), "delta.fields.mass: present but the keyframe had none");
+  Frame short_key = Key(7, kCodes);
+  short_key.mutable_keyframe()->mutable_fields()->add_mass(5);
+  EXPECT_EQ(no_mass.Apply(short_key).message(), "keyframe.fields.mass: 1 values for 4 vertices");
+  const std::string path = ::testing::TempDir() + "/mass.vtu";
+  ASSERT_TRUE(WriteVtu(d.surface(), path).ok());
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_THAT(text.str(),
+              ::testing::HasSubstr("<DataArray type=\"Float32\" Name=\"mass\" format=\"ascii\">\n"
+                                   "100\n200\n950\n400\n</DataArray>"));
+}
+
 TEST(SurfaceDecoderTest, SmallBitWidthsRoundTrip) {
   for (int bits = 2; bits <= 17; ++bits) {
     SurfaceDecoder d;

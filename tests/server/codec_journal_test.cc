@@ -245,6 +245,62 @@ TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   EXPECT_EQ(dec.stiffness(), std::vector<float>(16, 2e5f));
 }
 
+TEST(SurfaceCodecTest, MassTravelsBesideTheOtherFieldsAndAMassPaintSendsAKeyframe) {
+  auto topo = GridTopology(4);
+  SurfaceEncoder enc(FieldChoice{true, true, true, true});
+  SurfaceEncoder mass_only(FieldChoice{false, false, false, true});
+  SurfaceDecoder dec, dec_mass;
+  Frame frame;
+  auto fill = [](SurfaceSnapshot& s, float density) {
+    s.displacement.assign(16, 0.5f);
+    s.strain.assign(16, 0.25f);
+    s.stiffness.assign(16, 1e5f);
+    s.mass.resize(16);
+    for (int i = 0; i < 16; ++i) s.mass[i] = density + i;
+  };
+  auto a = Wave(topo, 0, 0.2, 0);
+  fill(*a, 1000);
+  EXPECT_TRUE(enc.Encode(a, &frame));
+  ASSERT_EQ(frame.keyframe().fields().mass_size(), 16);
+  EXPECT_EQ(frame.keyframe().fields().mass(3), 1003.0f);
+  const size_t all_four = frame.ByteSizeLong();
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  EXPECT_EQ(dec.mass(), a->mass);
+  EXPECT_TRUE(mass_only.Encode(a, &frame));
+  EXPECT_EQ(frame.keyframe().fields().mass_size(), 16);
+  EXPECT_EQ(frame.keyframe().fields().stiffness_size(), 0);
+  EXPECT_LT(frame.ByteSizeLong() + 3 * 16 * 4, all_four + 16) << "one field, not four";
+  ASSERT_TRUE(dec_mass.Apply(frame).ok());
+  // Motion: the moved vertices carry their mass.
+  auto b = Wave(topo, 1, 0.2, 0.3);
+  fill(*b, 2000);
+  EXPECT_FALSE(enc.Encode(b, &frame));
+  ASSERT_TRUE(frame.has_delta());
+  EXPECT_GT(frame.delta().moved(), 0);
+  EXPECT_EQ(frame.delta().fields().mass_size(), frame.delta().moved());
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  EXPECT_EQ(dec.mass(), b->mass) << "every vertex of the wave moved";
+  EXPECT_FALSE(mass_only.Encode(b, &frame));
+  EXPECT_EQ(frame.delta().fields().mass_size(), frame.delta().moved());
+  EXPECT_EQ(frame.delta().fields().displacement_size(), 0);
+  ASSERT_TRUE(dec_mass.Apply(frame).ok());
+  EXPECT_EQ(dec_mass.mass(), b->mass);
+  // A density paint without motion (fields_version moves): a keyframe.
+  auto c = Wave(topo, 2, 0.2, 0.3);
+  fill(*c, 2000);
+  c->fields_version = 1;
+  c->mass[5] = 7000;
+  EXPECT_TRUE(mass_only.Encode(c, &frame));
+  ASSERT_TRUE(dec_mass.Apply(frame).ok());
+  EXPECT_EQ(dec_mass.mass(), c->mass);
+  // Without fields a paint changes nothing on the wire: an empty delta.
+  SurfaceEncoder plain(FieldChoice{});
+  plain.Encode(b, &frame);
+  EXPECT_FALSE(plain.Encode(c, &frame));
+  EXPECT_EQ(frame.delta().moved(), 0);
+  EXPECT_FALSE(frame.delta().has_fields());
+}
+
 TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGrid) {
   auto topo = GridTopology();
   auto cache = std::make_shared<EncodeCache>();

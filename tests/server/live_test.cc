@@ -829,6 +829,54 @@ TEST_F(LiveTest, DragsAndCurvesAreReleasedWhenTheirCommandStreamEnds) {
   EXPECT_THAT(r.message(), ::testing::HasSubstr("starts with \"server:\""));
 }
 
+// Inspect with loads: what every client placed, with its owner, from the
+// simulation thread between two steps.
+TEST_F(LiveTest, InspectListsTheLoadsAndConstraintsOfEveryClient) {
+  const Session s = Create("block3", 1, /*paused=*/true);
+  Command force, drag, fix;
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "add_point_force { position { x: 1.5 y: 1.5 z: 2 } force { z: -5 } }", &force));
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "drag { material_point { x: 1.5 y: 1.5 z: 3 } target { x: 1.5 y: 1.5 z: 3.3 } "
+      "stiffness: 1e4 }",
+      &drag));
+  ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+      "fix_region { box { min { x: 2.99 y: -1 z: -1 } max { x: 3.01 y: 4 z: 4 } } }", &fix));
+  CommandStream a(*stub_, s, "viewer-a"), b(*stub_, s, "viewer-b");
+  const int64_t force_id = a.Send(1, force).load_id();
+  const int64_t drag_id = b.Send(1, drag).load_id();
+  const int64_t fix_id = b.Send(2, fix).constraint_id();
+  ASSERT_TRUE(force_id > 0 && drag_id > 0 && fix_id > 0);
+  InspectRequest ir;
+  *ir.mutable_session() = RefOf(s);
+  ir.set_loads(true);
+  grpc::ClientContext ic;
+  ic.set_deadline(Deadline());
+  InspectReply info;
+  ASSERT_TRUE(stub_->Inspect(&ic, ir, &info).ok());
+  ASSERT_EQ(info.loads_size(), 2);
+  EXPECT_EQ(info.loads(0).id(), force_id);
+  EXPECT_EQ(info.loads(0).kind(), "point_force");
+  EXPECT_EQ(info.loads(0).client_id(), "viewer-a");
+  EXPECT_EQ(info.loads(1).id(), drag_id);
+  EXPECT_EQ(info.loads(1).kind(), "drag");
+  EXPECT_EQ(info.loads(1).client_id(), "viewer-b");
+  EXPECT_DOUBLE_EQ(info.loads(1).target().z(), 3.3);
+  ASSERT_EQ(info.constraints_size(), 2);  // the scene's bottom, then viewer-b's side
+  EXPECT_EQ(info.constraints(0).client_id(), "");
+  EXPECT_EQ(info.constraints(1).id(), fix_id);
+  EXPECT_EQ(info.constraints(1).client_id(), "viewer-b");
+  EXPECT_EQ(info.constraints(1).control_points(), 16);
+  // Without loads: none listed.
+  ir.set_loads(false);
+  grpc::ClientContext ic2;
+  ic2.set_deadline(Deadline());
+  InspectReply plain;
+  ASSERT_TRUE(stub_->Inspect(&ic2, ir, &plain).ok());
+  EXPECT_EQ(plain.loads_size() + plain.constraints_size(), 0);
+  EXPECT_FALSE(plain.has_gravity());
+}
+
 TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {
   // h = 10 microseconds: no machine steps this block in real time, so every
   // step overruns. The loop must count that and re-anchor its clock rather

@@ -681,5 +681,44 @@ TEST(SolidRuntimeTest, StiffnessFieldShowsPaintedModulus) {
   }
 }
 
+TEST(SolidRuntimeTest, MassFieldShowsPaintedDensityInsideASphereOnly) {
+  auto s = Make(kFreeBlock);  // 2 m cube at density 100, cells of 0.5 m at level 1
+  ASSERT_NE(s, nullptr);
+  const Solid::SurfaceFields rest = s->ComputeSurfaceFields();
+  const size_t nv = s->BoundarySurface().nodes.size();
+  ASSERT_EQ(rest.mass.size(), nv);
+  for (float m : rest.mass) EXPECT_FLOAT_EQ(m, 100.0f) << "uniform density";
+  const double mass_before = s->total_mass();
+  // A hard-edged sphere of density 900 around the corner (0, 0, 0).
+  const Eigen::Vector3d centre(0, 0, 0);
+  const double radius = 0.9;
+  ASSERT_OK(s->PaintMaterial(
+      Parse<MaterialPaint>("region { sphere { center { x: 0 y: 0 z: 0 } radius: 0.9 } } "
+                           "material { density: 900 } strength: 1 falloff: 0.05")));
+  const Solid::SurfaceFields painted = s->ComputeSurfaceFields();
+  ASSERT_EQ(painted.mass.size(), nv);
+  const Points x = s->SurfacePositions();
+  // A vertex's cells reach at most one cell diagonal (0.5 sqrt 3 m) from it.
+  const double reach = 0.5 * std::sqrt(3.0);
+  int far = 0;
+  size_t nearest = 0;
+  for (size_t i = 0; i < nv; ++i) {
+    const double r = (x.row(i).transpose() - centre).norm();
+    if (r < (x.row(nearest).transpose() - centre).norm()) nearest = i;
+    EXPECT_GE(painted.mass[i], 100.0f - 1e-3f) << "vertex " << i;
+    EXPECT_LE(painted.mass[i], 900.0f + 1e-3f) << "vertex " << i;
+    if (r > radius + reach) {
+      EXPECT_FLOAT_EQ(painted.mass[i], 100.0f) << "vertex " << i << " at " << r << " m";
+      ++far;
+    }
+    // Only the density was painted.
+    EXPECT_FLOAT_EQ(painted.stiffness[i], 1e4f) << "vertex " << i;
+  }
+  // The corner vertex: its one boundary cell lies almost all in the sphere.
+  EXPECT_GT(painted.mass[nearest], 600.0f) << "vertex " << nearest << " at " << x.row(nearest);
+  EXPECT_GT(far, static_cast<int>(nv) / 2);
+  EXPECT_GT(s->total_mass(), mass_before);
+}
+
 }  // namespace
 }  // namespace dynsolid::solid

@@ -48,22 +48,9 @@ cleanup() {
 }
 trap cleanup EXIT
 
-"$SERVER" --listen 127.0.0.1:0 --data_dir "$DATA" > "$S/server.out" 2> "$S/server.log" &
-SERVER_PID=$!
-ADDR=""
-for _ in $(seq 600); do
-  if [ -s "$S/server.out" ]; then
-    ADDR=$(sed -n '1s/^listening on //p' "$S/server.out")
-    break
-  fi
-  if ! kill -0 "$SERVER_PID" 2>/dev/null; then break; fi
-  sleep 0.1
-done
-if [ -z "$ADDR" ]; then
-  echo "run_main: dynsolid-server did not start (see $S/server.log)" >&2
-  cat "$S/server.log" >&2
-  exit 1
-fi
+# shellcheck source=scripts/start_server.sh
+. scripts/start_server.sh
+start_server "$S/server.out" "$S/server.log" --listen 127.0.0.1:0 --data_dir "$DATA"
 echo "run_main: dynsolid-server listening on $ADDR" >&2
 
 "$CLIENT" --server "$ADDR" run --script clients/scripts/sculpt_block3.txt \

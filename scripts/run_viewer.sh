@@ -32,20 +32,10 @@ cleanup() {
 }
 trap cleanup EXIT INT TERM
 
-"build/$PRESET/server/dynsolid-server" --listen 127.0.0.1:0 --data_dir "$OUT/data" \
-  > "$OUT/server.out" 2> "$OUT/server.log" &
-SERVER_PID=$!
-ADDR=""
-for _ in $(seq 600); do
-  ADDR=$(sed -n '1s/^listening on //p' "$OUT/server.out" 2>/dev/null || true)
-  if [ -n "$ADDR" ]; then break; fi
-  if ! kill -0 "$SERVER_PID" 2>/dev/null; then break; fi
-  sleep 0.1
-done
-if [ -z "$ADDR" ]; then
-  echo "run_viewer: dynsolid-server did not start (see $OUT/server.log)" >&2
-  exit 1
-fi
+SERVER="build/$PRESET/server/dynsolid-server"
+# shellcheck source=scripts/start_server.sh
+. scripts/start_server.sh
+start_server "$OUT/server.out" "$OUT/server.log" --listen 127.0.0.1:0 --data_dir "$OUT/data"
 echo "run_viewer: dynsolid-server at $ADDR (log: $OUT/server.log)" >&2
 
 args=(--server "$ADDR" --listen "$VIEWER_LISTEN" --create "$SCENE")

@@ -175,3 +175,23 @@ export async function until(predicate, what, timeoutMs = 30000, everyMs = 100) {
     await sleep(everyMs);
   }
 }
+
+// A server, a gateway, Chromium and one viewer page, with a gRPC client of
+// the server; close() writes the page's console to `dir` and stops all.
+export async function startViewer(dir) {
+  const env = { server: new Server(dir) };
+  const address = await env.server.start();
+  env.gateway = new Gateway(dir, address);
+  env.url = await env.gateway.start();
+  env.browser = await launchBrowser();
+  env.page = await openViewer(env.browser, env.url);
+  env.grpc = grpcClient(address);
+  env.close = async () => {
+    fs.writeFileSync(path.join(dir, 'console.txt'), env.page.consoleLines.join('\n'));
+    await env.browser.close();
+    env.grpc.close();
+    await env.gateway.stop();
+    await env.server.kill('SIGTERM');
+  };
+  return env;
+}

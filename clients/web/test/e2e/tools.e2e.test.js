@@ -6,13 +6,11 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import fs from 'node:fs';
-import { Server, Gateway, launchBrowser, openViewer, grpcClient, outDir, until as waitFor, sleep } from './harness.js';
+import { startViewer, outDir, until as waitFor, sleep } from './harness.js';
 
 const out = outDir('tools');
 let server;
-let gateway;
-let browser;
+let env;
 let page;
 let grpc;
 let ref;
@@ -54,24 +52,14 @@ const clickAt = async (point, dy = 0) => {
 };
 
 before(async () => {
-  server = new Server(out);
-  const address = await server.start();
-  gateway = new Gateway(out, address);
-  browser = await launchBrowser();
-  page = await openViewer(browser, await gateway.start());
-  grpc = grpcClient(address);
+  env = await startViewer(out);
+  ({ server, page, grpc } = env);
   await page.click('#create');
   await until(() => page.evaluate(() => window.__dynsolid.metrics.framesRendered > 2), 'the solid drawn', 60000);
   ref = await page.evaluate(() => window.__dynsolid.session);
 });
 
-after(async () => {
-  if (page) fs.writeFileSync(path.join(out, 'console.txt'), page.consoleLines.join('\n'));
-  if (browser) await browser.close();
-  if (grpc) grpc.close();
-  if (gateway) await gateway.stop();
-  if (server) await server.kill('SIGTERM');
-});
+after(() => env && env.close());
 
 test('pause, step and resume from the buttons', async () => {
   await page.click('#pause');
@@ -232,4 +220,22 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
   await page.click('#reset-camera');
   await sleep(500);
   await shot('04_handle');
+});
+
+test('the picture for the docs: the sculpted block with its stiffness field, control mesh and a pin', async () => {
+  await tool('stiffness');
+  await page.fill('#params input[data-param=stiffnessValue]', '1e7');
+  await page.dispatchEvent('#params input[data-param=stiffnessValue]', 'change');
+  await page.selectOption('#field', 'stiffness');
+  const before = (await stats()).fields_version;
+  await clickAt({ x: 1.5, y: 2.5, z: 4 }, 4);  // the handle
+  await until(async () => (await stats()).fields_version > before, 'the paint applied', 60000);
+  await tool('pin');
+  await clickAt({ x: 0.5, y: 0, z: 1.5 });
+  await until(() => page.evaluate(() => window.__dynsolid.inspect.constraints.length > 0), 'the pin drawn');
+  await page.check('#show-control');
+  await tool('view');
+  await page.mouse.move(300, 790);
+  await sleep(1500);
+  await shot('viewer');
 });

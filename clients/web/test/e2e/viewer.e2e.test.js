@@ -8,12 +8,11 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import fs from 'node:fs';
-import { Server, Gateway, launchBrowser, openViewer, grpcClient, outDir, until, sleep } from './harness.js';
+import { startViewer, openViewer, outDir, until, sleep } from './harness.js';
 
 const out = outDir('viewer');
 let server;
-let gateway;
+let env;
 let browser;
 let page;
 let grpc;
@@ -46,22 +45,11 @@ const maxZ = (positions) => {
 const pageAt = (p, step) => until(async () => (await metrics(p)).step >= step, `the page at step ${step}`);
 
 before(async () => {
-  server = new Server(out);
-  const address = await server.start();
-  gateway = new Gateway(out, address);
-  const url = await gateway.start();
-  browser = await launchBrowser();
-  page = await openViewer(browser, url);
-  grpc = grpcClient(address);
+  env = await startViewer(out);
+  ({ server, browser, page, grpc } = env);
 });
 
-after(async () => {
-  if (page) fs.writeFileSync(path.join(out, 'console.txt'), page.consoleLines.join('\n'));
-  if (browser) await browser.close();
-  if (grpc) grpc.close();
-  if (gateway) await gateway.stop();
-  if (server) await server.kill('SIGTERM');
-});
+after(() => env && env.close());
 
 test('create block3 from the scene picker: the solid appears', async () => {
   await page.selectOption('#scene-select', 'block3');
@@ -232,8 +220,23 @@ test('a second person joining by the share link sees the first one\'s edits', as
     await page.mouse.click(a.x, a.y);
     await until(async () => (await metrics(second)).vertices > v0, 'the edit on the second page', 60000);
     await shot(second, '07_second_person');
-  } finally {
+    // The second person grabs the top and closes the tab mid-drag: the
+    // first sees the drag (Inspect lists every client's loads), then the
+    // server releases it when that page's command stream ends.
+    await tool(second, 'drag');
+    const b = await project(second, { x: 1.5, y: 1.5, z: 3 });
+    await second.mouse.move(b.x, b.y + 4);
+    await second.mouse.down();
+    await second.mouse.move(b.x, b.y - 30);
+    const drags = async () => (await inspect({ loads: true })).loads.filter((l) => l.kind === 'drag');
+    const held = await until(async () => { const d = await drags(); return d.length ? d : null; }, 'the drag listed');
+    assert.match(held[0].client_id, /^web-/);
+    await until(() => page.evaluate(() => window.__dynsolid.inspect.loads.some((l) => l.kind === 'drag')),
+      'the first page drawing the second one\'s drag');
     await second.close();
+    await until(async () => (await drags()).length === 0, 'the drag released when its page went away', 30000);
+  } finally {
+    if (!second.isClosed()) await second.close();
   }
 });
 

@@ -62,7 +62,9 @@ test('create block3 from the scene picker: the solid appears', async () => {
   assert.equal(s.stats.model, 'local_frame');
   const info = await inspect({ surface_positions: true });
   assert.equal(m.vertices, info.surface_vertices);
-  assert.match(m.status, /block3 .* local_frame \/ central_difference .* steps\/s/);
+  // The status line (refreshed twice a second) names the model and integrator.
+  await until(async () => /block3 .* local_frame \/ central_difference .* steps\/s/.test((await metrics(page)).status),
+    'the status line');
   assert.match(page.url(), new RegExp(`#session=${ref.id}&token=${ref.token}`));
   await shot(page, '01_created');
 });

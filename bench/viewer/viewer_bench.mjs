@@ -80,6 +80,34 @@ try {
       received: (m.framesReceived - s.received) / dt, skipped: m.skipped - s.skipped };
   });
   await page.mouse.up();
+  // The ceiling: frames drawn per second when every animation frame draws,
+  // block3 as it is and an empty scene (clear and composite only) at the
+  // same canvas size.
+  const ceiling = await page.evaluate(async () => {
+    const v = window.__dynsolid.view;
+    const rate = async () => {
+      const t0 = performance.now();
+      let n = 0;
+      await new Promise((done) => {
+        const f = () => {
+          v.needsRender = true;
+          n++;
+          if (performance.now() - t0 < 3000) requestAnimationFrame(f);
+          else done();
+        };
+        requestAnimationFrame(f);
+      });
+      return n / 3;
+    };
+    const solid = await rate();
+    v.mesh.visible = false;
+    v.grid.visible = false;
+    const empty = await rate();
+    v.mesh.visible = true;
+    v.grid.visible = true;
+    return { solid, empty, software: v.software, material: v.surfaceMaterial.type };
+  });
+  result.ceiling = ceiling;
   result.draw = {
     rafFps: 1000 / pct(draw.frameTimes, 50), frameMsP50: pct(draw.frameTimes, 50), frameMsP99: pct(draw.frameTimes, 99),
     surfaceFramesDrawnPerSecond: draw.rendered, framesReceivedPerSecond: draw.received, skippedByServer: draw.skipped,
@@ -124,6 +152,8 @@ console.log(`viewer benchmark on ${m.cpu} (${m.cores} cores, ${m.simd}), ${m.chr
 console.log(`block3 at ${result.levels} levels: ${result.vertices} surface vertices, ${result.quads} quads, canvas ${result.canvas.join('x')}`);
 console.log(`draw: ${fmt(result.draw.rafFps)} frames/s (requestAnimationFrame; frame time p50 ${fmt(result.draw.frameMsP50)} ms, p99 ${fmt(result.draw.frameMsP99)} ms); ` +
   `${fmt(result.draw.surfaceFramesDrawnPerSecond)} new surfaces drawn/s of ${fmt(result.draw.framesReceivedPerSecond)} received/s (server skipped ${result.draw.skippedByServer} for this page)`);
+console.log(`ceiling (every animation frame draws): block3 ${fmt(result.ceiling.solid)} frames/s, an empty scene ${fmt(result.ceiling.empty)} frames/s ` +
+  `(${result.ceiling.software ? 'software WebGL' : 'GPU'}, ${result.ceiling.material})`);
 console.log(`first picture after joining: p50 ${fmt(result.join.p50)} ms, max ${fmt(result.join.max)} ms over ${result.join.samples} joins (target 1000 ms)`);
 console.log(`drag round trip (pointer move -> first frame showing it): p50 ${fmt(result.drag.p50)} ms, p99 ${fmt(result.drag.p99)} ms over ${result.drag.samples} moves`);
 if (args.out) {

@@ -47,9 +47,13 @@ export class View {
     this.camera.add(key);
     this.scene.add(this.camera);
 
-    this.surfaceMaterial = new THREE.MeshStandardMaterial({
-      color: 0xc9b8a0, roughness: 0.55, metalness: 0.05, side: THREE.DoubleSide,
-    });
+    // The boundary is closed and its quads face outward: front faces only.
+    // A software renderer gets the cheaper Lambert shading (twice the frame
+    // rate on SwiftShader, bench/reports/viewer).
+    this.surfaceMaterial = this.software
+      ? new THREE.MeshLambertMaterial({ color: 0xc9b8a0, side: THREE.FrontSide })
+      : new THREE.MeshStandardMaterial({ color: 0xc9b8a0, roughness: 0.55, metalness: 0.05,
+        side: THREE.FrontSide });
     this.mesh = null;
     this.geometry = null;
     this.overlay = new THREE.Group();

@@ -18,6 +18,7 @@
 #include "dynsolid/journal.pb.h"
 #include "server/sim_core.h"
 #include "server/solid_builder.h"
+#include "tests/server/test_core.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::server {
@@ -25,29 +26,10 @@ namespace {
 
 using ::google::protobuf::util::MessageDifferencer;
 
-struct Core {
-  Scene scene;
-  SolidFactory factory;
-  std::unique_ptr<SimCore> core;
-  int64_t seq = 0;
-};
+using Core = TestCore;
 
 Core Make(const std::string& builtin = "block3", int levels = 1) {
-  CreateSessionRequest create;
-  create.set_builtin_scene(builtin);
-  create.set_levels_override(levels);
-  absl::StatusOr<SceneRequest> request = ResolveSceneRequest(create);
-  EXPECT_OK(request);
-  Core c;
-  c.scene = request->scene;
-  BuildLimits limits;
-  limits.sim_threads = 1;
-  c.factory = MakeSolidFactory(*request, limits);
-  absl::StatusOr<std::shared_ptr<solid::Solid>> solid = c.factory(nullptr);
-  EXPECT_OK(solid);
-  c.core =
-      std::make_unique<SimCore>(*solid, CoreOptions(), /*start_paused=*/true, c.scene, c.factory);
-  return c;
+  return MakeTestCore(builtin, levels, /*start_paused=*/true);
 }
 
 CommandReply Send(Core& c, const std::string& client, const std::string& text) {

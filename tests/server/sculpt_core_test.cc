@@ -15,6 +15,7 @@
 #include "google/protobuf/text_format.h"
 #include "server/sim_core.h"
 #include "server/solid_builder.h"
+#include "tests/server/test_core.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::server {
@@ -22,29 +23,10 @@ namespace {
 
 using ::testing::HasSubstr;
 
-struct Session {
-  SolidFactory factory;
-  Scene scene;
-  std::unique_ptr<SimCore> core;
-  int64_t seq = 0;
-};
+using Session = TestCore;
 
 Session Make(const std::string& builtin = "block3", int levels = 1) {
-  CreateSessionRequest create;
-  create.set_builtin_scene(builtin);
-  create.set_levels_override(levels);
-  absl::StatusOr<SceneRequest> request = ResolveSceneRequest(create);
-  EXPECT_OK(request);
-  Session s;
-  s.scene = request->scene;
-  BuildLimits limits;
-  limits.sim_threads = 1;
-  s.factory = MakeSolidFactory(*request, limits);
-  absl::StatusOr<std::shared_ptr<solid::Solid>> solid = s.factory(nullptr);
-  EXPECT_OK(solid);
-  CoreOptions options;
-  s.core = std::make_unique<SimCore>(*solid, options, /*start_paused=*/false, s.scene, s.factory);
-  return s;
+  return MakeTestCore(builtin, levels, /*start_paused=*/false);
 }
 
 CommandReply Send(Session& s, const std::string& text, const std::string& client = "c") {

@@ -157,6 +157,28 @@ def main():
         check(f in known, "compose.yaml", "--%s is not a dynsolid-server flag" % f)
     check(any(v.endswith(":/data") for v in srv.get("volumes", [])), "compose.yaml",
           "no volume at /data")
+    # The viewer's gateway: flags it takes (clients/web/gateway/main.js), and
+    # its --server names the server service at the port the server listens on.
+    gateway_flags = {"server", "listen", "proto", "create", "levels"}
+    web = compose["services"].get("web")
+    check(web is not None, "compose.yaml", "no web service (the viewer's gateway)")
+    if web:
+        wflags = flags_of(web.get("command", []))
+        for f in wflags:
+            check(f in gateway_flags, "compose.yaml", "--%s is not a gateway flag" % f)
+        server_port = port_of(eflags.get("listen", ":0")) if entry else 0
+        check(wflags.get("server") == "server:%d" % server_port, "compose.yaml",
+              "the web service's --server %r is not server:%d" % (wflags.get("server"), server_port))
+        with open(os.path.join(a.deploy, "Dockerfile.web")) as f:
+            web_docker = f.read()
+        wentry = re.search(r"^ENTRYPOINT\s+(\[.*\])", web_docker, re.M)
+        check(wentry is not None, "Dockerfile.web", "no ENTRYPOINT")
+        if wentry:
+            wargs = flags_of(yaml.safe_load(wentry.group(1))[2:])
+            for f in wargs:
+                check(f in gateway_flags, "Dockerfile.web", "--%s is not a gateway flag" % f)
+            check(re.search(r"^EXPOSE\s+%d\b" % port_of(wargs.get("listen", ":0")), web_docker, re.M)
+                  is not None, "Dockerfile.web", "the gateway's --listen port is not EXPOSEd")
 
     if problems:
         for p in problems:

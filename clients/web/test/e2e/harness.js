@@ -31,11 +31,19 @@ export function outDir(name) {
   return dir;
 }
 
+// Every process started here dies with the test process, whatever ends it.
+const children = new Set();
+process.on('exit', () => {
+  for (const c of children) if (c.exitCode === null && c.signalCode === null) c.kill('SIGKILL');
+});
+
 // Starts a process and waits for a stdout line matching `ready`; returns
 // {proc, match, log()}.
 function startProcess(cmd, args, ready, logFile, timeoutMs = 60000) {
   return new Promise((resolve, reject) => {
     const proc = spawn(cmd, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+    children.add(proc);
+    proc.on('exit', () => children.delete(proc));
     const log = fs.createWriteStream(logFile, { flags: 'a' });
     let out = '';
     const timer = setTimeout(() => {

@@ -116,6 +116,19 @@ absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& req
     }
     out.levels = levels;
   }
+  switch (request.model_override()) {
+    case SolverSettings::MODEL_DEFAULT:
+      break;
+    case SolverSettings::LOCAL_FRAME:
+    case SolverSettings::COROTATIONAL:
+      out.scene.mutable_solver()->set_model(request.model_override());
+      break;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "CreateSessionRequest.model_override must be LOCAL_FRAME (1) or COROTATIONAL (2), "
+          "or MODEL_DEFAULT (0) to keep the scene's, got ",
+          static_cast<int>(request.model_override())));
+  }
   return out;
 }
 

@@ -131,6 +131,18 @@ TEST(ResolveSceneRequestTest, ChecksSourceLevelsAndFiles) {
               StatusIs(absl::StatusCode::kInvalidArgument,
                        AllOf(HasSubstr("levels_override"), HasSubstr("got -2"))));
 
+  // The model: the scene's, or the one asked for; nothing else.
+  request.clear_levels_override();
+  request.set_builtin_scene("block3");
+  EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().model(), SolverSettings::LOCAL_FRAME);
+  request.set_model_override(SolverSettings::COROTATIONAL);
+  EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().model(), SolverSettings::COROTATIONAL);
+  request.set_model_override(static_cast<SolverSettings::Model>(7));
+  EXPECT_THAT(ResolveSceneRequest(request),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       AllOf(HasSubstr("model_override"), HasSubstr("got 7"))));
+  request.clear_model_override();
+
   // The text of the same built-in scene is refused: it names a file.
   absl::StatusOr<std::string_view> text = scene::BuiltinSceneText("mixed");
   ASSERT_OK(text);

@@ -167,6 +167,7 @@ class App {
     const request = { ...source, start_paused: $('start-paused').checked };
     const levels = $('levels').value.trim();
     if (levels !== '') request.levels_override = Number(levels);
+    if ($('model-select').value) request.model_override = $('model-select').value;
     this.banner(`creating ${label || source.builtin_scene || 'scene'}…`, 'info', 0);
     try {
       const s = await this.conn.call('CreateSession', request);

@@ -69,6 +69,29 @@ test('create block3 from the scene picker: the solid appears', async () => {
   await shot(page, '01_created');
 });
 
+test('a second session with the corotational model from the picker; closed from the page', async () => {
+  await page.selectOption('#model-select', 'COROTATIONAL');
+  await page.click('#create');
+  const other = await until(async () => {
+    const m = await metrics(page);
+    return m.session && m.session.id !== ref.id && m.rendered > 0 ? m : null;
+  }, 'the page in the new session', 60000);
+  const s = await grpc.call('GetSession', other.session);
+  assert.equal(s.stats.model, 'corotational');
+  await until(async () => /corotational \//.test((await metrics(page)).status), 'the status line naming it');
+  await page.click('#close-session');
+  await until(async () => !(await grpc.call('ListSessions', {})).sessions.some((x) => x.id === other.session.id),
+    'the session closed');
+  // Back to block3's session by its link.
+  await page.selectOption('#model-select', '');
+  await page.goto(`${page.url().split('#')[0]}#session=${ref.id}&token=${ref.token}`);
+  await page.reload();
+  await until(async () => {
+    const m = await metrics(page);
+    return m.session && m.session.id === ref.id && m.rendered > 0;
+  }, 'the page back in block3', 30000);
+});
+
 test('a scene file with an error is refused with the server\'s message and nothing is created', async () => {
   const before = (await grpc.call('ListSessions', {})).sessions.length;
   await page.setInputFiles('#scene-file', { name: 'broken.textproto', mimeType: 'text/plain',

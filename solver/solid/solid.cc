@@ -1307,14 +1307,7 @@ std::vector<Eigen::Vector3d> Solid::TracedPositionsAt(const Points& p) const {
   const Impl& im = *impl_;
   std::vector<Eigen::Vector3d> out;
   std::vector<double> shape;
-  for (const MaterialLocation& m : im.traced) {
-    im.ShapeAt(m, shape);
-    const int32_t* ids = im.layout->blocks[m.kind].element_nodes(m.element);
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    // Only the element's own nodes (rows of A p).
-    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * im.node_rows.Row(p, ids[k]);
-    out.push_back(x);
-  }
+  for (const MaterialLocation& m : im.traced) out.push_back(im.PositionAt(m, p, shape));
   return out;
 }
 

@@ -257,6 +257,17 @@ struct Solid::Impl {
                dn.data());
   }
 
+  // Where material location m is for control positions p: its element's
+  // shape values over that element's node rows of A p. `shape` is scratch.
+  Eigen::Vector3d PositionAt(const MaterialLocation& m, const Points& p,
+                             std::vector<double>& shape) const {
+    ShapeAt(m, shape);
+    const int32_t* ids = layout->blocks[m.kind].element_nodes(m.element);
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < shape.size(); ++k) x += shape[k] * node_rows.Row(p, ids[k]);
+    return x;
+  }
+
   // Energy bookkeeping for the stability guard: H = kinetic + strain +
   // spring energy - work of the external forces never grows for a
   // stable run (damping only lowers it).

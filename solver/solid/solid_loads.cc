@@ -273,16 +273,7 @@ std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
     info.id = load.id;
     info.kind = LoadInfo::Kind::kPointForce;
     info.material_points.push_back(V(load.msg.position()));
-    // Where it acts: its element's shape values over the node rows of A.
-    im.ShapeAt(load.at, shape);
-    const int32_t* ids = im.layout->blocks[load.at.kind].element_nodes(load.at.element);
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    for (size_t k = 0; k < shape.size(); ++k) {
-      for (SparseMatrix::InnerIterator it(d_.node_matrix, ids[k]); it; ++it) {
-        x += (shape[k] * it.value()) * p_.row(it.col()).transpose();
-      }
-    }
-    info.positions.push_back(x);
+    info.positions.push_back(im.PositionAt(load.at, p_, shape));  // where it acts
     info.force = V(load.msg.force());
     out.push_back(std::move(info));
   }

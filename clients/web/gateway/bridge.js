@@ -27,21 +27,14 @@ import { UNARY_METHODS, watchRaw, statusName, grpc } from './grpc.js';
 // buffering them.
 const MAX_BUFFERED_BYTES = 2 << 20;
 
-export class Tokens {
-  // Sessions created through this gateway: id -> token. Pages of this
-  // gateway may join them from the list (docs/viewer.md "Access").
-  constructor() {
-    this.byId = new Map();
-  }
-}
-
 export class Bridge {
-  constructor({ ws, service, client, tokens, address, log, callDeadlineSeconds = 600 }) {
+  // tokens: a Map, session id -> token, of the sessions created through
+  // this gateway (shared by its pages).
+  constructor({ ws, service, client, tokens, address, callDeadlineSeconds = 600 }) {
     this.ws = ws;
     this.service = service;
     this.client = client;
     this.tokens = tokens;
-    this.log = log;
     this.deadlineSeconds = callDeadlineSeconds;
     this.watch = null;
     this.commands = null;
@@ -91,11 +84,11 @@ export class Bridge {
           message: err.details || err.message });
         return;
       }
-      if (method === 'CreateSession') this.tokens.byId.set(response.id, response.token);
-      if (method === 'CloseSession') this.tokens.byId.delete(request.id);
+      if (method === 'CreateSession') this.tokens.set(response.id, response.token);
+      if (method === 'CloseSession') this.tokens.delete(request.id);
       if (method === 'ListSessions') {
         for (const s of response.sessions || []) {
-          if (this.tokens.byId.has(s.id)) s.token = this.tokens.byId.get(s.id);
+          if (this.tokens.has(s.id)) s.token = this.tokens.get(s.id);
         }
       }
       this.send({ op: 'result', id, ok: true, response });

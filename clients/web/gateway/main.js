@@ -14,7 +14,7 @@ import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { WebSocketServer } from 'ws';
 import { loadService, makeClient, DEFAULT_PROTO_ROOT } from './grpc.js';
-import { Bridge, Tokens } from './bridge.js';
+import { Bridge } from './bridge.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..');
@@ -56,18 +56,13 @@ const TYPES = {
   '.json': 'application/json', '.textproto': 'text/plain; charset=utf-8',
 };
 
-function serveStatic(req, res, extra) {
+function serveStatic(req, res) {
   const url = new URL(req.url, 'http://x');
   let pathname = decodeURIComponent(url.pathname);
   if (pathname === '/') pathname = '/index.html';
   if (pathname === '/favicon.ico') {
     res.writeHead(204);
     res.end();
-    return;
-  }
-  if (pathname === '/config.json') {
-    res.writeHead(200, { 'content-type': TYPES['.json'], 'cache-control': 'no-store' });
-    res.end(JSON.stringify(extra));
     return;
   }
   for (const [prefix, dir] of STATIC) {
@@ -104,7 +99,7 @@ function createSession(client, tokens, args, base, log, attempt = 0) {
       process.exitCode = 1;
       return;
     }
-    tokens.byId.set(s.id, s.token);
+    tokens.set(s.id, s.token);
     console.log(`session ${s.id} (${s.scene_name}): ${base}#session=${s.id}&token=${s.token}`);
   });
 }
@@ -113,11 +108,13 @@ function main() {
   const args = parseArgs(process.argv.slice(2));
   const service = loadService(args.proto);
   const client = makeClient(service, args.server);
-  const tokens = new Tokens();
+  // Sessions created through this gateway: id -> token. Its pages may join
+  // them from the list (docs/viewer.md "Access").
+  const tokens = new Map();
   const log = (...m) => console.error(new Date().toISOString(), 'gateway:', ...m);
   const [host, portText] = [args.listen.slice(0, args.listen.lastIndexOf(':')),
     args.listen.slice(args.listen.lastIndexOf(':') + 1)];
-  const server = http.createServer((req, res) => serveStatic(req, res, { server: args.server }));
+  const server = http.createServer(serveStatic);
   const wss = new WebSocketServer({ noServer: true, maxPayload: 8 << 20 });
   server.on('upgrade', (req, socket, head) => {
     if (new URL(req.url, 'http://x').pathname !== '/ws') {
@@ -125,7 +122,7 @@ function main() {
       return;
     }
     wss.handleUpgrade(req, socket, head, (ws) => {
-      const bridge = new Bridge({ ws, service, client, tokens, address: args.server, log });
+      const bridge = new Bridge({ ws, service, client, tokens, address: args.server });
       log(`page connected from ${req.socket.remoteAddress}`);
       ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
       ws.on('close', () => {

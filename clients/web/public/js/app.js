@@ -435,14 +435,25 @@ class App {
     $('status').textContent = parts.join(' · ');
   }
 
+  // Whether the control mesh held is not the current topology's.
+  meshStale() {
+    return !this.inspect.mesh || this.inspect.meshVersion !== this.decoder.topologyVersion;
+  }
+
+  // Inspect with what the overlays need; keeps the control mesh when asked.
+  async inspectOverlays({ mesh, positions, loads }) {
+    const r = await this.conn.call('Inspect', { session: this.session, control_mesh: mesh,
+      control_positions: positions, loads });
+    if (mesh) {
+      this.inspect.mesh = r.control_mesh;
+      this.inspect.meshVersion = r.topology_version;
+    }
+    if (positions) this.inspect.positions = r.control_positions;
+    return r;
+  }
+
   async controlMesh() {
-    const version = this.decoder.topologyVersion;
-    if (this.inspect.mesh && this.inspect.meshVersion === version) return this.inspect.mesh;
-    const r = await this.conn.call('Inspect', { session: this.session, control_mesh: true,
-      control_positions: true });
-    this.inspect.mesh = r.control_mesh;
-    this.inspect.meshVersion = r.topology_version;
-    this.inspect.positions = r.control_positions;
+    if (this.meshStale()) await this.inspectOverlays({ mesh: true, positions: true, loads: false });
     return this.inspect.mesh;
   }
 
@@ -452,23 +463,24 @@ class App {
     const loads = $('show-loads').checked;
     if (!control && !loads && !force) {
       this.view.setControlMesh(null, null, false);
+      this.overlayKey = null;
       return;
     }
     if (this.overlayBusy) return;
     this.overlayBusy = true;
     try {
-      const needMesh = control && (!this.inspect.mesh || this.inspect.meshVersion !== this.decoder.topologyVersion);
-      const r = await this.conn.call('Inspect', { session: this.session, control_mesh: needMesh,
-        control_positions: control, loads });
-      if (needMesh) {
-        this.inspect.mesh = r.control_mesh;
-        this.inspect.meshVersion = r.topology_version;
-      }
-      this.inspect.positions = r.control_positions;
+      const r = await this.inspectOverlays({ mesh: control && this.meshStale(), positions: control, loads });
       this.inspect.loads = r.loads || [];
       this.inspect.constraints = r.constraints || [];
-      this.view.setControlMesh(this.inspect.mesh, this.inspect.positions, control);
-      this.refreshMarkers();
+      // Rebuild the overlays only when what they show changed (an idle
+      // solid draws nothing new).
+      const key = JSON.stringify([control, this.inspect.meshVersion, control ? r.control_positions : null,
+        this.inspect.loads, this.inspect.constraints]);
+      if (key !== this.overlayKey) {
+        this.overlayKey = key;
+        this.view.setControlMesh(this.inspect.mesh, this.inspect.positions, control);
+        this.refreshMarkers();
+      }
     } catch (err) {
       // The stats poll and the watch report a lost server.
     } finally {

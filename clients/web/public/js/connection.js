@@ -121,7 +121,7 @@ export class Connection {
       }
       case 'reply': return this.onCommandReply(m.reply);
       case 'watch_end':
-        this.watchRequest = this.watchRequest && m.code === Code.OK ? this.watchRequest : null;
+        if (m.code !== Code.OK) this.watchRequest = null;
         this.onWatchEnd(m);
         return;
       case 'commands_end':

@@ -176,7 +176,6 @@ export class Tools {
     if (!hit) return;
     const origin = hit.point;
     const cmd = this.conn.command(C.drag(hit.material_point, origin, this.params.dragStiffness));
-    this.app.dragging = true;
     cmd.catch(() => {});
     await this.holdLoad(press, cmd, (id, e) => C.moveDrag(id, this.planePoint(e, origin, press.depth) || origin));
   }

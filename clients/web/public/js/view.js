@@ -129,8 +129,7 @@ export class View {
     pos.needsUpdate = true;
     this.needsRender = true;
     this.geometry.computeVertexNormals();
-    this.geometry.computeBoundingSphere();
-    this.geometry.computeBoundingBox();
+    this.geometry.computeBoundingSphere();  // ray casts test it first
     this.updateColors(decoder);
     if (!this.framed && n > 0) {
       this.resetCamera();
@@ -180,6 +179,7 @@ export class View {
       this.camera.lookAt(c);
     }
     if (this.grid) this.scene.remove(this.grid);
+    this.geometry.computeBoundingBox();
     const box = this.geometry.boundingBox;
     this.grid = new THREE.GridHelper(r * 6, 12, 0x3a4150, 0x2c323c);
     this.grid.rotation.x = Math.PI / 2;  // the xy plane, under the solid

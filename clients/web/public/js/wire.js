@@ -104,27 +104,26 @@ export class Reader {
     if (this.pos > this.end) throw new WireError('field runs past the end');
   }
 
-  // Appends a repeated varint field's values (packed or not) to `out`.
-  repeatedVarint(wire, out) {
+  // Appends a repeated scalar field's values to `out`, packed (one
+  // length-delimited run) or not (one value): `scalarWire` is the type's
+  // own wire type, `read` reads one value from a Reader.
+  repeated(wire, out, scalarWire, read) {
     if (wire === WIRE_LEN) {
       const r = this.sub();
-      while (!r.done()) out.push(r.varint());
-    } else if (wire === WIRE_VARINT) {
-      out.push(this.varint());
+      while (!r.done()) out.push(read(r));
+    } else if (wire === scalarWire) {
+      out.push(read(this));
     } else {
-      throw new WireError(`repeated varint field with wire type ${wire}`);
+      throw new WireError(`repeated field with wire type ${wire}, expected ${scalarWire} or packed`);
     }
   }
 
+  repeatedVarint(wire, out) {
+    this.repeated(wire, out, WIRE_VARINT, (r) => r.varint());
+  }
+
   repeatedFloat(wire, out) {
-    if (wire === WIRE_LEN) {
-      const r = this.sub();
-      while (!r.done()) out.push(r.float());
-    } else if (wire === WIRE_I32) {
-      out.push(this.float());
-    } else {
-      throw new WireError(`repeated float field with wire type ${wire}`);
-    }
+    this.repeated(wire, out, WIRE_I32, (r) => r.float());
   }
 }
 

@@ -5,7 +5,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { EventEmitter } from 'node:events';
-import { Bridge, Tokens } from '../../gateway/bridge.js';
+import { Bridge } from '../../gateway/bridge.js';
 
 function fakes() {
   const sent = [];
@@ -25,7 +25,7 @@ function fakes() {
       return s;
     },
   };
-  const bridge = new Bridge({ ws, service: null, client, tokens: new Tokens(), address: 'x', log: () => {} });
+  const bridge = new Bridge({ ws, service: null, client, tokens: new Map(), address: 'x' });
   const send = (m) => bridge.onMessage(Buffer.from(typeof m === 'string' ? m : JSON.stringify(m)), false);
   return { bridge, sent, calls, streams, send };
 }

@@ -71,6 +71,9 @@ export class Server {
   constructor(dir) {
     this.dir = dir;
     this.data = path.join(dir, 'data');
+    // A new server starts empty (a run never recovers an earlier run's
+    // sessions); start() again on the same object keeps the data (restarts).
+    fs.rmSync(this.data, { recursive: true, force: true });
     fs.mkdirSync(this.data, { recursive: true });
     this.address = null;
     this.proc = null;

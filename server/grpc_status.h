@@ -10,7 +10,9 @@
 namespace dynsolid::server {
 
 // Same canonical code (absl and gRPC share the numbering), same message.
-// Payloads are dropped. An unknown code becomes UNKNOWN.
+// Payloads (e.g. a SessionRedirect) travel as the details of an RpcStatus
+// (google.rpc.Status on the wire) in grpc-status-details-bin, each as an Any
+// with the payload's type URL. An unknown code becomes UNKNOWN.
 grpc::Status ToGrpcStatus(const absl::Status& status);
 
 }  // namespace dynsolid::server

@@ -8,6 +8,7 @@
 //                   [--max_watch_hz 240] [--answer_cache 256] [--undo_bytes N]
 //                   [--snapshot_every_steps 20000] [--build_threads 1]
 //                   [--encode_threads 2] [--stream_nice 10] [--stream_idle=true]
+//                   [--replica NAME --advertise HOST:PORT --peers NAME=HOST:PORT,...]
 //
 // (Abseil flags: --data-dir is spelled --data_dir, --tls-cert --tls_cert,
 // and so on.) With --data_dir every session is journaled and snapshotted
@@ -67,6 +68,19 @@ ABSL_FLAG(int64_t, undo_bytes, int64_t{256} << 20,
           "go first). Recover a session with the same value it ran with");
 ABSL_FLAG(int64_t, snapshot_every_steps, 20000,
           "With --data_dir, write a snapshot every this many steps (and on shutdown)");
+ABSL_FLAG(std::string, replica, "",
+          "This replica's name (a-z, 0-9, '-'; e.g. the pod's name): new session ids start "
+          "with it (\"NAME.HEX\"), so any replica knows where a session lives. Empty: alone");
+ABSL_FLAG(std::string, advertise, "",
+          "HOST:PORT clients use to reach this replica (returned in Session.address and in "
+          "redirects); empty: the bound address");
+ABSL_FLAG(std::string, peers, "",
+          "The replica set as NAME=HOST:PORT,... (this replica's entry may be included). "
+          "CreateSession places each new session on the least loaded replica; calls for a "
+          "peer's session are redirected to it. Needs --replica");
+ABSL_FLAG(std::string, peer_ca, "",
+          "PEM roots for TLS calls to peers; empty: --tls_cert when serving TLS, else "
+          "plaintext");
 ABSL_FLAG(double, shutdown_grace_seconds, 5.0,
           "On SIGINT/SIGTERM, how long running calls may take before they are cancelled");
 
@@ -113,6 +127,10 @@ int main(int argc, char** argv) {
   options.loop.core.answer_cache = absl::GetFlag(FLAGS_answer_cache);
   options.loop.core.undo_bytes = absl::GetFlag(FLAGS_undo_bytes);
   options.loop.snapshot_every_steps = absl::GetFlag(FLAGS_snapshot_every_steps);
+  options.replicas.replica = absl::GetFlag(FLAGS_replica);
+  options.replicas.advertise = absl::GetFlag(FLAGS_advertise);
+  options.replicas.peers = absl::GetFlag(FLAGS_peers);
+  options.peer_ca_file = absl::GetFlag(FLAGS_peer_ca);
   absl::StatusOr<std::unique_ptr<dynsolid::server::Server>> server =
       dynsolid::server::Server::Start(options);
   if (!server.ok()) {

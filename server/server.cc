@@ -77,13 +77,16 @@ absl::Status CheckOptions(const ServerOptions& o) {
 
 }  // namespace
 
-Server::Server(const ServerOptions& options)
+Server::Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas)
     : options_(options),
-      registry_(RegistryOptions{options.max_sessions, BuildLimits{options.max_cells, options.sim_threads}, options.loop,
-                                options.data_dir}),
+      replicas_(std::move(replicas)),
+      registry_(RegistryOptions{
+          options.max_sessions, BuildLimits{options.max_cells, options.sim_threads}, options.loop,
+          options.data_dir, replicas_->IdPrefix(),
+          [r = replicas_.get()](absl::string_view id) { return r->Elsewhere(id); }}),
       builds_(options.build_threads, "build"),
       encoders_(options.encode_threads, "encode", options.stream_nice, options.stream_idle),
-      service_(registry_, builds_, encoders_,
+      service_(registry_, *replicas_, options.max_sessions, builds_, encoders_,
                StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
@@ -97,10 +100,20 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     cert = *std::move(c);
     key = *std::move(k);
   }
+  ReplicaOptions replica_options = options.replicas;
+  const std::string& peer_ca = options.peer_ca_file.empty() ? options.tls_cert_file
+                                                            : options.peer_ca_file;
+  if (!peer_ca.empty() && !replica_options.peers.empty()) {
+    absl::StatusOr<std::string> roots = ReadWholeFile(peer_ca);
+    if (!roots.ok()) return roots.status();
+    replica_options.peer_roots_pem = *std::move(roots);
+  }
+  absl::StatusOr<std::unique_ptr<Replicas>> replicas = Replicas::Make(replica_options);
+  if (!replicas.ok()) return replicas.status();
   if (!options.data_dir.empty()) {
     if (absl::Status s = MakeDirs(options.data_dir + "/sessions"); !s.ok()) return s;
   }
-  std::unique_ptr<Server> server(new Server(options));
+  std::unique_ptr<Server> server(new Server(options, *std::move(replicas)));
   // Recovered sessions' simulation threads start here, at this thread's
   // priority.
   server->recovered_ = server->registry_.RecoverAll();
@@ -160,6 +173,15 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
         "cannot listen on ", health_failed ? options.health_listen : options.listen));
   }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
+  server->replicas_->SetBoundAddress(server->address_);
+  if (!server->replicas_->name().empty()) {
+    std::string peers;
+    for (const auto& p : server->replicas_->peers()) {
+      absl::StrAppend(&peers, peers.empty() ? "" : ", ", p->replica, "=", p->address);
+    }
+    ServerLog().info("replica {} at {}; peers: {}", server->replicas_->name(),
+                     server->replicas_->address(), peers.empty() ? "none" : peers);
+  }
   ServerLog().info(
       "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {} stepping "
       "threads per session; streaming threads at nice +{}{}; {})",

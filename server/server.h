@@ -11,6 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "server/replicas.h"
 #include "server/session_registry.h"
 #include "server/sessions_service.h"
 #include "server/work_queue.h"
@@ -65,6 +66,11 @@ struct ServerOptions {
   // or neither; empty: plaintext.
   std::string tls_cert_file;
   std::string tls_key_file;
+  // The replica set this server belongs to (replicas.h; empty: alone).
+  // ReplicaOptions::peer_roots_pem is read from peer_ca_file, or, with TLS
+  // and no peer_ca_file, from tls_cert_file.
+  ReplicaOptions replicas;
+  std::string peer_ca_file;
 };
 
 class Server {
@@ -97,9 +103,10 @@ class Server {
   SessionRegistry& registry() { return registry_; }
 
  private:
-  explicit Server(const ServerOptions& options);
+  Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas);
 
   const ServerOptions options_;
+  std::unique_ptr<Replicas> replicas_;
   SessionRegistry registry_;
   WorkQueue builds_;
   WorkQueue encoders_;

@@ -45,7 +45,7 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
   if (is_cancelled()) return kCancelled;
   std::string id;
   do {
-    id = random_.Next(kSessionIdBits);
+    id = options_.id_prefix + random_.Next(kSessionIdBits);
   } while (sessions_.contains(id));
   std::string token = random_.Next(kTokenBits);
   const absl::Time created = absl::Now();
@@ -136,6 +136,9 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Find(
   if (id.empty()) return absl::InvalidArgumentError("SessionRef.id is empty");
   const auto it = sessions_.find(id);
   if (it == sessions_.end()) {
+    if (options_.elsewhere != nullptr) {
+      if (absl::Status s = options_.elsewhere(id); !s.ok()) return s;
+    }
     return absl::NotFoundError(absl::StrCat("no open session with id \"", id, "\""));
   }
   if (token.empty()) {
@@ -189,6 +192,16 @@ std::vector<std::shared_ptr<const SolidSession>> SessionRegistry::List() const {
 int SessionRegistry::size() const {
   absl::ReaderMutexLock lock(&mu_);
   return static_cast<int>(sessions_.size());
+}
+
+int SessionRegistry::creating() const {
+  absl::ReaderMutexLock lock(&mu_);
+  return pending_;
+}
+
+bool SessionRegistry::accepting() const {
+  absl::ReaderMutexLock lock(&mu_);
+  return accepting_;
 }
 
 void SessionRegistry::StopAccepting() {

@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/base/thread_annotations.h"
@@ -37,11 +38,16 @@ struct RegistryOptions {
   // With a data directory, every session persists under
   // data_dir/sessions/ID (persistence.h); empty: nothing is written.
   std::string data_dir;
+  // New session ids start with this ("REPLICA."; replicas.h).
+  std::string id_prefix;
+  // Asked for an id that is not open here: a non-OK status (a redirect to
+  // the owner replica) is returned instead of NotFound. May be empty.
+  std::function<absl::Status(absl::string_view id)> elsewhere;
 };
 
 class SessionRegistry {
  public:
-  explicit SessionRegistry(RegistryOptions options) : options_(options) {}
+  explicit SessionRegistry(RegistryOptions options) : options_(std::move(options)) {}
   SessionRegistry(const SessionRegistry&) = delete;
   SessionRegistry& operator=(const SessionRegistry&) = delete;
 
@@ -78,6 +84,9 @@ class SessionRegistry {
   void StopAll(const absl::Status& status);
 
   int size() const;
+  // Creations in progress (slots reserved, solids being built).
+  int creating() const;
+  bool accepting() const;
 
   // From now on Create fails with Unavailable (server shutdown). Sessions
   // being built finish, but are not opened.

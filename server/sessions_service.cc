@@ -1,5 +1,7 @@
 #include "server/sessions_service.h"
 
+#include <algorithm>
+#include <chrono>
 #include <optional>
 
 #include "absl/strings/str_cat.h"
@@ -16,30 +18,144 @@ grpc::ServerUnaryReactor* SessionsService::CreateSession(grpc::CallbackServerCon
                                                          const CreateSessionRequest* request,
                                                          Session* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const bool placed = context->client_metadata().count(kPlacedHereKey) > 0;
   // context, request and response stay valid until Finish.
-  builds_.Post([this, context, request, response, reactor](bool run) {
+  builds_.Post([this, context, request, response, reactor, placed](bool run) {
     if (!run) {
       reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
       return;
     }
-    absl::StatusOr<std::shared_ptr<const SolidSession>> session =
-        registry_.Create(*request, [context] { return context->IsCancelled(); });
-    if (!session.ok()) {
-      ServerLog().info("CreateSession from {} failed: {}", context->peer(),
-                       session.status().ToString());
-      reactor->Finish(ToGrpcStatus(session.status()));
-      return;
+    Replicas::Peer* peer = (placed || !replicas_.has_peers()) ? nullptr : ChoosePlace();
+    if (peer != nullptr) {
+      CreateOn(peer, context, request, response, reactor);
+    } else {
+      CreateHere(context, request, response, reactor);
     }
-    const SolidSession& s = **session;
-    *response = s.ToProto();
-    ServerLog().info(
-        "session {} created for {}: scene {}, {} cells at level {} ({} cubic, {} linear, {} "
-        "pyramid elements) in {:.1f} ms",
-        s.id(), context->peer(), s.scene_name(), s.stats().cells(), s.stats().levels(),
-        s.stats().cubic_elements(), s.stats().linear_elements(), s.stats().pyramid_elements(),
-        s.stats().build_milliseconds());
-    reactor->Finish(grpc::Status::OK);
   });
+  return reactor;
+}
+
+void SessionsService::CreateHere(grpc::CallbackServerContext* context,
+                                 const CreateSessionRequest* request, Session* response,
+                                 grpc::ServerUnaryReactor* reactor) {
+  absl::StatusOr<std::shared_ptr<const SolidSession>> session =
+      registry_.Create(*request, [context] { return context->IsCancelled(); });
+  if (!session.ok()) {
+    ServerLog().info("CreateSession from {} failed: {}", context->peer(),
+                     session.status().ToString());
+    reactor->Finish(ToGrpcStatus(session.status()));
+    return;
+  }
+  const SolidSession& s = **session;
+  *response = ToProto(s);
+  ServerLog().info(
+      "session {} created for {}: scene {}, {} cells at level {} ({} cubic, {} linear, {} "
+      "pyramid elements) in {:.1f} ms",
+      s.id(), context->peer(), s.scene_name(), s.stats().cells(), s.stats().levels(),
+      s.stats().cubic_elements(), s.stats().linear_elements(), s.stats().pyramid_elements(),
+      s.stats().build_milliseconds());
+  reactor->Finish(grpc::Status::OK);
+}
+
+namespace {
+
+// Load as a fraction of capacity; what placement compares.
+double LoadOf(int sessions, int creating, int forwarding, int max_sessions) {
+  return static_cast<double>(sessions + creating + forwarding) / std::max(1, max_sessions);
+}
+
+}  // namespace
+
+Replicas::Peer* SessionsService::ChoosePlace() {
+  double best = LoadOf(registry_.size(), registry_.creating(), 0, max_sessions_);
+  Replicas::Peer* choice = nullptr;  // this replica wins ties
+  for (const auto& peer : replicas_.peers()) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
+    ServerInfo info;
+    const grpc::Status s = peer->stub->GetServerInfo(&ctx, google::protobuf::Empty(), &info);
+    if (!s.ok()) {
+      ServerLog().info("placement: peer {} at {} does not answer ({}); passed over",
+                       peer->replica, peer->address, s.error_message());
+      continue;
+    }
+    const int forwarding = peer->forwarding.load();
+    if (!info.accepting() ||
+        info.sessions() + info.creating() + forwarding >= info.max_sessions()) {
+      continue;
+    }
+    const double load =
+        LoadOf(info.sessions(), info.creating(), forwarding, info.max_sessions());
+    if (load < best) {
+      best = load;
+      choice = peer.get();
+    }
+  }
+  return choice;
+}
+
+void SessionsService::CreateOn(Replicas::Peer* peer, grpc::CallbackServerContext* context,
+                               const CreateSessionRequest* request, Session* response,
+                               grpc::ServerUnaryReactor* reactor) {
+  // Deadline and cancellation follow the caller's call.
+  std::shared_ptr<grpc::ClientContext> ctx = grpc::ClientContext::FromCallbackServerContext(*context);
+  ctx->AddMetadata(kPlacedHereKey, replicas_.name());
+  ++peer->forwarding;
+  ServerLog().info("CreateSession from {}: placed on peer {} at {}", context->peer(),
+                   peer->replica, peer->address);
+  peer->stub->async()->CreateSession(
+      ctx.get(), request, response,
+      [this, peer, ctx, context, request, response, reactor](grpc::Status s) {
+        --peer->forwarding;
+        const bool peer_cannot = s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                                 s.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED;
+        if (!peer_cannot || context->IsCancelled()) {
+          reactor->Finish(s);
+          return;
+        }
+        ServerLog().info("peer {} could not take the session ({}); building it here",
+                         peer->replica, s.error_message());
+        response->Clear();
+        builds_.Post([this, context, request, response, reactor](bool run) {
+          if (!run) {
+            reactor->Finish(
+                grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+            return;
+          }
+          CreateHere(context, request, response, reactor);
+        });
+      });
+}
+
+ServerInfo SessionsService::Info() const {
+  ServerInfo info;
+  info.set_replica(replicas_.name());
+  info.set_address(replicas_.address());
+  info.set_sessions(registry_.size());
+  info.set_creating(registry_.creating());
+  info.set_max_sessions(max_sessions_);
+  info.set_accepting(registry_.accepting());
+  for (const auto& peer : replicas_.peers()) {
+    ServerInfo::Peer* p = info.add_peers();
+    p->set_replica(peer->replica);
+    p->set_address(peer->address);
+  }
+  return info;
+}
+
+Session SessionsService::ToProto(const SolidSession& s) const {
+  Session out = s.ToProto();
+  out.set_replica(replicas_.name());
+  out.set_address(replicas_.address());
+  return out;
+}
+
+grpc::ServerUnaryReactor* SessionsService::GetServerInfo(grpc::CallbackServerContext* context,
+                                                         const google::protobuf::Empty* request,
+                                                         ServerInfo* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  *response = Info();
+  reactor->Finish(grpc::Status::OK);
   return reactor;
 }
 
@@ -49,7 +165,7 @@ grpc::ServerUnaryReactor* SessionsService::GetSession(grpc::CallbackServerContex
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   absl::StatusOr<std::shared_ptr<const SolidSession>> session =
       registry_.Get(request->id(), request->token());
-  if (session.ok()) *response = (*session)->ToProto();
+  if (session.ok()) *response = ToProto(**session);
   reactor->Finish(ToGrpcStatus(session.status()));
   return reactor;
 }

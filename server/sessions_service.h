@@ -9,6 +9,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "dynsolid/service.grpc.pb.h"
+#include "server/replicas.h"
 #include "server/session_registry.h"
 #include "server/streams.h"
 #include "server/work_queue.h"
@@ -20,10 +21,10 @@ class SessionsService final
     : public Sessions::WithRawCallbackMethod_Watch<Sessions::CallbackService> {
  public:
   // `registry` and `builds` outlive the service and the gRPC server.
-  SessionsService(SessionRegistry& registry, WorkQueue& builds, WorkQueue& encoders,
-                  StreamOptions stream_options)
-      : registry_(registry), builds_(builds), encoders_(encoders),
-        stream_options_(stream_options) {}
+  SessionsService(SessionRegistry& registry, Replicas& replicas, int max_sessions,
+                  WorkQueue& builds, WorkQueue& encoders, StreamOptions stream_options)
+      : registry_(registry), replicas_(replicas), max_sessions_(max_sessions), builds_(builds),
+        encoders_(encoders), stream_options_(stream_options) {}
   SessionsService(const SessionsService&) = delete;
   SessionsService& operator=(const SessionsService&) = delete;
 
@@ -51,17 +52,40 @@ class SessionsService final
   grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* Probe(
       grpc::CallbackServerContext* context) override;
 
+  grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
+                                          const google::protobuf::Empty* request,
+                                          ServerInfo* response) override;
+
   // GetCommandLog: reads the session's journal on the builds queue.
   grpc::ServerUnaryReactor* GetCommandLog(grpc::CallbackServerContext* context,
                                           const CommandLogRequest* request,
                                           CommandLog* response) override;
 
  private:
+  // This server's ServerInfo.
+  ServerInfo Info() const;
+  // The session as the caller sees it: owner replica and address filled.
+  Session ToProto(const SolidSession& s) const;
+  // Builds the session here (on the builds queue) and finishes the call.
+  void CreateHere(grpc::CallbackServerContext* context, const CreateSessionRequest* request,
+                  Session* response, grpc::ServerUnaryReactor* reactor);
+  // The peer with the least load below this replica's own, or null (this
+  // replica). Asks each peer's GetServerInfo (short deadline; a peer that
+  // does not answer, drains or is full is passed over). Blocking.
+  Replicas::Peer* ChoosePlace();
+  // Creates the session on `peer` for the caller (its deadline and
+  // cancellation carried over); builds here instead when the peer cannot.
+  void CreateOn(Replicas::Peer* peer, grpc::CallbackServerContext* context,
+                const CreateSessionRequest* request, Session* response,
+                grpc::ServerUnaryReactor* reactor);
+
   // The session `ref` names, or null after finishing the call with why not.
   std::shared_ptr<const SolidSession> SessionOrFinish(const SessionRef& ref,
                                                       grpc::ServerUnaryReactor* reactor);
 
   SessionRegistry& registry_;
+  Replicas& replicas_;
+  const int max_sessions_;
   WorkQueue& builds_;
   WorkQueue& encoders_;
   const StreamOptions stream_options_;

@@ -93,7 +93,8 @@ const char kUsage[] =
     "dynsolid-client [--server HOST:PORT] COMMAND [flags]\n"
     "  create --scene NAME | --scene_file FILE [--levels L] [--start_paused]\n"
     "  get --id ID --token TOKEN\n"
-    "  list\n"
+    "  list                          (this replica's sessions)\n"
+    "  info                          (the server's replica name, address, load and peers)\n"
     "  close --id ID --token TOKEN\n"
     "  stats --id ID --token TOKEN\n"
     "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
@@ -179,6 +180,18 @@ class Client {
 
   const std::string& ca_error() const { return ca_error_; }
 
+  // One unary call (fn makes it with the context given), following a
+  // redirect to the replica that owns the session.
+  template <typename Fn>
+  grpc::Status Call(Fn fn) {
+    for (int redirects = 0;; ++redirects) {
+      auto context = NewContext();
+      const grpc::Status s = fn(context.get());
+      if (redirects == dynsolid::client::kMaxRedirects || !channels_.Follow(s)) return s;
+      stub_ = dynsolid::Sessions::NewStub(channels_());
+    }
+  }
+
   int Create() {
     const std::string name = absl::GetFlag(FLAGS_scene);
     const std::string file = absl::GetFlag(FLAGS_scene_file);
@@ -198,22 +211,27 @@ class Client {
     }
     request.set_start_paused(absl::GetFlag(FLAGS_start_paused));
     dynsolid::Session reply;
-    auto context = NewContext();
-    return Report(stub_->CreateSession(context.get(), request, &reply), reply);
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->CreateSession(c, request, &reply); }), reply);
   }
 
   int Get() {
     dynsolid::SessionRef ref;
     if (int e = ReadRef(ref); e != 0) return e;
     dynsolid::Session reply;
-    auto context = NewContext();
-    return Report(stub_->GetSession(context.get(), ref, &reply), reply);
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->GetSession(c, ref, &reply); }), reply);
+  }
+
+  int Info() {
+    dynsolid::ServerInfo reply;
+    return Report(Call([&](grpc::ClientContext* c) {
+                    return stub_->GetServerInfo(c, google::protobuf::Empty(), &reply);
+                  }),
+                  reply);
   }
 
   int List() {
     dynsolid::ListSessionsResponse reply;
-    auto context = NewContext();
-    return Report(stub_->ListSessions(context.get(), dynsolid::ListSessionsRequest(), &reply),
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->ListSessions(c, dynsolid::ListSessionsRequest(), &reply); }),
                   reply);
   }
 
@@ -221,16 +239,14 @@ class Client {
     dynsolid::SessionRef ref;
     if (int e = ReadRef(ref); e != 0) return e;
     google::protobuf::Empty reply;
-    auto context = NewContext();
-    return Report(stub_->CloseSession(context.get(), ref, &reply), reply);
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->CloseSession(c, ref, &reply); }), reply);
   }
 
   int Stats() {
     dynsolid::SessionRef ref;
     if (int e = ReadRef(ref); e != 0) return e;
     dynsolid::SessionStats reply;
-    auto context = NewContext();
-    return Report(stub_->GetStats(context.get(), ref, &reply), reply);
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->GetStats(c, ref, &reply); }), reply);
   }
 
   int Mesh() {
@@ -238,8 +254,7 @@ class Client {
     if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
     request.set_control_mesh(true);
     dynsolid::InspectReply reply;
-    auto context = NewContext();
-    const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
+    const grpc::Status status = Call([&](grpc::ClientContext* c) { return stub_->Inspect(c, request, &reply); });
     return Report(status, reply.control_mesh());
   }
 
@@ -248,8 +263,7 @@ class Client {
     if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
     request.set_loads(true);
     dynsolid::InspectReply reply;
-    auto context = NewContext();
-    const grpc::Status status = stub_->Inspect(context.get(), request, &reply);
+    const grpc::Status status = Call([&](grpc::ClientContext* c) { return stub_->Inspect(c, request, &reply); });
     dynsolid::InspectReply out;
     out.set_step(reply.step());
     out.set_time(reply.time());
@@ -278,8 +292,7 @@ class Client {
       out->set_z(v[2]);
     }
     dynsolid::PickReply reply;
-    auto context = NewContext();
-    return Report(stub_->Pick(context.get(), request, &reply), reply);
+    return Report(Call([&](grpc::ClientContext* c) { return stub_->Pick(c, request, &reply); }), reply);
   }
 
   int Run(const dynsolid::client::Script& script) {
@@ -450,6 +463,7 @@ int main(int argc, char** argv) {
   if (command == "create") return client.Create();
   if (command == "get") return client.Get();
   if (command == "list") return client.List();
+  if (command == "info") return client.Info();
   if (command == "close") return client.Close();
   if (command == "stats") return client.Stats();
   if (command == "mesh") return client.Mesh();

@@ -146,6 +146,7 @@ int main(int argc, char** argv) {
     }
     ref.set_id(session.id());
     ref.set_token(session.token());
+    channels.Follow(session);  // the replica that owns it, when there are several
     std::printf("session %s token %s (scene %s)\n", session.id().c_str(), session.token().c_str(),
                 session.scene_name().c_str());
   } else {

@@ -101,6 +101,7 @@ void ProbeLink::WriterLoop() {
 void ProbeLink::ReaderLoop() {
   auto backoff = std::chrono::milliseconds(50);
   bool opened_before = false;
+  int redirects = 0;  // in a row, without a delivered pose in between
   for (;;) {
     {
       absl::MutexLock lock(&mu_);
@@ -175,6 +176,12 @@ void ProbeLink::ReaderLoop() {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     const grpc::Status status = s->rw->Finish();
+    if (delivered) redirects = 0;
+    if (redirects < client::kMaxRedirects && options_.channels.Follow(status)) {
+      ++redirects;  // the session lives on another replica: probe it there
+      if (options_.log) options_.log(absl::StrCat("probe: ", status.error_message()));
+      continue;
+    }
     bool stop = false;
     {
       absl::MutexLock lock(&mu_);

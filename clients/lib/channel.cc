@@ -1,6 +1,7 @@
 #include "clients/lib/channel.h"
 
 #include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
 
 namespace dynsolid::client {
 
@@ -31,6 +32,61 @@ std::shared_ptr<grpc::Channel> MakeChannel(const ChannelOptions& options) {
     credentials = grpc::SslCredentials(ssl);
   }
   return grpc::CreateCustomChannel(options.address, credentials, args);
+}
+
+struct ChannelFactory::Route {
+  ChannelOptions first;
+  mutable absl::Mutex mu;
+  std::string address ABSL_GUARDED_BY(mu);
+};
+
+ChannelFactory::ChannelFactory(ChannelOptions options) : route_(std::make_shared<Route>()) {
+  route_->address = options.address;
+  route_->first = std::move(options);
+}
+
+std::shared_ptr<grpc::Channel> ChannelFactory::operator()() const {
+  ChannelOptions o = route_->first;
+  o.address = address();
+  return MakeChannel(o);
+}
+
+std::string ChannelFactory::address() const {
+  absl::MutexLock lock(&route_->mu);
+  return route_->address;
+}
+
+ChannelFactory ChannelFactory::Fresh() const { return ChannelFactory(route_->first); }
+
+bool ChannelFactory::Follow(const Session& session) const {
+  if (session.address().empty()) return false;
+  absl::MutexLock lock(&route_->mu);
+  if (route_->address == session.address()) return false;
+  route_->address = session.address();
+  return true;
+}
+
+bool ChannelFactory::Follow(const grpc::Status& status) const {
+  SessionRedirect redirect;
+  if (!ParseRedirect(status, &redirect)) return false;
+  absl::MutexLock lock(&route_->mu);
+  route_->address = redirect.address();
+  return true;
+}
+
+bool ParseRedirect(const grpc::Status& status, SessionRedirect* redirect) {
+  if (status.error_code() != grpc::StatusCode::FAILED_PRECONDITION ||
+      status.error_details().empty()) {
+    return false;
+  }
+  RpcStatus details;
+  if (!details.ParseFromString(status.error_details())) return false;
+  for (const google::protobuf::Any& any : details.details()) {
+    if (any.Is<SessionRedirect>() && any.UnpackTo(redirect) && !redirect->address().empty()) {
+      return true;
+    }
+  }
+  return false;
 }
 
 bool IsFinalStreamStatus(grpc::StatusCode code) {

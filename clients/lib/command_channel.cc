@@ -124,6 +124,7 @@ void CommandChannel::ReaderLoop() {
   Clock::time_point broken_since{};
   bool broken = false;
   int backoff_ms = 50;
+  int redirects = 0;  // in a row, without a reply in between
   for (;;) {
     {
       absl::MutexLock lock(&mu_);
@@ -165,6 +166,16 @@ void CommandChannel::ReaderLoop() {
     }
     absl::MutexLock lock(&mu_);
     if (done_ || (closing_ && unanswered_ == 0)) break;
+    if (got_reply) redirects = 0;
+    if (redirects < kMaxRedirects && channels_.Follow(status)) {
+      // The session lives on another replica: open the stream there now
+      // and resend what is unanswered (same seqs: exactly once still).
+      ++redirects;
+      broken = true;
+      broken_since = Clock::now();
+      if (options_.log) options_.log(absl::StrCat("commands: ", status.error_message()));
+      continue;
+    }
     if (Fatal(status.error_code())) {
       fatal_ = ToAbslStatus(status);
       done_ = true;

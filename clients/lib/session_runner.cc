@@ -67,6 +67,7 @@ class Caller {
   grpc::Status Call(Fn fn) {
     const Clock::time_point give_up = Clock::now() + absl::ToChronoNanoseconds(patience_);
     int backoff_ms = 50;
+    int redirects = 0;
     for (;;) {
       if (used_) {
         const grpc_connectivity_state state = channel_->GetState(false);
@@ -77,6 +78,13 @@ class Caller {
       }
       used_ = true;
       const grpc::Status s = fn(*stub_);
+      if (redirects < kMaxRedirects && channels_.Follow(s)) {
+        // The session lives on another replica: ask it there.
+        if (log_) log_(absl::StrCat("calls: ", s.error_message()));
+        ++redirects;
+        Renew();
+        continue;
+      }
       if (s.error_code() != grpc::StatusCode::UNAVAILABLE || Clock::now() > give_up) return s;
       if (log_) log_(absl::StrCat("calls: ", s.error_message(), "; retrying on a new channel"));
       std::this_thread::sleep_for(std::chrono::milliseconds(backoff_ms));
@@ -89,13 +97,14 @@ class Caller {
     return *stub_;
   }
 
- private:
+  // A new channel (to where the factory points now).
   void Renew() {
     channel_ = channels_();
     stub_ = Sessions::NewStub(channel_);
     used_ = false;
   }
 
+ private:
   const ChannelFactory channels_;
   const absl::Duration patience_;
   const LogFn log_;
@@ -392,6 +401,12 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
     if (!s.ok()) return ToAbslStatus(s, "CreateSession");
     token = report.session.token();
     report.created = true;
+  }
+  // The session may live on another replica: every later call goes there.
+  if (channels.Follow(report.session)) {
+    if (options.log) options.log(absl::StrCat("session ", report.session.id(), " lives at ",
+                                              report.session.address()));
+    caller.Renew();
   }
   report.session.clear_token();
   report.token = token;

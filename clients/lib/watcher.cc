@@ -39,6 +39,7 @@ void Watcher::Loop() {
   Clock::time_point broken_since{};
   bool broken = false;
   int backoff_ms = 50;
+  int redirects = 0;  // in a row, without a frame in between
   std::unique_ptr<Sessions::Stub> stub = Sessions::NewStub(channels_());
   for (;;) {
     if (broken) stub = Sessions::NewStub(channels_());  // a fresh connection
@@ -102,6 +103,13 @@ void Watcher::Loop() {
     absl::MutexLock lock(&mu_);
     context_ = nullptr;
     if (stop_ || bad_frame) break;
+    if (got_frame) redirects = 0;
+    if (redirects < kMaxRedirects && channels_.Follow(status)) {
+      ++redirects;  // the session lives on another replica: watch it there
+      broken = true;
+      broken_since = Clock::now();
+      continue;
+    }
     if (Fatal(status.error_code())) {
       error_ = ToAbslStatus(status, "Watch");
       break;

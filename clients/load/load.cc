@@ -150,12 +150,16 @@ class LoadRun {
   absl::StatusOr<Report> Run();
 
  private:
-  ChannelFactory Factory() const {
+  // Channels to the server given, or, for a session, to the replica that
+  // owns it (Session.address; later redirects are followed by the streams).
+  ChannelFactory Factory(const Session* session = nullptr) const {
     client::ChannelOptions c;
     c.address = address_;
     c.tls_root_certs = tls_roots_;
     c.max_message_bytes = 16 << 20;
-    return client::ChannelFactoryFor(c);
+    ChannelFactory f = client::ChannelFactoryFor(c);
+    if (session != nullptr) f.Follow(*session);
+    return f;
   }
   absl::StatusOr<Session> CreateSession();
   void Client(int i, const Session& session, const Box& box, ClientResult* out);
@@ -316,7 +320,7 @@ void LoadRun::Client(int i, const Session& session, const Box& box, ClientResult
   client::CommandChannelOptions co;
   co.reconnect_timeout = absl::Seconds(60);
   if (o_.faults.disconnect) co.break_every = 5 + i % 7;
-  client::CommandChannel ch(Factory(), RefOf(session), id, co);
+  client::CommandChannel ch(Factory(&session), RefOf(session), id, co);
   std::mutex frames_mu;
   client::WatcherOptions wo;
   wo.rate_hz = o_.watch_hz;
@@ -325,13 +329,13 @@ void LoadRun::Client(int i, const Session& session, const Box& box, ClientResult
     std::lock_guard<std::mutex> l(frames_mu);
     out->frames.emplace_back(step, at);
   };
-  client::Watcher watcher(Factory(), RefOf(session), wo);
+  client::Watcher watcher(Factory(&session), RefOf(session), wo);
   // A watcher that never reads (fault): the server must not wait for it.
   std::unique_ptr<grpc::ClientContext> stalled_context;
   std::unique_ptr<grpc::ClientReader<Frame>> stalled;
   std::unique_ptr<Sessions::Stub> stalled_stub;
   if (o_.faults.stop_reading && i % 2 == 0) {
-    stalled_stub = Sessions::NewStub(Factory()());
+    stalled_stub = Sessions::NewStub(Factory(&session)());
     stalled_context = std::make_unique<grpc::ClientContext>();
     WatchRequest wr;
     *wr.mutable_session() = RefOf(session);
@@ -397,7 +401,7 @@ void LoadRun::Client(int i, const Session& session, const Box& box, ClientResult
 // and change nothing for the others.
 void LoadRun::Malformed(int i, const Session& session, std::atomic<bool>* stop,
                         ClientResult* out) {
-  auto stub = Sessions::NewStub(Factory()());
+  auto stub = Sessions::NewStub(Factory(&session)());
   uint64_t seq = 0;
   int round = 0;
   while (!stop->load()) {
@@ -445,7 +449,7 @@ void LoadRun::Malformed(int i, const Session& session, std::atomic<bool>* stop,
 void LoadRun::Verify(const Session& session, const std::string& client_id,
                      const std::vector<client::CommandRecord>& records,
                      std::vector<std::string>* problems) {
-  auto stub = Sessions::NewStub(Factory()());
+  auto stub = Sessions::NewStub(Factory(&session)());
   CommandLogRequest r;
   *r.mutable_session() = RefOf(session);
   r.set_client_id(client_id);
@@ -497,11 +501,12 @@ absl::StatusOr<Report> LoadRun::Run() {
     if (!s.ok()) return s.status();
     sessions.push_back(*s);
   }
-  auto stub = Sessions::NewStub(Factory()());
-  absl::StatusOr<Box> box = RestBox(*stub, RefOf(sessions[0]));
+  for (const Session& s : sessions) ++rep.sessions_per_replica[s.replica()];
+  absl::StatusOr<Box> box = RestBox(*Sessions::NewStub(Factory(&sessions[0])()), RefOf(sessions[0]));
   if (!box.ok()) return box.status();
   auto stats = [&](const Session& s) {
     SessionStats st;
+    auto stub = Sessions::NewStub(Factory(&s)());
     (void)Retrying([&] {
       grpc::ClientContext c;
       c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
@@ -561,7 +566,7 @@ absl::StatusOr<Report> LoadRun::Run() {
   std::vector<client::CommandRecord> burst_records;
   if (o_.faults.burst) {
     fault_threads.emplace_back([&] {
-      client::CommandChannel ch(Factory(), RefOf(sessions[0]), "burst");
+      client::CommandChannel ch(Factory(&sessions[0]), RefOf(sessions[0]), "burst");
       for (int k = 0; k < o_.burst_commands; ++k) {
         Command c;
         *c.mutable_set_gravity() = V(0, 0, -9.81 * (k % 2));
@@ -673,7 +678,7 @@ absl::StatusOr<Report> LoadRun::Run() {
     grpc::ClientContext c;
     c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
     google::protobuf::Empty e;
-    (void)stub->CloseSession(&c, RefOf(s), &e);
+    (void)Sessions::NewStub(Factory(&s)())->CloseSession(&c, RefOf(s), &e);
   }
   if (server_ != nullptr) {
     const int code = server_->Stop();
@@ -787,6 +792,10 @@ std::string ReportJson(const Report& r) {
   };
   std::string codes;
   for (const auto& [k, v] : r.codes) absl::StrAppend(&codes, codes.empty() ? "" : ", ", "\"", k, "\": ", v);
+  std::string placed;
+  for (const auto& [k, v] : r.sessions_per_replica) {
+    absl::StrAppend(&placed, placed.empty() ? "" : ", ", "\"", k, "\": ", v);
+  }
   std::string hold;
   for (const auto& [k, h] : r.hold) {
     absl::StrAppend(&hold, hold.empty() ? "" : ", ",
@@ -828,7 +837,7 @@ std::string ReportJson(const Report& r) {
       ", \"steps_dropped\": ", r.steps_dropped, ", \"overruns\": ", r.overruns,
       ",\n  \"server_cpu_percent\": ", absl::StrFormat("%.1f", r.server_cpu_percent),
       ", \"server_rss_max_kb\": ", r.server_rss_max_kb, ", \"server_rss_end_kb\": ", r.server_rss_end_kb,
-      ", \"restarts\": ", r.restarts,
+      ", \"restarts\": ", r.restarts, ", \"sessions_per_replica\": {", placed, "}",
       ",\n  \"server_samples\": [", samples, "]",
       ",\n  \"verified\": ", r.verified ? "true" : "false", ", \"problems\": [", problems, "]",
       ",\n  \"wall_seconds\": ", absl::StrFormat("%.1f", r.wall_seconds), "\n}\n");

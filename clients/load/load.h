@@ -80,6 +80,9 @@ struct Report {
   int64_t server_rss_max_kb = 0, server_rss_end_kb = 0;
   std::vector<std::array<double, 3>> server_samples;  // seconds, cpu %, rss kB
   int restarts = 0;
+  // Where the sessions were placed: replica name (Session.replica; "" for
+  // a server running alone) -> sessions.
+  std::map<std::string, int> sessions_per_replica;
   // Verification against the server's journal (GetCommandLog).
   bool verified = false;
   std::vector<std::string> problems;  // lost, duplicated, reordered, unknown

@@ -116,6 +116,23 @@ def main():
     res = c.get("resources", {})
     check("requests" in res and "limits" in res, sname, "resources need requests and limits")
 
+    # Replicas: each pod's name is its --replica, --advertise its stable
+    # address behind the headless Service, and --peers lists exactly the
+    # StatefulSet's pods at those addresses (scaling changes both).
+    env = {e["name"]: e for e in c.get("env", [])}
+    check(flags.get("replica") == "$(POD_NAME)" and
+          env.get("POD_NAME", {}).get("valueFrom", {}).get("fieldRef", {}).get("fieldPath")
+          == "metadata.name", sname, "--replica must be the pod's name (downward API)")
+    grpc_port = port_of(flags.get("listen", ":0"))
+    headless = spec["serviceName"]
+    check(flags.get("advertise") == "$(POD_NAME).%s:%d" % (headless, grpc_port), sname,
+          "--advertise must be the pod's address behind %s at the gRPC port" % headless)
+    want_peers = ["%s-%d=%s-%d.%s:%d" % (sts["metadata"]["name"], i, sts["metadata"]["name"], i,
+                                         headless, grpc_port) for i in range(spec["replicas"])]
+    check(flags.get("peers", "").split(",") == want_peers, sname,
+          "--peers %s must list the %d replicas: %s"
+          % (flags.get("peers"), spec["replicas"], ",".join(want_peers)))
+
     services = {d["metadata"]["name"]: (n, d) for n, d in by_kind.get("Service", [])}
     check(spec["serviceName"] in services, sname, "serviceName %s is no Service" % spec["serviceName"])
     if spec["serviceName"] in services:

@@ -21,6 +21,7 @@
 //   {op: "error", message}              a message the gateway could not take
 
 import { UNARY_METHODS, watchRaw, statusName, grpc } from './grpc.js';
+import { MAX_REDIRECTS } from './router.js';
 
 // Watch frames queued in the WebSocket beyond this pause the gRPC stream, so
 // a slow page makes the server skip frames for it instead of the gateway
@@ -29,11 +30,12 @@ const MAX_BUFFERED_BYTES = 2 << 20;
 
 export class Bridge {
   // tokens: a Map, session id -> token, of the sessions created through
-  // this gateway (shared by its pages).
-  constructor({ ws, service, client, tokens, address, callDeadlineSeconds = 600 }) {
+  // this gateway (shared by its pages). router: where sessions live
+  // (router.js), shared likewise.
+  constructor({ ws, service, router, tokens, address, callDeadlineSeconds = 600 }) {
     this.ws = ws;
     this.service = service;
-    this.client = client;
+    this.router = router;
     this.tokens = tokens;
     this.deadlineSeconds = callDeadlineSeconds;
     this.watch = null;
@@ -78,26 +80,70 @@ export class Bridge {
       return;
     }
     const deadline = new Date(Date.now() + this.deadlineSeconds * 1000);
-    this.client[method](request || {}, { deadline }, (err, response) => {
+    const done = (err, response) => {
       if (err) {
         this.send({ op: 'result', id, ok: false, code: err.code, code_name: statusName(err.code),
           message: err.details || err.message });
         return;
       }
+      if (method === 'CreateSession' || method === 'GetSession') this.router.learn(response);
       if (method === 'CreateSession') this.tokens.set(response.id, response.token);
-      if (method === 'CloseSession') this.tokens.delete(request.id);
+      if (method === 'CloseSession') {
+        this.tokens.delete(request.id);
+        this.router.forget(request.id);
+      }
       if (method === 'ListSessions') {
         for (const s of response.sessions || []) {
           if (this.tokens.has(s.id)) s.token = this.tokens.get(s.id);
         }
       }
       this.send({ op: 'result', id, ok: true, response });
+    };
+    if (method === 'ListSessions') {
+      this.listEverywhere(deadline, done);
+      return;
+    }
+    // The session a call names: SessionRef (id) or a request's session.
+    const r = request || {};
+    const session = r.session ? r.session.id : r.id;
+    const attempt = (redirects) => {
+      this.router.forSession(session)[method](r, { deadline }, (err, response) => {
+        if (err && redirects < MAX_REDIRECTS && this.router.follow(err)) {
+          attempt(redirects + 1);
+          return;
+        }
+        done(err, response);
+      });
+    };
+    attempt(0);
+  }
+
+  // ListSessions of every replica (the first one's GetServerInfo names its
+  // peers), merged; a peer that does not answer is left out.
+  listEverywhere(deadline, done) {
+    const first = this.router.client();
+    first.GetServerInfo({}, { deadline }, (infoErr, info) => {
+      const addresses = [this.router.first];
+      if (!infoErr) for (const p of info.peers || []) addresses.push(p.address);
+      const sessions = [];
+      let pending = addresses.length;
+      let firstErr = null;
+      addresses.forEach((address, i) => {
+        this.router.client(address).ListSessions({}, { deadline }, (err, response) => {
+          if (err && i === 0) firstErr = err;
+          if (!err) sessions.push(...(response.sessions || []));
+          if (--pending > 0) return;
+          if (firstErr) done(firstErr);
+          else done(null, { sessions });
+        });
+      });
     });
   }
 
-  startWatch(request) {
+  startWatch(request, redirects = 0) {
     this.stopWatch();
-    const call = watchRaw(this.service, this.client, request);
+    const session = request.session && request.session.id;
+    const call = watchRaw(this.service, this.router.forSession(session), request);
     this.watch = call;
     call.on('data', (bytes) => {
       if (this.watch !== call) return;
@@ -107,6 +153,10 @@ export class Bridge {
     call.on('error', (err) => {
       if (this.watch !== call) return;
       this.watch = null;
+      if (redirects < MAX_REDIRECTS && this.router.follow(err)) {
+        this.startWatch(request, redirects + 1);  // watch it where it lives
+        return;
+      }
       this.send({ op: 'watch_end', code: err.code, code_name: statusName(err.code),
         message: err.details || err.message });
     });
@@ -149,7 +199,7 @@ export class Bridge {
   }
 
   openCommands(session) {
-    const call = this.client.Commands();
+    const call = this.router.forSession(session).Commands();
     this.commands = call;
     this.commandsSession = session;
     call.on('data', (reply) => this.send({ op: 'reply', reply }));
@@ -159,7 +209,12 @@ export class Bridge {
       this.commandsSession = null;
       this.send({ op: 'commands_end', code, code_name: statusName(code), message });
     };
-    call.on('error', (err) => ended(err.code, err.details || err.message));
+    call.on('error', (err) => {
+      // Redirected: the page resends what is unanswered at once (an OK end),
+      // and the new stream opens where the session lives.
+      if (this.router.follow(err)) ended(grpc.status.OK, err.details);
+      else ended(err.code, err.details || err.message);
+    });
     call.on('end', () => ended(0, 'the command stream ended'));
   }
 

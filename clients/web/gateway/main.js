@@ -13,7 +13,8 @@ import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { WebSocketServer } from 'ws';
-import { loadService, makeClient, DEFAULT_PROTO_ROOT } from './grpc.js';
+import { loadService, DEFAULT_PROTO_ROOT } from './grpc.js';
+import { Router } from './router.js';
 import { Bridge } from './bridge.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
@@ -86,13 +87,13 @@ function serveStatic(req, res) {
 
 // --create: a session on a built-in scene, its URL printed (the server may
 // still be starting: try for a minute).
-function createSession(client, tokens, args, base, log, attempt = 0) {
+function createSession(router, tokens, args, base, log, attempt = 0) {
   const request = { builtin_scene: args.create };
   if (args.levels !== '') request.levels_override = Number(args.levels);
-  client.CreateSession(request, { deadline: new Date(Date.now() + 600000) }, (err, s) => {
+  router.client().CreateSession(request, { deadline: new Date(Date.now() + 600000) }, (err, s) => {
     if (err) {
       if (err.code === 14 && attempt < 60) {
-        setTimeout(() => createSession(client, tokens, args, base, log, attempt + 1), 1000);
+        setTimeout(() => createSession(router, tokens, args, base, log, attempt + 1), 1000);
         return;
       }
       log(`could not create ${args.create}: ${err.details || err.message}`);
@@ -100,6 +101,7 @@ function createSession(client, tokens, args, base, log, attempt = 0) {
       return;
     }
     tokens.set(s.id, s.token);
+    router.learn(s);
     console.log(`session ${s.id} (${s.scene_name}): ${base}#session=${s.id}&token=${s.token}`);
   });
 }
@@ -107,7 +109,8 @@ function createSession(client, tokens, args, base, log, attempt = 0) {
 function main() {
   const args = parseArgs(process.argv.slice(2));
   const service = loadService(args.proto);
-  const client = makeClient(service, args.server);
+  // Sessions on other replicas are reached where they live (router.js).
+  const router = new Router(service, args.server);
   // Sessions created through this gateway: id -> token. Its pages may join
   // them from the list (docs/viewer.md "Access").
   const tokens = new Map();
@@ -122,7 +125,7 @@ function main() {
       return;
     }
     wss.handleUpgrade(req, socket, head, (ws) => {
-      const bridge = new Bridge({ ws, service, client, tokens, address: args.server });
+      const bridge = new Bridge({ ws, service, router, tokens, address: args.server });
       log(`page connected from ${req.socket.remoteAddress}`);
       ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
       ws.on('close', () => {
@@ -137,7 +140,7 @@ function main() {
     const base = `http://${a.address}:${a.port}/`;
     console.log(`listening on ${base}`);
     log(`serving the viewer, dynsolid-server at ${args.server}`);
-    if (args.create) createSession(client, tokens, args, base, log);
+    if (args.create) createSession(router, tokens, args, base, log);
   });
   const stop = () => {
     log('stopping');

@@ -14,6 +14,7 @@ function fakes() {
   const streams = [];
   const client = {
     CreateSession: (req, opts, cb) => { calls.push(['CreateSession', req]); cb(null, { id: 'a1', token: 't1', scene_name: 'block3' }); },
+    GetServerInfo: (req, opts, cb) => { calls.push(['GetServerInfo', req]); cb(null, { replica: '', peers: [] }); },
     ListSessions: (req, opts, cb) => { calls.push(['ListSessions', req]); cb(null, { sessions: [{ id: 'a1' }, { id: 'b2' }] }); },
     GetStats: (req, opts, cb) => { calls.push(['GetStats', req]); cb({ code: 7, details: 'wrong token' }); },
     Commands: () => {
@@ -25,7 +26,12 @@ function fakes() {
       return s;
     },
   };
-  const bridge = new Bridge({ ws, service: null, client, tokens: new Map(), address: 'x' });
+  // A server running alone: every session at the first address.
+  const router = {
+    first: 'x', client: () => client, forSession: () => client,
+    learn: () => {}, follow: () => false, forget: () => {},
+  };
+  const bridge = new Bridge({ ws, service: null, router, tokens: new Map(), address: 'x' });
   const send = (m) => bridge.onMessage(Buffer.from(typeof m === 'string' ? m : JSON.stringify(m)), false);
   return { bridge, sent, calls, streams, send };
 }
@@ -52,7 +58,7 @@ test('unary calls pass through with their answers and errors; created sessions a
   send({ op: 'call', id: 7, method: 'CreateSession', request: { builtin_scene: 'block3' } });
   send({ op: 'call', id: 8, method: 'ListSessions', request: {} });
   send({ op: 'call', id: 9, method: 'GetStats', request: { id: 'a1', token: 'bad' } });
-  assert.deepEqual(calls.map((c) => c[0]), ['CreateSession', 'ListSessions', 'GetStats']);
+  assert.deepEqual(calls.map((c) => c[0]), ['CreateSession', 'GetServerInfo', 'ListSessions', 'GetStats']);
   assert.deepEqual(sent[1], { op: 'result', id: 7, ok: true, response: { id: 'a1', token: 't1', scene_name: 'block3' } });
   assert.deepEqual(sent[2].response.sessions, [{ id: 'a1', token: 't1' }, { id: 'b2' }]);
   assert.deepEqual([sent[3].ok, sent[3].code, sent[3].message], [false, 7, 'wrong token']);

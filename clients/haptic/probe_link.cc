@@ -167,12 +167,14 @@ void ProbeLink::ReaderLoop() {
       if (stream_ == s) stream_.reset();
       first_written_ = false;
     }
-    // The writer may still be in a Write on this stream: cancel unblocks
-    // it; Finish waits for the call's operations.
-    s->context.TryCancel();
-    // Let the writer leave its Write before Finish.
+    // The writer may still be in a Write on this stream; Finish waits for
+    // the call's operations. The stream has ended (Read failed), so that
+    // Write fails soon: let it leave, and Finish reads the server's status
+    // (a redirect names the owner). Only a Write that stays stuck is
+    // cancelled (the status is then CANCELLED).
     for (int i = 0; i < 1000; ++i) {
       if (s.use_count() <= 1) break;
+      if (i == 100) s->context.TryCancel();
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     const grpc::Status status = s->rw->Finish();

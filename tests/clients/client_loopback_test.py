@@ -29,27 +29,14 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import xml.etree.ElementTree as ET
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+from loopback import expect, expect_equal, fail, first_line  # noqa: E402
+
 STARTUP_SECONDS = 60
 RUN_SECONDS = 120
-
-
-def fail(message):
-    print("FAIL: " + message, file=sys.stderr)
-    sys.exit(1)
-
-
-def expect(condition, message):
-    if not condition:
-        fail(message)
-
-
-def expect_equal(what, got, want):
-    if got != want:
-        fail("%s: expected %r, got %r" % (what, want, got))
 
 
 class Server:
@@ -58,12 +45,7 @@ class Server:
         self.process = subprocess.Popen(
             [binary, "--listen", listen, "--data_dir", data_dir] + list(extra),
             stdout=subprocess.PIPE, stderr=self.log, text=True)
-        line = []
-        reader = threading.Thread(target=lambda: line.append(self.process.stdout.readline()))
-        reader.daemon = True
-        reader.start()
-        reader.join(STARTUP_SECONDS)
-        first = line[0].rstrip("\n") if line else ""
+        first = first_line(self.process, STARTUP_SECONDS)
         match = re.fullmatch(r"listening on (127\.0\.0\.1:(\d+))", first)
         if not match or int(match.group(2)) == 0:
             self.process.kill()

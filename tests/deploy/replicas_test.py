@@ -10,44 +10,38 @@ port), has its own data directory, and knows the other two (--replica,
 2. The CLI asked at a replica that does not own a session follows the
    redirect (get, stats, loads, run); a wrong token there still fails with
    PERMISSION_DENIED, and an id naming an unknown replica gets NOT_FOUND
-   naming it.
+   naming it. The haptic bridge given a replica that does not own its
+   session probes it where it lives.
 3. The load tester pointed at one replica spreads its sessions over the
    three and loses nothing.
-4. One replica killed with SIGKILL while clients work on the other two:
+4. One replica drained with SIGTERM exits 0 at once and, restarted, has
+   every session, none behind.
+5. One replica killed with SIGKILL while clients work on the other two:
    a session created meanwhile is placed on a live replica; the killed one,
    restarted on its data directory, has all its sessions, with every
    acknowledged command (the step count, the loads); the clients of the
    other replicas finish their scripts without a single reconnect.
 
-Usage: replicas_test.py --server PATH --client PATH --load PATH
+Usage: replicas_test.py --server PATH --client PATH --load PATH --bridge PATH
 """
 
 import argparse
 import json
 import os
-import re
 import shutil
 import signal
 import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+from loopback import expect, fail, first_line  # noqa: E402
 
 STARTUP_SECONDS = 60
 CALL_SECONDS = 120
 HOSTS = ["127.0.0.1", "127.0.0.2", "127.0.0.3"]
-
-
-def fail(message):
-    print("FAIL: " + message, file=sys.stderr)
-    sys.exit(1)
-
-
-def expect(condition, message):
-    if not condition:
-        fail(message)
 
 
 def free_port():
@@ -90,12 +84,7 @@ class Replica:
              "--snapshot_every_steps", "2000"],
             stdout=subprocess.PIPE, stderr=log, text=True)
         log.close()
-        line = []
-        reader = threading.Thread(target=lambda: line.append(self.process.stdout.readline()))
-        reader.daemon = True
-        reader.start()
-        reader.join(STARTUP_SECONDS)
-        first = line[0].rstrip("\n") if line else ""
+        first = first_line(self.process, STARTUP_SECONDS)
         if first != "listening on " + self.address:
             self.process.kill()
             fail("%s's first line: expected 'listening on %s', got %r (log %s)"
@@ -142,6 +131,7 @@ def main():
     parser.add_argument("--server", required=True)
     parser.add_argument("--client", required=True)
     parser.add_argument("--load", required=True)
+    parser.add_argument("--bridge", required=True)
     args = parser.parse_args()
     cli = Cli(args.client)
     root = tempfile.mkdtemp(prefix="dynsolid-replicas-")
@@ -214,6 +204,29 @@ def main():
                % (s1["id"], before["step"]))
         print("redirects: every session through both other replicas; a script on %s run "
               "through r2" % s1["id"])
+
+        # 2b. The haptic bridge, given r2's address and a session on r0:
+        #     the probe stream follows the redirect and contact models come.
+        hand = os.path.join(root, "hand.txt")
+        write(hand, "0 1.5 1.5 3.05\n0.3 1.5 1.5 3.05\n1.0 1.5 1.5 2.98\n2.0 1.5 1.5 2.98\n")
+        metrics_path = os.path.join(root, "bridge.json")
+        s0 = sessions[3]
+        bridge = subprocess.run(
+            [args.bridge, "--server", replicas[2].address, "--id", s0["id"], "--token",
+             s0["token"], "--device", "virtual_hand", "--script", hand, "--hand_stiffness", "500",
+             "--rt_priority", "0", "--json", metrics_path, "--verbose"],
+            capture_output=True, text=True, timeout=CALL_SECONDS)
+        expect(bridge.returncode == 0, "dynsolid-haptic-bridge through r2 on %s: exit %d: %s"
+               % (s0["id"], bridge.returncode, bridge.stderr.strip()[-2000:]))
+        with open(metrics_path) as f:
+            metrics = json.load(f)
+        expect(metrics["models_received"] > 100,
+               "the bridge through r2 on %s received %d contact models in 2 s"
+               % (s0["id"], metrics["models_received"]))
+        expect("lives on replica r0" in bridge.stderr,
+               "the bridge's log does not show the redirect it followed: %r" % bridge.stderr[-500:])
+        print("haptic bridge: through r2 to %s, %d contact models"
+              % (s0["id"], metrics["models_received"]))
 
         # 3. The load tester through one replica.
         load_json = os.path.join(root, "load.json")

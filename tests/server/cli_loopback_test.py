@@ -9,36 +9,25 @@ Usage: cli_loopback_test.py --server PATH --client PATH
 
 import argparse
 import json
+import os
 import re
 import signal
 import subprocess
 import sys
-import threading
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+from loopback import expect_equal, fail, first_line  # noqa: E402
 
 STARTUP_SECONDS = 30
 CALL_SECONDS = 60
 SHUTDOWN_SECONDS = 20
 
 
-def fail(message):
-    print("FAIL: " + message, file=sys.stderr)
-    sys.exit(1)
-
-
-def expect_equal(what, got, want):
-    if got != want:
-        fail("%s: expected %r, got %r" % (what, want, got))
-
-
 def read_first_line(process, timeout):
-    line = []
-    reader = threading.Thread(target=lambda: line.append(process.stdout.readline()))
-    reader.daemon = True
-    reader.start()
-    reader.join(timeout)
+    line = first_line(process, timeout)
     if not line:
         fail("the server printed no line within %d s" % timeout)
-    return line[0].rstrip("\n")
+    return line
 
 
 def client(args, server, *command):

@@ -93,6 +93,8 @@ struct SimCore::Prebuilt {
   // An undo's or redo's solid for `for_scene`, or the factory's error.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid>>> solid;
   std::shared_ptr<const Scene> for_scene;
+  // A paint's prepared material, or the error preparing it gave.
+  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedPaint>>> paint;
 };
 
 uint64_t SimCore::LastSeq(const std::string& client_id) const {
@@ -104,7 +106,7 @@ bool SimCore::NeedsBuild(const CommandRequest& request) const {
   auto it = clients_.find(request.client_id());
   if (it != clients_.end() && request.seq() <= it->second.last_seq) return false;  // an old seq
   const Command& c = request.command();
-  if (c.kind_case() == Command::kEdit) return true;
+  if (c.kind_case() == Command::kEdit || c.kind_case() == Command::kPaintMaterial) return true;
   if (factory_ == nullptr) return false;
   if (c.kind_case() == Command::kUndo && history_.can_undo()) {
     return history_.next_undo().scene != scene_;
@@ -124,6 +126,14 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
     return [scene = scene_, solid = solid_, edit = c.edit()]() {
       auto out = std::make_shared<Prebuilt>();
       out->edit = sculpt::PrepareEdit(*scene, *solid, edit);
+      return out;
+    };
+  }
+  if (c.kind_case() == Command::kPaintMaterial) {
+    // Solid::PreparePaint reads only what stepping leaves alone.
+    return [solid = solid_, paint = c.paint_material()]() {
+      auto out = std::make_shared<Prebuilt>();
+      out->paint = solid->PreparePaint(paint);
       return out;
     };
   }
@@ -339,7 +349,13 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply, Prebuilt* pre
       return Rename(solid_->Unfix(c.unfix().constraint_id()), "constraint_id",
                     "unfix.constraint_id");
     case Command::kPaintMaterial: {
-      absl::Status s = solid_->PaintMaterial(c.paint_material());
+      absl::Status s;
+      if (prebuilt != nullptr && prebuilt->paint.has_value()) {
+        s = prebuilt->paint->ok() ? solid_->ApplyPaint(***prebuilt->paint)
+                                  : prebuilt->paint->status();
+      } else {
+        s = solid_->PaintMaterial(c.paint_material());
+      }
       if (!s.ok()) return Rename(s, "paint", "paint_material");
       ++fields_version_;
       return s;

@@ -71,7 +71,8 @@ class SimCore {
                   std::shared_ptr<Prebuilt> prebuilt = nullptr);
 
   // ---- Building off the loop. A topology edit, and an undo or redo into
-  // another topology, build a new solid (hundreds of ms). NeedsBuild says
+  // another topology, build a new solid (hundreds of ms); a paint builds
+  // the solid's new material (tens to hundreds of ms). NeedsBuild says
   // whether `request` is such a new command; Prebuild returns the build to
   // run on another thread while the loop goes on stepping. The caller must
   // apply no other command until it hands the result to Process (the build

@@ -13,17 +13,20 @@ struct BackwardEuler::Flat {
   mutable Eigen::VectorXd out;
 };
 
-void BackwardEuler::SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>& k0) {
-  const int64_t n = md_.rows();
+std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& md,
+                                                          const std::vector<uint8_t>& fixed,
+                                                          double h,
+                                                          const Eigen::SparseMatrix<double>& k0) {
+  const int64_t n = md.rows();
   std::vector<Eigen::Triplet<double>> t;
   for (int64_t r = 0; r < n; ++r) {
-    for (SparseMatrix::InnerIterator it(md_, r); it; ++it) {
+    for (SparseMatrix::InnerIterator it(md, r); it; ++it) {
       for (int c = 0; c < 3; ++c) t.emplace_back(3 * r + c, 3 * it.col() + c, it.value());
     }
   }
   for (int k = 0; k < k0.outerSize(); ++k) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(k0, k); it; ++it) {
-      t.emplace_back(it.row(), it.col(), h_ * h_ * it.value());
+      t.emplace_back(it.row(), it.col(), h * h * it.value());
     }
   }
   Eigen::SparseMatrix<double> p(3 * n, 3 * n);
@@ -31,14 +34,19 @@ void BackwardEuler::SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>
   // Fixed DOFs: identity rows and columns.
   for (int k = 0; k < p.outerSize(); ++k) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(p, k); it; ++it) {
-      if (fixed_[it.row() / 3] || fixed_[it.col() / 3]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
+      if (fixed[it.row() / 3] || fixed[it.col() / 3]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
     }
   }
   auto flat = std::make_shared<Flat>();
   flat->factor.compute(p);
-  if (flat->factor.info() != Eigen::Success) return;  // keep the column preconditioner
+  if (flat->factor.info() != Eigen::Success) return nullptr;
   flat->out.resize(3 * n);
-  flat_ = std::move(flat);
+  return flat;
+}
+
+void BackwardEuler::SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>& k0) {
+  std::shared_ptr<Flat> flat = Factor(md_, fixed_, h_, k0);
+  if (flat != nullptr) flat_ = std::move(flat);  // else keep the column preconditioner
 }
 
 void BackwardEuler::Precondition(const Points& r, Points& z) const {
@@ -53,17 +61,34 @@ void BackwardEuler::Precondition(const Points& r, Points& z) const {
   Mask(z);
 }
 
+BackwardEuler::Prepared BackwardEuler::Prepare(const SparseMatrix& mt, const SparseMatrix* dt,
+                                               double h, std::vector<uint8_t> fixed,
+                                               const Eigen::SparseMatrix<double>* k0) {
+  Prepared p;
+  p.h = h;
+  p.md = mt;
+  if (dt != nullptr) p.md += h * (*dt);
+  const int64_t n = mt.rows();
+  p.fixed = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
+  p.pre.Setup(p.md, p.fixed, Preconditioner::kIncompleteCholesky);
+  if (k0 != nullptr) p.flat = Factor(p.md, p.fixed, h, *k0);
+  return p;
+}
+
 void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h,
                           std::vector<uint8_t> fixed) {
+  Setup(mt, dt, Prepare(*mt, dt, h, std::move(fixed), nullptr));
+}
+
+void BackwardEuler::Setup(const SparseMatrix* mt, const SparseMatrix* dt, Prepared prepared) {
   mt_ = mt;
   dt_ = dt;
-  h_ = h;
-  md_ = *mt;
-  if (dt != nullptr) md_ += h * (*dt);
-  flat_.reset();
+  h_ = prepared.h;
+  md_ = std::move(prepared.md);
+  fixed_ = std::move(prepared.fixed);
+  pre_ = std::move(prepared.pre);
+  flat_ = std::move(prepared.flat);
   const int64_t n = mt->rows();
-  fixed_ = fixed.empty() ? std::vector<uint8_t>(n, 0) : std::move(fixed);
-  pre_.Setup(md_, fixed_, Preconditioner::kIncompleteCholesky);
   for (Points* m : {&v_, &rhs_, &x_, &r_, &z_, &p_, &q_, &tmp_, &kx_, &c_}) m->setZero(n, 3);
   ResetWarmStart();
 }

@@ -64,6 +64,24 @@ class BackwardEuler {
 
   void Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h, std::vector<uint8_t> fixed);
 
+  // Setup's costly part (Mt + h Dt, its preconditioner and, with `k0`, the
+  // stiffness preconditioner's factor), made from values alone: another
+  // thread may make it while this integrator steps. Setup(mt, dt, prepared)
+  // then gives the bits of Setup(mt, dt, h, fixed) followed by
+  // SetStiffnessPreconditioner(*k0), for mt and dt equal to the ones given
+  // here.
+  struct Flat;
+  struct Prepared {
+    SparseMatrix md;
+    std::vector<uint8_t> fixed;
+    double h = 0;
+    ColumnPreconditioner pre;
+    std::shared_ptr<Flat> flat;
+  };
+  static Prepared Prepare(const SparseMatrix& mt, const SparseMatrix* dt, double h,
+                          std::vector<uint8_t> fixed, const Eigen::SparseMatrix<double>* k0);
+  void Setup(const SparseMatrix* mt, const SparseMatrix* dt, Prepared prepared);
+
   // One step from (p, p_prev) to p_next. `force` = F (then F - h Kt (v + dv0)
   // takes one Kt product) or `force_ahead` gives it directly; both then
   // solve the same system from the warm start dv0 with PCG to `tolerance`
@@ -119,8 +137,10 @@ class BackwardEuler {
   SparseMatrix md_;  // Mt + h Dt
   std::vector<uint8_t> fixed_;
   ColumnPreconditioner pre_;
-  struct Flat;
   std::shared_ptr<Flat> flat_;
+  // The factor of md + h^2 K0 (fixed DOFs identity), or null when it fails.
+  static std::shared_ptr<Flat> Factor(const SparseMatrix& md, const std::vector<uint8_t>& fixed,
+                                      double h, const Eigen::SparseMatrix<double>& k0);
   void Precondition(const Points& r, Points& z) const;
   Points v_, rhs_, x_, r_, z_, p_, q_, tmp_, kx_, c_;
   History history_;

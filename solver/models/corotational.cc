@@ -193,6 +193,9 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
 }
 
 void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
+  // The float copies depend only on the (fixed) double matrices: once made,
+  // they stay right (a paint prepared off the loop makes them there).
+  if (on == single_ && (!on || packed_f_[0].size() == packed_[0].size())) return;
   single_ = on;
   for (int kind = 0; kind < 3; ++kind) {
     packed_f_[kind].clear();

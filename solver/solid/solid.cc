@@ -816,6 +816,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
 }
 
 void Solid::Impl::InstallMaterial(MaterialBuild b) {
+  ++material_epoch;
   gravity_mass.resize(0);  // per material
   for (auto& boxes : element_boxes) boxes.clear();  // per layout (Locate)
   // The old model references the old layout: replace the model first.
@@ -829,10 +830,13 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   ConfigureLinearized();
 }
 
+bool Solid::Impl::SinglePrecisionLinearized() const {
+  return use_implicit && !double_cg && settings.cg_tolerance() >= kSinglePrecisionCgTolerance;
+}
+
 void Solid::Impl::ConfigureLinearized() {
   if (corotational == nullptr) return;
-  corotational->SetSinglePrecisionLinearized(
-      use_implicit && !double_cg && settings.cg_tolerance() >= kSinglePrecisionCgTolerance);
+  corotational->SetSinglePrecisionLinearized(SinglePrecisionLinearized());
 }
 
 int Solid::Impl::SubstepsFor(double omega) const {
@@ -1422,9 +1426,18 @@ std::pair<uint64_t, uint64_t> Solid::Fingerprint(const Scene& scene) const {
 // ---- Material painting.
 
 absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
-  Impl& im = *impl_;
+  ASSIGN_OR_RETURN(std::shared_ptr<PreparedPaint> prepared, PreparePaint(paint));
+  return ApplyPaint(*prepared);
+}
+
+absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
+    const MaterialPaint& paint) const {
+  const Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidateMaterialPaint(paint, "paint"));
   RETURN_IF_ERROR(im.CheckControlCells(paint.region(), "paint.region"));
+  auto out = std::make_shared<PreparedPaint>();
+  out->paint = paint;
+  out->material_epoch = im.material_epoch;
   const models::ElementLayout& old = *im.layout;
   const Material& target = paint.material();
   int64_t touched = 0;
@@ -1434,7 +1447,8 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
   // isotropic C, and the local-frame model's diagonal blocks use the last
   // two) and m the smallest density ratio over the samples; unpainted
   // samples have ratio 1. Then omega'^2 <= omega^2 r / m.
-  double stiffness_ratio = 1, mass_ratio = 1;
+  double& stiffness_ratio = out->stiffness_ratio;
+  double& mass_ratio = out->mass_ratio;
   auto stiffness_ratios = [](const models::MaterialPoint& a, const models::MaterialPoint& b) {
     const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
     return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
@@ -1468,11 +1482,34 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
     return absl::InvalidArgumentError(
         "paint.region contains no material sample (quadrature point) of the solid");
   }
-  ASSIGN_OR_RETURN(MaterialBuild build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
+  ASSIGN_OR_RETURN(out->build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
+  if (im.use_implicit) {
+    out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational);
+    // The float copies of the element matrices, here rather than when
+    // installed (ConfigureLinearized then finds them made).
+    out->build.corotational->SetSinglePrecisionLinearized(im.SinglePrecisionLinearized());
+    // The integrator's matrices and factors (a paint keeps one sub-step).
+    out->implicit_setup = integrators::BackwardEuler::Prepare(
+        out->build.mt, out->build.has_damping ? &out->build.dt : nullptr, h_, im.fixed, &out->k0);
+  }
+  return out;
+}
+
+absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
+  Impl& im = *impl_;
+  std::shared_ptr<PreparedPaint> again;
+  PreparedPaint* p = &prepared;
+  if (prepared.material_epoch != im.material_epoch || prepared.build.model == nullptr) {
+    // Prepared for a material that has changed since (or used up): the
+    // same paint on the current one.
+    ASSIGN_OR_RETURN(again, PreparePaint(prepared.paint));
+    p = again.get();
+  }
+  MaterialBuild& build = p->build;
   // The stable step: from the bound when it keeps the sub-step count (or
   // the step is implicit), else estimated afresh (power iteration, the
   // costliest part of a paint). Sub-steps never drop on a paint.
-  double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
+  double omega = im.omega_max * std::sqrt(p->stiffness_ratio / p->mass_ratio);
   bool estimated = false;
   int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
   if (!im.use_implicit && substeps > im.substeps) {
@@ -1486,19 +1523,15 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
         2.0 / omega, " s) but solver.max_substeps is ", im.settings.max_substeps(),
         "; paint a softer or denser material, or lower the time step"));
   }
-  Eigen::SparseMatrix<double> k0;
-  if (im.use_implicit) {
-    k0 = im.StiffnessMatrix(*build.layout, *build.corotational);
-  }
   // Nothing can fail from here on.
   build.model->set_frames(im.model->frames());
   im.InstallMaterial(std::move(build));
-  if (im.use_implicit) im.k0 = std::move(k0);
+  if (im.use_implicit) im.k0 = std::move(p->k0);
   im.omega_max = omega;
   if (estimated) im.omega_fixed = im.fixed;  // a bound holds for the old estimate's set
   im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
   const double old_h = im.h_sub;
-  im.SetSubsteps(substeps, h_);
+  im.SetSubsteps(substeps, h_, &p->implicit_setup);
   if (im.h_sub != old_h) p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
   im.RebuildConstantLoads();  // gravity follows the density
   total_mass_ = im.mt.sum();

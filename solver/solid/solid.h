@@ -293,6 +293,27 @@ class Solid {
   // when the sub-steps must grow, the stable-step estimate.
   absl::Status PaintMaterial(const MaterialPaint& paint);
 
+  // PaintMaterial in two halves, so that a server can build a paint off
+  // the simulation thread (PaintMaterial is exactly PreparePaint, then
+  // ApplyPaint: the same bits either way).
+  //
+  // PreparePaint does the costly part: the new element layout, the model
+  // with its element matrices, mass and damping, the implicit scheme's K0.
+  // It reads only what stepping leaves alone, so it may run on another
+  // thread while Step runs; no other call that changes the solid may run
+  // meanwhile. Its errors are PaintMaterial's (but for the sub-step limit,
+  // which ApplyPaint checks when the stable step must be estimated anew).
+  //
+  // ApplyPaint installs it at a step boundary: frames carried over, the
+  // stable step and sub-steps, the constant loads. It estimates the stable
+  // step (power iteration, on the solid's threads) only when the bound would
+  // raise the sub-step count, as PaintMaterial does. A paint prepared
+  // before another material change is prepared again here. On error
+  // nothing changed.
+  class PreparedPaint;
+  absl::StatusOr<std::shared_ptr<PreparedPaint>> PreparePaint(const MaterialPaint& paint) const;
+  absl::Status ApplyPaint(PreparedPaint& prepared);
+
   // Ids of the active point forces, pressures and fixed-region constraints,
   // ascending.
   std::vector<int64_t> load_ids() const;

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -98,6 +99,20 @@ struct MaterialBuild {
   SparseMatrix mt, dt;
   bool has_damping = false;
   int64_t shared_matrix_bytes = 0, element_bytes = 0;
+};
+
+// A paint's costly half (Solid::PreparePaint), for Solid::ApplyPaint.
+class Solid::PreparedPaint {
+ public:
+  MaterialPaint paint;
+  uint64_t material_epoch = 0;  // Impl::material_epoch it was made for
+  MaterialBuild build;
+  Eigen::SparseMatrix<double> k0;  // the implicit scheme's, for build
+  // Backward Euler's Setup for build at one sub-step, with k0.
+  std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
+  // Bounds of the stiffness increase and the density decrease over the
+  // painted samples (PaintMaterial's stable-step bound).
+  double stiffness_ratio = 1, mass_ratio = 1;
 };
 
 struct Solid::Impl {
@@ -284,10 +299,16 @@ struct Solid::Impl {
   Points velocity, mass_velocity, f_next;
   bool forces_valid = false;
 
-  void SetSubsteps(int n, double h) {
+  void SetSubsteps(int n, double h,
+                   std::optional<integrators::BackwardEuler::Prepared>* prepared = nullptr) {
     substeps = n;
     h_sub = h / n;
-    if (use_implicit) {
+    if (use_implicit && prepared != nullptr && prepared->has_value() &&
+        (*prepared)->h == h_sub && (*prepared)->fixed == fixed) {
+      // Made off the loop for these very values (a prepared paint).
+      implicit.Setup(&mt, has_damping ? &dt : nullptr, std::move(**prepared));
+      prepared->reset();
+    } else if (use_implicit) {
       implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
       if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
     } else {
@@ -377,10 +398,13 @@ struct Solid::Impl {
   bool SameMassAndDamping(const models::ElementLayout& l) const;
   bool paint_reuse = true;  // tests turn it off for a from-scratch reference
   void InstallMaterial(MaterialBuild b);
+  // Counts InstallMaterial calls: a prepared paint is for one material.
+  uint64_t material_epoch = 0;
   // Backward Euler's CG products in single precision when the tolerance
   // allows (kSinglePrecisionCgTolerance); after the model or use_implicit
   // changes.
   void ConfigureLinearized();
+  bool SinglePrecisionLinearized() const;
   bool double_cg = false;  // SetDoublePrecisionCgForTesting
   int SubstepsFor(double omega) const;
   // Loads from the lists (in id order), from scratch: f_const (point forces

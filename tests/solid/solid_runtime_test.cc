@@ -5,6 +5,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <thread>
 #include <tuple>
 
 #include <Eigen/Geometry>
@@ -369,6 +370,66 @@ TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
       for (int i = 0; i < 20; ++i) ASSERT_OK(s->Step());
       EXPECT_TRUE(s->control_positions() == finals[1]) << "restored: " << solver << " | " << paint;
     }
+  }
+}
+
+// A paint prepared on another thread while the solid steps (what the server
+// does off its simulation loop), installed 15 steps later, gives the bits of
+// painting at that step; one prepared before another paint is prepared
+// again for the new material; a failing one changes nothing.
+TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenApplied) {
+  const std::string base = R"pb(
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
+    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
+    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
+  )pb";
+  const MaterialPaint stiffer = Parse<MaterialPaint>(
+      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
+      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  const MaterialPaint softer = Parse<MaterialPaint>(
+      "region { sphere { center { x: 1 y: 1.5 z: 1.5 } radius: 0.9 } } "
+      "material { young_modulus: 5e4 } strength: 1");
+  for (const char* solver : {"solver { time_step: 1e-3 }",
+                             "solver { model: COROTATIONAL integrator: BACKWARD_EULER "
+                             "time_step: 2e-3 }"}) {
+    auto reference = Make(base + solver);
+    auto live = Make(base + solver);
+    ASSERT_NE(reference, nullptr);
+    ASSERT_NE(live, nullptr);
+    for (int i = 0; i < 5; ++i) {
+      ASSERT_OK(reference->Step());
+      ASSERT_OK(live->Step());
+    }
+    // Prepared on a thread while `live` takes 15 steps.
+    absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> prepared;
+    std::thread builder([&] { prepared = live->PreparePaint(stiffer); });
+    for (int i = 0; i < 15; ++i) ASSERT_OK(live->Step());
+    builder.join();
+    ASSERT_OK(prepared);
+    for (int i = 0; i < 15; ++i) ASSERT_OK(reference->Step());
+    ASSERT_OK(reference->PaintMaterial(stiffer));
+    ASSERT_OK(live->ApplyPaint(**prepared));
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // Prepared, then another paint lands first: applying it paints the
+    // current material.
+    absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> stale = live->PreparePaint(stiffer);
+    ASSERT_OK(stale);
+    ASSERT_OK(live->PaintMaterial(softer));
+    ASSERT_OK(live->ApplyPaint(**stale));
+    ASSERT_OK(reference->PaintMaterial(softer));
+    ASSERT_OK(reference->PaintMaterial(stiffer));
+    for (int i = 0; i < 20; ++i) {
+      ASSERT_OK(live->Step());
+      ASSERT_OK(reference->Step());
+    }
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // A paint of no sample is refused when prepared.
+    EXPECT_THAT(live->PreparePaint(Parse<MaterialPaint>(
+                    "region { sphere { center { x: 9 y: 9 z: 9 } radius: 0.1 } } "
+                    "material { young_modulus: 1e6 } strength: 1")),
+                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("no material sample")));
   }
 }
 

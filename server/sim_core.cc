@@ -95,6 +95,11 @@ struct SimCore::Prebuilt {
   std::shared_ptr<const Scene> for_scene;
   // A paint's prepared material, or the error preparing it gave.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedPaint>>> paint;
+  // An undo's or redo's state prepared for the solid it goes into (the
+  // current one, or `solid` above), for the history entry whose state is
+  // `for_state`.
+  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedState>>> state;
+  const std::string* for_state = nullptr;
 };
 
 uint64_t SimCore::LastSeq(const std::string& client_id) const {
@@ -107,12 +112,11 @@ bool SimCore::NeedsBuild(const CommandRequest& request) const {
   if (it != clients_.end() && request.seq() <= it->second.last_seq) return false;  // an old seq
   const Command& c = request.command();
   if (c.kind_case() == Command::kEdit || c.kind_case() == Command::kPaintMaterial) return true;
-  if (factory_ == nullptr) return false;
   if (c.kind_case() == Command::kUndo && history_.can_undo()) {
-    return history_.next_undo().scene != scene_;
+    return factory_ != nullptr || history_.next_undo().scene == scene_;
   }
   if (c.kind_case() == Command::kRedo && history_.can_redo()) {
-    return history_.next_redo().scene != scene_;
+    return factory_ != nullptr || history_.next_redo().scene == scene_;
   }
   return false;
 }
@@ -137,12 +141,29 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
       return out;
     };
   }
-  std::shared_ptr<const Scene> target =
-      c.kind_case() == Command::kUndo ? history_.next_undo().scene : history_.next_redo().scene;
-  return [factory = factory_, target, original = original_]() {
+  const HistoryItem& item =
+      c.kind_case() == Command::kUndo ? history_.next_undo() : history_.next_redo();
+  // The entry stays put until Process takes the result (no command applies
+  // meanwhile), so its state is read where it is.
+  const std::string* state = &item.state;
+  if (item.scene == scene_) {
+    // The same solid: its state prepared (parsed, its material built).
+    return [solid = solid_, state]() {
+      auto out = std::make_shared<Prebuilt>();
+      out->for_state = state;
+      out->state = solid->PrepareState(*state);
+      return out;
+    };
+  }
+  std::shared_ptr<const Scene> target = item.scene;
+  return [factory = factory_, target, original = original_, state]() {
     auto out = std::make_shared<Prebuilt>();
     out->for_scene = target;
     out->solid = factory(target == original ? nullptr : target.get());
+    if (out->solid->ok()) {
+      out->for_state = state;
+      out->state = (**out->solid)->PrepareState(*state);
+    }
     return out;
   };
 }
@@ -452,8 +473,17 @@ absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply,
 }
 
 absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
+  // The state prepared off the loop for this entry, if any (its errors are
+  // the restore's).
+  solid::Solid::PreparedState* prepared = nullptr;
+  if (prebuilt != nullptr && prebuilt->state.has_value() && prebuilt->for_state == &item.state) {
+    if (!prebuilt->state->ok()) return prebuilt->state->status();
+    prepared = prebuilt->state->value().get();
+  }
   if (item.scene == scene_) {
-    return solid_->RestoreStateAtClock(item.state, solid_->time(), solid_->steps());
+    return prepared != nullptr
+               ? solid_->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
+               : solid_->RestoreStateAtClock(item.state, solid_->time(), solid_->steps());
   }
   if (factory_ == nullptr) {
     return absl::FailedPreconditionError("this session cannot rebuild its solid (no factory)");
@@ -463,7 +493,9 @@ absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
           ? *std::move(prebuilt->solid)
           : factory_(item.scene == original_ ? nullptr : item.scene.get());
   if (!rebuilt.ok()) return rebuilt.status();
-  RETURN_IF_ERROR((*rebuilt)->RestoreStateAtClock(item.state, solid_->time(), solid_->steps()));
+  RETURN_IF_ERROR(prepared != nullptr && prebuilt->for_scene == item.scene
+                      ? (*rebuilt)->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
+                      : (*rebuilt)->RestoreStateAtClock(item.state, solid_->time(), solid_->steps()));
   (*rebuilt)->set_topology_version(solid_->topology_version() + 1);
   solid_ = *std::move(rebuilt);
   scene_ = item.scene;

@@ -1644,9 +1644,10 @@ absl::Status Solid::RestoreStateAtClock(std::string_view bytes, double time, int
   return Restore(bytes, &clock);
 }
 
-absl::Status Solid::Restore(std::string_view bytes, const std::pair<double, int64_t>* clock) {
+absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
+    std::string_view bytes) const {
   static_assert(sizeof(models::MaterialPoint) == 4 * sizeof(double));
-  Impl& im = *impl_;
+  const Impl& im = *impl_;
   const int64_t nc = p_.rows();
   if (bytes.size() < kHeaderBytes + 8 || std::memcmp(bytes.data(), kStateMagic, 8) != 0) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -1899,47 +1900,125 @@ absl::Status Solid::Restore(std::string_view bytes, const std::pair<double, int6
     }
   }
 
+  // Backward Euler's Setup for the restored fixed set, sub-steps, mass and
+  // K0 (made here, off the loop when a server prepares an undo).
+  std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
+  if (im.use_implicit) {
+    std::vector<uint8_t> fixed(fix_count.size());
+    for (size_t i = 0; i < fixed.size(); ++i) fixed[i] = fix_count[i] > 0 ? 1 : 0;
+    const SparseMatrix& mt = build ? build->mt : im.mt;
+    const bool damped = build ? build->has_damping : im.has_damping;
+    const SparseMatrix& dt = build ? build->dt : im.dt;
+    if (build) build->corotational->SetSinglePrecisionLinearized(im.SinglePrecisionLinearized());
+    implicit_setup = integrators::BackwardEuler::Prepare(mt, damped ? &dt : nullptr, h_ / substeps,
+                                                         std::move(fixed), build ? &k0 : &im.k0);
+  }
+
+  auto out = std::make_shared<PreparedState>();
+  out->material_epoch = im.material_epoch;
+  out->time = time;
+  out->steps = steps;
+  out->rollbacks = rollbacks;
+  out->substeps = substeps;
+  out->omega = omega;
+  out->stable = stable;
+  out->forces_valid = forces_valid;
+  out->strain = strain;
+  out->rebase = rebase;
+  out->ledger = ledger;
+  out->p = std::move(p);
+  out->p_prev = std::move(p_prev);
+  out->f = std::move(f);
+  out->f_press = std::move(f_press);
+  out->hold = std::move(hold);
+  out->warm = std::move(warm);
+  out->omega_fixed_bytes = omega_fixed_bytes;
+  out->next_id = next_id;
+  out->gravity = gravity;
+  out->point_loads = std::move(point_loads);
+  out->pressures = std::move(pressures);
+  out->fixes = std::move(fixes);
+  out->fix_count = std::move(fix_count);
+  out->drags = std::move(drags);
+  out->frames = std::move(frames);
+  out->build = std::move(build);
+  out->k0 = std::move(k0);
+  out->implicit_setup = std::move(implicit_setup);
+  return out;
+}
+
+absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareState(
+    std::string bytes) const {
+  ASSIGN_OR_RETURN(std::shared_ptr<PreparedState> out, PrepareStateView(bytes));
+  out->bytes = std::move(bytes);
+  return out;
+}
+
+absl::Status Solid::Restore(std::string_view bytes, const std::pair<double, int64_t>* clock) {
+  ASSIGN_OR_RETURN(std::shared_ptr<PreparedState> state, PrepareStateView(bytes));
+  return Install(*state, clock);
+}
+
+absl::Status Solid::RestorePreparedAtClock(PreparedState& state, double time, int64_t steps) {
+  const std::pair<double, int64_t> clock{time, steps};
+  return Install(state, &clock);
+}
+
+absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int64_t>* clock) {
+  Impl& im = *impl_;
+  std::shared_ptr<PreparedState> again;
+  PreparedState* ps = &prepared;
+  if (prepared.material_epoch != im.material_epoch || prepared.used) {
+    // Prepared against a material that has changed since: again, now.
+    if (prepared.bytes.empty()) {
+      return absl::InternalError("solid state: prepared for another material, bytes not kept");
+    }
+    ASSIGN_OR_RETURN(again, PrepareStateView(prepared.bytes));
+    ps = again.get();
+  }
+  PreparedState& s = *ps;
+  s.used = true;
   // Nothing can fail from here on.
-  if (build) {
-    im.InstallMaterial(*std::move(build));
-    if (im.use_implicit) im.k0 = std::move(k0);
+  if (s.build) {
+    im.InstallMaterial(*std::move(s.build));
+    if (im.use_implicit) im.k0 = std::move(s.k0);
     total_mass_ = im.mt.sum();
     ReportMaterial();
   }
-  im.model->set_frames(frames);
-  im.point_loads = std::move(point_loads);
-  im.pressures = std::move(pressures);
-  im.fixes = std::move(fixes);
-  im.drags = std::move(drags);
-  im.fix_count = std::move(fix_count);
-  im.next_id = next_id;
-  im.gravity = gravity;
+  im.model->set_frames(s.frames);
+  im.point_loads = std::move(s.point_loads);
+  im.pressures = std::move(s.pressures);
+  im.fixes = std::move(s.fixes);
+  im.drags = std::move(s.drags);
+  im.fix_count = std::move(s.fix_count);
+  im.next_id = s.next_id;
+  im.gravity = s.gravity;
   im.RebuildConstantLoads();
   im.RebuildPressure();
-  if (im.has_pressure) im.f_press = std::move(f_press);
-  im.hold = std::move(hold);
-  im.omega_fixed.assign(omega_fixed_bytes.begin(), omega_fixed_bytes.end());
-  im.omega_max = omega;
-  im.stable_step = stable;
+  if (im.has_pressure) im.f_press = std::move(s.f_press);
+  im.hold = std::move(s.hold);
+  im.omega_fixed.assign(s.omega_fixed_bytes.begin(), s.omega_fixed_bytes.end());
+  im.omega_max = s.omega;
+  im.stable_step = s.stable;
   for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
-  im.SetSubsteps(substeps, h_);
-  if (im.use_implicit) im.implicit.set_history(std::move(warm));  // checked above
-  p_ = std::move(p);
-  p_prev_ = std::move(p_prev);
-  im.f = std::move(f);
-  im.forces_valid = forces_valid;
+  im.SetSubsteps(s.substeps, h_, &s.implicit_setup);
+  if (im.use_implicit) im.implicit.set_history(std::move(s.warm));  // checked above
+  p_ = std::move(s.p);
+  p_prev_ = std::move(s.p_prev);
+  im.f = std::move(s.f);
+  im.forces_valid = s.forces_valid;
   im.ClearContact();  // the restored `f` carries no contact load
   ++im.contact.epoch;      // and its fixed set or material may differ
   im.loads_changed = true;  // not saved: recomputing the loads changes no bit
-  im.last_strain_energy = strain;
-  im.ledger = ledger;
-  im.ledger_rebase = rebase;
-  time_ = clock != nullptr ? clock->first : time;
-  steps_ = clock != nullptr ? clock->second : steps;
-  rollbacks_ = rollbacks;
-  report_.substeps = substeps;
-  report_.omega_max = omega;
-  report_.stable_step = stable;
+  im.last_strain_energy = s.strain;
+  im.ledger = s.ledger;
+  im.ledger_rebase = s.rebase;
+  time_ = clock != nullptr ? clock->first : s.time;
+  steps_ = clock != nullptr ? clock->second : s.steps;
+  rollbacks_ = s.rollbacks;
+  report_.substeps = s.substeps;
+  report_.omega_max = s.omega;
+  report_.stable_step = s.stable;
   report_.point_forces = static_cast<int32_t>(im.point_loads.size());
   report_.gravity = im.gravity.squaredNorm() > 0;
   report_.fixed_control_points =

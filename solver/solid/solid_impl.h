@@ -434,4 +434,35 @@ struct Solid::Impl {
   }
 };
 
+// A state's parsed contents and the material it holds (Solid::PrepareState),
+// for Solid::RestorePreparedAtClock.
+class Solid::PreparedState {
+ public:
+  std::string bytes;  // kept when prepared for later (PrepareState)
+  uint64_t material_epoch = 0;
+  bool used = false;
+  double time = 0;
+  int64_t steps = 0, rollbacks = 0;
+  int32_t substeps = 1;
+  double omega = 0, stable = 0;
+  bool forces_valid = false;
+  double strain = 0;
+  bool rebase = false;
+  Impl::Ledger ledger;
+  Points p, p_prev, f, f_press, hold;
+  integrators::BackwardEuler::History warm;
+  std::string omega_fixed_bytes;
+  int64_t next_id = 0;
+  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
+  std::vector<Impl::PointLoad> point_loads;
+  std::vector<Impl::PressureLoad> pressures;
+  std::vector<Impl::FixConstraint> fixes;
+  std::vector<int32_t> fix_count;
+  std::vector<Impl::DragLoad> drags;
+  models::InternalForceModel::Frames frames;
+  std::optional<MaterialBuild> build;  // when the material differs
+  Eigen::SparseMatrix<double> k0;      // with build, implicit
+  std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
+};
+
 }  // namespace dynsolid::solid

@@ -433,6 +433,61 @@ TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenAppli
   }
 }
 
+// A state prepared on another thread while the solid steps (a server's undo
+// off its loop), restored later, gives the bits of restoring it then: across
+// a paint (the material rebuilt), and after another paint landed in between
+// (prepared again from its bytes).
+TEST(SolidRuntimeTest, StatePreparedWhileSteppingRestoresTheBitsOfRestoringThen) {
+  const std::string base = R"pb(
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
+    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
+    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
+  )pb";
+  const MaterialPaint paint = Parse<MaterialPaint>(
+      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
+      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  for (const char* solver : {"solver { time_step: 1e-3 }",
+                             "solver { model: COROTATIONAL integrator: BACKWARD_EULER "
+                             "time_step: 2e-3 }"}) {
+    auto reference = Make(base + solver);
+    auto live = Make(base + solver);
+    ASSERT_NE(reference, nullptr);
+    ASSERT_NE(live, nullptr);
+    for (Solid* s : {reference.get(), live.get()}) {
+      for (int i = 0; i < 5; ++i) ASSERT_OK(s->Step());
+    }
+    const std::string before = live->SaveState();
+    for (Solid* s : {reference.get(), live.get()}) {
+      ASSERT_OK(s->PaintMaterial(paint));
+      for (int i = 0; i < 5; ++i) ASSERT_OK(s->Step());
+    }
+    absl::StatusOr<std::shared_ptr<Solid::PreparedState>> prepared;
+    std::thread builder([&] { prepared = live->PrepareState(before); });
+    for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());
+    builder.join();
+    ASSERT_OK(prepared);
+    for (int i = 0; i < 10; ++i) ASSERT_OK(reference->Step());
+    ASSERT_OK(reference->RestoreStateAtClock(before, reference->time(), reference->steps()));
+    ASSERT_OK(live->RestorePreparedAtClock(**prepared, live->time(), live->steps()));
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // Prepared, then a paint lands first: restored from its bytes again.
+    absl::StatusOr<std::shared_ptr<Solid::PreparedState>> stale = live->PrepareState(before);
+    ASSERT_OK(stale);
+    for (Solid* s : {reference.get(), live.get()}) ASSERT_OK(s->PaintMaterial(paint));
+    ASSERT_OK(live->RestorePreparedAtClock(**stale, live->time(), live->steps()));
+    ASSERT_OK(reference->RestoreStateAtClock(before, reference->time(), reference->steps()));
+    for (Solid* s : {reference.get(), live.get()}) {
+      for (int i = 0; i < 20; ++i) ASSERT_OK(s->Step());
+    }
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // Bad bytes are refused when prepared.
+    EXPECT_THAT(live->PrepareState(before.substr(0, 100)),
+                StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checksum")));
+  }
+}
+
 TEST(SolidRuntimeTest, PaintingDensityChangesTheMassExactly) {
   // Level 0: two unit hexahedra, exact volumes.
   const char* text = R"pb(

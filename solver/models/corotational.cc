@@ -139,7 +139,7 @@ Eigen::Matrix<double, 6, 6> Isotropic(double lambda, double mu) {
 
 CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
                                      WorkerPool& pool, const CorotationalModel* previous)
-    : layout_(layout), pool_(pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
+    : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
   fem::NodeMatrixX3 g;
   Eigen::Matrix<double, 6, Eigen::Dynamic> b;
   for (int kind = 0; kind < 3; ++kind) {
@@ -307,7 +307,7 @@ double CorotationalModel::Forces(const Points& d, Points& g) {
   const int parts = static_cast<int>(work_.size());
   // Each part into its own buffer (whichever thread takes it), summed in
   // part order: the same bits for any thread count.
-  pool_.RunParts(parts, [&](int k) { RunBatches(k, d, &frames_, work_[k]); });
+  pool_->RunParts(parts, [&](int k) { RunBatches(k, d, &frames_, work_[k]); });
   SumParts(g);
   double energy = 0;
   for (int k = 0; k < parts; ++k) energy += work_[k].energy;
@@ -344,7 +344,7 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
 void CorotationalModel::UpdateFrames(const Points& d) {
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
-  pool_.RunParts(parts, [&](int k) { FrameBatches(k, d); });
+  pool_->RunParts(parts, [&](int k) { FrameBatches(k, d); });
   timing_.measure_ms = -1;
   timing_.elements_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -352,7 +352,7 @@ void CorotationalModel::UpdateFrames(const Points& d) {
 double CorotationalModel::AffineForces(const Points& x, Points& g) {
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
-  pool_.RunParts(parts, [&](int k) { RunBatches(k, x, nullptr, work_[k], true); });
+  pool_->RunParts(parts, [&](int k) { RunBatches(k, x, nullptr, work_[k], true); });
   SumParts(g);
   double energy = 0;
   for (int k = 0; k < parts; ++k) energy += work_[k].energy;
@@ -363,14 +363,14 @@ double CorotationalModel::AffineForces(const Points& x, Points& g) {
 
 void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
   const int parts = static_cast<int>(work_.size());
-  pool_.RunParts(parts, [&](int k) { RunBatches(k, v, nullptr, work_[k]); });
+  pool_->RunParts(parts, [&](int k) { RunBatches(k, v, nullptr, work_[k]); });
   SumParts(out);
 }
 
 void CorotationalModel::SumParts(Points& out) const {
   out.resize(num_nodes_, 3);
-  const int threads = pool_.size();
-  pool_.Run([&](int t) {
+  const int threads = pool_->size();
+  pool_->Run([&](int t) {
     const int64_t n = num_nodes_;
     SumPartRows(schedule_, part_buffers_.data(), static_cast<int32_t>(n * t / threads),
                 static_cast<int32_t>(n * (t + 1) / threads), out);

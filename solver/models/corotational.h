@@ -58,6 +58,7 @@ class CorotationalModel final : public InternalForceModel {
   InternalForceModel::Frames frames() const override { return frames_; }
   void set_frames(const InternalForceModel::Frames& frames) override { frames_ = frames; }
   std::string_view name() const override { return "corotational"; }
+  void set_pool(WorkerPool& pool) override { pool_ = &pool; }
   Timing last_timing() const override { return timing_; }
 
   // out (#nodes by 3, N) = sum_e R_e K R_e^T P v_e for v (#nodes by 3, m):
@@ -120,7 +121,7 @@ class CorotationalModel final : public InternalForceModel {
   void SumParts(Points& out) const;  // out = sum of the parts' buffers
 
   const ElementLayout& layout_;
-  WorkerPool& pool_;
+  WorkerPool* pool_;
   Points rest_;
   int32_t num_nodes_;
   // packed_[kind][group]: 3n x 3n.

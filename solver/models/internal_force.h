@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include "solver/common/worker_pool.h"
 #include "solver/mesh/points.h"
 
 namespace dynsolid::models {
@@ -46,6 +47,11 @@ class InternalForceModel {
   virtual void set_frames(const Frames& frames) = 0;
 
   virtual std::string_view name() const = 0;
+
+  // The threads its passes run on from now on (a model built on a thread
+  // pool of its own, off a solid's simulation thread, moves to the solid's
+  // when installed; the results do not depend on the pool's size).
+  virtual void set_pool(WorkerPool& pool) = 0;
 
   // Wall time of the last Forces call's parts, milliseconds: the
   // deformation measure (-1 when the model has none) and the element loop.

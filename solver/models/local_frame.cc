@@ -40,7 +40,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
                                  int32_t num_nodes, WorkerPool& pool,
                                  const LocalFrameModel* previous, bool float_products)
     : layout_(layout),
-      pool_(pool),
+      pool_(&pool),
       measure_(std::move(measure)),
       num_nodes_(num_nodes),
       float_products_(float_products) {
@@ -490,12 +490,12 @@ double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed
   // ElementSchedule).
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = kForceParts;
-  const int threads = pool_.size();
-  pool_.RunParts(measure_.parts(), [&](int k) { measure_.ForwardPart(d, k, delta_); });
+  const int threads = pool_->size();
+  pool_->RunParts(measure_.parts(), [&](int k) { measure_.ForwardPart(d, k, delta_); });
   const auto t1 = std::chrono::steady_clock::now();
-  pool_.RunParts(parts, [&](int k) { RunBatches<T>(k, d, packed, work_[k]); });
+  pool_->RunParts(parts, [&](int k) { RunBatches<T>(k, d, packed, work_[k]); });
   // y = dE/d delta = sum_e R_e K dhat, summed over the parts' buffers.
-  pool_.Run([&](int t) {
+  pool_->Run([&](int t) {
     const int32_t n = num_nodes_;
     SumPartRows(schedule_, part_buffers_.data(), static_cast<int32_t>(int64_t{n} * t / threads),
                 static_cast<int32_t>(int64_t{n} * (t + 1) / threads), y_);
@@ -506,7 +506,7 @@ double LocalFrameModel::RunForces(const Points& d, Points& g, const KSet& packed
   // The force is y's pull-back through the measure: g = (d delta / d d)^T y
   // (the gradient of the energy).
   g.resize(num_nodes_, 3);
-  pool_.RunParts(measure_.parts(), [&](int k) { measure_.TransposePart(d, y_, k, g); });
+  pool_->RunParts(measure_.parts(), [&](int k) { measure_.TransposePart(d, y_, k, g); });
   const auto t3 = std::chrono::steady_clock::now();
   // The measure's phase holds both its passes (forward and transpose).
   timing_.measure_ms = std::chrono::duration<double, std::milli>((t1 - t0) + (t3 - t2)).count();

@@ -96,6 +96,7 @@ class LocalFrameModel final : public InternalForceModel {
   InternalForceModel::Frames frames() const override;
   void set_frames(const InternalForceModel::Frames& frames) override;
   std::string_view name() const override { return "local_frame"; }
+  void set_pool(WorkerPool& pool) override { pool_ = &pool; }
   Timing last_timing() const override { return timing_; }
 
   // The three matrices of group `group` of kind block `kind` (tests, reports).
@@ -127,7 +128,7 @@ class LocalFrameModel final : public InternalForceModel {
   void RunBatches(int part, const Points& d, const KSet& packed, Workspace& w);
 
   const ElementLayout& layout_;
-  WorkerPool& pool_;
+  WorkerPool* pool_;
   DeformationMeasure measure_;
   int32_t num_nodes_;
   // packed_[kind][group][axis]: n x n, packed for the batched products

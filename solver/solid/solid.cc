@@ -760,8 +760,9 @@ bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
 }
 
 absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
-                                                         bool reuse) const {
+                                                         bool reuse, WorkerPool* model_pool) const {
   reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
+  WorkerPool& threads = model_pool != nullptr ? *model_pool : *pool;
   MaterialBuild b;
   for (const auto& array : l->materials) {
     for (const auto& m : array) b.has_damping |= m.damping > 0;
@@ -783,7 +784,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
         " MiB; use fewer subdivision levels or a more regular control mesh"));
   }
   if (corot) {
-    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, *pool,
+    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, threads,
                                                          reuse ? corotational : nullptr);
     b.corotational = m.get();
     b.shared_matrix_bytes = m->shared_matrix_bytes();
@@ -798,7 +799,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
             ? previous->measure()
             : models::DeformationMeasure(d->fine(), d->elements, rest_nodes, pool->size());
     auto m = std::make_unique<models::LocalFrameModel>(
-        *l, std::move(measure), d->elements.num_nodes(), *pool, previous,
+        *l, std::move(measure), d->elements.num_nodes(), threads, previous,
         settings.element_products() == SolverSettings::FLOAT);
     b.shared_matrix_bytes = m->shared_matrix_bytes();
     b.element_bytes = m->per_element_bytes();
@@ -1447,8 +1448,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   // isotropic C, and the local-frame model's diagonal blocks use the last
   // two) and m the smallest density ratio over the samples; unpainted
   // samples have ratio 1. Then omega'^2 <= omega^2 r / m.
-  double& stiffness_ratio = out->stiffness_ratio;
-  double& mass_ratio = out->mass_ratio;
+  double stiffness_ratio = 1, mass_ratio = 1;
   auto stiffness_ratios = [](const models::MaterialPoint& a, const models::MaterialPoint& b) {
     const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
     return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
@@ -1482,7 +1482,32 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     return absl::InvalidArgumentError(
         "paint.region contains no material sample (quadrature point) of the solid");
   }
-  ASSIGN_OR_RETURN(out->build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
+  // The new model's passes (the stable-step estimate below) run on a pool
+  // of this thread's own: the solid's may be stepping.
+  out->pool = std::make_unique<WorkerPool>(1);
+  ASSIGN_OR_RETURN(out->build,
+                   im.BuildMaterial(std::move(layout), /*reuse=*/true, out->pool.get()));
+  // The stable step: from the bound when it keeps the sub-step count (or
+  // the step is implicit), else estimated afresh (power iteration, the
+  // costliest part of a paint). Sub-steps never drop on a paint.
+  out->omega_max_before = im.omega_max;
+  out->substeps_before = im.substeps;
+  out->fixed_before = im.fixed;
+  double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
+  int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
+  if (!im.use_implicit && substeps > im.substeps) {
+    omega = im.EstimateOmegaMax(*out->build.model, out->build.mt, im.fixed);
+    out->estimated = true;
+    substeps = std::max(im.substeps, im.SubstepsFor(omega));
+  }
+  if (substeps > im.settings.max_substeps()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "paint: the painted solid needs ", substeps, " explicit sub-steps (stable step ",
+        2.0 / omega, " s) but solver.max_substeps is ", im.settings.max_substeps(),
+        "; paint a softer or denser material, or lower the time step"));
+  }
+  out->omega = omega;
+  out->substeps = substeps;
   if (im.use_implicit) {
     out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational);
     // The float copies of the element matrices, here rather than when
@@ -1499,32 +1524,21 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   Impl& im = *impl_;
   std::shared_ptr<PreparedPaint> again;
   PreparedPaint* p = &prepared;
-  if (prepared.material_epoch != im.material_epoch || prepared.build.model == nullptr) {
-    // Prepared for a material that has changed since (or used up): the
-    // same paint on the current one.
+  if (prepared.material_epoch != im.material_epoch || prepared.build.model == nullptr ||
+      prepared.omega_max_before != im.omega_max || prepared.substeps_before != im.substeps ||
+      prepared.fixed_before != im.fixed) {
+    // Prepared for a material, stable step or fixed set that has changed
+    // since (or used up): the same paint on the current solid.
     ASSIGN_OR_RETURN(again, PreparePaint(prepared.paint));
     p = again.get();
   }
   MaterialBuild& build = p->build;
-  // The stable step: from the bound when it keeps the sub-step count (or
-  // the step is implicit), else estimated afresh (power iteration, the
-  // costliest part of a paint). Sub-steps never drop on a paint.
-  double omega = im.omega_max * std::sqrt(p->stiffness_ratio / p->mass_ratio);
-  bool estimated = false;
-  int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
-  if (!im.use_implicit && substeps > im.substeps) {
-    omega = im.EstimateOmegaMax(*build.model, build.mt, im.fixed);
-    estimated = true;
-    substeps = std::max(im.substeps, im.SubstepsFor(omega));
-  }
-  if (substeps > im.settings.max_substeps()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "paint: the painted solid needs ", substeps, " explicit sub-steps (stable step ",
-        2.0 / omega, " s) but solver.max_substeps is ", im.settings.max_substeps(),
-        "; paint a softer or denser material, or lower the time step"));
-  }
+  const double omega = p->omega;
+  const int substeps = p->substeps;
+  const bool estimated = p->estimated;
   // Nothing can fail from here on.
   build.model->set_frames(im.model->frames());
+  build.model->set_pool(*im.pool);
   im.InstallMaterial(std::move(build));
   if (im.use_implicit) im.k0 = std::move(p->k0);
   im.omega_max = omega;

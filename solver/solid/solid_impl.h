@@ -110,9 +110,17 @@ class Solid::PreparedPaint {
   Eigen::SparseMatrix<double> k0;  // the implicit scheme's, for build
   // Backward Euler's Setup for build at one sub-step, with k0.
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
-  // Bounds of the stiffness increase and the density decrease over the
-  // painted samples (PaintMaterial's stable-step bound).
-  double stiffness_ratio = 1, mass_ratio = 1;
+  // The stable step and sub-steps for build, from the solid's as they were
+  // (omega_max, substeps, fixed), with the power iteration done here when
+  // the bound would raise the sub-steps (`estimated`).
+  double omega_max_before = 0;
+  int substeps_before = 0;
+  std::vector<uint8_t> fixed_before;
+  double omega = 0;
+  int substeps = 1;
+  bool estimated = false;
+  // build.model runs on this pool until installed (then on the solid's).
+  std::unique_ptr<WorkerPool> pool;
 };
 
 struct Solid::Impl {
@@ -391,8 +399,11 @@ struct Solid::Impl {
   // matrices of groups with the same rest shape and stiffness samples, the
   // deformation measure, and Mt and Dt when no density or damping sample
   // changed. Each is what integrating again would give, bit for bit.
+  // The model runs on `model_pool` (default: the solid's pool) until
+  // set_pool moves it.
   absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l,
-                                              bool reuse = false) const;
+                                              bool reuse = false,
+                                              WorkerPool* model_pool = nullptr) const;
   // True when every element's density and damping samples in `l` equal the
   // current layout's.
   bool SameMassAndDamping(const models::ElementLayout& l) const;

@@ -425,6 +425,29 @@ TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenAppli
       ASSERT_OK(reference->Step());
     }
     EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // Much stiffer: the explicit step needs more sub-steps, so the stable
+    // step is estimated anew (on the prepared model's own thread pool).
+    const MaterialPaint much_stiffer = Parse<MaterialPaint>(
+        "region { sphere { center { x: 1.5 y: 1.5 z: 2.5 } radius: 0.6 } } "
+        "material { young_modulus: 1e9 } strength: 1");
+    const int before_substeps = live->build_report().substeps;
+    absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> hard;
+    std::thread hard_builder([&] { hard = live->PreparePaint(much_stiffer); });
+    for (int i = 0; i < 5; ++i) ASSERT_OK(live->Step());
+    hard_builder.join();
+    ASSERT_OK(hard);
+    for (int i = 0; i < 5; ++i) ASSERT_OK(reference->Step());
+    ASSERT_OK(live->ApplyPaint(**hard));
+    ASSERT_OK(reference->PaintMaterial(much_stiffer));
+    if (std::string(solver).find("BACKWARD") == std::string::npos) {
+      EXPECT_GT(live->build_report().substeps, before_substeps)
+          << "the estimate was not needed: stable step " << live->build_report().stable_step;
+    }
+    for (int i = 0; i < 10; ++i) {
+      ASSERT_OK(live->Step());
+      ASSERT_OK(reference->Step());
+    }
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver << " (much stiffer)";
     // A paint of no sample is refused when prepared.
     EXPECT_THAT(live->PreparePaint(Parse<MaterialPaint>(
                     "region { sphere { center { x: 9 y: 9 z: 9 } radius: 0.1 } } "

@@ -26,7 +26,6 @@ import argparse
 import csv
 import json
 import os
-import re
 import shutil
 import signal
 import socket
@@ -35,6 +34,9 @@ import sys
 import tempfile
 import threading
 import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+from loopback import fail  # noqa: E402
 
 CALL_SECONDS = 60
 SOFT = (0.75, 1.5)
@@ -51,11 +53,6 @@ RAMP_MS = 10.0
 # (docs/haptic.md "Server").
 SERVER_FLAGS = ["--stream_idle=false", "--stream_nice=0"]
 BRIDGE_FLAGS = []
-
-
-def fail(message):
-    print("FAIL: " + message, file=sys.stderr)
-    sys.exit(1)
 
 
 def check(ok, message):

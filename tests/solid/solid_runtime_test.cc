@@ -43,6 +43,20 @@ T Parse(const std::string& text) {
   return msg;
 }
 
+// A block at one level under a load, and the two ways the paint and
+// restore tests step it (local frame + central difference, corotational +
+// backward Euler).
+constexpr char kPaintBlock[] = R"pb(
+    mesh { block { nx: 3 ny: 3 nz: 3 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
+    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
+    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
+  )pb";
+constexpr const char* kPaintSolvers[] = {
+    "solver { time_step: 1e-3 }",
+    "solver { model: COROTATIONAL integrator: BACKWARD_EULER time_step: 2e-3 }"};
+
 // Centre of mass from the row sums of Mt.
 Eigen::Vector3d Centre(const Solid& s) {
   const Points& p = s.control_positions();
@@ -331,21 +345,13 @@ TEST(SolidRuntimeTest, PaintingStiffnessOnHalfTheBeamChangesTheStaticDeflection)
 // for a stiffness-only paint and one that changes density too, and for a
 // state restored across a paint.
 TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
-  const std::string base = R"pb(
-    mesh { block { nx: 3 ny: 3 nz: 3 } }
-    subdivision { levels: 1 }
-    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
-    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
-    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
-  )pb";
+  const std::string base = kPaintBlock;
   const char* paints[] = {
       "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
       "material { young_modulus: 4e5 } strength: 1",
       "region { sphere { center { x: 1 y: 1.5 z: 1.5 } radius: 0.9 } } "
       "material { young_modulus: 2e5 density: 3000 } strength: 0.5"};
-  for (const char* solver : {"solver { time_step: 1e-3 }",
-                             "solver { model: COROTATIONAL integrator: BACKWARD_EULER "
-                             "time_step: 2e-3 }"}) {
+  for (const char* solver : kPaintSolvers) {
     for (const char* paint : paints) {
       std::vector<Points> finals;
       std::string saved;
@@ -378,22 +384,14 @@ TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
 // painting at that step; one prepared before another paint is prepared
 // again for the new material; a failing one changes nothing.
 TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenApplied) {
-  const std::string base = R"pb(
-    mesh { block { nx: 3 ny: 3 nz: 3 } }
-    subdivision { levels: 1 }
-    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
-    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
-    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
-  )pb";
+  const std::string base = kPaintBlock;
   const MaterialPaint stiffer = Parse<MaterialPaint>(
       "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
       "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
   const MaterialPaint softer = Parse<MaterialPaint>(
       "region { sphere { center { x: 1 y: 1.5 z: 1.5 } radius: 0.9 } } "
       "material { young_modulus: 5e4 } strength: 1");
-  for (const char* solver : {"solver { time_step: 1e-3 }",
-                             "solver { model: COROTATIONAL integrator: BACKWARD_EULER "
-                             "time_step: 2e-3 }"}) {
+  for (const char* solver : kPaintSolvers) {
     auto reference = Make(base + solver);
     auto live = Make(base + solver);
     ASSERT_NE(reference, nullptr);
@@ -461,19 +459,11 @@ TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenAppli
 // a paint (the material rebuilt), and after another paint landed in between
 // (prepared again from its bytes).
 TEST(SolidRuntimeTest, StatePreparedWhileSteppingRestoresTheBitsOfRestoringThen) {
-  const std::string base = R"pb(
-    mesh { block { nx: 3 ny: 3 nz: 3 } }
-    subdivision { levels: 1 }
-    materials { base { young_modulus: 1e5 density: 1000 damping: 200 } }
-    constraints { fixed { box { min { x: -1 y: -1 z: -0.01 } max { x: 4 y: 4 z: 0.01 } } } }
-    loads { point_forces { position { x: 1.5 y: 1.5 z: 3 } force { x: 3000 } } }
-  )pb";
+  const std::string base = kPaintBlock;
   const MaterialPaint paint = Parse<MaterialPaint>(
       "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
       "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
-  for (const char* solver : {"solver { time_step: 1e-3 }",
-                             "solver { model: COROTATIONAL integrator: BACKWARD_EULER "
-                             "time_step: 2e-3 }"}) {
+  for (const char* solver : kPaintSolvers) {
     auto reference = Make(base + solver);
     auto live = Make(base + solver);
     ASSERT_NE(reference, nullptr);

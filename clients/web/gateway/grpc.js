@@ -29,7 +29,8 @@ export function loadService(protoRoot = DEFAULT_PROTO_ROOT) {
   return { definition, Sessions: pkg.dynsolid.Sessions };
 }
 
-export function makeClient(service, address) {
+// `credentials`: TLS (grpc.credentials.createSsl) or, when absent, plaintext.
+export function makeClient(service, address, credentials = undefined) {
   const options = {
     'grpc.max_receive_message_length': 64 << 20,
     'grpc.max_send_message_length': 16 << 20,
@@ -37,7 +38,7 @@ export function makeClient(service, address) {
     'grpc.initial_reconnect_backoff_ms': 200,
     'grpc.max_reconnect_backoff_ms': 1000,
   };
-  return new service.Sessions(address, grpc.credentials.createInsecure(), options);
+  return new service.Sessions(address, credentials || grpc.credentials.createInsecure(), options);
 }
 
 // Watch with the Frame bytes passed through untouched: the page decodes

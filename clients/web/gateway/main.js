@@ -4,6 +4,7 @@
 // page's WebSocket to dynsolid-server's gRPC service.
 //
 //   node gateway/main.js --server 127.0.0.1:50051 [--listen 127.0.0.1:8080]
+//                        [--tls_ca ROOTS.pem]
 //
 // Prints "listening on http://HOST:PORT/" on stdout once it serves (port 0:
 // a free one).
@@ -13,7 +14,7 @@ import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { WebSocketServer } from 'ws';
-import { loadService, DEFAULT_PROTO_ROOT } from './grpc.js';
+import { loadService, DEFAULT_PROTO_ROOT, grpc } from './grpc.js';
 import { Router } from './router.js';
 import { Bridge } from './bridge.js';
 
@@ -22,7 +23,7 @@ const root = path.resolve(here, '..');
 
 function parseArgs(argv) {
   const args = { server: '127.0.0.1:50051', listen: '127.0.0.1:8080', proto: DEFAULT_PROTO_ROOT,
-    create: '', levels: '' };
+    create: '', levels: '', tls_ca: '' };
   for (let i = 0; i < argv.length; ++i) {
     const a = argv[i];
     const eq = a.indexOf('=');
@@ -30,10 +31,11 @@ function parseArgs(argv) {
     if (!a.startsWith('--') || !(key in args)) {
       if (a === '--help' || a === '-h') {
         console.log('usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]\n' +
+          '         [--tls_ca ROOTS.pem]          call the servers over TLS with these roots\n' +
           '         [--create SCENE [--levels N]]   open a session on a built-in scene and print its URL');
         process.exit(0);
       }
-      console.error(`gateway: unknown argument ${a} (--server, --listen, --proto, --create, --levels)`);
+      console.error(`gateway: unknown argument ${a} (--server, --listen, --proto, --tls_ca, --create, --levels)`);
       process.exit(2);
     }
     args[key] = eq > 0 ? a.slice(eq + 1) : argv[++i];
@@ -110,7 +112,16 @@ function main() {
   const args = parseArgs(process.argv.slice(2));
   const service = loadService(args.proto);
   // Sessions on other replicas are reached where they live (router.js).
-  const router = new Router(service, args.server);
+  let credentials;
+  if (args.tls_ca) {
+    try {
+      credentials = grpc.credentials.createSsl(fs.readFileSync(args.tls_ca));
+    } catch (e) {
+      console.error(`gateway: cannot read --tls_ca ${args.tls_ca}: ${e.message}`);
+      process.exit(2);
+    }
+  }
+  const router = new Router(service, args.server, credentials);
   // Sessions created through this gateway: id -> token. Its pages may join
   // them from the list (docs/viewer.md "Access").
   const tokens = new Map();

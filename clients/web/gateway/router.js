@@ -63,9 +63,11 @@ export function parseRedirect(err) {
 }
 
 export class Router {
-  constructor(service, firstAddress) {
+  // credentials: for every replica (TLS roots), or undefined for plaintext.
+  constructor(service, firstAddress, credentials = undefined) {
     this.service = service;
     this.first = firstAddress;
+    this.credentials = credentials;
     this.clients = new Map();  // address -> grpc client
     this.owners = new Map();   // session id -> address
   }
@@ -73,7 +75,7 @@ export class Router {
   client(address = this.first) {
     let c = this.clients.get(address);
     if (!c) {
-      c = makeClient(this.service, address);
+      c = makeClient(this.service, address, this.credentials);
       this.clients.set(address, c);
     }
     return c;

@@ -68,8 +68,13 @@ function startProcess(cmd, args, ready, logFile, timeoutMs = 60000) {
 }
 
 export class Server {
-  constructor(dir) {
+  // `extra`: more dynsolid-server flags (TLS, replicas); `listen`: the
+  // address to bind (default a free port on 127.0.0.1).
+  constructor(dir, { extra = [], listen = null, log = 'server.log' } = {}) {
     this.dir = dir;
+    this.extra = extra;
+    this.listen = listen;
+    this.logName = log;
     this.data = path.join(dir, 'data');
     // A new server starts empty (a run never recovers an earlier run's
     // sessions); start() again on the same object keeps the data (restarts).
@@ -81,14 +86,14 @@ export class Server {
 
   // Starts (or restarts, on the same address and data dir) the server.
   async start() {
-    const listen = this.address || '127.0.0.1:0';
+    const listen = this.address || this.listen || '127.0.0.1:0';
     // Snapshots often, so a restart replays few steps. Streaming threads at
     // normal priority: here the browser shares the machine's cores with the
     // server, and its software WebGL would starve SCHED_IDLE threads (the
     // server's default, for a server whose viewers sit elsewhere).
     const { proc, match } = await startProcess(serverBinary(), ['--listen', listen, '--data_dir', this.data,
-      '--snapshot_every_steps', '500', '--stream_idle=false', '--stream_nice=0'],
-      /listening on (\S+)/, path.join(this.dir, 'server.log'));
+      '--snapshot_every_steps', '500', '--stream_idle=false', '--stream_nice=0', ...this.extra],
+      /listening on (\S+)/, path.join(this.dir, this.logName));
     this.proc = proc;
     this.address = match[1];
     proc.removeAllListeners('exit');
@@ -108,14 +113,17 @@ export class Server {
 }
 
 export class Gateway {
-  constructor(dir, serverAddress) {
+  // `extra`: more gateway flags (--tls_ca).
+  constructor(dir, serverAddress, extra = []) {
     this.dir = dir;
     this.serverAddress = serverAddress;
+    this.extra = extra;
   }
 
   async start() {
     const { proc, match } = await startProcess(process.execPath,
-      [path.join(WEB_ROOT, 'gateway/main.js'), '--server', this.serverAddress, '--listen', '127.0.0.1:0'],
+      [path.join(WEB_ROOT, 'gateway/main.js'), '--server', this.serverAddress, '--listen', '127.0.0.1:0',
+        ...this.extra],
       /listening on (\S+)/, path.join(this.dir, 'gateway.log'));
     this.proc = proc;
     proc.removeAllListeners('exit');

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -280,6 +281,61 @@ void ProbeHub::StopAll(const absl::Status& status) {
   for (auto& c : channels) c->Stop(status);
 }
 
+struct ProbeHub::ContactBuild {
+  std::thread builder;
+  std::atomic<bool> done{false};
+  std::shared_ptr<solid::Solid> solid;  // kept alive for the build
+  absl::StatusOr<std::shared_ptr<solid::Solid::PreparedContact>> built =
+      absl::UnknownError("none");
+  std::chrono::steady_clock::time_point started;
+  int64_t epoch = -1;
+  // The (solid, epoch) whose build failed: not tried again.
+  const solid::Solid* failed_solid = nullptr;
+  int64_t failed_epoch = -1;
+};
+
+ProbeHub::ProbeHub(ProbeLimits limits)
+    : limits_(limits), contact_(std::make_unique<ContactBuild>()) {}
+
+ProbeHub::~ProbeHub() {
+  if (contact_->builder.joinable()) contact_->builder.join();
+}
+
+void ProbeHub::TendContactBuild(SimCore& core) {
+  solid::Solid& solid = core.solid();
+  ContactBuild& b = *contact_;
+  if (b.builder.joinable() && b.done.load(std::memory_order_acquire)) {
+    b.builder.join();
+    b.done.store(false);
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - b.started)
+            .count();
+    if (b.built.ok()) {
+      const bool installed = solid.InstallContactCache(*b.built);
+      SessionLog().info("contact stiffness built off the loop in {:.0f} ms{}", ms,
+                        installed ? "" : " (the solid changed meanwhile: dropped)");
+    } else {
+      SessionLog().warn("no contact stiffness: {}", b.built.status().ToString());
+      b.failed_solid = b.solid.get();
+      b.failed_epoch = b.epoch;
+    }
+    b.built = absl::UnknownError("none");
+    b.solid.reset();
+  }
+  if (contact_wanted_ && !b.builder.joinable() && solid.ContactCacheStale() &&
+      !(b.failed_solid == &solid && b.failed_epoch == solid.contact_epoch())) {
+    b.solid = core.shared_solid();
+    b.epoch = solid.contact_epoch();
+    b.started = std::chrono::steady_clock::now();
+    b.builder = std::thread([&b, wake = wake_, job = solid.ContactCacheJob()] {
+      b.built = job();
+      b.done.store(true, std::memory_order_release);
+      if (wake) wake();
+    });
+  }
+  contact_wanted_ = false;
+}
+
 ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
   UpdateResult result;
   std::vector<std::shared_ptr<ProbeChannel>> channels;
@@ -290,6 +346,7 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
   if (channels.empty() && sims_.empty() && !loads_on_) return result;
   const auto t0 = std::chrono::steady_clock::now();
   solid::Solid& solid = core.solid();
+  TendContactBuild(core);  // a finished build installed
 
   // Follow the attached set (in attach order).
   std::vector<Sim> sims;
@@ -363,7 +420,7 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
         m->set_topology_version(topology);
         m->set_horizon(s.channel->horizon());
         absl::StatusOr<solid::Solid::ContactResponse> r =
-            solid.ContactResponseAt(*c, s.channel->horizon());
+            solid.ContactResponseAt(*c, s.channel->horizon(), /*build_if_stale=*/false);
         if (r.ok()) {
           m->set_stiffness(r->stiffness);
           m->set_damping(r->damping);
@@ -377,6 +434,8 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
             SessionLog().info("probe {}: contact stiffness built in {:.0f} ms", s.channel->id(),
                               r->build_ms);
           }
+        } else if (absl::IsUnavailable(r.status())) {
+          contact_wanted_ = true;  // being built (or to be): sent without stiffness
         } else {
           SessionLog().warn("probe {}: no contact stiffness: {}", s.channel->id(),
                             r.status().ToString());
@@ -422,6 +481,7 @@ ProbeHub::UpdateResult ProbeHub::Update(SimCore& core) {
     result.contact_ended = true;
     pushed_ = false;
   }
+  TendContactBuild(core);  // a build started if a probe wanted one
   result.ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return result;

@@ -139,7 +139,8 @@ class ProbeChannel {
 // from the simulation thread only.
 class ProbeHub {
  public:
-  explicit ProbeHub(ProbeLimits limits = {}) : limits_(limits) {}
+  explicit ProbeHub(ProbeLimits limits = {});
+  ~ProbeHub();  // waits for a contact stiffness build under way
   ProbeHub(const ProbeHub&) = delete;
   ProbeHub& operator=(const ProbeHub&) = delete;
 
@@ -202,6 +203,16 @@ class ProbeHub {
   int64_t total_ ABSL_GUARDED_BY(mu_) = 0;
   bool stopped_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status stop_status_ ABSL_GUARDED_BY(mu_);
+
+  // The contact stiffness (Solid::ContactCacheJob), built on a thread of its
+  // own when a probe needs it: a build on the loop would hold it (0.2 s on
+  // block3, seconds after a topology edit). Meanwhile models go out without
+  // stiffness (the bridge renders its coupling alone). Simulation thread
+  // only, but `contact_done_`.
+  void TendContactBuild(SimCore& core);
+  struct ContactBuild;  // probe.cc
+  std::unique_ptr<ContactBuild> contact_;
+  bool contact_wanted_ = false;  // a probe asked for a model while stale
 
   // Simulation thread only.
   std::vector<Sim> sims_;

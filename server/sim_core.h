@@ -105,6 +105,8 @@ class SimCore {
   // The solid may be replaced by a topology edit, undo or redo: do not keep
   // references across Process calls.
   solid::Solid& solid() { return *solid_; }
+  // The same, shared: for work on another thread that must keep it alive.
+  std::shared_ptr<solid::Solid> shared_solid() const { return solid_; }
   const solid::Solid& solid() const { return *solid_; }
   int64_t steps() const { return solid_->steps(); }
   bool paused() const { return paused_; }

@@ -312,6 +312,23 @@ class Solid {
   // raise the sub-step count, as PaintMaterial does. A paint prepared
   // before another material change is prepared again here. On error
   // nothing changed.
+  // The contact stiffness behind ContactResponseAt, built off the
+  // simulation thread (a server's probes; building it on the loop holds the
+  // loop for the local-frame model's finite-difference columns: 0.2 s on
+  // block3, seconds on an edited solid).
+  // ContactCacheStale: ContactResponseAt would have to build it first.
+  // ContactCacheJob (on the simulation thread) copies what the build reads
+  // and returns the build, to run on any thread while this solid steps and
+  // changes, as long as the solid lives; the local-frame columns use a model
+  // of the job's own. InstallContactCache takes its result when it is still
+  // for this solid's material and fixed set, and says whether it did.
+  class PreparedContact;
+  bool ContactCacheStale() const;
+  // Changes with the material and the fixed set (a cache is for one).
+  int64_t contact_epoch() const;
+  std::function<absl::StatusOr<std::shared_ptr<PreparedContact>>()> ContactCacheJob() const;
+  bool InstallContactCache(std::shared_ptr<PreparedContact> prepared);
+
   class PreparedPaint;
   absl::StatusOr<std::shared_ptr<PreparedPaint>> PreparePaint(const MaterialPaint& paint) const;
   absl::Status ApplyPaint(PreparedPaint& prepared);
@@ -515,7 +532,10 @@ class Solid {
     double horizon = 0;           // tau, seconds
     double build_ms = 0;          // time spent (re)building the cache in this call
   };
-  absl::StatusOr<ContactResponse> ContactResponseAt(const SurfacePoint& c, double horizon);
+  // With `build_if_stale` false, a stale cache is not built here:
+  // Unavailable (build it with ContactCacheJob).
+  absl::StatusOr<ContactResponse> ContactResponseAt(const SurfacePoint& c, double horizon,
+                                                    bool build_if_stale = true);
   static constexpr int kMaxContactDenseDofs = 3000;
 
   // Contact loads: constant forces (newtons) at surface material points,

@@ -18,6 +18,8 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/models/local_frame.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -230,8 +232,180 @@ absl::StatusOr<Solid::SurfacePoint> Solid::SurfacePointAt(int32_t quad, double u
   return out;
 }
 
+absl::Status Solid::Impl::BuildContactCache(const ContactInputs& in, ContactCache& cache) {
+  // The free coordinates.
+  cache.free_index.assign(in.nc, -1);
+  cache.free_points.clear();
+  for (int32_t i = 0; i < in.nc; ++i) {
+    if (in.fixed[i]) continue;
+    cache.free_index[i] = static_cast<int32_t>(cache.free_points.size());
+    cache.free_points.push_back(i);
+  }
+  const int64_t nf = static_cast<int64_t>(cache.free_points.size());
+  const int64_t n = 3 * nf;
+  if (n == 0) return absl::FailedPreconditionError("contact: every control point is fixed");
+  if (n > kMaxContactDenseDofs) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("contact: ", n,
+                     " free control coordinates; the contact stiffness is built densely "
+                     "for at most ",
+                     kMaxContactDenseDofs));
+  }
+  cache.k.setZero(n, n);
+  if (in.triplets) {
+    // A^T K A at rest (and the penalty springs), node-major 3 i + a.
+    for (const Eigen::Triplet<double, int32_t>& t : in.triplets()) {
+      const int32_t ri = cache.free_index[t.row() / 3], ci = cache.free_index[t.col() / 3];
+      if (ri < 0 || ci < 0) continue;
+      cache.k(3 * ri + t.row() % 3, 3 * ci + t.col() % 3) += t.value();
+    }
+  } else {
+    // Forward differences of the internal control forces (and springs) at
+    // the current positions, frames found afresh each time.
+    const double eps = 1e-6 * std::max(in.extent, 1e-9);
+    const Points g0 = in.forces(in.p);
+    Points p = in.p;
+    for (int64_t f = 0; f < nf; ++f) {
+      const int32_t i = cache.free_points[f];
+      for (int a = 0; a < 3; ++a) {
+        const double keep = p(i, a);
+        p(i, a) = keep + eps;
+        const Points g = in.forces(p);
+        p(i, a) = keep;
+        for (int64_t f2 = 0; f2 < nf; ++f2) {
+          const int32_t j = cache.free_points[f2];
+          for (int b = 0; b < 3; ++b) cache.k(3 * f2 + b, 3 * f + a) = (g(j, b) - g0(j, b)) / eps;
+        }
+      }
+    }
+    for (size_t s = 0; s < in.spring_point.size(); ++s) {
+      const int32_t f = cache.free_index[in.spring_point[s]];
+      if (f < 0) continue;
+      for (int a = 0; a < 3; ++a) cache.k(3 * f + a, 3 * f + a) += in.spring_k[s];
+    }
+    const Eigen::MatrixXd sym = 0.5 * (cache.k + cache.k.transpose());
+    cache.k = sym;
+  }
+  // Mass and damping on the free points.
+  cache.mass.setZero(nf, nf);
+  cache.damping.setZero(nf, nf);
+  for (int32_t r = 0; r < in.mt.outerSize(); ++r) {
+    const int32_t fr = cache.free_index[r];
+    if (fr < 0) continue;
+    for (SparseMatrix::InnerIterator it(in.mt, r); it; ++it) {
+      const int32_t fc = cache.free_index[it.col()];
+      if (fc >= 0) cache.mass(fr, fc) += it.value();
+    }
+    if (in.has_damping) {
+      for (SparseMatrix::InnerIterator it(in.dt, r); it; ++it) {
+        const int32_t fc = cache.free_index[it.col()];
+        if (fc >= 0) cache.damping(fr, fc) += it.value();
+      }
+    }
+  }
+  cache.k_ldlt.compute(cache.k);
+  cache.k_definite = false;
+  if (cache.k_ldlt.info() == Eigen::Success && cache.k_ldlt.isPositive()) {
+    const Eigen::VectorXd d = cache.k_ldlt.vectorD();
+    cache.k_definite = d.minCoeff() > 1e-10 * d.maxCoeff();
+  }
+  cache.epoch = in.epoch;
+  cache.horizon = 0;
+  cache.s_ok = false;
+  return absl::OkStatus();
+}
+
+Solid::Impl::ContactInputs Solid::Impl::ContactInputsNow(const Points& p) const {
+  const Impl& im = *this;
+  ContactInputs in;
+  in.epoch = im.contact.epoch;
+  in.nc = p.rows();
+  in.fixed = im.fixed;
+  in.mt = im.mt;
+  in.dt = im.dt;
+  in.has_damping = im.has_damping;
+  in.spring_point = im.spring_point;
+  in.spring_k = im.spring_k;
+  if (im.corotational == nullptr) {
+    in.p = p;
+    const Eigen::Vector3d ext =
+        (im.rest_control.colwise().maxCoeff() - im.rest_control.colwise().minCoeff()).transpose();
+    in.extent = ext.maxCoeff();
+  }
+  return in;
+}
+
+int64_t Solid::contact_epoch() const { return impl_->contact.epoch; }
+
+bool Solid::ContactCacheStale() const {
+  const Impl& im = *impl_;
+  return im.contact.cache == nullptr || im.contact.cache->epoch != im.contact.epoch;
+}
+
+class Solid::PreparedContact {
+ public:
+  const Solid* solid = nullptr;
+  std::shared_ptr<Impl::ContactCache> cache;
+};
+
+std::function<absl::StatusOr<std::shared_ptr<Solid::PreparedContact>>()> Solid::ContactCacheJob()
+    const {
+  const Impl& im = *impl_;
+  auto in = std::make_shared<Impl::ContactInputs>(im.ContactInputsNow(p_));
+  // What the job reads of the solid: kept alive by shared ownership (a paint
+  // may replace them meanwhile), and never changed once built.
+  std::shared_ptr<const models::ElementLayout> layout = im.layout;
+  std::shared_ptr<const models::InternalForceModel> model = im.model;
+  const SparseMatrix* nm = &d_.node_matrix;
+  const fem::NodeRows* rows = &im.node_rows;
+  const int32_t num_nodes = d_.elements.num_nodes();
+  const bool float_products = im.settings.element_products() == SolverSettings::FLOAT;
+  const bool corotational = im.corotational != nullptr;
+  return [this, in, layout, model, nm, rows, num_nodes, float_products,
+          corotational]() -> absl::StatusOr<std::shared_ptr<PreparedContact>> {
+    auto out = std::make_shared<PreparedContact>();
+    out->solid = this;
+    out->cache = std::make_shared<Impl::ContactCache>();
+    if (corotational) {
+      const auto& corot = static_cast<const models::CorotationalModel&>(*model);
+      in->triplets = [&] {
+        return Impl::StiffnessTriplets(*nm, *layout, corot, in->spring_point, in->spring_k);
+      };
+      RETURN_IF_ERROR(Impl::BuildContactCache(*in, *out->cache));
+      return out;
+    }
+    // The local-frame columns: a model of this job's own on a pool of its
+    // own, taking the solid's element matrices over (the same forces).
+    const auto& live = static_cast<const models::LocalFrameModel&>(*model);
+    WorkerPool pool(1);
+    models::LocalFrameModel own(*layout, live.measure(), num_nodes, pool, &live, float_products);
+    in->forces = [&](const Points& p) {
+      const Points d = rows->Multiply(p);
+      Points g(d.rows(), 3);
+      own.ResetFrames();
+      own.ExactForces(d, g);
+      Points control;
+      rows->MultiplyTransposed(g, 0, d.rows(), control);
+      return control;
+    };
+    RETURN_IF_ERROR(Impl::BuildContactCache(*in, *out->cache));
+    return out;
+  };
+}
+
+bool Solid::InstallContactCache(std::shared_ptr<PreparedContact> prepared) {
+  Impl& im = *impl_;
+  if (prepared == nullptr || prepared->solid != this ||
+      prepared->cache->epoch != im.contact.epoch) {
+    return false;
+  }
+  im.contact.cache = std::move(prepared->cache);
+  return true;
+}
+
 absl::StatusOr<Solid::ContactResponse> Solid::ContactResponseAt(const SurfacePoint& c,
-                                                                double horizon) {
+                                                                double horizon,
+                                                                bool build_if_stale) {
   Impl& im = *impl_;
   if (!(horizon >= 1e-4 && horizon <= 100)) {
     return absl::InvalidArgumentError(
@@ -245,92 +419,23 @@ absl::StatusOr<Solid::ContactResponse> Solid::ContactResponseAt(const SurfacePoi
   ContactResponse out;
   out.horizon = horizon;
   const auto t_build = Clock::now();
-  if (im.contact.cache == nullptr) im.contact.cache = std::make_shared<Impl::ContactCache>();
+  if (ContactCacheStale()) {
+    if (!build_if_stale) {
+      return absl::UnavailableError("contact: the contact stiffness is being built");
+    }
+    auto cache = std::make_shared<Impl::ContactCache>();
+    Impl::ContactInputs in = im.ContactInputsNow(p_);
+    if (im.corotational != nullptr) {
+      in.triplets = [&im] { return im.StiffnessTriplets(); };
+    } else {
+      in.forces = [this](const Points& p) { return InternalControlForces(p); };
+    }
+    RETURN_IF_ERROR(Impl::BuildContactCache(in, *cache));
+    im.contact.cache = std::move(cache);
+  }
   Impl::ContactCache& cache = *im.contact.cache;
   const int64_t nc = p_.rows();
-  if (cache.epoch != im.contact.epoch) {
-    // The free coordinates.
-    cache.free_index.assign(nc, -1);
-    cache.free_points.clear();
-    for (int32_t i = 0; i < nc; ++i) {
-      if (im.fixed[i]) continue;
-      cache.free_index[i] = static_cast<int32_t>(cache.free_points.size());
-      cache.free_points.push_back(i);
-    }
-    const int64_t nf = static_cast<int64_t>(cache.free_points.size());
-    const int64_t n = 3 * nf;
-    if (n == 0) return absl::FailedPreconditionError("contact: every control point is fixed");
-    if (n > kMaxContactDenseDofs) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("contact: ", n,
-                       " free control coordinates; the contact stiffness is built densely "
-                       "for at most ",
-                       kMaxContactDenseDofs));
-    }
-    cache.k.setZero(n, n);
-    if (im.corotational != nullptr) {
-      // A^T K A at rest (and the penalty springs), node-major 3 i + a.
-      for (const Eigen::Triplet<double, int32_t>& t : im.StiffnessTriplets()) {
-        const int32_t ri = cache.free_index[t.row() / 3], ci = cache.free_index[t.col() / 3];
-        if (ri < 0 || ci < 0) continue;
-        cache.k(3 * ri + t.row() % 3, 3 * ci + t.col() % 3) += t.value();
-      }
-    } else {
-      // Forward differences of the internal control forces (and springs) at
-      // the current positions, frames found afresh each time.
-      const Eigen::Vector3d ext =
-          (im.rest_control.colwise().maxCoeff() - im.rest_control.colwise().minCoeff()).transpose();
-      const double eps = 1e-6 * std::max(ext.maxCoeff(), 1e-9);
-      const Points g0 = InternalControlForces(p_);
-      Points p = p_;
-      for (int64_t f = 0; f < nf; ++f) {
-        const int32_t i = cache.free_points[f];
-        for (int a = 0; a < 3; ++a) {
-          const double keep = p(i, a);
-          p(i, a) = keep + eps;
-          const Points g = InternalControlForces(p);
-          p(i, a) = keep;
-          for (int64_t f2 = 0; f2 < nf; ++f2) {
-            const int32_t j = cache.free_points[f2];
-            for (int b = 0; b < 3; ++b) cache.k(3 * f2 + b, 3 * f + a) = (g(j, b) - g0(j, b)) / eps;
-          }
-        }
-      }
-      for (size_t s = 0; s < im.spring_point.size(); ++s) {
-        const int32_t f = cache.free_index[im.spring_point[s]];
-        if (f < 0) continue;
-        for (int a = 0; a < 3; ++a) cache.k(3 * f + a, 3 * f + a) += im.spring_k[s];
-      }
-      const Eigen::MatrixXd sym = 0.5 * (cache.k + cache.k.transpose());
-      cache.k = sym;
-    }
-    // Mass and damping on the free points.
-    cache.mass.setZero(nf, nf);
-    cache.damping.setZero(nf, nf);
-    for (int32_t r = 0; r < im.mt.outerSize(); ++r) {
-      const int32_t fr = cache.free_index[r];
-      if (fr < 0) continue;
-      for (SparseMatrix::InnerIterator it(im.mt, r); it; ++it) {
-        const int32_t fc = cache.free_index[it.col()];
-        if (fc >= 0) cache.mass(fr, fc) += it.value();
-      }
-      if (im.has_damping) {
-        for (SparseMatrix::InnerIterator it(im.dt, r); it; ++it) {
-          const int32_t fc = cache.free_index[it.col()];
-          if (fc >= 0) cache.damping(fr, fc) += it.value();
-        }
-      }
-    }
-    cache.k_ldlt.compute(cache.k);
-    cache.k_definite = false;
-    if (cache.k_ldlt.info() == Eigen::Success && cache.k_ldlt.isPositive()) {
-      const Eigen::VectorXd d = cache.k_ldlt.vectorD();
-      cache.k_definite = d.minCoeff() > 1e-10 * d.maxCoeff();
-    }
-    cache.epoch = im.contact.epoch;
-    cache.horizon = 0;
-    cache.s_ok = false;
-  }
+
   const int64_t nf = static_cast<int64_t>(cache.free_points.size());
   const int64_t n = 3 * nf;
   if (cache.horizon != horizon) {

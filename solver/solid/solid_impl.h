@@ -129,8 +129,10 @@ struct Solid::Impl {
   fem::NodeRows node_rows;
   SolverSettings settings;
   std::unique_ptr<WorkerPool> pool;
-  std::unique_ptr<models::ElementLayout> layout;  // the model references *layout
-  std::unique_ptr<models::InternalForceModel> model;
+  // Shared with a contact stiffness being built off the loop
+  // (Solid::ContactCacheJob), which may outlive a material change.
+  std::shared_ptr<models::ElementLayout> layout;  // the model references *layout
+  std::shared_ptr<models::InternalForceModel> model;
   SparseMatrix mt, dt;
   bool has_damping = false;
   integrators::CentralDifference integrator;
@@ -236,6 +238,25 @@ struct Solid::Impl {
   // by the change). `epoch` counts changes of what the contact stiffness
   // depends on (material, fixed set); the cache is rebuilt when it moved.
   struct ContactCache;  // solid_contact.cc
+  // What building the contact stiffness reads: the K triplets
+  // (corotational) or the internal forces at `p` (local frame).
+  struct ContactInputs {
+    int64_t epoch = 0;
+    int64_t nc = 0;
+    std::vector<uint8_t> fixed;
+    SparseMatrix mt, dt;
+    bool has_damping = false;
+    std::vector<int32_t> spring_point;
+    std::vector<double> spring_k;
+    std::function<std::vector<Eigen::Triplet<double, int32_t>>()> triplets;
+    std::function<Points(const Points&)> forces;
+    Points p;
+    double extent = 0;  // the rest control mesh's largest side
+  };
+  // The inputs as the solid is now, its positions `p` (forces and
+  // triplets left to the caller).
+  ContactInputs ContactInputsNow(const Points& p) const;
+  static absl::Status BuildContactCache(const ContactInputs& in, ContactCache& cache);
   struct ContactState {
     bool active = false;
     Points force;

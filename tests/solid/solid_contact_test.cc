@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "solver/scene/build.h"
@@ -124,6 +125,57 @@ TEST(SolidContactTest, ResponseSplitsExactlyAndIsStifferThanStatic) {
   ASSERT_OK_AND_ASSIGN(Solid::ContactResponse slow, s->ContactResponseAt(c, 100.0));
   EXPECT_NEAR(slow.stiffness, slow.static_stiffness, 0.02 * slow.static_stiffness);
   EXPECT_LT(slow.velocity.norm(), 1e-12) << "at rest";
+}
+
+// The contact stiffness built by ContactCacheJob on another thread while
+// the solid steps (with a local-frame model of the job's own), installed,
+// answers as the one ContactResponseAt builds itself at the same state; a
+// job for a material that changed meanwhile is not installed; without a
+// built cache and asked not to build, ContactResponseAt says so.
+TEST(SolidContactTest, ContactStiffnessBuiltOffTheLoopAnswersAsTheInlineOne) {
+  for (bool corotational : {false, true}) {
+    auto a = corotational ? Block3Corotational(1) : Block3(1);
+    auto b = corotational ? Block3Corotational(1) : Block3(1);
+    ASSERT_NE(a, nullptr);
+    ASSERT_NE(b, nullptr);
+    for (Solid* s : {a.get(), b.get()}) {
+      ASSERT_OK(s->SetGravity(Parse<Vec3>("z: -9.81")));
+      for (int i = 0; i < 5; ++i) ASSERT_OK(s->Step());
+    }
+    ASSERT_OK_AND_ASSIGN(Solid::SurfacePoint c,
+                         b->ClosestSurfacePoint(Eigen::Vector3d(1.2, 1.9, 3.2)));
+    EXPECT_TRUE(b->ContactCacheStale());
+    EXPECT_THAT(b->ContactResponseAt(c, 0.03, /*build_if_stale=*/false),
+                StatusIs(absl::StatusCode::kUnavailable));
+    // The job copies the state now; b steps on meanwhile.
+    auto job = b->ContactCacheJob();
+    absl::StatusOr<std::shared_ptr<Solid::PreparedContact>> built;
+    std::thread builder([&] { built = job(); });
+    for (int i = 0; i < 5; ++i) ASSERT_OK(b->Step());
+    builder.join();
+    ASSERT_OK(built);
+    ASSERT_TRUE(b->InstallContactCache(*built));
+    EXPECT_FALSE(b->ContactCacheStale());
+    // The inline build at the state the job copied: a, 5 steps behind.
+    ASSERT_OK_AND_ASSIGN(Solid::SurfacePoint ca,
+                         a->ClosestSurfacePoint(Eigen::Vector3d(1.2, 1.9, 3.2)));
+    ASSERT_OK_AND_ASSIGN(Solid::ContactResponse inline_r, a->ContactResponseAt(ca, 0.03));
+    ASSERT_OK_AND_ASSIGN(Solid::ContactResponse job_r,
+                         b->ContactResponseAt(ca, 0.03, /*build_if_stale=*/false));
+    EXPECT_EQ(job_r.build_ms < 50, true);
+    EXPECT_NEAR(job_r.stiffness, inline_r.stiffness, 1e-6 * inline_r.stiffness) << corotational;
+    EXPECT_NEAR(job_r.static_stiffness, inline_r.static_stiffness,
+                1e-6 * inline_r.static_stiffness)
+        << corotational;
+    // A job for the material before a paint is refused.
+    auto stale_job = b->ContactCacheJob();
+    ASSERT_OK(b->PaintMaterial(Parse<MaterialPaint>(
+        "region { sphere { center { x: 1.5 y: 1.5 z: 2.5 } radius: 0.8 } } "
+        "material { young_modulus: 3e5 } strength: 1")));
+    ASSERT_OK_AND_ASSIGN(std::shared_ptr<Solid::PreparedContact> old, stale_job());
+    EXPECT_FALSE(b->InstallContactCache(old));
+    EXPECT_TRUE(b->ContactCacheStale());
+  }
 }
 
 // The static stiffness is the solid's own: a point force at the material

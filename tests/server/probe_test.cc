@@ -265,6 +265,38 @@ TEST_F(ProbeTest, PaintedStifferHalfHasLargerEffectiveStiffness) {
   Close(p);
 }
 
+// Across a topology edit the probe goes on: the edited solid's contact
+// stiffness is built off the simulation loop, models for the new topology
+// come without stiffness meanwhile, and then with it again.
+TEST_F(ProbeTest, ProbeGoesOnAcrossATopologyEditAsItsStiffnessIsRebuilt) {
+  const Session s = CreateBlock3();
+  Probe p = OpenProbe(s);
+  SendPose(p, 1.5, 1.5, 3.05);
+  const ContactModel before = StiffModelFor(p, p.seq).model();
+  const CommandReply edit = Command(s, "extrude", [](dynsolid::Command* c) {
+    ExtrudeFaces* e = c->mutable_edit()->mutable_extrude_faces();
+    *e->add_near() = V3(1.5, 1.5, 3);
+    e->set_distance(1);
+    e->set_layers(1);
+  });
+  ASSERT_EQ(edit.code(), 0) << edit.message();
+  // The probe at the top of the new column (z = 4).
+  SendPose(p, 1.5, 1.5, 4.05);
+  bool saw_unknown = false;
+  const ProbeReply after = ReadUntil(p, [&](const ProbeReply& r) {
+    if (!r.has_model() || r.model().topology_version() == before.topology_version()) return false;
+    if (r.model().stiffness() == 0) saw_unknown = true;
+    return r.model().stiffness() > 0;
+  });
+  EXPECT_TRUE(saw_unknown) << "no model went out while the stiffness was being built";
+  EXPECT_GT(after.model().point().z(), 3.5) << "on the new column";
+  EXPECT_GT(after.model().stiffness(), 0);
+  EXPECT_GT(after.model().static_stiffness(), 0);
+  std::printf("static stiffness at the top: %.4g N/m before, %.4g N/m on the extruded column\n",
+              before.static_stiffness(), after.model().static_stiffness());
+  Close(p);
+}
+
 // A probe pushing in dents the solid: the reaction (minus the reported
 // coupling force) acts at the contact material point.
 TEST_F(ProbeTest, PushingProbeDentsTheSolidAtTheContactPoint) {

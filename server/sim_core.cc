@@ -95,6 +95,8 @@ struct SimCore::Prebuilt {
   std::shared_ptr<const Scene> for_scene;
   // A paint's prepared material, or the error preparing it gave.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedPaint>>> paint;
+  // An unfix's prepared stable step, or the error preparing it gave.
+  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedUnfix>>> unfix;
   // An undo's or redo's state prepared for the solid it goes into (the
   // current one, or `solid` above), for the history entry whose state is
   // `for_state`.
@@ -111,7 +113,10 @@ bool SimCore::NeedsBuild(const CommandRequest& request) const {
   auto it = clients_.find(request.client_id());
   if (it != clients_.end() && request.seq() <= it->second.last_seq) return false;  // an old seq
   const Command& c = request.command();
-  if (c.kind_case() == Command::kEdit || c.kind_case() == Command::kPaintMaterial) return true;
+  if (c.kind_case() == Command::kEdit || c.kind_case() == Command::kPaintMaterial ||
+      c.kind_case() == Command::kUnfix) {
+    return true;
+  }
   if (c.kind_case() == Command::kUndo && history_.can_undo()) {
     return factory_ != nullptr || history_.next_undo().scene == scene_;
   }
@@ -130,6 +135,14 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
     return [scene = scene_, solid = solid_, edit = c.edit()]() {
       auto out = std::make_shared<Prebuilt>();
       out->edit = sculpt::PrepareEdit(*scene, *solid, edit);
+      return out;
+    };
+  }
+  if (c.kind_case() == Command::kUnfix) {
+    // Solid::PrepareUnfix estimates on a model of its own.
+    return [solid = solid_, id = c.unfix().constraint_id()]() {
+      auto out = std::make_shared<Prebuilt>();
+      out->unfix = solid->PrepareUnfix(id);
       return out;
     };
   }
@@ -366,9 +379,16 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply, Prebuilt* pre
       reply->set_constraint_id(*id);
       return absl::OkStatus();
     }
-    case Command::kUnfix:
-      return Rename(solid_->Unfix(c.unfix().constraint_id()), "constraint_id",
-                    "unfix.constraint_id");
+    case Command::kUnfix: {
+      absl::Status s;
+      if (prebuilt != nullptr && prebuilt->unfix.has_value()) {
+        s = prebuilt->unfix->ok() ? solid_->ApplyUnfix(***prebuilt->unfix)
+                                  : prebuilt->unfix->status();
+      } else {
+        s = solid_->Unfix(c.unfix().constraint_id());
+      }
+      return Rename(s, "constraint_id", "unfix.constraint_id");
+    }
     case Command::kPaintMaterial: {
       absl::Status s;
       if (prebuilt != nullptr && prebuilt->paint.has_value()) {

@@ -831,6 +831,17 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   ConfigureLinearized();
 }
 
+std::unique_ptr<models::InternalForceModel> Solid::Impl::ModelCopy(
+    const models::ElementLayout& l, WorkerPool& threads) const {
+  if (corotational != nullptr) {
+    return std::make_unique<models::CorotationalModel>(l, rest_nodes, threads, corotational);
+  }
+  const auto* live = static_cast<const models::LocalFrameModel*>(model.get());
+  return std::make_unique<models::LocalFrameModel>(
+      l, live->measure(), d->elements.num_nodes(), threads, live,
+      settings.element_products() == SolverSettings::FLOAT);
+}
+
 bool Solid::Impl::SinglePrecisionLinearized() const {
   return use_implicit && !double_cg && settings.cg_tolerance() >= kSinglePrecisionCgTolerance;
 }

@@ -322,6 +322,14 @@ class Solid {
   // changes, as long as the solid lives; the local-frame columns use a model
   // of the job's own. InstallContactCache takes its result when it is still
   // for this solid's material and fixed set, and says whether it did.
+  // Unfix in two halves, like PreparePaint and ApplyPaint: the stable-step
+  // estimate an unfix may need (power iteration, up to about 0.5 s) runs in
+  // PrepareUnfix on a model of its own, off the simulation thread;
+  // ApplyUnfix installs it (prepared again if the solid changed since).
+  class PreparedUnfix;
+  absl::StatusOr<std::shared_ptr<PreparedUnfix>> PrepareUnfix(int64_t constraint_id) const;
+  absl::Status ApplyUnfix(PreparedUnfix& prepared);
+
   class PreparedContact;
   bool ContactCacheStale() const;
   // Changes with the material and the fixed set (a cache is for one).

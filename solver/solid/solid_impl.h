@@ -437,6 +437,11 @@ struct Solid::Impl {
   // changes.
   void ConfigureLinearized();
   bool SinglePrecisionLinearized() const;
+  // A model of the current material of its own, on `pool`, for `l` (the
+  // current layout, kept alive by the caller): the live model's element
+  // matrices taken over, the same forces.
+  std::unique_ptr<models::InternalForceModel> ModelCopy(const models::ElementLayout& l,
+                                                        WorkerPool& pool) const;
   bool double_cg = false;  // SetDoublePrecisionCgForTesting
   int SubstepsFor(double omega) const;
   // Loads from the lists (in id order), from scratch: f_const (point forces
@@ -495,6 +500,24 @@ class Solid::PreparedState {
   std::optional<MaterialBuild> build;  // when the material differs
   Eigen::SparseMatrix<double> k0;      // with build, implicit
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
+};
+
+// An unfix's decision and stable-step estimate (Solid::PrepareUnfix).
+class Solid::PreparedUnfix {
+ public:
+  int64_t constraint_id = 0;
+  // What it was prepared for.
+  uint64_t material_epoch = 0;
+  std::vector<int32_t> fix_count_before;
+  double omega_max_before = 0;
+  int substeps_before = 0;
+  bool used = false;
+  // The result.
+  std::vector<int32_t> count;
+  std::vector<uint8_t> new_fixed;
+  bool reestimate = false;
+  double omega = 0;
+  int substeps = 1;
 };
 
 }  // namespace dynsolid::solid

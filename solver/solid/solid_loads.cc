@@ -342,7 +342,13 @@ absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {
 }
 
 absl::Status Solid::Unfix(int64_t constraint_id) {
-  Impl& im = *impl_;
+  ASSIGN_OR_RETURN(std::shared_ptr<PreparedUnfix> prepared, PrepareUnfix(constraint_id));
+  return ApplyUnfix(*prepared);
+}
+
+absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> Solid::PrepareUnfix(
+    int64_t constraint_id) const {
+  const Impl& im = *impl_;
   auto it = std::find_if(im.fixes.begin(), im.fixes.end(),
                          [constraint_id](const Impl::FixConstraint& c) { return c.id == constraint_id; });
   if (it == im.fixes.end()) {
@@ -350,45 +356,71 @@ absl::Status Solid::Unfix(int64_t constraint_id) {
                                             " not found (active fixed regions: ",
                                             IdList(im.fixes), ")"));
   }
-  std::vector<int32_t> count = im.fix_count;
-  for (int32_t i : it->points) --count[i];
+  auto out = std::make_shared<PreparedUnfix>();
+  out->constraint_id = constraint_id;
+  out->material_epoch = im.material_epoch;
+  out->fix_count_before = im.fix_count;
+  out->omega_max_before = im.omega_max;
+  out->substeps_before = im.substeps;
+  out->count = im.fix_count;
+  for (int32_t i : it->points) --out->count[i];
   // The stable-step estimate holds while every point it was made with
-  // fixed stays fixed; otherwise estimate again (the live model's frames
-  // are kept).
-  bool reestimate = false;
-  for (size_t i = 0; i < count.size(); ++i) reestimate |= im.omega_fixed[i] && count[i] == 0;
-  double omega = im.omega_max;
-  int substeps = im.substeps;
-  std::vector<uint8_t> new_fixed(count.size());
-  for (size_t i = 0; i < count.size(); ++i) new_fixed[i] = count[i] > 0 ? 1 : 0;
-  if (reestimate) {
-    const models::InternalForceModel::Frames frames = im.model->frames();
-    omega = im.EstimateOmegaMax(*im.model, im.mt, new_fixed);
-    im.model->set_frames(frames);
+  // fixed stays fixed; otherwise estimate again, on a model of this call's
+  // own (the live one may be stepping on another thread).
+  for (size_t i = 0; i < out->count.size(); ++i) {
+    out->reestimate |= im.omega_fixed[i] && out->count[i] == 0;
+  }
+  out->omega = im.omega_max;
+  out->substeps = im.substeps;
+  out->new_fixed.resize(out->count.size());
+  for (size_t i = 0; i < out->count.size(); ++i) out->new_fixed[i] = out->count[i] > 0 ? 1 : 0;
+  if (out->reestimate) {
+    WorkerPool pool(1);
+    const std::shared_ptr<const models::ElementLayout> layout = im.layout;  // kept for `own`
+    std::unique_ptr<models::InternalForceModel> own = im.ModelCopy(*layout, pool);
+    out->omega = im.EstimateOmegaMax(*own, im.mt, out->new_fixed);
     if (!im.use_implicit) {
-      substeps = std::max(im.substeps, im.SubstepsFor(omega));
-      if (substeps > im.settings.max_substeps()) {
+      out->substeps = std::max(im.substeps, im.SubstepsFor(out->omega));
+      if (out->substeps > im.settings.max_substeps()) {
         return absl::InvalidArgumentError(absl::StrCat(
-            "constraint id ", constraint_id, ": without it the solid needs ", substeps,
-            " explicit sub-steps (stable step ", 2.0 / omega, " s) but solver.max_substeps is ",
-            im.settings.max_substeps()));
+            "constraint id ", constraint_id, ": without it the solid needs ", out->substeps,
+            " explicit sub-steps (stable step ", 2.0 / out->omega,
+            " s) but solver.max_substeps is ", im.settings.max_substeps()));
       }
     }
   }
-  im.fix_count = std::move(count);
+  return out;
+}
+
+absl::Status Solid::ApplyUnfix(PreparedUnfix& prepared) {
+  Impl& im = *impl_;
+  std::shared_ptr<PreparedUnfix> again;
+  PreparedUnfix* p = &prepared;
+  if (prepared.used || prepared.material_epoch != im.material_epoch ||
+      prepared.fix_count_before != im.fix_count || prepared.omega_max_before != im.omega_max ||
+      prepared.substeps_before != im.substeps) {
+    // Prepared for a solid that has changed since: again, now.
+    ASSIGN_OR_RETURN(again, PrepareUnfix(prepared.constraint_id));
+    p = again.get();
+  }
+  p->used = true;
+  auto it = std::find_if(im.fixes.begin(), im.fixes.end(), [p](const Impl::FixConstraint& c) {
+    return c.id == p->constraint_id;
+  });
+  im.fix_count = std::move(p->count);
   im.fixes.erase(it);
-  if (reestimate) {
-    im.omega_max = omega;
-    im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
-    im.omega_fixed = new_fixed;
+  if (p->reestimate) {
+    im.omega_max = p->omega;
+    im.stable_step = p->omega > 0 ? 2.0 / p->omega : INFINITY;
+    im.omega_fixed = p->new_fixed;
     report_.omega_max = im.omega_max;
     report_.stable_step = im.stable_step;
-    if (substeps != im.substeps) {
+    if (p->substeps != im.substeps) {
       const double old_h = im.h_sub;
-      im.substeps = substeps;
-      im.h_sub = h_ / substeps;
+      im.substeps = p->substeps;
+      im.h_sub = h_ / p->substeps;
       p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
-      report_.substeps = substeps;
+      report_.substeps = p->substeps;
     }
   }
   ApplyFixed();
@@ -396,6 +428,5 @@ absl::Status Solid::Unfix(int64_t constraint_id) {
   im.ledger_rebase = true;
   return absl::OkStatus();
 }
-
 
 }  // namespace dynsolid::solid

@@ -501,6 +501,55 @@ TEST(SolidRuntimeTest, StatePreparedWhileSteppingRestoresTheBitsOfRestoringThen)
   }
 }
 
+// An unfix prepared on another thread while the solid steps (its stable-step
+// estimate on a model of its own), applied later, gives the bits of
+// unfixing then; one prepared before another change is prepared again.
+TEST(SolidRuntimeTest, UnfixPreparedWhileSteppingGivesTheBitsOfUnfixingWhenApplied) {
+  for (const char* solver : kPaintSolvers) {
+    auto reference = Make(kPaintBlock + std::string(solver));
+    auto live = Make(kPaintBlock + std::string(solver));
+    ASSERT_NE(reference, nullptr);
+    ASSERT_NE(live, nullptr);
+    for (Solid* s : {reference.get(), live.get()}) {
+      for (int i = 0; i < 5; ++i) ASSERT_OK(s->Step());
+    }
+    ASSERT_EQ(live->constraint_ids().size(), 1u);
+    const int64_t clamp = live->constraint_ids()[0];
+    // The scene's clamp: the stable step was estimated with it, so it is
+    // estimated again.
+    absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> prepared;
+    std::thread builder([&] { prepared = live->PrepareUnfix(clamp); });
+    for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());
+    builder.join();
+    ASSERT_OK(prepared);
+    for (int i = 0; i < 10; ++i) ASSERT_OK(reference->Step());
+    ASSERT_OK(reference->Unfix(clamp));
+    ASSERT_OK(live->ApplyUnfix(**prepared));
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    // Prepared, then a fix lands first: prepared again for the new set.
+    const Region top =
+        Parse<Region>("box { min { x: -1 y: -1 z: 2.99 } max { x: 4 y: 4 z: 3.01 } }");
+    const Region side =
+        Parse<Region>("box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 4 z: 4 } }");
+    absl::StatusOr<int64_t> a = live->FixRegion(top);
+    absl::StatusOr<int64_t> b = reference->FixRegion(top);
+    ASSERT_OK(a);
+    ASSERT_OK(b);
+    absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> stale = live->PrepareUnfix(*a);
+    ASSERT_OK(stale);
+    ASSERT_OK(live->FixRegion(side).status());
+    ASSERT_OK(reference->FixRegion(side).status());
+    ASSERT_OK(live->ApplyUnfix(**stale));
+    ASSERT_OK(reference->Unfix(*b));
+    for (Solid* s : {reference.get(), live.get()}) {
+      for (int i = 0; i < 20; ++i) ASSERT_OK(s->Step());
+    }
+    EXPECT_EQ(live->SaveState(), reference->SaveState()) << solver;
+    EXPECT_THAT(live->PrepareUnfix(12345),
+                StatusIs(absl::StatusCode::kNotFound, HasSubstr("constraint id 12345")));
+  }
+}
+
 TEST(SolidRuntimeTest, PaintingDensityChangesTheMassExactly) {
   // Level 0: two unit hexahedra, exact volumes.
   const char* text = R"pb(

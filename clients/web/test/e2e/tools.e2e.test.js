@@ -181,8 +181,12 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
     cells = await until(async () => { const s = await stats(); return s.control_cells > cells ? s.control_cells : null; },
       `the column at x = ${x}`, 60000);
   }
-  // Refused: the two columns' top faces (parallel, facing the same way).
+  // Paused from here to the handle: the columns (soft, local-frame model)
+  // lean under gravity, and the clicks below aim at faces where they stand.
   await caughtUp();
+  await page.click('#pause');
+  await until(async () => (await stats()).paused, 'paused');
+  // Refused: the two columns' top faces (parallel, facing the same way).
   await tool('merge');
   await clickAt({ x: 0.5, y: 2.5, z: 3.9 }, 4);  // 1 m in 2 layers: tops near z = 4
   await sleep(300);
@@ -217,6 +221,9 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
   const merged = await until(async () => { const s = await stats(); return s.control_cells > cells ? s : null; },
     'the handle', 60000);
   assert.equal(merged.control_cells, cells + 1);
+  await page.click('#resume');
+  await until(async () => !(await stats()).paused, 'running again');
+  await caughtUp();
   await page.click('#reset-camera');
   await sleep(500);
   await shot('04_handle');

@@ -103,8 +103,7 @@ absl::Status Replicas::Elsewhere(absl::string_view id) const {
   return absl::NotFoundError(absl::StrCat(
       "session \"", id, "\" belongs to replica \"", owner, "\", which is not ",
       name_.empty() ? "this server (it runs alone: no --replica)"
-                    : absl::StrCat("this replica (\"", name_, "\") or one of its peers"),
-      ""));
+                    : absl::StrCat("this replica (\"", name_, "\") or one of its peers")));
 }
 
 absl::Status RedirectStatus(absl::string_view id, absl::string_view owner,

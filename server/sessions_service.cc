@@ -14,17 +14,23 @@
 
 namespace dynsolid::server {
 
+void SessionsService::OnBuilds(grpc::ServerUnaryReactor* reactor, std::function<void()> work) {
+  builds_.Post([reactor, work = std::move(work)](bool run) {
+    if (!run) {
+      reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+      return;
+    }
+    work();
+  });
+}
+
 grpc::ServerUnaryReactor* SessionsService::CreateSession(grpc::CallbackServerContext* context,
                                                          const CreateSessionRequest* request,
                                                          Session* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const bool placed = context->client_metadata().count(kPlacedHereKey) > 0;
   // context, request and response stay valid until Finish.
-  builds_.Post([this, context, request, response, reactor, placed](bool run) {
-    if (!run) {
-      reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-      return;
-    }
+  OnBuilds(reactor, [this, context, request, response, reactor, placed] {
     Replicas::Peer* peer = (placed || !replicas_.has_peers()) ? nullptr : ChoosePlace();
     if (peer != nullptr) {
       CreateOn(peer, context, request, response, reactor);
@@ -116,12 +122,7 @@ void SessionsService::CreateOn(Replicas::Peer* peer, grpc::CallbackServerContext
         ServerLog().info("peer {} could not take the session ({}); building it here",
                          peer->replica, s.error_message());
         response->Clear();
-        builds_.Post([this, context, request, response, reactor](bool run) {
-          if (!run) {
-            reactor->Finish(
-                grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-            return;
-          }
+        OnBuilds(reactor, [this, context, request, response, reactor] {
           CreateHere(context, request, response, reactor);
         });
       });
@@ -312,11 +313,7 @@ grpc::ServerUnaryReactor* SessionsService::GetCommandLog(grpc::CallbackServerCon
     return reactor;
   }
   // Reading the journal can take a while: off the RPC threads.
-  builds_.Post([session, request, response, reactor](bool run) {
-    if (!run) {
-      reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-      return;
-    }
+  OnBuilds(reactor, [session, request, response, reactor] {
     // The durable prefix: a record being appended right now is a torn tail
     // to this reader, and its answer has not been sent yet.
     absl::StatusOr<JournalContents> journal = ReadJournal(session->dir() + "/journal", 0);

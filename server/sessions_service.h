@@ -6,6 +6,8 @@
 // live in streams.h.
 #pragma once
 
+#include <functional>
+
 #include <grpcpp/grpcpp.h>
 
 #include "dynsolid/service.grpc.pb.h"
@@ -62,6 +64,9 @@ class SessionsService final
                                           CommandLog* response) override;
 
  private:
+  // Runs `work` on the builds queue; a call whose work never runs (the
+  // server shuts down first) is finished with UNAVAILABLE.
+  void OnBuilds(grpc::ServerUnaryReactor* reactor, std::function<void()> work);
   // This server's ServerInfo.
   ServerInfo Info() const;
   // The session as the caller sees it: owner replica and address filled.

@@ -56,8 +56,6 @@ std::string ChannelFactory::address() const {
   return route_->address;
 }
 
-ChannelFactory ChannelFactory::Fresh() const { return ChannelFactory(route_->first); }
-
 bool ChannelFactory::Follow(const Session& session) const {
   if (session.address().empty()) return false;
   absl::MutexLock lock(&route_->mu);

@@ -51,9 +51,6 @@ class ChannelFactory {
   // in its details), moves to the owner's address and returns true.
   bool Follow(const grpc::Status& status) const;
 
-  // A factory with its own route, starting at this one's first address.
-  ChannelFactory Fresh() const;
-
  private:
   struct Route;
   std::shared_ptr<Route> route_;

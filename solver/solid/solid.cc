@@ -832,13 +832,14 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
 }
 
 std::unique_ptr<models::InternalForceModel> Solid::Impl::ModelCopy(
-    const models::ElementLayout& l, WorkerPool& threads) const {
-  if (corotational != nullptr) {
-    return std::make_unique<models::CorotationalModel>(l, rest_nodes, threads, corotational);
+    const models::ElementLayout& l, const models::InternalForceModel& live,
+    WorkerPool& threads) const {
+  if (const auto* corot = dynamic_cast<const models::CorotationalModel*>(&live)) {
+    return std::make_unique<models::CorotationalModel>(l, rest_nodes, threads, corot);
   }
-  const auto* live = static_cast<const models::LocalFrameModel*>(model.get());
+  const auto& lf = static_cast<const models::LocalFrameModel&>(live);
   return std::make_unique<models::LocalFrameModel>(
-      l, live->measure(), d->elements.num_nodes(), threads, live,
+      l, lf.measure(), d->elements.num_nodes(), threads, &lf,
       settings.element_products() == SolverSettings::FLOAT);
 }
 
@@ -1449,7 +1450,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   RETURN_IF_ERROR(im.CheckControlCells(paint.region(), "paint.region"));
   auto out = std::make_shared<PreparedPaint>();
   out->paint = paint;
-  out->material_epoch = im.material_epoch;
+  out->made_for = im.PreparedForNow();
   const models::ElementLayout& old = *im.layout;
   const Material& target = paint.material();
   int64_t touched = 0;
@@ -1501,9 +1502,6 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   // The stable step: from the bound when it keeps the sub-step count (or
   // the step is implicit), else estimated afresh (power iteration, the
   // costliest part of a paint). Sub-steps never drop on a paint.
-  out->omega_max_before = im.omega_max;
-  out->substeps_before = im.substeps;
-  out->fixed_before = im.fixed;
   double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
   int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
   if (!im.use_implicit && substeps > im.substeps) {
@@ -1535,9 +1533,7 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   Impl& im = *impl_;
   std::shared_ptr<PreparedPaint> again;
   PreparedPaint* p = &prepared;
-  if (prepared.material_epoch != im.material_epoch || prepared.build.model == nullptr ||
-      prepared.omega_max_before != im.omega_max || prepared.substeps_before != im.substeps ||
-      prepared.fixed_before != im.fixed) {
+  if (prepared.build.model == nullptr || prepared.made_for != im.PreparedForNow()) {
     // Prepared for a material, stable step or fixed set that has changed
     // since (or used up): the same paint on the current solid.
     ASSIGN_OR_RETURN(again, PreparePaint(prepared.paint));

@@ -271,6 +271,14 @@ class Solid {
   // Removes a fixed-region constraint; NotFound naming the id otherwise.
   // Freed points start with zero velocity.
   absl::Status Unfix(int64_t constraint_id);
+  // Unfix in two halves, like PreparePaint and ApplyPaint below: the
+  // stable-step estimate an unfix may need (power iteration, up to about
+  // 0.5 s) runs in PrepareUnfix on a model of its own, off the simulation
+  // thread; ApplyUnfix installs it (prepared again if the solid changed
+  // since).
+  class PreparedUnfix;
+  absl::StatusOr<std::shared_ptr<PreparedUnfix>> PrepareUnfix(int64_t constraint_id) const;
+  absl::Status ApplyUnfix(PreparedUnfix& prepared);
 
   // Paints material samples (scene.proto MaterialPaint: falloff, blending
   // and unset fields are documented there) and rebuilds what depends on the
@@ -290,9 +298,9 @@ class Solid {
   // (bench/paint_bench: block3 51 ms, block4 with corotational + backward
   // Euler 0.9 s), dominated by the element matrices of the new groups (a
   // smooth falloff gives most touched elements their own sample array) and,
-  // when the sub-steps must grow, the stable-step estimate. All but the
-  // estimate and about a millisecond of installing can be done off the
-  // simulation thread: PreparePaint below.
+  // when the sub-steps must grow, the stable-step estimate. All of it but
+  // about a millisecond of installing can be done off the simulation
+  // thread: PreparePaint below.
   absl::Status PaintMaterial(const MaterialPaint& paint);
 
   // PaintMaterial in two halves, so that a server can build a paint off
@@ -300,43 +308,17 @@ class Solid {
   // ApplyPaint: the same bits either way).
   //
   // PreparePaint does the costly part: the new element layout, the model
-  // with its element matrices, mass and damping, the implicit scheme's K0.
-  // It reads only what stepping leaves alone, so it may run on another
-  // thread while Step runs; no other call that changes the solid may run
-  // meanwhile. Its errors are PaintMaterial's (but for the sub-step limit,
-  // which ApplyPaint checks when the stable step must be estimated anew).
+  // with its element matrices, mass and damping, the stable step (the power
+  // iteration, when the bound would raise the sub-steps, on the new model's
+  // own thread pool), the implicit scheme's K0 and factors. It reads only
+  // what stepping leaves alone, so it may run on another thread while Step
+  // runs; no other call that changes the solid may run meanwhile. Its
+  // errors are PaintMaterial's.
   //
   // ApplyPaint installs it at a step boundary: frames carried over, the
-  // stable step and sub-steps, the constant loads. It estimates the stable
-  // step (power iteration, on the solid's threads) only when the bound would
-  // raise the sub-step count, as PaintMaterial does. A paint prepared
-  // before another material change is prepared again here. On error
-  // nothing changed.
-  // The contact stiffness behind ContactResponseAt, built off the
-  // simulation thread (a server's probes; building it on the loop holds the
-  // loop for the local-frame model's finite-difference columns: 0.2 s on
-  // block3, seconds on an edited solid).
-  // ContactCacheStale: ContactResponseAt would have to build it first.
-  // ContactCacheJob (on the simulation thread) copies what the build reads
-  // and returns the build, to run on any thread while this solid steps and
-  // changes, as long as the solid lives; the local-frame columns use a model
-  // of the job's own. InstallContactCache takes its result when it is still
-  // for this solid's material and fixed set, and says whether it did.
-  // Unfix in two halves, like PreparePaint and ApplyPaint: the stable-step
-  // estimate an unfix may need (power iteration, up to about 0.5 s) runs in
-  // PrepareUnfix on a model of its own, off the simulation thread;
-  // ApplyUnfix installs it (prepared again if the solid changed since).
-  class PreparedUnfix;
-  absl::StatusOr<std::shared_ptr<PreparedUnfix>> PrepareUnfix(int64_t constraint_id) const;
-  absl::Status ApplyUnfix(PreparedUnfix& prepared);
-
-  class PreparedContact;
-  bool ContactCacheStale() const;
-  // Changes with the material and the fixed set (a cache is for one).
-  int64_t contact_epoch() const;
-  std::function<absl::StatusOr<std::shared_ptr<PreparedContact>>()> ContactCacheJob() const;
-  bool InstallContactCache(std::shared_ptr<PreparedContact> prepared);
-
+  // stable step and sub-steps, the constant loads. A paint prepared before
+  // the material, stable step or fixed set changed is prepared again here.
+  // On error nothing changed.
   class PreparedPaint;
   absl::StatusOr<std::shared_ptr<PreparedPaint>> PreparePaint(const MaterialPaint& paint) const;
   absl::Status ApplyPaint(PreparedPaint& prepared);
@@ -545,6 +527,23 @@ class Solid {
   absl::StatusOr<ContactResponse> ContactResponseAt(const SurfacePoint& c, double horizon,
                                                     bool build_if_stale = true);
   static constexpr int kMaxContactDenseDofs = 3000;
+
+  // The contact stiffness behind ContactResponseAt, built off the
+  // simulation thread (a server's probes; building it on the loop holds the
+  // loop for the local-frame model's finite-difference columns: 0.2 s on
+  // block3, seconds on an edited solid).
+  // ContactCacheStale: ContactResponseAt would have to build it first.
+  // ContactCacheJob (on the simulation thread) copies what the build reads
+  // and returns the build, to run on any thread while this solid steps and
+  // changes, as long as the solid lives; the local-frame columns use a model
+  // of the job's own. InstallContactCache takes its result when it is still
+  // for this solid's material and fixed set, and says whether it did.
+  class PreparedContact;
+  bool ContactCacheStale() const;
+  // Changes with the material and the fixed set (a cache is for one).
+  int64_t contact_epoch() const;
+  std::function<absl::StatusOr<std::shared_ptr<PreparedContact>>()> ContactCacheJob() const;
+  bool InstallContactCache(std::shared_ptr<PreparedContact> prepared);
 
   // Contact loads: constant forces (newtons) at surface material points,
   // acting in every force evaluation of the following steps until replaced

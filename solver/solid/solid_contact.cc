@@ -19,7 +19,6 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
-#include "solver/models/local_frame.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -358,10 +357,8 @@ std::function<absl::StatusOr<std::shared_ptr<Solid::PreparedContact>>()> Solid::
   std::shared_ptr<const models::InternalForceModel> model = im.model;
   const SparseMatrix* nm = &d_.node_matrix;
   const fem::NodeRows* rows = &im.node_rows;
-  const int32_t num_nodes = d_.elements.num_nodes();
-  const bool float_products = im.settings.element_products() == SolverSettings::FLOAT;
   const bool corotational = im.corotational != nullptr;
-  return [this, in, layout, model, nm, rows, num_nodes, float_products,
+  return [this, in, layout, model, nm, rows,
           corotational]() -> absl::StatusOr<std::shared_ptr<PreparedContact>> {
     auto out = std::make_shared<PreparedContact>();
     out->solid = this;
@@ -376,14 +373,14 @@ std::function<absl::StatusOr<std::shared_ptr<Solid::PreparedContact>>()> Solid::
     }
     // The local-frame columns: a model of this job's own on a pool of its
     // own, taking the solid's element matrices over (the same forces).
-    const auto& live = static_cast<const models::LocalFrameModel&>(*model);
     WorkerPool pool(1);
-    models::LocalFrameModel own(*layout, live.measure(), num_nodes, pool, &live, float_products);
+    const std::unique_ptr<models::InternalForceModel> own =
+        impl_->ModelCopy(*layout, *model, pool);
     in->forces = [&](const Points& p) {
       const Points d = rows->Multiply(p);
       Points g(d.rows(), 3);
-      own.ResetFrames();
-      own.ExactForces(d, g);
+      own->ResetFrames();
+      own->ExactForces(d, g);
       Points control;
       rows->MultiplyTransposed(g, 0, d.rows(), control);
       return control;
@@ -434,8 +431,6 @@ absl::StatusOr<Solid::ContactResponse> Solid::ContactResponseAt(const SurfacePoi
     im.contact.cache = std::move(cache);
   }
   Impl::ContactCache& cache = *im.contact.cache;
-  const int64_t nc = p_.rows();
-
   const int64_t nf = static_cast<int64_t>(cache.free_points.size());
   const int64_t n = 3 * nf;
   if (cache.horizon != horizon) {

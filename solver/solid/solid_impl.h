@@ -101,21 +101,29 @@ struct MaterialBuild {
   int64_t shared_matrix_bytes = 0, element_bytes = 0;
 };
 
+// What a change prepared off the loop (a paint, an unfix) was made for:
+// Impl::PreparedForNow() then. When any of it differs at install time, the
+// change is prepared again.
+struct PreparedFor {
+  uint64_t material_epoch = 0;  // Impl::material_epoch
+  double omega_max = 0;
+  int substeps = 0;
+  std::vector<int32_t> fix_count;
+  bool operator==(const PreparedFor&) const = default;
+};
+
 // A paint's costly half (Solid::PreparePaint), for Solid::ApplyPaint.
 class Solid::PreparedPaint {
  public:
   MaterialPaint paint;
-  uint64_t material_epoch = 0;  // Impl::material_epoch it was made for
+  PreparedFor made_for;
   MaterialBuild build;
   Eigen::SparseMatrix<double> k0;  // the implicit scheme's, for build
   // Backward Euler's Setup for build at one sub-step, with k0.
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
-  // The stable step and sub-steps for build, from the solid's as they were
-  // (omega_max, substeps, fixed), with the power iteration done here when
-  // the bound would raise the sub-steps (`estimated`).
-  double omega_max_before = 0;
-  int substeps_before = 0;
-  std::vector<uint8_t> fixed_before;
+  // The stable step and sub-steps for build, from the solid's as they were,
+  // with the power iteration done here when the bound would raise the
+  // sub-steps (`estimated`).
   double omega = 0;
   int substeps = 1;
   bool estimated = false;
@@ -432,15 +440,20 @@ struct Solid::Impl {
   void InstallMaterial(MaterialBuild b);
   // Counts InstallMaterial calls: a prepared paint is for one material.
   uint64_t material_epoch = 0;
+  PreparedFor PreparedForNow() const {
+    return {material_epoch, omega_max, substeps, fix_count};
+  }
   // Backward Euler's CG products in single precision when the tolerance
   // allows (kSinglePrecisionCgTolerance); after the model or use_implicit
   // changes.
   void ConfigureLinearized();
   bool SinglePrecisionLinearized() const;
-  // A model of the current material of its own, on `pool`, for `l` (the
-  // current layout, kept alive by the caller): the live model's element
-  // matrices taken over, the same forces.
+  // A model of its own for `live` (a model of this solid) and its layout
+  // `l` (kept alive by the caller), on `pool`: live's element matrices
+  // taken over, the same forces. Reads only what never changes after the
+  // solid is made, so it may run off the simulation thread.
   std::unique_ptr<models::InternalForceModel> ModelCopy(const models::ElementLayout& l,
+                                                        const models::InternalForceModel& live,
                                                         WorkerPool& pool) const;
   bool double_cg = false;  // SetDoublePrecisionCgForTesting
   int SubstepsFor(double omega) const;
@@ -506,11 +519,7 @@ class Solid::PreparedState {
 class Solid::PreparedUnfix {
  public:
   int64_t constraint_id = 0;
-  // What it was prepared for.
-  uint64_t material_epoch = 0;
-  std::vector<int32_t> fix_count_before;
-  double omega_max_before = 0;
-  int substeps_before = 0;
+  PreparedFor made_for;
   bool used = false;
   // The result.
   std::vector<int32_t> count;

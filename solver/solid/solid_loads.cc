@@ -358,10 +358,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> Solid::PrepareUnfix(
   }
   auto out = std::make_shared<PreparedUnfix>();
   out->constraint_id = constraint_id;
-  out->material_epoch = im.material_epoch;
-  out->fix_count_before = im.fix_count;
-  out->omega_max_before = im.omega_max;
-  out->substeps_before = im.substeps;
+  out->made_for = im.PreparedForNow();
   out->count = im.fix_count;
   for (int32_t i : it->points) --out->count[i];
   // The stable-step estimate holds while every point it was made with
@@ -377,7 +374,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> Solid::PrepareUnfix(
   if (out->reestimate) {
     WorkerPool pool(1);
     const std::shared_ptr<const models::ElementLayout> layout = im.layout;  // kept for `own`
-    std::unique_ptr<models::InternalForceModel> own = im.ModelCopy(*layout, pool);
+    std::unique_ptr<models::InternalForceModel> own = im.ModelCopy(*layout, *im.model, pool);
     out->omega = im.EstimateOmegaMax(*own, im.mt, out->new_fixed);
     if (!im.use_implicit) {
       out->substeps = std::max(im.substeps, im.SubstepsFor(out->omega));
@@ -396,9 +393,7 @@ absl::Status Solid::ApplyUnfix(PreparedUnfix& prepared) {
   Impl& im = *impl_;
   std::shared_ptr<PreparedUnfix> again;
   PreparedUnfix* p = &prepared;
-  if (prepared.used || prepared.material_epoch != im.material_epoch ||
-      prepared.fix_count_before != im.fix_count || prepared.omega_max_before != im.omega_max ||
-      prepared.substeps_before != im.substeps) {
+  if (prepared.used || prepared.made_for != im.PreparedForNow()) {
     // Prepared for a solid that has changed since: again, now.
     ASSIGN_OR_RETURN(again, PrepareUnfix(prepared.constraint_id));
     p = again.get();

@@ -1,6 +1,9 @@
 // Private to solver/solid: the Solid's internal state (Solid::Impl) and the
-// small helpers its translation units share (solid.cc: build, step, state;
-// solid_loads.cc: loads and constraints; solid_remesh.cc: topology
+// small helpers its translation units share (solid.cc: build and step;
+// solid_paint.cc: material painting; solid_state.cc: save and restore;
+// solid_surface.cc: the boundary surface; solid_loads.cc: loads and
+// constraints; solid_drags.cc: drags and curves; solid_contact.cc: haptic
+// contact; solid_pick.cc: picking; solid_remesh.cc: topology
 // transfer). Nothing outside solver/solid includes it.
 #pragma once
 

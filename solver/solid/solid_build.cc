@@ -1,0 +1,676 @@
+// Building a solid: the scene's mesh subdivided, its elements laid out and
+// grouped by rest shape, the force model, mass and damping assembled onto
+// the control points, the stable step estimated (Create, CreateWith), and a
+// material layout built off the loop and installed (BuildMaterial,
+// InstallMaterial) as paints and topology edits need.
+#include "solver/solid/solid.h"
+#include "solver/solid/solid_impl.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <map>
+#include <numeric>
+#include <optional>
+#include <span>
+#include <type_traits>
+
+#include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl_lite.h>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/parallel.h"
+#include "solver/common/status_macros.h"
+#include "solver/common/worker_pool.h"
+#include "solver/fem/node_rows.h"
+#include "solver/integrators/backward_euler.h"
+#include "solver/integrators/central_difference.h"
+#include "solver/models/corotational.h"
+#include "solver/models/element_blocks.h"
+#include "solver/models/local_frame.h"
+#include "solver/mesh/boundary.h"
+#include "solver/models/measure.h"
+#include "solver/scene/scene_loader.h"
+#include "solver/subdivision/mcj.h"
+
+namespace dynsolid::solid {
+namespace {
+
+// An element's rows of the node matrix restricted to its control support:
+// B (n x s) with support[a] the control point of column a, and a 128-bit
+// hash of (kind, group, B) under which B^T X B products are cached
+// (regular grids repeat them).
+struct ElementSupport {
+  std::vector<int32_t> support;
+  Eigen::MatrixXd b;
+  std::pair<uint64_t, uint64_t> key;
+};
+
+void GatherSupport(const subdivision::SparseMatrix& nm, const int32_t* ids, int n, int kind,
+                   int32_t group, ElementSupport& out) {
+  out.support.clear();
+  for (int i = 0; i < n; ++i) {
+    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+      out.support.push_back(static_cast<int32_t>(it.col()));
+    }
+  }
+  std::sort(out.support.begin(), out.support.end());
+  out.support.erase(std::unique(out.support.begin(), out.support.end()), out.support.end());
+  const int s = static_cast<int>(out.support.size());
+  out.b.setZero(n, s);
+  for (int i = 0; i < n; ++i) {
+    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+      out.b(i, std::lower_bound(out.support.begin(), out.support.end(), it.col()) -
+                   out.support.begin()) = it.value();
+    }
+  }
+  // FNV-1a and a multiplicative mix over the bits of (kind, group, s, B).
+  uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
+  auto mix = [&](uint64_t x) {
+    h1 = (h1 ^ x) * 1099511628211ull;
+    h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
+  };
+  mix(static_cast<uint64_t>(kind));
+  mix(static_cast<uint64_t>(group));
+  mix(static_cast<uint64_t>(s));
+  for (Eigen::Index k = 0; k < out.b.size(); ++k) {
+    uint64_t bits;
+    std::memcpy(&bits, out.b.data() + k, sizeof(bits));
+    mix(bits);
+  }
+  out.key = {h1, h2};
+}
+
+// A 128-bit hash (FNV-1a and a multiplicative mix, as GatherSupport's key).
+class Hash128 {
+ public:
+  void Mix(uint64_t x) {
+    h1_ = (h1_ ^ x) * 1099511628211ull;
+    h2_ = (h2_ ^ (x + 0x632be59bd9b4e019ull + (h2_ << 6) + (h2_ >> 2))) * 0xff51afd7ed558ccdull;
+  }
+  void Doubles(const double* v, size_t n) {
+    Mix(n);
+    for (size_t i = 0; i < n; ++i) {
+      uint64_t bits;
+      std::memcpy(&bits, v + i, sizeof(bits));
+      Mix(bits);
+    }
+  }
+  void Ints(const int32_t* v, size_t n) {
+    Mix(n);
+    for (size_t i = 0; i < n; ++i) Mix(static_cast<uint32_t>(v[i]));
+  }
+  void Bytes(std::string_view s) {
+    Mix(s.size());
+    for (unsigned char c : s) Mix(c);
+  }
+  std::pair<uint64_t, uint64_t> value() const { return {h1_, h2_}; }
+
+ private:
+  uint64_t h1_ = 1469598103934665603ull, h2_ = 0x9e3779b97f4a7c15ull;
+};
+
+}  // namespace
+
+// Mt = sum_e B_e^T M_e B_e with B_e the element's rows of the node matrix
+// restricted to its control support (and Dt alike). Element matrices are
+// shared per group; B_e^T M_e B_e is cached by (group, B_e values), which
+// regular grids repeat.
+void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
+                                          bool has_damping, SparseMatrix& mt, SparseMatrix& dt) {
+  const int32_t nc = static_cast<int32_t>(nm.cols());
+  // Small control meshes accumulate densely; large ones through triplets.
+  const bool dense = nc <= 6000;
+  Eigen::MatrixXd mt_dense, dt_dense;
+  std::vector<Eigen::Triplet<double, int32_t>> mt_t, dt_t;
+  if (dense) {
+    mt_dense = Eigen::MatrixXd::Zero(nc, nc);
+    if (has_damping) dt_dense = Eigen::MatrixXd::Zero(nc, nc);
+  }
+  ElementSupport es;
+  // Cache of B^T M_e B (and B^T D_e B) by a 128-bit hash of (kind, group, B).
+  std::map<std::pair<uint64_t, uint64_t>, std::pair<Eigen::MatrixXd, Eigen::MatrixXd>> cache;
+  fem::NodeMatrixX3 g;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout.blocks[kind];
+    const fem::KindTable& table = layout.tables[kind];
+    const int n = block.nodes;
+    // Per group: consistent mass and damping matrices (n x n).
+    std::vector<Eigen::MatrixXd> me(block.groups.size()), de(block.groups.size());
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      const models::ElementGroup& grp = block.groups[gi];
+      const auto& material = layout.materials[grp.material];
+      me[gi] = Eigen::MatrixXd::Zero(n, n);
+      if (has_damping) de[gi] = Eigen::MatrixXd::Zero(n, n);
+      for (int q = 0; q < table.points; ++q) {
+        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+        const double dv = std::max(det, 0.0) * table.weight[q];
+        const Eigen::Map<const Eigen::VectorXd> nq(table.N(q), n);
+        me[gi].noalias() += (material[q].density * dv) * nq * nq.transpose();
+        if (has_damping) de[gi].noalias() += (material[q].damping * dv) * nq * nq.transpose();
+      }
+    }
+    for (int32_t e = 0; e < block.size(); ++e) {
+      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
+      const std::vector<int32_t>& support = es.support;
+      const Eigen::MatrixXd& b = es.b;
+      const int s = static_cast<int>(support.size());
+      auto it = cache.find(es.key);
+      if (it == cache.end()) {
+        Eigen::MatrixXd tm = b.transpose() * me[block.group[e]] * b;
+        Eigen::MatrixXd td;
+        if (has_damping) td = b.transpose() * de[block.group[e]] * b;
+        it = cache.emplace(es.key, std::make_pair(std::move(tm), std::move(td))).first;
+      }
+      const Eigen::MatrixXd& tm = it->second.first;
+      const Eigen::MatrixXd& td = it->second.second;
+      for (int j = 0; j < s; ++j) {
+        for (int i = 0; i < s; ++i) {
+          if (dense) {
+            mt_dense(support[i], support[j]) += tm(i, j);
+            if (has_damping) dt_dense(support[i], support[j]) += td(i, j);
+          } else {
+            mt_t.emplace_back(support[i], support[j], tm(i, j));
+            if (has_damping) dt_t.emplace_back(support[i], support[j], td(i, j));
+          }
+        }
+      }
+    }
+  }
+  if (dense) {
+    mt = mt_dense.sparseView(0.0, 0.0);
+    if (has_damping) dt = dt_dense.sparseView(0.0, 0.0);
+  } else {
+    mt.resize(nc, nc);
+    mt.setFromTriplets(mt_t.begin(), mt_t.end());
+    if (has_damping) {
+      dt.resize(nc, nc);
+      dt.setFromTriplets(dt_t.begin(), dt_t.end());
+    }
+  }
+  mt.makeCompressed();
+  if (has_damping) dt.makeCompressed();
+}
+
+bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& now = layout->blocks[kind];
+    const models::ElementBlock& next = l.blocks[kind];
+    if (now.size() != next.size()) return false;
+    for (int32_t e = 0; e < next.size(); ++e) {
+      const auto& a = layout->materials[now.groups[now.group[e]].material];
+      const auto& b = l.materials[next.groups[next.group[e]].material];
+      if (a.size() != b.size()) return false;
+      for (size_t q = 0; q < a.size(); ++q) {
+        if (a[q].density != b[q].density || a[q].damping != b[q].damping) return false;
+      }
+    }
+  }
+  return true;
+}
+
+absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
+                                                         bool reuse, WorkerPool* model_pool) const {
+  reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
+  WorkerPool& threads = model_pool != nullptr ? *model_pool : *pool;
+  MaterialBuild b;
+  for (const auto& array : l->materials) {
+    for (const auto& m : array) b.has_damping |= m.damping > 0;
+  }
+  // The model the scene asks for, after checking what its shared element
+  // matrices would take: curved meshes share few of them.
+  const bool corot = settings.model() == SolverSettings::COROTATIONAL;
+  double bytes = 0;
+  for (const models::ElementBlock& block : l->blocks) {
+    const double n = block.nodes;
+    bytes += static_cast<double>(block.groups.size()) * (corot ? 9.0 : 3.0) * n * n * 8.0;
+  }
+  if (bytes > kMaxSharedMatrixBytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "the ", corot ? "corotational" : "local-frame", " element matrices of this scene would take ",
+        static_cast<int64_t>(bytes / 1048576.0), " MiB (", l->blocks[0].groups.size(),
+        " distinct cubic elements), above the limit of ",
+        static_cast<int64_t>(kMaxSharedMatrixBytes / 1048576.0),
+        " MiB; use fewer subdivision levels or a more regular control mesh"));
+  }
+  if (corot) {
+    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, threads,
+                                                         reuse ? corotational : nullptr);
+    b.corotational = m.get();
+    b.shared_matrix_bytes = m->shared_matrix_bytes();
+    b.element_bytes = m->per_element_bytes();
+    b.model = std::move(m);
+  } else {
+    // One measure part per thread: its sums do not depend on the split.
+    const auto* previous =
+        reuse ? dynamic_cast<const models::LocalFrameModel*>(model.get()) : nullptr;
+    models::DeformationMeasure measure =
+        previous != nullptr
+            ? previous->measure()
+            : models::DeformationMeasure(d->fine(), d->elements, rest_nodes, pool->size());
+    auto m = std::make_unique<models::LocalFrameModel>(
+        *l, std::move(measure), d->elements.num_nodes(), threads, previous,
+        settings.element_products() == SolverSettings::FLOAT);
+    b.shared_matrix_bytes = m->shared_matrix_bytes();
+    b.element_bytes = m->per_element_bytes();
+    b.model = std::move(m);
+  }
+  // Mass (and damping) in control-point space.
+  if (reuse && SameMassAndDamping(*l)) {
+    b.mt = mt;
+    b.dt = dt;
+  } else {
+    AssembleControlMatrices(d->node_matrix, *l, b.has_damping, b.mt, b.dt);
+  }
+  b.layout = std::move(l);
+  return b;
+}
+
+void Solid::Impl::InstallMaterial(MaterialBuild b) {
+  ++material_epoch;
+  gravity_mass.resize(0);  // per material
+  for (auto& boxes : element_boxes) boxes.clear();  // per layout (Locate)
+  // The old model references the old layout: replace the model first.
+  model = std::move(b.model);
+  corotational = b.corotational;
+  layout = std::move(b.layout);
+  mt = std::move(b.mt);
+  dt = std::move(b.dt);
+  has_damping = b.has_damping;
+  ++contact.epoch;  // the contact stiffness depends on the material
+  ConfigureLinearized();
+}
+
+std::unique_ptr<models::InternalForceModel> Solid::Impl::ModelCopy(
+    const models::ElementLayout& l, const models::InternalForceModel& live,
+    WorkerPool& threads) const {
+  if (const auto* corot = dynamic_cast<const models::CorotationalModel*>(&live)) {
+    return std::make_unique<models::CorotationalModel>(l, rest_nodes, threads, corot);
+  }
+  const auto& lf = static_cast<const models::LocalFrameModel&>(live);
+  return std::make_unique<models::LocalFrameModel>(
+      l, lf.measure(), d->elements.num_nodes(), threads, &lf,
+      settings.element_products() == SolverSettings::FLOAT);
+}
+
+bool Solid::Impl::SinglePrecisionLinearized() const {
+  return use_implicit && !double_cg && settings.cg_tolerance() >= kSinglePrecisionCgTolerance;
+}
+
+void Solid::Impl::ConfigureLinearized() {
+  if (corotational == nullptr) return;
+  corotational->SetSinglePrecisionLinearized(SinglePrecisionLinearized());
+}
+
+int Solid::Impl::SubstepsFor(double omega) const {
+  const double stable = omega > 0 ? 2.0 / omega : INFINITY;
+  const double limit = settings.stability_safety() * stable;
+  return std::max(1, static_cast<int>(std::ceil(settings.time_step() / limit)));
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
+                                                     scene::Discretization discretization) {
+  return Create(scene, std::move(discretization), 0);
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
+                                                     scene::Discretization discretization,
+                                                     int threads) {
+  return CreateWith(scene, std::move(discretization), threads, nullptr);
+}
+
+absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
+    const Scene& scene, scene::Discretization discretization, int threads,
+    const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* materials) {
+  if (threads < 0 || threads > 8) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("threads: ", threads, " is outside 0-8 (0: the hardware's)"));
+  }
+  const auto t_build = Clock::now();
+  std::unique_ptr<Solid> s(new Solid());
+  s->d_ = std::move(discretization);
+  s->impl_ = std::make_unique<Impl>();
+  Impl& im = *s->impl_;
+  im.d = &s->d_;
+  im.node_rows = fem::NodeRows(s->d_.node_matrix);
+  im.settings = scene::ResolvedSolverSettings(scene);
+  im.surface = &s->surface_;
+  if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
+      im.settings.model() != SolverSettings::COROTATIONAL) {
+    return absl::UnimplementedError(
+        "solver.integrator: backward_euler linearizes the corotational model (MODEL.md 5); "
+        "with solver.model local_frame it is not available in this build");
+  }
+  s->h_ = im.settings.time_step();
+  const mesh::CellComplex& control = s->d_.control();
+  const int32_t nc = control.num_vertices();
+  for (const Region& r : scene.constraints().fixed()) {
+    for (int32_t c : r.control_cells()) {
+      if (c >= control.num_cells()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "constraints.fixed: control cell ", c, " is out of range [0, ", control.num_cells(), ")"));
+      }
+    }
+  }
+  for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+    RETURN_IF_ERROR(im.CheckControlCells(scene.loads().pressures(i).region(),
+                                         absl::StrCat("loads.pressures[", i, "].region")));
+  }
+
+  // Rest configuration.
+  im.rest_control = control.positions();
+  im.rest_nodes = im.node_rows.Multiply(im.rest_control);
+  const Points& rest = im.rest_nodes;
+  im.pool = std::make_unique<WorkerPool>(threads > 0 ? threads : BuildThreads());
+
+  // Materials: base, then painted regions in order.
+  const models::MaterialPoint base = ToPoint(scene.materials().base());
+  std::vector<std::pair<const Region*, models::MaterialPoint>> painted;
+  for (const MaterialRegion& mr : scene.materials().regions()) {
+    painted.push_back({&mr.region(), ToPoint(mr.material())});
+  }
+  models::MaterialSampler sampler = [&](const Eigen::Vector3d& x, int32_t cell) {
+    models::MaterialPoint m = base;
+    for (const auto& [region, material] : painted) {
+      if (InRegion(*region, x, cell)) m = material;
+    }
+    return m;
+  };
+  auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
+      s->d_.elements, rest, s->d_.hierarchy.control_cell,
+      materials != nullptr ? *materials : sampler));
+  if (layout->inverted_elements > 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        layout->inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "
+        "point); the subdivided mesh is too distorted for finite elements"));
+  }
+  s->rest_volume_ = layout->rest_volume;
+  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout)));
+  im.InstallMaterial(std::move(material));
+  s->total_mass_ = im.mt.sum();
+  s->BuildSurface();
+
+  // Constraints: the scene's fixed regions, held at rest.
+  im.fix_count.assign(nc, 0);
+  im.fixed.assign(nc, 0);
+  im.hold = im.rest_control;
+  BuildReport& rep = s->report_;
+  for (const PenaltySpring& spring : scene.constraints().springs()) {
+    for (int32_t i = 0; i < nc; ++i) {
+      bool in = InShape(spring.region(), im.rest_control.row(i).transpose());
+      for (int32_t c : spring.region().control_cells()) {
+        const auto verts = control.cell_vertices(c);
+        in |= std::binary_search(verts.begin(), verts.end(), i);
+      }
+      if (in && spring.stiffness() > 0) {
+        im.spring_point.push_back(i);
+        im.spring_k.push_back(spring.stiffness());
+      }
+    }
+  }
+  rep.penalty_springs = static_cast<int32_t>(im.spring_point.size());
+
+  // Loads, with ids: point forces, then pressures (then fixed regions).
+  const bool snap = im.settings.snap_forces_to_quadrature();
+  for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
+    const PointForce& pf = scene.loads().point_forces(i);
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(pf.position()), rest, snap);
+    if (!at.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("loads.point_forces[", i, "].position: ", at.status().message()));
+    }
+    im.point_loads.push_back({im.next_id++, pf, *at});
+  }
+  for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+    const Pressure& pr = scene.loads().pressures(i);
+    std::vector<int32_t> quads = im.SelectQuads(pr.region());
+    if (quads.empty()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "loads.pressures[", i, "].region selects no boundary face (no face has its rest "
+          "centroid in the region or its cell in control_cells)"));
+    }
+    im.pressures.push_back({im.next_id++, pr, std::move(quads)});
+  }
+  for (const Region& r : scene.constraints().fixed()) {
+    Impl::FixConstraint fix{im.next_id++, r, im.SelectControlPoints(r)};
+    for (int32_t i : fix.points) {
+      ++im.fix_count[i];
+      im.fixed[i] = 1;
+    }
+    im.fixes.push_back(std::move(fix));
+  }
+  rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
+  im.gravity = V(scene.loads().gravity());
+  im.RebuildConstantLoads();
+  im.RebuildPressure();
+  rep.point_forces = static_cast<int32_t>(im.point_loads.size());
+  rep.gravity = im.gravity.squaredNorm() > 0;
+
+  // Traced points.
+  for (int i = 0; i < static_cast<int>(scene.traced_size()); ++i) {
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(scene.traced(i).position()), rest, false);
+    if (!at.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("traced[", i, "] (", scene.traced(i).name(), "): ", at.status().message()));
+    }
+    im.traced.push_back(*at);
+    s->traced_names_.push_back(scene.traced(i).name());
+  }
+
+  // Stable step and sub-steps.
+  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed);
+  im.omega_fixed = im.fixed;
+  im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
+  rep.omega_max = im.omega_max;
+  rep.stable_step = im.stable_step;
+  im.substeps = im.SubstepsFor(im.omega_max);
+  // Implicit steps: asked for, or chosen by `auto` when the explicit scheme
+  // would need more than kAutoImplicitSubsteps sub-steps (corotational only).
+  constexpr int kAutoImplicitSubsteps = 4;
+  im.use_implicit =
+      im.settings.integrator() == SolverSettings::BACKWARD_EULER ||
+      (im.settings.integrator() == SolverSettings::AUTO && im.corotational != nullptr &&
+       im.substeps > kAutoImplicitSubsteps);
+  rep.implicit = im.use_implicit;
+  im.ConfigureLinearized();
+  s->ReportMaterial();  // after ConfigureLinearized: the float copies, when made
+  if (im.use_implicit) {
+    im.substeps = 1;
+    im.x_nodes.setZero(rest.rows(), 3);
+    im.kx_nodes.setZero(rest.rows(), 3);
+    Impl* ip = &im;
+    im.stiffness_op = [ip](const Points& x, Points& out) {
+      ip->ToNodes(x, ip->x_nodes);
+      ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
+      ip->FromNodes(ip->kx_nodes, out);
+      for (size_t s = 0; s < ip->spring_point.size(); ++s) {
+        out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
+      }
+    };
+    // F - h Kt w = f_ext(p) - A^T g_R(A (p + h w)) - springs at p + h w (the
+    // frames of p held: g_R and the springs are affine in the positions);
+    // w = v + dv0, the velocity plus the warm start.
+    im.force_ahead = [ip](const Points& v, Points& out) {
+      const auto t0 = Clock::now();
+      const Points& p = *ip->ahead_from;
+      ip->ahead = p + ip->implicit.h() * v;
+      ip->ToNodes(ip->ahead, ip->x_nodes);
+      ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+      ++ip->element_passes;
+      ip->FromNodes(ip->kx_nodes, ip->g_ahead);
+      out = ip->f - ip->g_ahead;
+      for (size_t s = 0; s < ip->spring_point.size(); ++s) {
+        const int32_t i = ip->spring_point[s];
+        out.row(i) -= ip->spring_k[s] * (ip->ahead.row(i) - ip->rest_control.row(i));
+      }
+      ip->ahead_ms = MsSince(t0);
+    };
+  }
+  if (im.use_implicit) {
+    im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational);
+  }
+  if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "solver.time_step: ", s->h_, " s needs ", im.substeps,
+        " explicit sub-steps (stable step ", rep.stable_step, " s) but solver.max_substeps is ",
+        im.settings.max_substeps(), "; lower the time step or the stiffness"));
+  }
+  rep.substeps = im.substeps;
+  im.SetSubsteps(im.substeps, s->h_);
+
+  // State: rest positions, initial rigid velocity.
+  s->p_ = im.rest_control;
+  Eigen::Vector3d centroid = im.rest_control.colwise().mean().transpose();
+  const Eigen::Vector3d v0 = V(scene.initial().linear_velocity());
+  const Eigen::Vector3d w0 = V(scene.initial().angular_velocity());
+  s->p_prev_ = s->p_;
+  for (int32_t i = 0; i < nc; ++i) {
+    if (im.fixed[i]) continue;
+    const Eigen::Vector3d x = im.rest_control.row(i).transpose();
+    const Eigen::Vector3d v = v0 + w0.cross(x - centroid);
+    s->p_prev_.row(i) = (x - im.h_sub * v).transpose();
+  }
+  im.nodes.setZero(rest.rows(), 3);
+  im.g.setZero(rest.rows(), 3);
+  im.f.setZero(nc, 3);
+  im.p_next.setZero(nc, 3);
+  im.backup_p.setZero(nc, 3);
+  im.backup_prev.setZero(nc, 3);
+  im.f_next.setZero(nc, 3);
+  im.velocity = (s->p_ - s->p_prev_) / im.h_sub;
+  im.mass_velocity = im.mt * im.velocity;
+  // The ledger starts from the initial kinetic energy (no strain at rest).
+  im.ledger.started = true;
+  im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
+  im.ledger.peak = im.ledger.h_min;
+  im.fingerprint = s->Fingerprint(scene);
+  rep.build_ms = MsSince(t_build);
+  return s;
+}
+
+// K0 = A^T K A (3 #control square, node-major DOFs 3 i + c) of the
+// corotational model at rest, plus the penalty springs, as triplets.
+std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
+    const SparseMatrix& nm, const models::ElementLayout& layout,
+    const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
+    const std::vector<double>& spring_k) {
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
+  ElementSupport es;
+  // Control meshes are small: sum into a dense matrix (no triplet per
+  // element entry) unless it would pass 32 MiB.
+  const int64_t dofs = 3 * static_cast<int64_t>(nm.cols());
+  const bool dense = dofs <= 2048;
+  Eigen::MatrixXd sum;
+  if (dense) sum.setZero(dofs, dofs);
+  Eigen::MatrixXd kcd, tcd;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout.blocks[kind];
+    const int n = block.nodes;
+    for (int32_t e = 0; e < block.size(); ++e) {
+      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
+      const std::vector<int32_t>& support = es.support;
+      const Eigen::MatrixXd& b = es.b;
+      const int s = static_cast<int>(support.size());
+      auto it = cache.find(es.key);
+      if (it == cache.end()) {
+        // E^T K E with E = B (x) I3 (node-major element DOFs from control
+        // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
+        const Eigen::MatrixXd k = corotational.K(kind, block.group[e]);
+        Eigen::MatrixXd tk(3 * s, 3 * s);
+        for (int c = 0; c < 3; ++c) {
+          for (int d = 0; d < 3; ++d) {
+            kcd.resize(n, n);
+            for (int j = 0; j < n; ++j)
+              for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + d);
+            tcd.noalias() = b.transpose() * (kcd * b);
+            for (int bb = 0; bb < s; ++bb)
+              for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + d) = tcd(a, bb);
+          }
+        }
+        it = cache.emplace(es.key, std::move(tk)).first;
+      }
+      const Eigen::MatrixXd& tk = it->second;
+      for (int c = 0; c < 3 * s; ++c) {
+        const int64_t col = 3 * static_cast<int64_t>(support[c / 3]) + c % 3;
+        for (int a = 0; a < 3 * s; ++a) {
+          if (tk(a, c) == 0) continue;
+          const int64_t row = 3 * static_cast<int64_t>(support[a / 3]) + a % 3;
+          if (dense) {
+            sum(row, col) += tk(a, c);
+          } else {
+            t.emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), tk(a, c));
+          }
+        }
+      }
+    }
+  }
+  if (dense) {
+    for (int64_t c = 0; c < dofs; ++c)
+      for (int64_t r = 0; r < dofs; ++r) {
+        if (sum(r, c) != 0) t.emplace_back(static_cast<int32_t>(r), static_cast<int32_t>(c), sum(r, c));
+      }
+  }
+  for (size_t k = 0; k < spring_point.size(); ++k) {
+    for (int c = 0; c < 3; ++c) {
+      t.emplace_back(3 * spring_point[k] + c, 3 * spring_point[k] + c, spring_k[k]);
+    }
+  }
+  return t;
+}
+
+void Solid::ReportMaterial() {
+  const Impl& im = *impl_;
+  report_.cubic_groups = static_cast<int32_t>(im.layout->blocks[0].groups.size());
+  report_.linear_groups = static_cast<int32_t>(im.layout->blocks[1].groups.size());
+  report_.pyramid_groups = static_cast<int32_t>(im.layout->blocks[2].groups.size());
+  report_.material_arrays = static_cast<int32_t>(im.layout->materials.size());
+  report_.damping_matrix = im.has_damping;
+  report_.node_matrix_bytes = im.node_rows.bytes();
+  report_.node_matrix_float_values = im.node_rows.float_values();
+  // Filled by the model; BuildMaterial read them.
+  if (im.corotational != nullptr) {
+    report_.single_precision_cg = im.corotational->single_precision_linearized();
+    report_.shared_matrix_bytes = im.corotational->shared_matrix_bytes();
+    report_.element_bytes = im.corotational->per_element_bytes();
+    report_.measure_quad_path.clear();
+  } else {
+    const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());
+    report_.shared_matrix_bytes = lf->shared_matrix_bytes();
+    report_.element_bytes = lf->per_element_bytes();
+    report_.factorized_elements = lf->factorized_elements();
+    report_.measure_quad_path = models::QuadPathName(lf->measure().quad_path());
+  }
+}
+
+std::pair<uint64_t, uint64_t> Solid::Fingerprint(const Scene& scene) const {
+  Hash128 h;
+  std::string bytes;
+  {
+    google::protobuf::io::StringOutputStream stream(&bytes);
+    google::protobuf::io::CodedOutputStream coded(&stream);
+    coded.SetSerializationDeterministic(true);
+    scene.SerializeToCodedStream(&coded);
+  }
+  h.Bytes(bytes);
+  const Impl& im = *impl_;
+  h.Doubles(im.rest_control.data(), im.rest_control.size());
+  const SparseMatrix& nm = d_.node_matrix;
+  h.Mix(nm.rows());
+  h.Mix(nm.cols());
+  h.Ints(nm.outerIndexPtr(), nm.outerSize() + 1);
+  h.Ints(nm.innerIndexPtr(), nm.nonZeros());
+  h.Doubles(nm.valuePtr(), nm.nonZeros());
+  for (const models::ElementBlock& block : im.layout->blocks) {
+    h.Ints(block.node_ids.data(), block.node_ids.size());
+  }
+  return h.value();
+}
+
+}  // namespace dynsolid::solid

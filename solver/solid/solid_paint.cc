@@ -1,0 +1,185 @@
+// Material painting (the paper's brush on material properties): a paint is
+// prepared off the simulation loop (PreparePaint: the new material layout,
+// its matrices, mass and stable step on a model of its own) and installed
+// on it (ApplyPaint); PaintMaterial is the two in a row.
+#include <algorithm>
+#include <memory>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/solid/ordered_sampler.h"
+#include "solver/solid/solid.h"
+#include "solver/solid/solid_impl.h"
+
+namespace dynsolid::solid {
+namespace {
+
+// smoothstep(t) = t^2 (3 - 2 t) on [0, 1].
+double Smoothstep(double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  return t * t * (3.0 - 2.0 * t);
+}
+
+// The paint weight of a sample at rest position x in control cell `cell`
+// (scene.proto MaterialPaint).
+double PaintWeight(const MaterialPaint& paint, const Eigen::Vector3d& x, int32_t cell) {
+  const Region& r = paint.region();
+  double w = 0;
+  for (int32_t c : r.control_cells()) {
+    if (c == cell) w = paint.strength();
+  }
+  double depth = -1, band = 0;
+  const double falloff = paint.falloff() > 0 ? paint.falloff() : 0.25;
+  if (r.shape_case() == Region::kSphere) {
+    depth = r.sphere().radius() - (x - V(r.sphere().center())).norm();
+    band = falloff * r.sphere().radius();
+  } else if (r.shape_case() == Region::kBox) {
+    const Eigen::Vector3d lo = V(r.box().min()), hi = V(r.box().max());
+    depth = std::min((x - lo).minCoeff(), (hi - x).minCoeff());
+    band = falloff * 0.5 * (hi - lo).minCoeff();
+  }
+  if (depth >= 0) {
+    const double s = band > 0 ? Smoothstep(depth / band) : 1.0;
+    w = std::max(w, paint.strength() * s);
+  }
+  return w;
+}
+
+double Blend(double value, double target, double w) {
+  if (target == 0 || w <= 0) return value;  // unset fields are not painted
+  if (w >= 1) return target;
+  return value + w * (target - value);
+}
+
+}  // namespace
+
+// ---- Material painting.
+
+absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
+  ASSIGN_OR_RETURN(std::shared_ptr<PreparedPaint> prepared, PreparePaint(paint));
+  return ApplyPaint(*prepared);
+}
+
+absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
+    const MaterialPaint& paint) const {
+  const Impl& im = *impl_;
+  RETURN_IF_ERROR(scene::ValidateMaterialPaint(paint, "paint"));
+  RETURN_IF_ERROR(im.CheckControlCells(paint.region(), "paint.region"));
+  auto out = std::make_shared<PreparedPaint>();
+  out->paint = paint;
+  out->made_for = im.PreparedForNow();
+  const models::ElementLayout& old = *im.layout;
+  const Material& target = paint.material();
+  int64_t touched = 0;
+  // Bounds for the new stable step: K' <= r K and M' >= m M in the PSD
+  // sense, r the largest ratio of the isotropic stiffness's eigenvalues
+  // (3 lambda + 2 mu, lambda + 2 mu, mu: the same eigenvectors for every
+  // isotropic C, and the local-frame model's diagonal blocks use the last
+  // two) and m the smallest density ratio over the samples; unpainted
+  // samples have ratio 1. Then omega'^2 <= omega^2 r / m.
+  double stiffness_ratio = 1, mass_ratio = 1;
+  auto stiffness_ratios = [](const models::MaterialPoint& a, const models::MaterialPoint& b) {
+    const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
+    return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
+  };
+  OrderedSampler sampler(
+      old, im.rest_nodes,
+      [&](int kind, int32_t e, int q, const Eigen::Vector3d& x, int32_t cell) {
+        const models::ElementBlock& block = old.blocks[kind];
+        models::MaterialPoint m = old.materials[block.groups[block.group[e]].material][q];
+        const double w = PaintWeight(paint, x, cell);
+        if (w > 0) {
+          ++touched;
+          m.young = Blend(m.young, target.young_modulus(), w);
+          m.poisson = Blend(m.poisson, target.poisson_ratio(), w);
+          m.density = Blend(m.density, target.density(), w);
+          m.damping = Blend(m.damping, target.damping(), w);
+          const models::MaterialPoint& was =
+              old.materials[block.groups[block.group[e]].material][q];
+          stiffness_ratio = std::max(stiffness_ratio, stiffness_ratios(was, m));
+          mass_ratio = std::min(mass_ratio, m.density / was.density);
+        }
+        return m;
+      });
+  auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
+      d_.elements, im.rest_nodes, d_.hierarchy.control_cell,
+      [&sampler](const Eigen::Vector3d& x, int32_t cell) { return sampler(x, cell); }));
+  if (!sampler.ok()) {
+    return absl::InternalError("paint: the element layout sampled materials out of order");
+  }
+  if (touched == 0) {
+    return absl::InvalidArgumentError(
+        "paint.region contains no material sample (quadrature point) of the solid");
+  }
+  // The new model's passes (the stable-step estimate below) run on a pool
+  // of this thread's own: the solid's may be stepping.
+  out->pool = std::make_unique<WorkerPool>(1);
+  ASSIGN_OR_RETURN(out->build,
+                   im.BuildMaterial(std::move(layout), /*reuse=*/true, out->pool.get()));
+  // The stable step: from the bound when it keeps the sub-step count (or
+  // the step is implicit), else estimated afresh (power iteration, the
+  // costliest part of a paint). Sub-steps never drop on a paint.
+  double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
+  int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
+  if (!im.use_implicit && substeps > im.substeps) {
+    omega = im.EstimateOmegaMax(*out->build.model, out->build.mt, im.fixed);
+    out->estimated = true;
+    substeps = std::max(im.substeps, im.SubstepsFor(omega));
+  }
+  if (substeps > im.settings.max_substeps()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "paint: the painted solid needs ", substeps, " explicit sub-steps (stable step ",
+        2.0 / omega, " s) but solver.max_substeps is ", im.settings.max_substeps(),
+        "; paint a softer or denser material, or lower the time step"));
+  }
+  out->omega = omega;
+  out->substeps = substeps;
+  if (im.use_implicit) {
+    out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational);
+    // The float copies of the element matrices, here rather than when
+    // installed (ConfigureLinearized then finds them made).
+    out->build.corotational->SetSinglePrecisionLinearized(im.SinglePrecisionLinearized());
+    // The integrator's matrices and factors (a paint keeps one sub-step).
+    out->implicit_setup = integrators::BackwardEuler::Prepare(
+        out->build.mt, out->build.has_damping ? &out->build.dt : nullptr, h_, im.fixed, &out->k0);
+  }
+  return out;
+}
+
+absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
+  Impl& im = *impl_;
+  std::shared_ptr<PreparedPaint> again;
+  PreparedPaint* p = &prepared;
+  if (prepared.build.model == nullptr || prepared.made_for != im.PreparedForNow()) {
+    // Prepared for a material, stable step or fixed set that has changed
+    // since (or used up): the same paint on the current solid.
+    ASSIGN_OR_RETURN(again, PreparePaint(prepared.paint));
+    p = again.get();
+  }
+  MaterialBuild& build = p->build;
+  const double omega = p->omega;
+  const int substeps = p->substeps;
+  const bool estimated = p->estimated;
+  // Nothing can fail from here on.
+  build.model->set_frames(im.model->frames());
+  build.model->set_pool(*im.pool);
+  im.InstallMaterial(std::move(build));
+  if (im.use_implicit) im.k0 = std::move(p->k0);
+  im.omega_max = omega;
+  if (estimated) im.omega_fixed = im.fixed;  // a bound holds for the old estimate's set
+  im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
+  const double old_h = im.h_sub;
+  im.SetSubsteps(substeps, h_, &p->implicit_setup);
+  if (im.h_sub != old_h) p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
+  im.RebuildConstantLoads();  // gravity follows the density
+  total_mass_ = im.mt.sum();
+  ReportMaterial();
+  report_.omega_max = im.omega_max;
+  report_.stable_step = im.stable_step;
+  report_.substeps = im.substeps;
+  im.forces_valid = false;
+  im.ledger_rebase = true;
+  return absl::OkStatus();
+}
+
+}  // namespace dynsolid::solid

@@ -236,7 +236,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     auto u = w.u.topLeftCorner(m, batch.count);
     auto y = w.y.topLeftCorner(m, batch.count);
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t e = block.by_group[batch.first + b];
+      const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
 #ifdef DYNSOLID_COROT_AVX2
       {
@@ -288,7 +288,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     }
     for (int32_t b = 0; b < batch.count; ++b) {
       w.energy += 0.5 * u.col(b).dot(y.col(b));
-      const int32_t e = block.by_group[batch.first + b];
+      const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
 #ifdef DYNSOLID_COROT_AVX2
       RotateBackAvx2(n, rot[b], y.col(b).data(), ids, w.g.data());
@@ -327,7 +327,7 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
     const int n = block.nodes;
     pos.resize(n, 3);
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t e = block.by_group[batch.first + b];
+      const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
       // As RunBatches with `update`: the same sums, the same bits.
 #ifdef DYNSOLID_COROT_AVX2

@@ -173,15 +173,33 @@ int64_t PerElementBytes(const ElementLayout& layout) {
 }
 
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
-                                 int32_t num_nodes) {
+                                 int32_t num_nodes, const std::vector<uint8_t>* pooled) {
   ElementSchedule out;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
+    std::vector<int32_t>& order = out.order[kind];
+    order.reserve(block.by_group.size());
+    std::vector<int32_t> pool;
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      for (int32_t s = block.group_start[gi]; s < block.group_start[gi + 1]; s += batch_size) {
-        out.batches.push_back({kind, static_cast<int32_t>(gi), s,
-                               std::min(batch_size, block.group_start[gi + 1] - s)});
+      const auto begin = block.by_group.begin() + block.group_start[gi];
+      const auto end = block.by_group.begin() + block.group_start[gi + 1];
+      if (kind == 0 && pooled != nullptr && (*pooled)[gi] != 0) {
+        pool.insert(pool.end(), begin, end);
+        continue;
       }
+      const int32_t first = static_cast<int32_t>(order.size());
+      order.insert(order.end(), begin, end);
+      for (int32_t s = first; s < static_cast<int32_t>(order.size()); s += batch_size) {
+        out.batches.push_back({kind, static_cast<int32_t>(gi), s,
+                               std::min<int32_t>(batch_size, static_cast<int32_t>(order.size()) - s)});
+      }
+    }
+    std::sort(pool.begin(), pool.end());
+    const int32_t first = static_cast<int32_t>(order.size());
+    order.insert(order.end(), pool.begin(), pool.end());
+    for (int32_t s = first; s < static_cast<int32_t>(order.size()); s += batch_size) {
+      out.batches.push_back(
+          {kind, kPooled, s, std::min<int32_t>(batch_size, static_cast<int32_t>(order.size()) - s)});
     }
   }
   // An element costs its matrix products (3 n^2 multiply-adds in either
@@ -214,7 +232,7 @@ ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size
       const ElementBatch& batch = out.batches[bi];
       const ElementBlock& block = layout.blocks[batch.kind];
       for (int32_t b = 0; b < batch.count; ++b) {
-        const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+        const int32_t* ids = block.element_nodes(out.order[batch.kind][batch.first + b]);
         for (int i = 0; i < block.nodes; ++i) out.node_parts[ids[i]] |= bit;
       }
     }
@@ -235,7 +253,7 @@ void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
     const int n = block.nodes;
     nodes.clear();
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      const int32_t* ids = block.element_nodes(schedule.order[batch.kind][batch.first + b]);
       nodes.insert(nodes.end(), ids, ids + n);
     }
     std::sort(nodes.begin(), nodes.end());
@@ -246,7 +264,7 @@ void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
     schedule.max_batch_nodes = std::max(schedule.max_batch_nodes, batch.num_nodes);
     schedule.batch_nodes.insert(schedule.batch_nodes.end(), nodes.begin(), nodes.end());
     for (int32_t b = 0; b < batch.count; ++b) {
-      const int32_t* ids = block.element_nodes(block.by_group[batch.first + b]);
+      const int32_t* ids = block.element_nodes(schedule.order[batch.kind][batch.first + b]);
       for (int i = 0; i < n; ++i) {
         const auto at = std::lower_bound(nodes.begin(), nodes.end(), ids[i]) - nodes.begin();
         schedule.local_ids.push_back(static_cast<uint16_t>(at));

@@ -65,8 +65,11 @@ struct ElementLayout {
   int32_t inverted_elements = 0;          // elements with det J0 <= 0 somewhere
 };
 
-// Consecutive elements of one group (block.by_group[first .. first+count)),
-// processed together as one dense matrix product.
+// Consecutive elements of one group (schedule.order[kind][first ..
+// first+count)), processed together as one dense matrix product; or, with
+// group kPooled, consecutive elements of pooled cubic groups (see
+// ScheduleElements), each applied with factors of its own.
+inline constexpr int32_t kPooled = -1;
 struct ElementBatch {
   int kind;
   int32_t group;
@@ -89,6 +92,10 @@ struct ElementBatch {
 // (ascending) and node_parts[v] has bit k set when part k touches node v
 // (parts <= 8).
 struct ElementSchedule {
+  // Per kind, the elements in the order the batches take them: each
+  // group's elements as in block.by_group, in group order, pooled groups'
+  // elements last (by element index).
+  std::array<std::vector<int32_t>, 3> order;
   std::vector<ElementBatch> batches;
   std::vector<size_t> part_start;
   std::vector<std::vector<int32_t>> part_nodes;
@@ -98,8 +105,13 @@ struct ElementSchedule {
   std::vector<uint16_t> local_ids;
   int32_t max_batch_nodes = 0;
 };
+//
+// `pooled` (optional, one flag per cubic group) marks cubic groups whose
+// elements leave their groups' batches and share kPooled batches with the
+// other pooled groups' elements (groups of one or a few elements: a
+// painted band, a curved mesh), for a model that applies them per element.
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
-                                 int32_t num_nodes);
+                                 int32_t num_nodes, const std::vector<uint8_t>* pooled = nullptr);
 
 // Batch node tables: per batch, the nodes its elements touch (ascending,
 // each once) and each element's nodes as 16-bit indices into that list.

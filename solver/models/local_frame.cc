@@ -36,19 +36,56 @@ constexpr double kFrameNewtonExit = 1e-5;
 
 }  // namespace
 
+namespace {
+
+// A group's three matrices K_x, K_y, K_z (local_frame.h), integrated.
+std::array<Eigen::MatrixXd, 3> IntegrateGroup(const fem::KindTable& table, const ElementGroup& grp,
+                                              const std::vector<MaterialPoint>& material) {
+  const int n = table.nodes;
+  fem::NodeMatrixX3 g;
+  // K_x = sum_q dV [(l + 2m) gx gx^T + m gy gy^T + m gz gz^T] = B_x B_x^T
+  // with B_x's columns sqrt(dV (l + 2m)) gx, sqrt(dV m) gy, sqrt(dV m) gz.
+  std::array<Eigen::MatrixXd, 3> b;
+  for (auto& m : b) m.resize(n, 3 * table.points);
+  for (int q = 0; q < table.points; ++q) {
+    const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+    const double dv = std::max(det, 0.0) * table.weight[q] * kStiffnessFactor;
+    const double lam = material[q].lame_lambda(), mu = material[q].lame_mu();
+    for (int axis = 0; axis < 3; ++axis) {
+      for (int c = 0; c < 3; ++c) {
+        const double coef = std::sqrt(dv * (c == axis ? lam + 2 * mu : mu));
+        b[axis].col(3 * q + c) = coef * g.col(c);
+      }
+    }
+  }
+  return {b[0] * b[0].transpose(), b[1] * b[1].transpose(), b[2] * b[2].transpose()};
+}
+
+}  // namespace
+
 LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure,
                                  int32_t num_nodes, WorkerPool& pool,
-                                 const LocalFrameModel* previous, bool float_products)
+                                 const LocalFrameModel* previous, bool float_products,
+                                 int32_t quadrature_group_size)
     : layout_(layout),
       pool_(&pool),
       measure_(std::move(measure)),
       num_nodes_(num_nodes),
       float_products_(float_products) {
   if (previous != nullptr && previous->float_products_ != float_products) previous = nullptr;
-  fem::NodeMatrixX3 g;
+  // Small cubic groups go to the quadrature points (when the cubic table is
+  // the tensor rule the sum factorization reads).
+  const ElementBlock& cubic = layout.blocks[0];
+  pooled_.assign(cubic.groups.size(), 0);
+  if (quadrature_group_size > 0 && cubic.size() > 0 &&
+      CubicQuadratureBasis::Make(layout.tables[0], quadrature_basis_)) {
+    for (size_t gi = 0; gi < cubic.groups.size(); ++gi) {
+      pooled_[gi] = cubic.group_start[gi + 1] - cubic.group_start[gi] <= quadrature_group_size;
+    }
+  }
   // The cubic table's rule is a tensor Gauss rule of n1 points a side.
   std::optional<KroneckerBasis> kron_basis;
-  if (float_products && layout.blocks[0].size() > 0) {
+  if (float_products && cubic.size() > 0) {
     const int n1 = static_cast<int>(std::lround(std::cbrt(layout.tables[0].points)));
     const fem::Rule1d rule = fem::GaussLegendre(n1);
     kron_basis = KroneckerBasis::Make(rule.points, rule.weights);
@@ -56,12 +93,21 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
-    const int n = block.nodes;
     const std::vector<int32_t> reuse = previous != nullptr
                                            ? MatchStiffnessGroups(layout, previous->layout_, kind)
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      if (reuse[gi] >= 0) {
+      if (kind == 0 && pooled_[gi]) {
+        // Applied at the quadrature points: no matrices.
+        if (float_products) {
+          packed_f_[kind].emplace_back();
+          kron_.emplace_back();
+        } else {
+          packed_[kind].emplace_back();
+        }
+        continue;
+      }
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[reuse[gi]])) {
         if (float_products) {
           packed_f_[kind].push_back(previous->packed_f_[kind][reuse[gi]]);
           if (kind == 0) kron_.push_back(previous->kron_[reuse[gi]]);
@@ -72,25 +118,8 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       }
       ++integrated_groups_;
       const ElementGroup& grp = block.groups[gi];
-      const auto& material = layout.materials[grp.material];
-      // K_x = sum_q dV [(l + 2m) gx gx^T + m gy gy^T + m gz gz^T] = B_x B_x^T
-      // with B_x's columns sqrt(dV (l + 2m)) gx, sqrt(dV m) gy, sqrt(dV m) gz.
-      std::array<Eigen::MatrixXd, 3> b;
-      for (auto& m : b) m.resize(n, 3 * table.points);
-      for (int q = 0; q < table.points; ++q) {
-        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
-        const double dv = std::max(det, 0.0) * table.weight[q] * kStiffnessFactor;
-        const double lam = material[q].lame_lambda(), mu = material[q].lame_mu();
-        for (int axis = 0; axis < 3; ++axis) {
-          for (int c = 0; c < 3; ++c) {
-            const double coef = std::sqrt(dv * (c == axis ? lam + 2 * mu : mu));
-            b[axis].col(3 * q + c) = coef * g.col(c);
-          }
-        }
-      }
-      const std::array<Eigen::MatrixXd, 3> dense = {b[0] * b[0].transpose(),
-                                                    b[1] * b[1].transpose(),
-                                                    b[2] * b[2].transpose()};
+      const std::array<Eigen::MatrixXd, 3> dense =
+          IntegrateGroup(table, grp, layout.materials[grp.material]);
       const std::array<PackedMatrix, 3> k = {PackedMatrix(dense[0]), PackedMatrix(dense[1]),
                                              PackedMatrix(dense[2])};
       if (kind == 0 && kron_basis) kron_.push_back(KroneckerStiffness::Fit(*kron_basis, dense));
@@ -107,8 +136,27 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
     }
   }
   work_.resize(kForceParts);
-  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_, &pooled_);
   IndexBatchNodes(layout, schedule_);
+  // The pooled elements' factors, in schedule order (the pooled batches run
+  // last among the cubic ones, from quadrature_first_).
+  quadrature_first_ = static_cast<int32_t>(schedule_.order[0].size());
+  for (const ElementBatch& batch : schedule_.batches) {
+    if (batch.group == kPooled) quadrature_first_ = std::min(quadrature_first_, batch.first);
+  }
+  quadrature_elements_ = static_cast<int64_t>(schedule_.order[0].size()) - quadrature_first_;
+  const int64_t chunks = (quadrature_elements_ + kQuadratureLanes - 1) / kQuadratureLanes;
+  quadrature_factors_.assign(chunks * kChunkValues, 0.0);
+  for (int64_t k = 0; k < quadrature_elements_; ++k) {
+    const int32_t e = schedule_.order[0][quadrature_first_ + k];
+    const ElementGroup& grp = cubic.groups[cubic.group[e]];
+    SetCubicQuadratureFactors(layout.tables[0], grp.rest, layout.materials[grp.material],
+                              quadrature_factors_.data() + (k / kQuadratureLanes) * kChunkValues,
+                              static_cast<int>(k % kQuadratureLanes));
+  }
+  if (float_products) {
+    quadrature_factors_f_.assign(quadrature_factors_.begin(), quadrature_factors_.end());
+  }
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_, 3);
     // Room for the largest batch's rows, plus a line for the alignment.
@@ -126,10 +174,19 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   y_.setZero(num_nodes_, 3);
 }
 
+Eigen::MatrixXd LocalFrameModel::K(int kind, int32_t group, int axis) const {
+  if (kind == 0 && pooled_[group]) {
+    const ElementGroup& grp = layout_.blocks[0].groups[group];
+    return IntegrateGroup(layout_.tables[0], grp, layout_.materials[grp.material])[axis];
+  }
+  return float_products_ ? packed_f_[kind][group][axis].Unpack()
+                         : packed_[kind][group][axis].Unpack();
+}
+
 InternalForceModel::Frames LocalFrameModel::frames() const {
   Frames out;
   for (int kind = 0; kind < 3; ++kind) {
-    const std::vector<int32_t>& order = layout_.blocks[kind].by_group;
+    const std::vector<int32_t>& order = schedule_.order[kind];
     out[kind].resize(frames_[kind].size());
     for (size_t k = 0; k < order.size(); ++k) out[kind][order[k]] = frames_[kind][k];
   }
@@ -138,7 +195,7 @@ InternalForceModel::Frames LocalFrameModel::frames() const {
 
 void LocalFrameModel::set_frames(const Frames& frames) {
   for (int kind = 0; kind < 3; ++kind) {
-    const std::vector<int32_t>& order = layout_.blocks[kind].by_group;
+    const std::vector<int32_t>& order = schedule_.order[kind];
     for (size_t k = 0; k < order.size(); ++k) frames_[kind][k] = frames[kind][order[k]];
   }
 }
@@ -372,7 +429,8 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
     const int n = block.nodes;
-    const double* grad = centre_gradient_[batch.kind][batch.group].data();
+    const bool pooled = batch.group == kPooled;
+    const double* grad = pooled ? nullptr : centre_gradient_[batch.kind][batch.group].data();
     const int32_t* nodes = schedule_.batch_nodes.data() + batch.nodes_begin;
     const uint16_t* lids = schedule_.local_ids.data() + batch.local_begin;
     GatherRows(batch.num_nodes, nodes, d.data(), delta_.data(), local);
@@ -402,6 +460,10 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
       T* cx = cols[0] + b * ld;
       T* cy = cols[1] + b * ld;
       T* cz = cols[2] + b * ld;
+      if (pooled) {
+        const int32_t e = schedule_.order[batch.kind][batch.first + b];
+        grad = centre_gradient_[batch.kind][block.group[e]].data();
+      }
 #ifdef DYNSOLID_LF_AVX2
       if (n % 4 == 0) {
         LocalDeformationAvx2(n, local, lid, grad, q, rot[b], cx, cy, cz);
@@ -419,8 +481,27 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     // y = K dhat: sum-factorized where the group has the form (float
     // products only), else the shared dense matrices.
     bool factorized = false;
+    if (pooled) {
+      // Per element at its quadrature points, a chunk of lanes at a time
+      // (pooled batches start on a chunk).
+      const int64_t first = batch.first - quadrature_first_;
+      for (int32_t c = 0; c < batch.count; c += kQuadratureLanes) {
+        const T* x[3] = {cols[0] + c * ld, cols[1] + c * ld, cols[2] + c * ld};
+        double* y[3] = {w.yx.data() + c * ld, w.yy.data() + c * ld, w.yz.data() + c * ld};
+        const int64_t chunk = (first + c) / kQuadratureLanes * kChunkValues;
+        const int count = std::min<int32_t>(kQuadratureLanes, batch.count - c);
+        if constexpr (std::is_same_v<T, float>) {
+          ApplyCubicQuadrature<float, float>(quadrature_basis_, quadrature_factors_f_.data() + chunk,
+                                             count, x, ld, y);
+        } else {
+          ApplyCubicQuadrature<double, double>(quadrature_basis_,
+                                               quadrature_factors_.data() + chunk, count, x, ld, y);
+        }
+      }
+      factorized = true;
+    }
     if constexpr (std::is_same_v<T, float>) {
-      if (batch.kind == 0 && kron_[batch.group]) {
+      if (!pooled && batch.kind == 0 && kron_[batch.group]) {
         const KroneckerStiffness& kron = *kron_[batch.group];
         kron.Apply(0, cols[0], ld, batch.count, w.yx.data());
         kron.Apply(1, cols[1], ld, batch.count, w.yy.data());
@@ -543,8 +624,10 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
 int64_t LocalFrameModel::per_element_bytes() const {
   int64_t elements = 0;
   for (const ElementBlock& b : layout_.blocks) elements += b.size();
+  const int64_t factor_bytes = static_cast<int64_t>(quadrature_factors_.size()) * 8 +
+                               static_cast<int64_t>(quadrature_factors_f_.size()) * 4;
   return PerElementBytes(layout_) + BatchTableBytes(layout_, schedule_) +
-         (elements > 0 ? measure_.bytes() / elements : 0);
+         (elements > 0 ? (measure_.bytes() + factor_bytes) / elements : 0);
 }
 
 }  // namespace dynsolid::models

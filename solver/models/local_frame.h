@@ -45,6 +45,14 @@
 // one material: every interior element of a block) applies them
 // sum-factorized (kron_product.h), within the same rounding.
 //
+// Cubic groups of at most `quadrature_group_size` elements (a painted
+// band, where every element has a material of its own; a curved mesh,
+// where every element has a shape of its own) have no dense matrices: their
+// elements share kPooled batches and are applied at their quadrature
+// points from per-element factors (cubic_quadrature.h), in float with
+// float products. A dense matrix per element would be streamed from memory
+// on every pass (the torus's 87 MB) and integrated on every paint.
+//
 // Note on Eq. 15's factor 2 (MODEL.md writes K^x_x = 2 int ...): with it,
 // E would not keep its meaning in pascals (the energy 1/2 eps C eps gives
 // int B^T C B); kStiffnessFactor = 1 keeps E in pascals.
@@ -58,6 +66,7 @@
 #include <Eigen/Geometry>
 
 #include "solver/common/worker_pool.h"
+#include "solver/models/cubic_quadrature.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
 #include "solver/models/kron_product.h"
@@ -68,6 +77,10 @@ namespace dynsolid::models {
 
 inline constexpr double kStiffnessFactor = 1.0;
 
+// Cubic groups of at most this many elements are applied at their
+// quadrature points (see above; bench/quadrature_bench compares the paths).
+inline constexpr int32_t kQuadratureGroupSize = 8;
+
 
 class LocalFrameModel final : public InternalForceModel {
  public:
@@ -77,7 +90,8 @@ class LocalFrameModel final : public InternalForceModel {
   // (the same bits as integrating them again; see MatchStiffnessGroups).
   LocalFrameModel(const ElementLayout& layout, DeformationMeasure measure, int32_t num_nodes,
                   WorkerPool& pool, const LocalFrameModel* previous = nullptr,
-                  bool float_products = false);
+                  bool float_products = false,
+                  int32_t quadrature_group_size = kQuadratureGroupSize);
 
   // The deformation measure (it depends on the mesh alone: a model rebuilt
   // after a paint copies it).
@@ -88,6 +102,8 @@ class LocalFrameModel final : public InternalForceModel {
   // the elements in them.
   int32_t factorized_groups() const;
   int64_t factorized_elements() const;
+  // Cubic elements applied at their quadrature points.
+  int64_t quadrature_elements() const { return quadrature_elements_; }
 
   double Forces(const Points& d, Points& g) override;
   double ExactForces(const Points& d, Points& g) override;
@@ -100,10 +116,9 @@ class LocalFrameModel final : public InternalForceModel {
   Timing last_timing() const override { return timing_; }
 
   // The three matrices of group `group` of kind block `kind` (tests, reports).
-  Eigen::MatrixXd K(int kind, int32_t group, int axis) const {
-    return float_products_ ? packed_f_[kind][group][axis].Unpack()
-                           : packed_[kind][group][axis].Unpack();
-  }
+  // A group applied at its quadrature points has its matrices integrated
+  // here (in double).
+  Eigen::MatrixXd K(int kind, int32_t group, int axis) const;
   int64_t shared_matrix_bytes() const;
   // The layout's per-element bytes (element_blocks.h) plus the measure's
   // edge and corner lists spread over the elements.
@@ -141,7 +156,18 @@ class LocalFrameModel final : public InternalForceModel {
   // material), used in place of packed_f_'s dense products.
   std::vector<std::optional<KroneckerStiffness>> kron_;
   bool float_products_ = false;
-  // Per element, in the order of its kind block's by_group (the order the
+  // Per cubic group: applied at its quadrature points (no matrices in
+  // packed_ / packed_f_).
+  std::vector<uint8_t> pooled_;
+  // The pooled elements' factors, a chunk of kQuadratureLanes per
+  // kChunkValues, in schedule order from quadrature_first_ (and rounded to
+  // float with float products).
+  CubicQuadratureBasis quadrature_basis_{};
+  std::vector<double> quadrature_factors_;
+  std::vector<float> quadrature_factors_f_;
+  int32_t quadrature_first_ = 0;
+  int64_t quadrature_elements_ = 0;
+  // Per element, in the schedule's order (the order the
   // batches run in, so a batch reads its frames in sequence); frames() and
   // set_frames() map them to and from element order.
   std::array<std::vector<Eigen::Quaterniond>, 3> frames_;

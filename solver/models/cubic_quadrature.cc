@@ -1,0 +1,196 @@
+#include "solver/models/cubic_quadrature.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Dense>
+
+#include "solver/fem/basis.h"
+#include "solver/models/local_frame.h"
+
+namespace dynsolid::models {
+namespace {
+
+constexpr int L = kQuadratureLanes;
+// The three components of a chunk's elements side by side: lane l + L a
+// holds element l's component a, so every contraction runs over 3 L lanes.
+constexpr int W = 3 * L;
+
+// One 1D contraction of a 4 x 4 x 4 field (index 16 i + 4 j + k, a row of L
+// lanes each) along the axis of stride kStride: out[.., q, ..] = sum_n
+// M[q][n] in[.., n, ..], or with kTranspose sum_n M[n][q] in[.., n, ..];
+// kAdd adds into out instead of overwriting it.
+template <int kStride, bool kTranspose, bool kAdd, typename S>
+inline void Contract(const S (*__restrict in)[W], S (*__restrict out)[W], const S (&m)[4][4]) {
+  S c[4][4];
+  for (int q = 0; q < 4; ++q)
+    for (int n = 0; n < 4; ++n) c[q][n] = kTranspose ? m[n][q] : m[q][n];
+  for (int o = 0; o < 64; ++o) {
+    if ((o / kStride) % 4 != 0) continue;  // o: the line's first entry
+    const S* __restrict i0 = in[o];
+    const S* __restrict i1 = in[o + kStride];
+    const S* __restrict i2 = in[o + 2 * kStride];
+    const S* __restrict i3 = in[o + 3 * kStride];
+    S* __restrict o0 = out[o];
+    S* __restrict o1 = out[o + kStride];
+    S* __restrict o2 = out[o + 2 * kStride];
+    S* __restrict o3 = out[o + 3 * kStride];
+    for (int l = 0; l < W; ++l) {
+      const S a0 = i0[l], a1 = i1[l], a2 = i2[l], a3 = i3[l];
+      const S y0 = c[0][0] * a0 + c[0][1] * a1 + c[0][2] * a2 + c[0][3] * a3;
+      const S y1 = c[1][0] * a0 + c[1][1] * a1 + c[1][2] * a2 + c[1][3] * a3;
+      const S y2 = c[2][0] * a0 + c[2][1] * a1 + c[2][2] * a2 + c[2][3] * a3;
+      const S y3 = c[3][0] * a0 + c[3][1] * a1 + c[3][2] * a2 + c[3][3] * a3;
+      if constexpr (kAdd) {
+        o0[l] += y0, o1[l] += y1, o2[l] += y2, o3[l] += y3;
+      } else {
+        o0[l] = y0, o1[l] = y1, o2[l] = y2, o3[l] = y3;
+      }
+    }
+  }
+}
+
+template <typename S>
+struct Basis1d {
+  S b[4][4], d[4][4];
+};
+inline Basis1d<double> BasisIn(const CubicQuadratureBasis& basis, double) {
+  Basis1d<double> o;
+  std::copy(&basis.b[0][0], &basis.b[0][0] + 16, &o.b[0][0]);
+  std::copy(&basis.db[0][0], &basis.db[0][0] + 16, &o.d[0][0]);
+  return o;
+}
+inline Basis1d<float> BasisIn(const CubicQuadratureBasis& basis, float) {
+  Basis1d<float> o;
+  std::copy(&basis.bf[0][0], &basis.bf[0][0] + 16, &o.b[0][0]);
+  std::copy(&basis.dbf[0][0], &basis.dbf[0][0] + 16, &o.d[0][0]);
+  return o;
+}
+
+}  // namespace
+
+bool CubicQuadratureBasis::Make(const fem::KindTable& table, CubicQuadratureBasis& out) {
+  if (table.kind != fem::ElementKind::kCubic || table.points != 64 || table.nodes != 64) {
+    return false;
+  }
+  // The 1D points: u of points 0, 16, 32, 48.
+  for (int q = 0; q < 4; ++q) {
+    const double t = table.uvw[16 * q].x();
+    const std::array<double, 4> b = fem::CubicBSpline(t), db = fem::CubicBSplineDerivative(t);
+    for (int i = 0; i < 4; ++i) {
+      out.b[q][i] = b[i];
+      out.db[q][i] = db[i];
+      out.bf[q][i] = static_cast<float>(b[i]);
+      out.dbf[q][i] = static_cast<float>(db[i]);
+    }
+  }
+  // The tensor products against the table.
+  for (int q = 0; q < 64; ++q) {
+    const int qi = q / 16, qj = (q / 4) % 4, qk = q % 4;
+    const double* dn = table.dN(q);
+    for (int m = 0; m < 64; ++m) {
+      const int i = m / 16, j = (m / 4) % 4, k = m % 4;
+      const double e[3] = {out.db[qi][i] * out.b[qj][j] * out.b[qk][k],
+                           out.b[qi][i] * out.db[qj][j] * out.b[qk][k],
+                           out.b[qi][i] * out.b[qj][j] * out.db[qk][k]};
+      for (int c = 0; c < 3; ++c) {
+        if (std::abs(e[c] - dn[3 * m + c]) > 1e-12) return false;
+      }
+    }
+  }
+  return true;
+}
+
+void SetCubicQuadratureFactors(const fem::KindTable& table, const fem::NodeMatrixX3& rest,
+                               const std::vector<MaterialPoint>& material, double* chunk,
+                               int lane) {
+  for (int q = 0; q < table.points; ++q) {
+    // J(c, k) = d x_c / d u_k = sum_i rest(i, c) dN_i / du_k.
+    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dn(
+        table.dN(q), table.nodes, 3);
+    const Eigen::Matrix3d j = rest.transpose() * dn;
+    const double det = j.determinant();
+    // As the dense path: a point of an inverted element adds nothing.
+    const double dv = std::max(det, 0.0) * table.weight[q] * kStiffnessFactor;
+    const Eigen::Matrix3d jinv = dv > 0 ? Eigen::Matrix3d(j.inverse()) : Eigen::Matrix3d::Zero();
+    double* f = chunk + static_cast<int64_t>(q) * kFactorsPerPoint * L;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) f[(3 * r + c) * L + lane] = jinv(r, c);
+    f[9 * L + lane] = dv * material[q].lame_lambda();
+    f[10 * L + lane] = dv * material[q].lame_mu();
+  }
+}
+
+template <typename S, typename T>
+void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, int count,
+                          const T* const x[3], int ld, double* const y[3]) {
+  const Basis1d<S> bs = BasisIn(basis, S(0));
+  const auto& B = bs.b;
+  const auto& D = bs.d;
+  // Six buffers of 64 x W, reused stage by stage (36 KB in float).
+  alignas(64) S f[64][W], a1[64][W], a2[64][W], c3[64][W], c4[64][W], c5[64][W];
+  for (int a = 0; a < 3; ++a) {
+    for (int l = 0; l < L; ++l) {
+      for (int m = 0; m < 64; ++m) {
+        f[m][L * a + l] = l < count ? static_cast<S>(x[a][l * ld + m]) : S(0);
+      }
+    }
+  }
+  // Reference gradients at the points: along w (stride 1), v (4), u (16):
+  // d/du into f, d/dv into a1, d/dw into a2.
+  Contract<1, false, false>(f, a1, B);
+  Contract<1, false, false>(f, a2, D);
+  Contract<4, false, false>(a1, c3, B);
+  Contract<4, false, false>(a1, c4, D);
+  Contract<4, false, false>(a2, c5, B);
+  Contract<16, false, false>(c3, f, D);
+  Contract<16, false, false>(c4, a1, B);
+  Contract<16, false, false>(c5, a2, B);
+  // At each point: to physical gradients, scaled, and back.
+  for (int q = 0; q < 64; ++q) {
+    const S* fq = factors + static_cast<int64_t>(q) * kFactorsPerPoint * L;
+    S* __restrict ru = f[q];
+    S* __restrict rv = a1[q];
+    S* __restrict rw = a2[q];
+    for (int l = 0; l < L; ++l) {
+      S j[9];
+      for (int k = 0; k < 9; ++k) j[k] = fq[k * L + l];
+      const S lam = fq[9 * L + l], mu = fq[10 * L + l];
+      const S stiff = lam + mu + mu;
+      for (int a = 0; a < 3; ++a) {
+        const int i = L * a + l;
+        const S r0 = ru[i], r1 = rv[i], r2 = rw[i];
+        S p[3];
+        for (int c = 0; c < 3; ++c) {
+          p[c] = (r0 * j[c] + r1 * j[3 + c] + r2 * j[6 + c]) * (c == a ? stiff : mu);
+        }
+        ru[i] = j[0] * p[0] + j[1] * p[1] + j[2] * p[2];
+        rv[i] = j[3] * p[0] + j[4] * p[1] + j[5] * p[2];
+        rw[i] = j[6] * p[0] + j[7] * p[1] + j[8] * p[2];
+      }
+    }
+  }
+  // The transposes in reverse order.
+  Contract<16, true, false>(f, c3, D);
+  Contract<16, true, false>(a1, c4, B);
+  Contract<16, true, false>(a2, c5, B);
+  Contract<4, true, false>(c3, a1, B);
+  Contract<4, true, true>(c4, a1, D);
+  Contract<4, true, false>(c5, a2, B);
+  Contract<1, true, false>(a1, f, B);
+  Contract<1, true, true>(a2, f, D);
+  for (int a = 0; a < 3; ++a) {
+    for (int l = 0; l < count; ++l) {
+      for (int m = 0; m < 64; ++m) y[a][l * ld + m] = static_cast<double>(f[m][L * a + l]);
+    }
+  }
+}
+
+template void ApplyCubicQuadrature<double, double>(const CubicQuadratureBasis&, const double*, int,
+                                                   const double* const[3], int, double* const[3]);
+template void ApplyCubicQuadrature<double, float>(const CubicQuadratureBasis&, const double*, int,
+                                                  const float* const[3], int, double* const[3]);
+template void ApplyCubicQuadrature<float, float>(const CubicQuadratureBasis&, const float*, int,
+                                                 const float* const[3], int, double* const[3]);
+
+}  // namespace dynsolid::models

@@ -135,47 +135,57 @@ Eigen::Matrix<double, 6, 6> Isotropic(double lambda, double mu) {
   return c;
 }
 
+// A group's K = sum_q B_q^T C_q B_q dV_q (3n x 3n), exactly symmetric.
+Eigen::MatrixXd IntegrateGroup(const fem::KindTable& table, const ElementGroup& grp,
+                               const std::vector<MaterialPoint>& material) {
+  const int n = table.nodes;
+  fem::NodeMatrixX3 g;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> b;
+  Eigen::MatrixXd k;
+  k.setZero(3 * n, 3 * n);
+  for (int q = 0; q < table.points; ++q) {
+    const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
+    const double dv = std::max(det, 0.0) * table.weight[q];
+    StrainDisplacement(g, b);
+    const Eigen::Matrix<double, 6, 6> c =
+        Isotropic(material[q].lame_lambda(), material[q].lame_mu()) * dv;
+    k.noalias() += b.transpose() * (c * b);
+  }
+  // Exactly symmetric (a + b == b + a in floating point).
+  return 0.5 * (k + k.transpose()).eval();
+}
+
 }  // namespace
 
 CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
-                                     WorkerPool& pool, const CorotationalModel* previous)
+                                     WorkerPool& pool, const CorotationalModel* previous,
+                                     int32_t quadrature_group_size)
     : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
-  fem::NodeMatrixX3 g;
-  Eigen::Matrix<double, 6, Eigen::Dynamic> b;
+  pooled_ = quadrature_.Choose(layout, quadrature_group_size);
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
-    const fem::KindTable& table = layout.tables[kind];
-    const int n = block.nodes;
     const std::vector<int32_t> reuse = previous != nullptr
                                            ? MatchStiffnessGroups(layout, previous->layout_, kind)
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      if (reuse[gi] >= 0) {
+      if (kind == 0 && pooled_[gi]) {
+        packed_[kind].emplace_back();  // applied at the quadrature points
+        continue;
+      }
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[reuse[gi]])) {
         packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         continue;
       }
       ++integrated_groups_;
       const ElementGroup& grp = block.groups[gi];
-      const auto& material = layout.materials[grp.material];
-      // K = sum_q B_q^T C_q B_q dV_q.
-      Eigen::MatrixXd k;
-      k.setZero(3 * n, 3 * n);
-      for (int q = 0; q < table.points; ++q) {
-        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
-        const double dv = std::max(det, 0.0) * table.weight[q];
-        StrainDisplacement(g, b);
-        const Eigen::Matrix<double, 6, 6> c =
-            Isotropic(material[q].lame_lambda(), material[q].lame_mu()) * dv;
-        k.noalias() += b.transpose() * (c * b);
-      }
-      // Exactly symmetric (a + b == b + a in floating point).
-      k = 0.5 * (k + k.transpose()).eval();
-      packed_[kind].emplace_back(k);
+      packed_[kind].emplace_back(
+          IntegrateGroup(layout.tables[kind], grp, layout.materials[grp.material]));
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
   }
   work_.resize(kForceParts);
-  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_);
+  schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_, &pooled_);
+  quadrature_.Build(layout, schedule_, 1.0);
   int max_nodes = 0;
   for (const ElementBlock& block : layout.blocks) {
     if (block.size() > 0) max_nodes = std::max(max_nodes, block.nodes);
@@ -197,6 +207,7 @@ void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
   // they stay right (a paint prepared off the loop makes them there).
   if (on == single_ && (!on || packed_f_[0].size() == packed_[0].size())) return;
   single_ = on;
+  quadrature_.SetFloat(on);
   for (int kind = 0; kind < 3; ++kind) {
     packed_f_[kind].clear();
     if (on) {
@@ -228,7 +239,8 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
   for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
-    const ElementGroup& grp = block.groups[batch.group];
+    const bool pooled = batch.group == kPooled;
+    const ElementGroup* grp = pooled ? nullptr : &block.groups[batch.group];
     const int n = block.nodes;
     const int m = 3 * n;
     pos.resize(n, 3);
@@ -238,13 +250,14 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+      if (pooled) grp = &block.groups[block.group[e]];
 #ifdef DYNSOLID_COROT_AVX2
       {
         // (Read only without `update`; set either way, which GCC can see.)
         const Eigen::Matrix3d r_in = update == nullptr
                                          ? frames_[batch.kind][e].toRotationMatrix()
                                          : Eigen::Matrix3d::Identity();
-        ElementColumn(n, x.data(), rest_.data(), ids, grp.centre_gradient.data(), subtract_rest,
+        ElementColumn(n, x.data(), rest_.data(), ids, grp->centre_gradient.data(), subtract_rest,
                       &r_in, rot[b],
                       update != nullptr ? &(*update)[batch.kind][e] : nullptr,
                       kRotationIterations, u.col(b).data());
@@ -254,7 +267,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       for (int i = 0; i < n; ++i) pos.row(i) = x.row(ids[i]);
       if (update != nullptr) {
         // Deformation gradient at the centre, then its rotation R_e.
-        const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+        const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp->centre_gradient);
         Eigen::Quaterniond& q = (*update)[batch.kind][e];
         ExtractRotation(f, q, kRotationIterations, &rot[b]);
       } else {
@@ -275,7 +288,19 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     }
     // y = K u (K pre-packed; rows padded to the panel height), in float
     // for ApplyLinearized when asked.
-    if (!subtract_rest && single_) {
+    if (pooled) {
+      // K u at the quadrature points: node-major columns (stride 3).
+      const int64_t ld = w.u.rows();
+      const double* xs[3] = {w.u.data(), w.u.data() + 1, w.u.data() + 2};
+      double* ys[3] = {w.y.data(), w.y.data() + 1, w.y.data() + 2};
+      if (!subtract_rest && single_) {
+        quadrature_.Apply<CubicPointLaw::kIsotropic, float, double>(batch.first, batch.count, xs,
+                                                                    ld, 3, ys);
+      } else {
+        quadrature_.Apply<CubicPointLaw::kIsotropic, double, double>(batch.first, batch.count, xs,
+                                                                     ld, 3, ys);
+      }
+    } else if (!subtract_rest && single_) {
       auto uf = w.uf.topLeftCorner(m, batch.count);
       uf = u.cast<float>();
       packed_f_[batch.kind][batch.group].Apply(w.uf.data(), static_cast<int>(w.uf.rows()),
@@ -323,12 +348,12 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
   for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
     const ElementBatch& batch = schedule_.batches[bi];
     const ElementBlock& block = layout_.blocks[batch.kind];
-    const ElementGroup& grp = block.groups[batch.group];
     const int n = block.nodes;
     pos.resize(n, 3);
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+      const ElementGroup& grp = block.groups[block.group[e]];
       // As RunBatches with `update`: the same sums, the same bits.
 #ifdef DYNSOLID_COROT_AVX2
       const Eigen::Matrix3d f = CentreGradientAvx2(n, d.data(), ids, grp.centre_gradient.data());
@@ -386,6 +411,18 @@ int64_t CorotationalModel::shared_matrix_bytes() const {
   return bytes;
 }
 
-int64_t CorotationalModel::per_element_bytes() const { return PerElementBytes(layout_); }
+int64_t CorotationalModel::per_element_bytes() const {
+  int64_t elements = 0;
+  for (const ElementBlock& b : layout_.blocks) elements += b.size();
+  return PerElementBytes(layout_) + (elements > 0 ? quadrature_.bytes() / elements : 0);
+}
+
+Eigen::MatrixXd CorotationalModel::K(int kind, int32_t group) const {
+  if (kind == 0 && pooled_[group]) {
+    const ElementGroup& grp = layout_.blocks[0].groups[group];
+    return IntegrateGroup(layout_.tables[0], grp, layout_.materials[grp.material]);
+  }
+  return packed_[kind][group].Unpack();
+}
 
 }  // namespace dynsolid::models

@@ -25,7 +25,13 @@
 // frames held fixed (the standard corotational force, no dR/dd term).
 //
 // Elements of one group are processed in batches as dense products: the
-// shared K times a 3n x batch block of local displacements.
+// shared K times a 3n x batch block of local displacements. Cubic groups
+// of at most `quadrature_group_size` elements (by default all of them) have
+// no matrix: their elements share kPooled batches and K u is taken at their
+// quadrature points (cubic_quadrature.h, the isotropic law). A dense
+// 192 x 192 per element would be integrated on every paint and streamed
+// from memory on every pass; shared by a whole block, its products are
+// still slower (bench/quadrature_bench).
 #pragma once
 
 #include <array>
@@ -35,6 +41,7 @@
 #include <Eigen/Geometry>
 
 #include "solver/common/worker_pool.h"
+#include "solver/models/cubic_quadrature.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/internal_force.h"
 #include "solver/models/panel_product.h"
@@ -49,7 +56,8 @@ class CorotationalModel final : public InternalForceModel {
   // whose rest shape and stiffness samples it already had take its matrices
   // (see MatchStiffnessGroups).
   CorotationalModel(const ElementLayout& layout, const Points& rest, WorkerPool& pool,
-                    const CorotationalModel* previous = nullptr);
+                    const CorotationalModel* previous = nullptr,
+                    int32_t quadrature_group_size = kEveryGroup);
   CorotationalModel(const CorotationalModel&) = delete;
   CorotationalModel& operator=(const CorotationalModel&) = delete;
 
@@ -94,7 +102,10 @@ class CorotationalModel final : public InternalForceModel {
 
   // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
   // 2 pyramid): 3n x 3n, node-major, N/m.
-  Eigen::MatrixXd K(int kind, int32_t group) const { return packed_[kind][group].Unpack(); }
+  // A group applied at its quadrature points has it integrated here.
+  Eigen::MatrixXd K(int kind, int32_t group) const;
+  // Cubic elements applied at their quadrature points.
+  int64_t quadrature_elements() const { return quadrature_.size(); }
   // Bytes of the shared group matrices (float copies included); bytes per element of per-element
   // state (node ids, group id, place in by_group, warm-started frame), as
   // LocalFrameModel counts them. The copy of the rest positions (24 bytes
@@ -128,6 +139,10 @@ class CorotationalModel final : public InternalForceModel {
   std::array<std::vector<PackedMatrix>, 3> packed_;  // packed for the products
   std::array<std::vector<PackedMatrixF>, 3> packed_f_;  // float copies, when on
   bool single_ = false;
+  // Per cubic group: applied at its quadrature points (no matrix in
+  // packed_); those elements and their factors.
+  std::vector<uint8_t> pooled_;
+  CubicQuadratureElements quadrature_;
   Frames frames_;  // per element, by kind; written by Forces only
   ElementSchedule schedule_;  // batches and their fixed parts
   // Per-part scratch, allocated at construction (mutable for the const

@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include <Eigen/Dense>
 
 #include "solver/fem/basis.h"
-#include "solver/models/local_frame.h"
 
 namespace dynsolid::models {
 namespace {
@@ -102,8 +102,8 @@ bool CubicQuadratureBasis::Make(const fem::KindTable& table, CubicQuadratureBasi
 }
 
 void SetCubicQuadratureFactors(const fem::KindTable& table, const fem::NodeMatrixX3& rest,
-                               const std::vector<MaterialPoint>& material, double* chunk,
-                               int lane) {
+                               const std::vector<MaterialPoint>& material, double scale,
+                               double* chunk, int lane) {
   for (int q = 0; q < table.points; ++q) {
     // J(c, k) = d x_c / d u_k = sum_i rest(i, c) dN_i / du_k.
     const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dn(
@@ -111,7 +111,7 @@ void SetCubicQuadratureFactors(const fem::KindTable& table, const fem::NodeMatri
     const Eigen::Matrix3d j = rest.transpose() * dn;
     const double det = j.determinant();
     // As the dense path: a point of an inverted element adds nothing.
-    const double dv = std::max(det, 0.0) * table.weight[q] * kStiffnessFactor;
+    const double dv = std::max(det, 0.0) * table.weight[q] * scale;
     const Eigen::Matrix3d jinv = dv > 0 ? Eigen::Matrix3d(j.inverse()) : Eigen::Matrix3d::Zero();
     double* f = chunk + static_cast<int64_t>(q) * kFactorsPerPoint * L;
     for (int r = 0; r < 3; ++r)
@@ -121,9 +121,40 @@ void SetCubicQuadratureFactors(const fem::KindTable& table, const fem::NodeMatri
   }
 }
 
-template <typename S, typename T>
+// The point's step for the local-frame model: each component a on its own,
+// s_c = k_ac p_c with k_aa = dV (lambda + 2 mu), k_ac = dV mu.
+template <typename S>
+inline void LocalFramePoint(const S (&j)[9], S lam, S mu, S (&r)[3][3]) {
+  const S stiff = lam + mu + mu;
+  for (int a = 0; a < 3; ++a) {
+    S p[3];
+    for (int c = 0; c < 3; ++c) {
+      p[c] = (r[a][0] * j[c] + r[a][1] * j[3 + c] + r[a][2] * j[6 + c]) * (c == a ? stiff : mu);
+    }
+    for (int k = 0; k < 3; ++k) r[a][k] = j[3 * k] * p[0] + j[3 * k + 1] * p[1] + j[3 * k + 2] * p[2];
+  }
+}
+
+// The point's step for isotropic linear elasticity (the corotational
+// model): H = r Jinv (H_ac = d u_a / d x_c), sigma = dV lambda tr(H) I +
+// dV mu (H + H^T), t = sigma Jinv^T.
+template <typename S>
+inline void IsotropicPoint(const S (&j)[9], S lam, S mu, S (&r)[3][3]) {
+  S h[3][3];
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) h[a][c] = r[a][0] * j[c] + r[a][1] * j[3 + c] + r[a][2] * j[6 + c];
+  const S tr = lam * (h[0][0] + h[1][1] + h[2][2]);
+  S sg[3][3];
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) sg[a][c] = mu * (h[a][c] + h[c][a]) + (a == c ? tr : S(0));
+  for (int a = 0; a < 3; ++a)
+    for (int k = 0; k < 3; ++k)
+      r[a][k] = sg[a][0] * j[3 * k] + sg[a][1] * j[3 * k + 1] + sg[a][2] * j[3 * k + 2];
+}
+
+template <CubicPointLaw kLaw, typename S, typename T>
 void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, int count,
-                          const T* const x[3], int ld, double* const y[3]) {
+                          const T* const x[3], int64_t ld, int node_stride, double* const y[3]) {
   const Basis1d<S> bs = BasisIn(basis, S(0));
   const auto& B = bs.b;
   const auto& D = bs.d;
@@ -132,7 +163,7 @@ void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, i
   for (int a = 0; a < 3; ++a) {
     for (int l = 0; l < L; ++l) {
       for (int m = 0; m < 64; ++m) {
-        f[m][L * a + l] = l < count ? static_cast<S>(x[a][l * ld + m]) : S(0);
+        f[m][L * a + l] = l < count ? static_cast<S>(x[a][l * ld + m * node_stride]) : S(0);
       }
     }
   }
@@ -146,7 +177,8 @@ void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, i
   Contract<16, false, false>(c3, f, D);
   Contract<16, false, false>(c4, a1, B);
   Contract<16, false, false>(c5, a2, B);
-  // At each point: to physical gradients, scaled, and back.
+  // At each point: to physical gradients, the material's response, and
+  // back to the reference gradients' weights.
   for (int q = 0; q < 64; ++q) {
     const S* fq = factors + static_cast<int64_t>(q) * kFactorsPerPoint * L;
     S* __restrict ru = f[q];
@@ -156,17 +188,21 @@ void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, i
       S j[9];
       for (int k = 0; k < 9; ++k) j[k] = fq[k * L + l];
       const S lam = fq[9 * L + l], mu = fq[10 * L + l];
-      const S stiff = lam + mu + mu;
+      S r[3][3];
       for (int a = 0; a < 3; ++a) {
-        const int i = L * a + l;
-        const S r0 = ru[i], r1 = rv[i], r2 = rw[i];
-        S p[3];
-        for (int c = 0; c < 3; ++c) {
-          p[c] = (r0 * j[c] + r1 * j[3 + c] + r2 * j[6 + c]) * (c == a ? stiff : mu);
-        }
-        ru[i] = j[0] * p[0] + j[1] * p[1] + j[2] * p[2];
-        rv[i] = j[3] * p[0] + j[4] * p[1] + j[5] * p[2];
-        rw[i] = j[6] * p[0] + j[7] * p[1] + j[8] * p[2];
+        r[a][0] = ru[L * a + l];
+        r[a][1] = rv[L * a + l];
+        r[a][2] = rw[L * a + l];
+      }
+      if constexpr (kLaw == CubicPointLaw::kLocalFrame) {
+        LocalFramePoint(j, lam, mu, r);
+      } else {
+        IsotropicPoint(j, lam, mu, r);
+      }
+      for (int a = 0; a < 3; ++a) {
+        ru[L * a + l] = r[a][0];
+        rv[L * a + l] = r[a][1];
+        rw[L * a + l] = r[a][2];
       }
     }
   }
@@ -181,16 +217,96 @@ void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, i
   Contract<1, true, true>(a2, f, D);
   for (int a = 0; a < 3; ++a) {
     for (int l = 0; l < count; ++l) {
-      for (int m = 0; m < 64; ++m) y[a][l * ld + m] = static_cast<double>(f[m][L * a + l]);
+      for (int m = 0; m < 64; ++m) {
+        y[a][l * ld + m * node_stride] = static_cast<double>(f[m][L * a + l]);
+      }
     }
   }
 }
 
-template void ApplyCubicQuadrature<double, double>(const CubicQuadratureBasis&, const double*, int,
-                                                   const double* const[3], int, double* const[3]);
-template void ApplyCubicQuadrature<double, float>(const CubicQuadratureBasis&, const double*, int,
-                                                  const float* const[3], int, double* const[3]);
-template void ApplyCubicQuadrature<float, float>(const CubicQuadratureBasis&, const float*, int,
-                                                 const float* const[3], int, double* const[3]);
+std::vector<uint8_t> CubicQuadratureElements::Choose(const ElementLayout& layout,
+                                                     int32_t group_size) {
+  const ElementBlock& cubic = layout.blocks[0];
+  std::vector<uint8_t> pooled(cubic.groups.size(), 0);
+  if (group_size <= 0 || cubic.size() == 0 || !CubicQuadratureBasis::Make(layout.tables[0], basis_)) {
+    return pooled;
+  }
+  for (size_t gi = 0; gi < cubic.groups.size(); ++gi) {
+    pooled[gi] = cubic.group_start[gi + 1] - cubic.group_start[gi] <= group_size;
+  }
+  return pooled;
+}
+
+void CubicQuadratureElements::Build(const ElementLayout& layout, const ElementSchedule& schedule,
+                                    double scale) {
+  const ElementBlock& cubic = layout.blocks[0];
+  // The pooled batches run last among the cubic ones.
+  first_ = static_cast<int32_t>(schedule.order[0].size());
+  for (const ElementBatch& batch : schedule.batches) {
+    if (batch.group == kPooled) first_ = std::min(first_, batch.first);
+  }
+  size_ = static_cast<int64_t>(schedule.order[0].size()) - first_;
+  const int64_t chunks = (size_ + L - 1) / L;
+  factors_.assign(chunks * kChunkValues, 0.0);
+  // Elements of one group have the same factors (shape up to translation,
+  // material): made once per group, copied into each element's lane.
+  std::vector<int64_t> made(cubic.groups.size(), -1);  // a pooled place holding them
+  for (int64_t k = 0; k < size_; ++k) {
+    const int32_t e = schedule.order[0][first_ + k];
+    const int32_t gi = cubic.group[e];
+    double* chunk = factors_.data() + (k / L) * kChunkValues;
+    const int lane = static_cast<int>(k % L);
+    if (made[gi] < 0) {
+      const ElementGroup& grp = cubic.groups[gi];
+      SetCubicQuadratureFactors(layout.tables[0], grp.rest, layout.materials[grp.material], scale,
+                                chunk, lane);
+      made[gi] = k;
+      continue;
+    }
+    const double* from = factors_.data() + (made[gi] / L) * kChunkValues;
+    const int from_lane = static_cast<int>(made[gi] % L);
+    for (int64_t r = 0; r < 64 * kFactorsPerPoint; ++r) chunk[r * L + lane] = from[r * L + from_lane];
+  }
+  if (!factors_f_.empty()) SetFloat(true);
+}
+
+void CubicQuadratureElements::SetFloat(bool on) {
+  if (on) {
+    factors_f_.assign(factors_.begin(), factors_.end());
+  } else {
+    factors_f_ = {};
+  }
+}
+
+template <CubicPointLaw kLaw, typename S, typename T>
+void CubicQuadratureElements::Apply(int32_t first, int32_t count, const T* const x[3], int64_t ld,
+                                    int node_stride, double* const y[3]) const {
+  // Pooled batches start on a chunk.
+  const int64_t at = first - first_;
+  for (int32_t c = 0; c < count; c += L) {
+    const T* xc[3] = {x[0] + c * ld, x[1] + c * ld, x[2] + c * ld};
+    double* yc[3] = {y[0] + c * ld, y[1] + c * ld, y[2] + c * ld};
+    const int64_t chunk = (at + c) / L * kChunkValues;
+    const int n = std::min<int32_t>(L, count - c);
+    if constexpr (std::is_same_v<S, float>) {
+      ApplyCubicQuadrature<kLaw, S, T>(basis_, factors_f_.data() + chunk, n, xc, ld, node_stride,
+                                       yc);
+    } else {
+      ApplyCubicQuadrature<kLaw, S, T>(basis_, factors_.data() + chunk, n, xc, ld, node_stride,
+                                       yc);
+    }
+  }
+}
+
+#define DYNSOLID_INSTANTIATE(LAW, S, T)                                                       \
+  template void ApplyCubicQuadrature<CubicPointLaw::LAW, S, T>(                                \
+      const CubicQuadratureBasis&, const S*, int, const T* const[3], int64_t, int, double* const[3]); \
+  template void CubicQuadratureElements::Apply<CubicPointLaw::LAW, S, T>(                      \
+      int32_t, int32_t, const T* const[3], int64_t, int, double* const[3]) const;
+DYNSOLID_INSTANTIATE(kLocalFrame, double, double)
+DYNSOLID_INSTANTIATE(kLocalFrame, float, float)
+DYNSOLID_INSTANTIATE(kIsotropic, double, double)
+DYNSOLID_INSTANTIATE(kIsotropic, float, double)
+#undef DYNSOLID_INSTANTIATE
 
 }  // namespace dynsolid::models

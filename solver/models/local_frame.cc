@@ -73,16 +73,9 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
       num_nodes_(num_nodes),
       float_products_(float_products) {
   if (previous != nullptr && previous->float_products_ != float_products) previous = nullptr;
-  // Small cubic groups go to the quadrature points (when the cubic table is
-  // the tensor rule the sum factorization reads).
+  // Small cubic groups go to the quadrature points.
   const ElementBlock& cubic = layout.blocks[0];
-  pooled_.assign(cubic.groups.size(), 0);
-  if (quadrature_group_size > 0 && cubic.size() > 0 &&
-      CubicQuadratureBasis::Make(layout.tables[0], quadrature_basis_)) {
-    for (size_t gi = 0; gi < cubic.groups.size(); ++gi) {
-      pooled_[gi] = cubic.group_start[gi + 1] - cubic.group_start[gi] <= quadrature_group_size;
-    }
-  }
+  pooled_ = quadrature_.Choose(layout, quadrature_group_size);
   // The cubic table's rule is a tensor Gauss rule of n1 points a side.
   std::optional<KroneckerBasis> kron_basis;
   if (float_products && cubic.size() > 0) {
@@ -138,25 +131,8 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   work_.resize(kForceParts);
   schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_, &pooled_);
   IndexBatchNodes(layout, schedule_);
-  // The pooled elements' factors, in schedule order (the pooled batches run
-  // last among the cubic ones, from quadrature_first_).
-  quadrature_first_ = static_cast<int32_t>(schedule_.order[0].size());
-  for (const ElementBatch& batch : schedule_.batches) {
-    if (batch.group == kPooled) quadrature_first_ = std::min(quadrature_first_, batch.first);
-  }
-  quadrature_elements_ = static_cast<int64_t>(schedule_.order[0].size()) - quadrature_first_;
-  const int64_t chunks = (quadrature_elements_ + kQuadratureLanes - 1) / kQuadratureLanes;
-  quadrature_factors_.assign(chunks * kChunkValues, 0.0);
-  for (int64_t k = 0; k < quadrature_elements_; ++k) {
-    const int32_t e = schedule_.order[0][quadrature_first_ + k];
-    const ElementGroup& grp = cubic.groups[cubic.group[e]];
-    SetCubicQuadratureFactors(layout.tables[0], grp.rest, layout.materials[grp.material],
-                              quadrature_factors_.data() + (k / kQuadratureLanes) * kChunkValues,
-                              static_cast<int>(k % kQuadratureLanes));
-  }
-  if (float_products) {
-    quadrature_factors_f_.assign(quadrature_factors_.begin(), quadrature_factors_.end());
-  }
+  quadrature_.Build(layout, schedule_, kStiffnessFactor);
+  quadrature_.SetFloat(float_products);
   for (Workspace& w : work_) {
     w.g.setZero(num_nodes_, 3);
     // Room for the largest batch's rows, plus a line for the alignment.
@@ -482,22 +458,10 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     // products only), else the shared dense matrices.
     bool factorized = false;
     if (pooled) {
-      // Per element at its quadrature points, a chunk of lanes at a time
-      // (pooled batches start on a chunk).
-      const int64_t first = batch.first - quadrature_first_;
-      for (int32_t c = 0; c < batch.count; c += kQuadratureLanes) {
-        const T* x[3] = {cols[0] + c * ld, cols[1] + c * ld, cols[2] + c * ld};
-        double* y[3] = {w.yx.data() + c * ld, w.yy.data() + c * ld, w.yz.data() + c * ld};
-        const int64_t chunk = (first + c) / kQuadratureLanes * kChunkValues;
-        const int count = std::min<int32_t>(kQuadratureLanes, batch.count - c);
-        if constexpr (std::is_same_v<T, float>) {
-          ApplyCubicQuadrature<float, float>(quadrature_basis_, quadrature_factors_f_.data() + chunk,
-                                             count, x, ld, y);
-        } else {
-          ApplyCubicQuadrature<double, double>(quadrature_basis_,
-                                               quadrature_factors_.data() + chunk, count, x, ld, y);
-        }
-      }
+      // Per element at its quadrature points.
+      const T* x[3] = {cols[0], cols[1], cols[2]};
+      double* y[3] = {w.yx.data(), w.yy.data(), w.yz.data()};
+      quadrature_.Apply<CubicPointLaw::kLocalFrame, T, T>(batch.first, batch.count, x, ld, 1, y);
       factorized = true;
     }
     if constexpr (std::is_same_v<T, float>) {
@@ -624,8 +588,7 @@ int64_t LocalFrameModel::shared_matrix_bytes() const {
 int64_t LocalFrameModel::per_element_bytes() const {
   int64_t elements = 0;
   for (const ElementBlock& b : layout_.blocks) elements += b.size();
-  const int64_t factor_bytes = static_cast<int64_t>(quadrature_factors_.size()) * 8 +
-                               static_cast<int64_t>(quadrature_factors_f_.size()) * 4;
+  const int64_t factor_bytes = quadrature_.bytes();
   return PerElementBytes(layout_) + BatchTableBytes(layout_, schedule_) +
          (elements > 0 ? (measure_.bytes() + factor_bytes) / elements : 0);
 }

@@ -77,10 +77,6 @@ namespace dynsolid::models {
 
 inline constexpr double kStiffnessFactor = 1.0;
 
-// Cubic groups of at most this many elements are applied at their
-// quadrature points (see above; bench/quadrature_bench compares the paths).
-inline constexpr int32_t kQuadratureGroupSize = 8;
-
 
 class LocalFrameModel final : public InternalForceModel {
  public:
@@ -103,7 +99,7 @@ class LocalFrameModel final : public InternalForceModel {
   int32_t factorized_groups() const;
   int64_t factorized_elements() const;
   // Cubic elements applied at their quadrature points.
-  int64_t quadrature_elements() const { return quadrature_elements_; }
+  int64_t quadrature_elements() const { return quadrature_.size(); }
 
   double Forces(const Points& d, Points& g) override;
   double ExactForces(const Points& d, Points& g) override;
@@ -159,14 +155,8 @@ class LocalFrameModel final : public InternalForceModel {
   // Per cubic group: applied at its quadrature points (no matrices in
   // packed_ / packed_f_).
   std::vector<uint8_t> pooled_;
-  // The pooled elements' factors, a chunk of kQuadratureLanes per
-  // kChunkValues, in schedule order from quadrature_first_ (and rounded to
-  // float with float products).
-  CubicQuadratureBasis quadrature_basis_{};
-  std::vector<double> quadrature_factors_;
-  std::vector<float> quadrature_factors_f_;
-  int32_t quadrature_first_ = 0;
-  int64_t quadrature_elements_ = 0;
+  // The pooled elements and their factors.
+  CubicQuadratureElements quadrature_;
   // Per element, in the schedule's order (the order the
   // batches run in, so a batch reads its frames in sequence); frames() and
   // set_frames() map them to and from element order.

@@ -57,6 +57,8 @@ struct BuildReport {
   // Cubic elements whose products run sum-factorized (local-frame model
   // with float products; models/kron_product.h).
   int64_t factorized_elements = 0;
+  // Cubic elements applied at their quadrature points (models/cubic_quadrature.h).
+  int64_t quadrature_elements = 0;
   // How the local-frame measure runs its quadrilateral faces
   // (models::QuadPathName: "avx512", "avx2", "per-corner"); empty for the
   // corotational model.

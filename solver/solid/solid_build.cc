@@ -645,6 +645,7 @@ void Solid::ReportMaterial() {
     report_.shared_matrix_bytes = lf->shared_matrix_bytes();
     report_.element_bytes = lf->per_element_bytes();
     report_.factorized_elements = lf->factorized_elements();
+    report_.quadrature_elements = lf->quadrature_elements();
     report_.measure_quad_path = models::QuadPathName(lf->measure().quad_path());
   }
 }

@@ -433,5 +433,46 @@ TEST(CorotationalTest, ForcesAndApplyLinearizedDoNotAllocate) {
 #endif
 }
 
+// Cubic elements applied at their quadrature points (cubic_quadrature.h,
+// the isotropic law) give the dense K's products: on a curved mesh with a
+// graded material, forces and the linearization in double to rounding, the
+// single-precision linearization within its 1e-6.
+TEST(CorotationalTest, QuadraturePointsGiveTheDenseProducts) {
+  for (const auto& [name, levels] : {std::pair{"torus", 1}, std::pair{"mixed", 2}}) {
+    auto f = Build(name, levels, 2, [](const Eigen::Vector3d& x, int32_t) {
+      return MaterialPoint{kYoung * (1.5 + std::sin(2.0 * x.x() + x.z())),
+                           0.3 + 0.1 * std::cos(3.0 * x.y()), 1000, 0};
+    });
+    CorotationalModel dense(f->layout, f->rest, *f->pool, nullptr, 0);
+    CorotationalModel quad(f->layout, f->rest, *f->pool, nullptr, 1 << 30);
+    const int64_t cubic = f->layout.blocks[0].size();
+    ASSERT_GT(cubic, 0) << name;
+    EXPECT_EQ(dense.quadrature_elements(), 0);
+    EXPECT_EQ(quad.quadrature_elements(), cubic);
+    EXPECT_EQ(quad.integrated_groups(),
+              f->layout.blocks[1].groups.size() + f->layout.blocks[2].groups.size());
+    // K of a pooled group, integrated on demand, is the dense model's.
+    EXPECT_EQ(quad.K(0, 0), dense.K(0, 0));
+    const Points p = Deformed(f->rest, 0.02, Rotation(0.8, Eigen::Vector3d(1, 2, -1)));
+    const Points v = RandomPoints(f->nodes(), 5);
+    Points gd, gq, kd, kq, kf;
+    const double ed = dense.Forces(p, gd), eq = quad.Forces(p, gq);
+    dense.ApplyLinearized(v, kd);
+    quad.ApplyLinearized(v, kq);
+    quad.SetSinglePrecisionLinearized(true);
+    quad.ApplyLinearized(v, kf);
+    const double gs = gd.cwiseAbs().maxCoeff(), ks = kd.cwiseAbs().maxCoeff();
+    std::printf("%s: %lld cubic elements at their quadrature points; force differs by %.1e, "
+                "linearization by %.1e (double) and %.1e (float) of the largest entry\n",
+                name, static_cast<long long>(cubic), (gq - gd).cwiseAbs().maxCoeff() / gs,
+                (kq - kd).cwiseAbs().maxCoeff() / ks, (kf - kd).cwiseAbs().maxCoeff() / ks);
+    EXPECT_NEAR(eq, ed, 1e-12 * ed) << name;
+    EXPECT_LE((gq - gd).cwiseAbs().maxCoeff(), 1e-12 * gs) << name;
+    EXPECT_LE((kq - kd).cwiseAbs().maxCoeff(), 1e-12 * ks) << name;
+    EXPECT_GT((kf - kd).cwiseAbs().maxCoeff(), 0) << name << ": the float path ran";
+    EXPECT_LE((kf - kd).cwiseAbs().maxCoeff(), 1e-6 * ks) << name;
+  }
+}
+
 }  // namespace
 }  // namespace dynsolid::models

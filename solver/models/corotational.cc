@@ -419,8 +419,7 @@ int64_t CorotationalModel::per_element_bytes() const {
 
 Eigen::MatrixXd CorotationalModel::K(int kind, int32_t group) const {
   if (kind == 0 && pooled_[group]) {
-    const ElementGroup& grp = layout_.blocks[0].groups[group];
-    return IntegrateGroup(layout_.tables[0], grp, layout_.materials[grp.material]);
+    return quadrature_.Matrix(CubicPointLaw::kIsotropic, layout_, group, 1.0);
   }
   return packed_[kind][group].Unpack();
 }

@@ -102,7 +102,8 @@ class CorotationalModel final : public InternalForceModel {
 
   // Group `group`'s stiffness of kind block `kind` (0 cubic, 1 linear,
   // 2 pyramid): 3n x 3n, node-major, N/m.
-  // A group applied at its quadrature points has it integrated here.
+  // A group applied at its quadrature points has it made here from them
+  // (CubicQuadratureElements::Matrix).
   Eigen::MatrixXd K(int kind, int32_t group) const;
   // Cubic elements applied at their quadrature points.
   int64_t quadrature_elements() const { return quadrature_.size(); }

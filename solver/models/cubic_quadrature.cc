@@ -278,6 +278,42 @@ void CubicQuadratureElements::SetFloat(bool on) {
   }
 }
 
+Eigen::MatrixXd CubicQuadratureElements::Matrix(CubicPointLaw law, const ElementLayout& layout,
+                                                int32_t group, double scale, int axis) const {
+  const ElementGroup& grp = layout.blocks[0].groups[group];
+  // The group's factors in every lane.
+  std::vector<double> chunk(kChunkValues);
+  for (int lane = 0; lane < L; ++lane) {
+    SetCubicQuadratureFactors(layout.tables[0], grp.rest, layout.materials[grp.material], scale,
+                              chunk.data(), lane);
+  }
+  const bool iso = law == CubicPointLaw::kIsotropic;
+  const int n = iso ? 192 : 64;
+  Eigen::MatrixXd x = Eigen::MatrixXd::Identity(n, n), k(n, n);
+  // Columns as the law reads them: node-major (stride 3) for kIsotropic,
+  // component `axis` alone for kLocalFrame.
+  std::vector<double> zeros(static_cast<size_t>(n) * L, 0.0), sink(static_cast<size_t>(n) * L);
+  for (int c = 0; c < n; c += L) {
+    const int count = std::min(L, n - c);
+    if (iso) {
+      const double* xs[3] = {x.data() + int64_t{c} * n, x.data() + int64_t{c} * n + 1,
+                             x.data() + int64_t{c} * n + 2};
+      double* ys[3] = {k.data() + int64_t{c} * n, k.data() + int64_t{c} * n + 1,
+                       k.data() + int64_t{c} * n + 2};
+      ApplyCubicQuadrature<CubicPointLaw::kIsotropic, double, double>(basis_, chunk.data(), count,
+                                                                      xs, n, 3, ys);
+    } else {
+      const double* xs[3] = {zeros.data(), zeros.data(), zeros.data()};
+      double* ys[3] = {sink.data(), sink.data(), sink.data()};
+      xs[axis] = x.data() + int64_t{c} * n;
+      ys[axis] = k.data() + int64_t{c} * n;
+      ApplyCubicQuadrature<CubicPointLaw::kLocalFrame, double, double>(basis_, chunk.data(), count,
+                                                                       xs, n, 1, ys);
+    }
+  }
+  return 0.5 * (k + k.transpose());
+}
+
 template <CubicPointLaw kLaw, typename S, typename T>
 void CubicQuadratureElements::Apply(int32_t first, int32_t count, const T* const x[3], int64_t ld,
                                     int node_stride, double* const y[3]) const {

@@ -42,6 +42,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "solver/fem/element_data.h"
 #include "solver/models/element_blocks.h"
 
@@ -114,6 +116,12 @@ class CubicQuadratureElements {
   int64_t bytes() const {
     return static_cast<int64_t>(factors_.size()) * 8 + static_cast<int64_t>(factors_f_.size()) * 4;
   }
+  // The dense matrix of a pooled group's elements, from the quadrature
+  // points (24 products of 8 unit columns; far cheaper than integrating):
+  // kIsotropic the 192 x 192 node-major K, kLocalFrame the 64 x 64 K_axis.
+  // Symmetrized ((K + K^T) / 2, as the integrated matrices).
+  Eigen::MatrixXd Matrix(CubicPointLaw law, const ElementLayout& layout, int32_t group,
+                         double scale, int axis = 0) const;
   // ApplyCubicQuadrature for the pooled batch of schedule elements [first,
   // first + count), a chunk at a time (x, y, ld, node_stride as there: the
   // batch's first element at x[a][0]).

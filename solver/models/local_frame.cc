@@ -152,8 +152,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
 
 Eigen::MatrixXd LocalFrameModel::K(int kind, int32_t group, int axis) const {
   if (kind == 0 && pooled_[group]) {
-    const ElementGroup& grp = layout_.blocks[0].groups[group];
-    return IntegrateGroup(layout_.tables[0], grp, layout_.materials[grp.material])[axis];
+    return quadrature_.Matrix(CubicPointLaw::kLocalFrame, layout_, group, kStiffnessFactor, axis);
   }
   return float_products_ ? packed_f_[kind][group][axis].Unpack()
                          : packed_[kind][group][axis].Unpack();

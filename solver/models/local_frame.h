@@ -112,8 +112,8 @@ class LocalFrameModel final : public InternalForceModel {
   Timing last_timing() const override { return timing_; }
 
   // The three matrices of group `group` of kind block `kind` (tests, reports).
-  // A group applied at its quadrature points has its matrices integrated
-  // here (in double).
+  // A group applied at its quadrature points has its matrices made here
+  // from them (CubicQuadratureElements::Matrix, in double).
   Eigen::MatrixXd K(int kind, int32_t group, int axis) const;
   int64_t shared_matrix_bytes() const;
   // The layout's per-element bytes (element_blocks.h) plus the measure's

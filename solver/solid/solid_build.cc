@@ -562,6 +562,7 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
     const std::vector<double>& spring_k) {
   std::vector<Eigen::Triplet<double, int32_t>> t;
   std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
+  std::map<std::pair<int, int32_t>, Eigen::MatrixXd> group_k;
   ElementSupport es;
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.
@@ -582,7 +583,14 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
       if (it == cache.end()) {
         // E^T K E with E = B (x) I3 (node-major element DOFs from control
         // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
-        const Eigen::MatrixXd k = corotational.K(kind, block.group[e]);
+        // A group's K once (the model integrates those it applies at the
+        // quadrature points on each call).
+        auto kt = group_k.find({kind, block.group[e]});
+        if (kt == group_k.end()) {
+          kt = group_k.emplace(std::pair{kind, block.group[e]}, corotational.K(kind, block.group[e]))
+                   .first;
+        }
+        const Eigen::MatrixXd& k = kt->second;
         Eigen::MatrixXd tk(3 * s, 3 * s);
         for (int c = 0; c < 3; ++c) {
           for (int d = 0; d < 3; ++d) {

@@ -247,6 +247,12 @@ TEST(LocalFrameTest, QuadraturePointsGiveTheDenseProducts) {
     const auto dense = make(false, 0), quad = make(false, 1 << 30), quad_f = make(true, 1 << 30);
     const int64_t cubic = f->layout.blocks[0].size();
     ASSERT_GT(cubic, 0) << name;
+    // A pooled group's matrices, made from its quadrature points, are the
+    // integrated ones to rounding.
+    for (int axis = 0; axis < 3; ++axis) {
+      const Eigen::MatrixXd kq = quad->K(0, 0, axis), kd = dense->K(0, 0, axis);
+      EXPECT_LE((kq - kd).cwiseAbs().maxCoeff(), 1e-13 * kd.cwiseAbs().maxCoeff()) << name;
+    }
     EXPECT_EQ(dense->quadrature_elements(), 0);
     EXPECT_EQ(quad->quadrature_elements(), cubic);
     EXPECT_EQ(quad->integrated_groups(), f->layout.blocks[1].groups.size() +

@@ -385,7 +385,8 @@ class Solid {
   // Errors (the state is then unchanged): InvalidArgument for another
   // format, version or scene/discretization (fingerprint mismatch);
   // DataLoss for truncated or corrupted bytes.
-  static constexpr uint32_t kStateFormatVersion = 3;  // 3: drags and curves
+  // 3: drags and curves; 4: a word-wise checksum (version 3 still read).
+  static constexpr uint32_t kStateFormatVersion = 4;
   std::string SaveState() const;
   absl::Status RestoreState(std::string_view bytes);
   // The same, but the clock reads `time` and `steps` afterwards (undo and

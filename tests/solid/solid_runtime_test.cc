@@ -1,6 +1,7 @@
 // Runtime edits of a live solid (loads, constraints, material painting),
 // exact save/restore, and the boundary surface for watchers.
 #include <cmath>
+#include <cstring>
 #include <cstdlib>
 #include <map>
 #include <set>
@@ -776,6 +777,20 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   EXPECT_EQ(b->SaveState(), fresh) << "failed restores change nothing";
   ASSERT_OK(b->RestoreState(saved));
   EXPECT_EQ(b->SaveState(), saved);
+  // A version 3 state (the same payload under the byte-wise FNV-1a
+  // checksum) is still read, and saved again as the current version.
+  ASSERT_EQ(saved[8], static_cast<char>(Solid::kStateFormatVersion));
+  std::string v3 = saved;
+  v3[8] = 3;
+  uint64_t h = 1469598103934665603ull;
+  for (size_t i = 0; i + 8 < v3.size(); ++i) h = (h ^ static_cast<unsigned char>(v3[i])) * 1099511628211ull;
+  std::memcpy(v3.data() + v3.size() - 8, &h, 8);
+  auto c = Make(text);
+  ASSERT_NE(c, nullptr);
+  ASSERT_OK(c->RestoreState(v3));
+  EXPECT_EQ(c->SaveState(), saved);
+  v3[100] ^= 0x20;
+  EXPECT_THAT(c->RestoreState(v3), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checksum")));
 }
 
 TEST(SolidRuntimeTest, BoundarySurfaceIsClosedWithTheRightEulerCharacteristic) {

@@ -161,18 +161,26 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
                                      WorkerPool& pool, const CorotationalModel* previous,
                                      int32_t quadrature_group_size)
     : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
-  pooled_ = quadrature_.Choose(layout, quadrature_group_size);
+  pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
+  for (int kind = 1; kind < 3; ++kind) {
+    const ElementBlock& block = layout.blocks[kind];
+    pooled_[kind].assign(block.groups.size(), 0);
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      pooled_[kind][gi] = block.group_start[gi + 1] - block.group_start[gi] <=
+                          std::min(quadrature_group_size, kQuadratureGroupSize);
+    }
+  }
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const std::vector<int32_t> reuse = previous != nullptr
                                            ? MatchStiffnessGroups(layout, previous->layout_, kind)
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      if (kind == 0 && pooled_[gi]) {
+      if (kind == 0 && pooled_[0][gi]) {
         packed_[kind].emplace_back();  // applied at the quadrature points
         continue;
       }
-      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[reuse[gi]])) {
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]])) {
         packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         continue;
       }
@@ -180,6 +188,20 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
       const ElementGroup& grp = block.groups[gi];
       packed_[kind].emplace_back(
           IntegrateGroup(layout.tables[kind], grp, layout.materials[grp.material]));
+    }
+    if (kind > 0) {
+      // Pooled small groups: their K for plain products.
+      small_[kind].resize(block.groups.size());
+      small_f_[kind].resize(block.groups.size());
+      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+        if (!pooled_[kind][gi]) continue;
+        const Eigen::MatrixXd k = packed_[kind][gi].Unpack();
+        const int m = static_cast<int>(k.rows());
+        std::vector<double>& out = small_[kind][gi];
+        out.resize(static_cast<size_t>(m) * m);
+        for (int i = 0; i < m; ++i)
+          for (int j = 0; j < m; ++j) out[static_cast<size_t>(i) * m + j] = k(i, j);
+      }
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
   }
@@ -208,6 +230,12 @@ void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
   if (on == single_ && (!on || packed_f_[0].size() == packed_[0].size())) return;
   single_ = on;
   quadrature_.SetFloat(on);
+  for (int kind = 1; kind < 3; ++kind) {
+    for (size_t gi = 0; gi < small_[kind].size(); ++gi) {
+      small_f_[kind][gi].assign(on ? small_[kind][gi].begin() : small_[kind][gi].end(),
+                                small_[kind][gi].end());
+    }
+  }
   for (int kind = 0; kind < 3; ++kind) {
     packed_f_[kind].clear();
     if (on) {
@@ -288,7 +316,30 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
     }
     // y = K u (K pre-packed; rows padded to the panel height), in float
     // for ApplyLinearized when asked.
-    if (pooled) {
+    if (pooled && batch.kind != 0) {
+      // Per element, its group's K (in float for ApplyLinearized when asked).
+      const bool single = !subtract_rest && single_;
+      for (int32_t b = 0; b < batch.count; ++b) {
+        const int32_t g = block.group[schedule_.order[batch.kind][batch.first + b]];
+        const double* x = u.col(b).data();
+        double* out = y.col(b).data();
+        if (single) {
+          const float* k = small_f_[batch.kind][g].data();
+          for (int i = 0; i < m; ++i) {
+            float acc = 0;
+            for (int j = 0; j < m; ++j) acc += k[i * m + j] * static_cast<float>(x[j]);
+            out[i] = acc;
+          }
+        } else {
+          const double* k = small_[batch.kind][g].data();
+          for (int i = 0; i < m; ++i) {
+            double acc = 0;
+            for (int j = 0; j < m; ++j) acc += k[i * m + j] * x[j];
+            out[i] = acc;
+          }
+        }
+      }
+    } else if (pooled) {
       // K u at the quadrature points: node-major columns (stride 3).
       const int64_t ld = w.u.rows();
       const double* xs[3] = {w.u.data(), w.u.data() + 1, w.u.data() + 2};
@@ -418,7 +469,7 @@ int64_t CorotationalModel::per_element_bytes() const {
 }
 
 Eigen::MatrixXd CorotationalModel::K(int kind, int32_t group) const {
-  if (kind == 0 && pooled_[group]) {
+  if (kind == 0 && pooled_[0][group]) {
     return quadrature_.Matrix(CubicPointLaw::kIsotropic, layout_, group, 1.0);
   }
   return packed_[kind][group].Unpack();

@@ -31,7 +31,9 @@
 // quadrature points (cubic_quadrature.h, the isotropic law). A dense
 // 192 x 192 per element would be integrated on every paint and streamed
 // from memory on every pass; shared by a whole block, its products are
-// still slower (bench/quadrature_bench).
+// still slower (bench/quadrature_bench). Linear and pyramid groups of at
+// most kQuadratureGroupSize elements (a curved mesh's) share kPooled
+// batches too and keep their K, applied by plain products.
 #pragma once
 
 #include <array>
@@ -140,9 +142,14 @@ class CorotationalModel final : public InternalForceModel {
   std::array<std::vector<PackedMatrix>, 3> packed_;  // packed for the products
   std::array<std::vector<PackedMatrixF>, 3> packed_f_;  // float copies, when on
   bool single_ = false;
-  // Per cubic group: applied at its quadrature points (no matrix in
-  // packed_); those elements and their factors.
-  std::vector<uint8_t> pooled_;
+  // Per kind and group: pooled (ScheduleElements). Pooled cubic groups are
+  // applied at their quadrature points (no matrix in packed_; quadrature_
+  // holds those elements' factors); pooled linear and pyramid groups (at
+  // most kQuadratureGroupSize elements) by plain products with their K in
+  // small_ (3n x 3n row-major) and small_f_ (float, when single_).
+  PooledGroups pooled_;
+  std::array<std::vector<std::vector<double>>, 3> small_;
+  std::array<std::vector<std::vector<float>>, 3> small_f_;
   CubicQuadratureElements quadrature_;
   Frames frames_;  // per element, by kind; written by Forces only
   ElementSchedule schedule_;  // batches and their fixed parts

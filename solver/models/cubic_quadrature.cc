@@ -243,7 +243,7 @@ void CubicQuadratureElements::Build(const ElementLayout& layout, const ElementSc
   // The pooled batches run last among the cubic ones.
   first_ = static_cast<int32_t>(schedule.order[0].size());
   for (const ElementBatch& batch : schedule.batches) {
-    if (batch.group == kPooled) first_ = std::min(first_, batch.first);
+    if (batch.group == kPooled && batch.kind == 0) first_ = std::min(first_, batch.first);
   }
   size_ = static_cast<int64_t>(schedule.order[0].size()) - first_;
   const int64_t chunks = (size_ + L - 1) / L;

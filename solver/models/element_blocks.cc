@@ -173,7 +173,7 @@ int64_t PerElementBytes(const ElementLayout& layout) {
 }
 
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
-                                 int32_t num_nodes, const std::vector<uint8_t>* pooled) {
+                                 int32_t num_nodes, const PooledGroups* pooled) {
   ElementSchedule out;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
@@ -183,7 +183,7 @@ ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
       const auto begin = block.by_group.begin() + block.group_start[gi];
       const auto end = block.by_group.begin() + block.group_start[gi + 1];
-      if (kind == 0 && pooled != nullptr && (*pooled)[gi] != 0) {
+      if (pooled != nullptr && !(*pooled)[kind].empty() && (*pooled)[kind][gi] != 0) {
         pool.insert(pool.end(), begin, end);
         continue;
       }

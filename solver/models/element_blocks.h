@@ -67,8 +67,8 @@ struct ElementLayout {
 
 // Consecutive elements of one group (schedule.order[kind][first ..
 // first+count)), processed together as one dense matrix product; or, with
-// group kPooled, consecutive elements of pooled cubic groups (see
-// ScheduleElements), each applied with factors of its own.
+// group kPooled, consecutive elements of pooled groups of one kind (see
+// ScheduleElements), each applied on its own.
 inline constexpr int32_t kPooled = -1;
 struct ElementBatch {
   int kind;
@@ -106,12 +106,14 @@ struct ElementSchedule {
   int32_t max_batch_nodes = 0;
 };
 //
-// `pooled` (optional, one flag per cubic group) marks cubic groups whose
-// elements leave their groups' batches and share kPooled batches with the
-// other pooled groups' elements (groups of one or a few elements: a
-// painted band, a curved mesh), for a model that applies them per element.
+// `pooled` (optional; per kind, one flag per group, or empty) marks groups
+// whose elements leave their groups' batches and share kPooled batches
+// with the other pooled groups' elements of their kind (groups of one or a
+// few elements: a painted band, a curved mesh), for a model that applies
+// them per element.
+using PooledGroups = std::array<std::vector<uint8_t>, 3>;
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
-                                 int32_t num_nodes, const std::vector<uint8_t>* pooled = nullptr);
+                                 int32_t num_nodes, const PooledGroups* pooled = nullptr);
 
 // Batch node tables: per batch, the nodes its elements touch (ascending,
 // each once) and each element's nodes as 16-bit indices into that list.

@@ -75,7 +75,14 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   if (previous != nullptr && previous->float_products_ != float_products) previous = nullptr;
   // Small cubic groups go to the quadrature points.
   const ElementBlock& cubic = layout.blocks[0];
-  pooled_ = quadrature_.Choose(layout, quadrature_group_size);
+  pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
+  for (int kind = 1; kind < 3; ++kind) {
+    const ElementBlock& block = layout.blocks[kind];
+    pooled_[kind].assign(block.groups.size(), 0);
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      pooled_[kind][gi] = block.group_start[gi + 1] - block.group_start[gi] <= quadrature_group_size;
+    }
+  }
   // The cubic table's rule is a tensor Gauss rule of n1 points a side.
   std::optional<KroneckerBasis> kron_basis;
   if (float_products && cubic.size() > 0) {
@@ -90,7 +97,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
                                            ? MatchStiffnessGroups(layout, previous->layout_, kind)
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      if (kind == 0 && pooled_[gi]) {
+      if (kind == 0 && pooled_[0][gi]) {
         // Applied at the quadrature points: no matrices.
         if (float_products) {
           packed_f_[kind].emplace_back();
@@ -100,7 +107,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
         }
         continue;
       }
-      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[reuse[gi]])) {
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]])) {
         if (float_products) {
           packed_f_[kind].push_back(previous->packed_f_[kind][reuse[gi]]);
           if (kind == 0) kron_.push_back(previous->kron_[reuse[gi]]);
@@ -120,6 +127,23 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
         packed_f_[kind].push_back({PackedMatrixF(k[0]), PackedMatrixF(k[1]), PackedMatrixF(k[2])});
       } else {
         packed_[kind].push_back(k);
+      }
+    }
+    if (kind > 0) {
+      // Pooled small groups: their matrices for plain products.
+      const int n = block.nodes;
+      small_[kind].resize(block.groups.size());
+      if (float_products) small_f_[kind].resize(block.groups.size());
+      for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+        if (!pooled_[kind][gi]) continue;
+        std::vector<double>& k = small_[kind][gi];
+        k.resize(3 * static_cast<size_t>(n) * n);
+        for (int axis = 0; axis < 3; ++axis) {
+          const Eigen::MatrixXd m = K(kind, static_cast<int32_t>(gi), axis);
+          for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) k[(axis * n + i) * n + j] = m(i, j);
+        }
+        if (float_products) small_f_[kind][gi].assign(k.begin(), k.end());
       }
     }
     frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
@@ -151,7 +175,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
 }
 
 Eigen::MatrixXd LocalFrameModel::K(int kind, int32_t group, int axis) const {
-  if (kind == 0 && pooled_[group]) {
+  if (kind == 0 && pooled_[0][group]) {
     return quadrature_.Matrix(CubicPointLaw::kLocalFrame, layout_, group, kStiffnessFactor, axis);
   }
   return float_products_ ? packed_f_[kind][group][axis].Unpack()
@@ -456,11 +480,34 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
     // y = K dhat: sum-factorized where the group has the form (float
     // products only), else the shared dense matrices.
     bool factorized = false;
-    if (pooled) {
+    if (pooled && batch.kind == 0) {
       // Per element at its quadrature points.
       const T* x[3] = {cols[0], cols[1], cols[2]};
       double* y[3] = {w.yx.data(), w.yy.data(), w.yz.data()};
       quadrature_.Apply<CubicPointLaw::kLocalFrame, T, T>(batch.first, batch.count, x, ld, 1, y);
+      factorized = true;
+    } else if (pooled) {
+      // Per element, its group's small matrices (in T's precision).
+      double* ys[3] = {w.yx.data(), w.yy.data(), w.yz.data()};
+      for (int32_t b = 0; b < batch.count; ++b) {
+        const int32_t g = block.group[schedule_.order[batch.kind][batch.first + b]];
+        const T* k;
+        if constexpr (std::is_same_v<T, float>) {
+          k = small_f_[batch.kind][g].data();
+        } else {
+          k = small_[batch.kind][g].data();
+        }
+        for (int a = 0; a < 3; ++a) {
+          const T* x = cols[a] + b * ld;
+          double* y = ys[a] + b * ld;
+          for (int i = 0; i < n; ++i) {
+            const T* row = k + (a * n + i) * n;
+            T acc = 0;
+            for (int j = 0; j < n; ++j) acc += row[j] * x[j];
+            y[i] = static_cast<double>(acc);
+          }
+        }
+      }
       factorized = true;
     }
     if constexpr (std::is_same_v<T, float>) {

@@ -45,13 +45,17 @@
 // one material: every interior element of a block) applies them
 // sum-factorized (kron_product.h), within the same rounding.
 //
-// Cubic groups of at most `quadrature_group_size` elements (a painted
-// band, where every element has a material of its own; a curved mesh,
-// where every element has a shape of its own) have no dense matrices: their
-// elements share kPooled batches and are applied at their quadrature
-// points from per-element factors (cubic_quadrature.h), in float with
-// float products. A dense matrix per element would be streamed from memory
-// on every pass (the torus's 87 MB) and integrated on every paint.
+// Groups of at most `quadrature_group_size` elements (a painted band,
+// where every element has a material of its own; a curved mesh, where
+// every element has a shape of its own) leave their own batches of one or
+// a few elements for kPooled batches of their kind. Cubic ones have no
+// dense matrices: they are applied at their quadrature points from
+// per-element factors (cubic_quadrature.h), in float with float products;
+// a dense matrix per element would be streamed from memory on every pass
+// (the torus's 87 MB) and integrated on every paint. Linear and pyramid
+// ones keep their small matrices, applied by plain products: a batch of
+// one element wasted most of a panel product and all of a batch's
+// gathers.
 //
 // Note on Eq. 15's factor 2 (MODEL.md writes K^x_x = 2 int ...): with it,
 // E would not keep its meaning in pascals (the energy 1/2 eps C eps gives
@@ -152,9 +156,14 @@ class LocalFrameModel final : public InternalForceModel {
   // material), used in place of packed_f_'s dense products.
   std::vector<std::optional<KroneckerStiffness>> kron_;
   bool float_products_ = false;
-  // Per cubic group: applied at its quadrature points (no matrices in
-  // packed_ / packed_f_).
-  std::vector<uint8_t> pooled_;
+  // Per kind and group: pooled (ScheduleElements). Pooled cubic groups are
+  // applied at their quadrature points (no matrices in packed_ /
+  // packed_f_); pooled linear and pyramid groups by plain products with
+  // their matrices in small_ (row-major, axis after axis; the entries of
+  // packed_f_ with float products) and small_f_ (float products).
+  PooledGroups pooled_;
+  std::array<std::vector<std::vector<double>>, 3> small_;
+  std::array<std::vector<std::vector<float>>, 3> small_f_;
   // The pooled elements and their factors.
   CubicQuadratureElements quadrature_;
   // Per element, in the schedule's order (the order the

@@ -647,6 +647,7 @@ void Solid::ReportMaterial() {
     report_.single_precision_cg = im.corotational->single_precision_linearized();
     report_.shared_matrix_bytes = im.corotational->shared_matrix_bytes();
     report_.element_bytes = im.corotational->per_element_bytes();
+    report_.quadrature_elements = im.corotational->quadrature_elements();
     report_.measure_quad_path.clear();
   } else {
     const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());

@@ -583,8 +583,8 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
       if (it == cache.end()) {
         // E^T K E with E = B (x) I3 (node-major element DOFs from control
         // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
-        // A group's K once (the model integrates those it applies at the
-        // quadrature points on each call).
+        // A group's K once (the model makes K of a group it applies at its
+        // quadrature points anew on each call).
         auto kt = group_k.find({kind, block.group[e]});
         if (kt == group_k.end()) {
           kt = group_k.emplace(std::pair{kind, block.group[e]}, corotational.K(kind, block.group[e]))

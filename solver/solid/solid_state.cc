@@ -188,7 +188,21 @@ constexpr size_t kHeaderBytes = 8 + 4 + 8 + 8 + 8;  // magic, version, fingerpri
 
 std::string Solid::SaveState() const {
   const Impl& im = *impl_;
+  // One buffer, sized up front: the header (its payload size patched at
+  // the end), the payload, the checksum. (Appending to a growing payload
+  // and then copying it behind the header copied a painted state's MBs
+  // three times; every undoable command pays this.)
+  const models::ElementLayout& l = *im.layout;
+  size_t estimate = 64 * 1024 + 8 * static_cast<size_t>(8 * p_.size());
+  for (const auto& array : l.materials) estimate += 8 + array.size() * sizeof(models::MaterialPoint);
+  for (const models::ElementBlock& block : l.blocks) estimate += 8 + 4 * block.size() + 40 * block.size();
   StateWriter w;
+  w.out.reserve(estimate);
+  w.out.assign(kStateMagic, 8);
+  w.Put<uint32_t>(kStateFormatVersion);
+  w.Put<uint64_t>(im.fingerprint.first);
+  w.Put<uint64_t>(im.fingerprint.second);
+  w.Put<uint64_t>(0);  // the payload size, patched below
   w.Put<double>(time_);
   w.Put<int64_t>(steps_);
   w.Put<int64_t>(rollbacks_);
@@ -245,7 +259,6 @@ std::string Solid::SaveState() const {
     w.Bytes(d.curve ? d.shape.SerializeAsString() : d.drag.SerializeAsString());
   }
   // Material samples: the distinct arrays and each element's array.
-  const models::ElementLayout& l = *im.layout;
   w.Put<uint64_t>(l.materials.size());
   for (const auto& array : l.materials) {
     w.Doubles(reinterpret_cast<const double*>(array.data()), 4 * array.size());
@@ -259,17 +272,12 @@ std::string Solid::SaveState() const {
   for (const auto& f : frames) {
     w.Doubles(reinterpret_cast<const double*>(f.data()), 4 * f.size());
   }
-  std::string out(kStateMagic, 8);
-  StateWriter h;
-  h.Put<uint32_t>(kStateFormatVersion);
-  h.Put<uint64_t>(im.fingerprint.first);
-  h.Put<uint64_t>(im.fingerprint.second);
-  h.Put<uint64_t>(w.out.size());
-  out += h.out;
-  out += w.out;
+  std::string& out = w.out;
+  const uint64_t payload = out.size() - kHeaderBytes;
+  std::memcpy(out.data() + kHeaderBytes - 8, &payload, sizeof(payload));
   const uint64_t sum = Checksum(kStateFormatVersion, out);
   out.append(reinterpret_cast<const char*>(&sum), sizeof(sum));
-  return out;
+  return std::move(out);
 }
 
 absl::Status Solid::RestoreState(std::string_view bytes) { return Restore(bytes, nullptr); }

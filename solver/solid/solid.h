@@ -134,9 +134,12 @@ class Solid {
   // FailedPrecondition saying why.
   absl::Status Step();
   static constexpr int kMaxHalvings = 6;
-  // Create refuses scenes whose shared element matrices would exceed this
-  // (ResourceExhausted): elements of curved meshes rarely share them.
+  // Create refuses scenes whose element matrices would exceed this
+  // (ResourceExhausted): elements of curved meshes rarely share them (cubic
+  // elements at their quadrature points count their factors instead).
   static constexpr double kMaxSharedMatrixBytes = 4.0 * 1024 * 1024 * 1024;
+  // Tests: the limit Create checks instead (0 restores kMaxSharedMatrixBytes).
+  static void SetMaxElementBytesForTesting(double bytes);
 
   // Overrides the sub-step count chosen from the stable-step estimate
   // (tests of the stability guard; stress cases in reports).

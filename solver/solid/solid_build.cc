@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -31,6 +32,7 @@
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
 #include "solver/models/corotational.h"
+#include "solver/models/cubic_quadrature.h"
 #include "solver/models/element_blocks.h"
 #include "solver/models/local_frame.h"
 #include "solver/mesh/boundary.h"
@@ -214,6 +216,14 @@ bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
   return true;
 }
 
+namespace {
+std::atomic<double> g_max_element_bytes{Solid::kMaxSharedMatrixBytes};
+}  // namespace
+
+void Solid::SetMaxElementBytesForTesting(double bytes) {
+  g_max_element_bytes.store(bytes > 0 ? bytes : kMaxSharedMatrixBytes);
+}
+
 absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
                                                          bool reuse, WorkerPool* model_pool) const {
   reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
@@ -222,20 +232,32 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
   for (const auto& array : l->materials) {
     for (const auto& m : array) b.has_damping |= m.damping > 0;
   }
-  // The model the scene asks for, after checking what its shared element
-  // matrices would take: curved meshes share few of them.
+  // The model the scene asks for, after checking what its element
+  // matrices would take: curved meshes share few of them. Cubic elements
+  // applied at their quadrature points (every one in the corotational
+  // model, those of small groups in the local-frame one) keep 11 numbers
+  // per point instead (models/cubic_quadrature.h).
   const bool corot = settings.model() == SolverSettings::COROTATIONAL;
   double bytes = 0;
-  for (const models::ElementBlock& block : l->blocks) {
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = l->blocks[kind];
     const double n = block.nodes;
-    bytes += static_cast<double>(block.groups.size()) * (corot ? 9.0 : 3.0) * n * n * 8.0;
+    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+      const int32_t members = block.group_start[gi + 1] - block.group_start[gi];
+      if (kind == 0 && (corot || members <= models::kQuadratureGroupSize)) {
+        bytes += members * 64.0 * models::kFactorsPerPoint * 8.0;
+      } else {
+        bytes += (corot ? 9.0 : 3.0) * n * n * 8.0;
+      }
+    }
   }
-  if (bytes > kMaxSharedMatrixBytes) {
+  const double limit = g_max_element_bytes.load();
+  if (bytes > limit) {
     return absl::ResourceExhaustedError(absl::StrCat(
-        "the ", corot ? "corotational" : "local-frame", " element matrices of this scene would take ",
+        "the ", corot ? "corotational" : "local-frame", " element data of this scene would take ",
         static_cast<int64_t>(bytes / 1048576.0), " MiB (", l->blocks[0].groups.size(),
         " distinct cubic elements), above the limit of ",
-        static_cast<int64_t>(kMaxSharedMatrixBytes / 1048576.0),
+        static_cast<int64_t>(limit / 1048576.0),
         " MiB; use fewer subdivision levels or a more regular control mesh"));
   }
   if (corot) {

@@ -366,17 +366,28 @@ TEST(SolidTest, BackwardEulerStaysBoundedOnAStiffScene) {
   EXPECT_TRUE(a->build_report().implicit);
 }
 
-TEST(SolidTest, RefusesScenesWhoseElementMatricesWouldNotFit) {
-  // A curved mesh (the nozzle) shares almost no element matrices: at three
-  // levels the corotational ones would take about 10 GiB.
+TEST(SolidTest, RefusesScenesWhoseElementDataWouldNotFit) {
+  // A curved mesh (the nozzle) shares almost no element matrices. Its cubic
+  // elements run at their quadrature points (11 numbers a point), its
+  // linear ones keep a 24 x 24 K each: at two levels about 32 MiB in all
+  // (the dense corotational matrices took 898 MB). Under a 10 MiB limit
+  // the scene is refused, saying why; under the default one it builds.
   auto scene = scene::BuiltinScene("nozzle");
   ASSERT_OK(scene);
   scene->mutable_solver()->set_model(SolverSettings::COROTATIONAL);
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), 3);
+  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), 2);
   ASSERT_OK(d);
-  EXPECT_THAT(Solid::Create(*scene, *std::move(d)),
-              StatusIs(absl::StatusCode::kResourceExhausted,
-                       HasSubstr("element matrices of this scene would take")));
+  Solid::SetMaxElementBytesForTesting(10.0 * 1024 * 1024);
+  auto refused = Solid::Create(*scene, *d);
+  Solid::SetMaxElementBytesForTesting(0);
+  EXPECT_THAT(refused, StatusIs(absl::StatusCode::kResourceExhausted,
+                                HasSubstr("element data of this scene would take 3")));
+  EXPECT_THAT(refused, StatusIs(absl::StatusCode::kResourceExhausted,
+                                HasSubstr("above the limit of 10 MiB")));
+  auto built = Solid::Create(*scene, *std::move(d));
+  ASSERT_OK(built);
+  EXPECT_EQ((*built)->build_report().quadrature_elements,
+            (*built)->discretization().elements.num_cubic());
 }
 
 TEST(SolidTest, SceneWithoutDampingLoadsOrConstraintsBuildsNoneOfThem) {

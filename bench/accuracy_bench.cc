@@ -2,8 +2,10 @@
 // (static tip deflection against Timoshenko beam theory), a bar in tension
 // (end displacement against F L / E A) and a vibrating cantilever (first
 // bending frequency against Euler-Bernoulli), for both models, over
-// subdivision levels x integrator x CG tolerance x time step. CSV on stdout,
-// one row per problem and configuration:
+// subdivision levels x integrator x CG tolerance x time step, and central
+// difference with a lumped mass at the default settings (integrator
+// "central_difference_lumped"). CSV on stdout, one row per problem and
+// configuration:
 //
 //   problem,model,levels,integrator,cg_tolerance,time_step,substeps,value,
 //   analytic,error_percent,wall_per_sim_s,simulated_s,wall_s,cg_per_step,
@@ -79,7 +81,15 @@ struct Config {
   double tol = 1e-4;
   double h = 1e-3;
   bool frequency = true;  // also run the vibrating cantilever
+  bool lumped = false;    // solver.mass: LUMPED (CSV integrator "<integrator>_lumped")
 };
+
+// The CSV's integrator column: the scheme, with "_lumped" for a lumped mass.
+std::string IntegratorLabel(const Config& c) {
+  std::string out;
+  for (char ch : c.integrator) out += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return c.lumped ? out + "_lumped" : out;
+}
 
 std::string Lower(const std::string& s) {
   std::string out = s;
@@ -115,8 +125,9 @@ std::string SceneText(const Config& c, double damping, const std::string& axis, 
     constraints { fixed { box { min { x: -1e-6 y: -1 z: -1 } max { x: 1e-6 y: 1 z: 1 } } } }
     loads { %s }
     %s
-    solver { model: %s integrator: %s time_step: %.17g cg_tolerance: %.17g max_substeps: 100000 }
-  )pb", kL, kW, kW, c.levels, kE, nu, kRho, damping, loads, traced, c.model, c.integrator, c.h, c.tol);
+    solver { model: %s integrator: %s time_step: %.17g cg_tolerance: %.17g max_substeps: 100000 mass: %s }
+  )pb", kL, kW, kW, c.levels, kE, nu, kRho, damping, loads, traced, c.model, c.integrator, c.h, c.tol,
+      c.lumped ? "LUMPED" : "CONSISTENT");
 }
 
 std::unique_ptr<Solid> Make(const std::string& text) {
@@ -298,7 +309,7 @@ Cost Stepping(Solid& s, double seconds, F each) {
 void Row(const std::string& problem, const Config& c, int substeps, double value, double analytic,
          const Cost& cost, const Static* st) {
   std::printf("%s,%s,%d,%s,%.0e,%.6g,%d,%.9g,%.9g,%.5f,%.6g,%.6g,%.4f,%.2f,%s,%.4f,%.9g,%.3g\n",
-              problem.c_str(), Lower(c.model).c_str(), c.levels, Lower(c.integrator).c_str(), c.tol,
+              problem.c_str(), Lower(c.model).c_str(), c.levels, IntegratorLabel(c).c_str(), c.tol,
               c.h, substeps, value, analytic, 100.0 * (value - analytic) / analytic,
               cost.wall_per_sim, cost.sim, cost.wall, cost.cg_per_step,
               st ? st->method.c_str() : "", st ? st->wall_s : 0.0, st ? st->nonlinear : 0.0,
@@ -339,6 +350,14 @@ std::vector<Config> Configs(int max_levels, bool full) {
               continue;
             }
             out.push_back(c);
+            // Central difference with a lumped mass at the default settings
+            // (levels 0-2; the local-frame model's frequency to level 1).
+            if (!be && first && levels <= 2) {
+              Config lumped = c;
+              lumped.lumped = true;
+              lumped.frequency = model == "COROTATIONAL" || levels <= 1 || full;
+              out.push_back(lumped);
+            }
           }
         }
       }
@@ -372,7 +391,7 @@ int main(int argc, char** argv) {
   std::map<int, std::optional<Points>> shapes;  // vibration start per level
   for (const Config& c : Configs(max_levels, absl::GetFlag(FLAGS_full))) {
     std::fprintf(stderr, "%s level %d %s tol %.0e h %.4g\n", Lower(c.model).c_str(), c.levels,
-                 Lower(c.integrator).c_str(), c.tol, c.h);
+                 IntegratorLabel(c).c_str(), c.tol, c.h);
     for (const Problem& pr : problems) {
       auto key = std::make_tuple(std::string(pr.name), c.model, c.levels);
       if (!statics.count(key)) {

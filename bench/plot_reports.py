@@ -23,7 +23,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 MODEL_COLOR = {"corotational": "tab:blue", "local_frame": "tab:orange"}
-INTEGRATOR_MARKER = {"central_difference": "o", "backward_euler": "s"}
+INTEGRATOR_MARKER = {"central_difference": "o", "backward_euler": "s",
+                     "central_difference_lumped": "^"}
+INTEGRATOR_SHORT = {"central_difference": "CD", "backward_euler": "BE",
+                    "central_difference_lumped": "CD lumped"}
 PROBLEM_TITLE = {
     "cantilever_static": "Cantilever tip deflection vs Timoshenko",
     "bar_static": "Bar in tension vs F L / E A",
@@ -76,7 +79,7 @@ def pareto(points):
 
 
 def config_label(r):
-    integ = {"central_difference": "CD", "backward_euler": "BE"}[r["integrator"]]
+    integ = INTEGRATOR_SHORT[r["integrator"]]
     return f"L{r['levels']} {integ} tol {r['cg_tolerance']} h {float(r['time_step']):.3g}"
 
 
@@ -267,13 +270,34 @@ def accuracy_md(rows, args):
     freq_rows = [r for r in rows if r["problem"] == "cantilever_frequency"]
     for model in ("corotational", "local_frame"):
         for lv in lev:
-            fr = [r for r in freq_rows if r["model"] == model and int(r["levels"]) == lv]
+            fr = [r for r in freq_rows if r["model"] == model and int(r["levels"]) == lv
+                  and not r["integrator"].endswith("_lumped")]
             if not fr:
                 continue
             errs = [float(r["error_percent"]) for r in fr]
             out.append(f"- First bending frequency, {model.replace('_', '-')} level {lv}: "
                        f"{min(errs):+.2f} % to {max(errs):+.2f} % against Euler-Bernoulli over "
                        f"{len(fr)} configurations.")
+    # The lumped mass next to the consistent one at the same settings.
+    for model in ("corotational", "local_frame"):
+        for lv in lev:
+            lumped = [r for r in freq_rows if r["model"] == model and int(r["levels"]) == lv
+                      and r["integrator"] == "central_difference_lumped"]
+            consistent = [r for r in freq_rows if r["model"] == model and int(r["levels"]) == lv
+                          and r["integrator"] == "central_difference"
+                          and float(r["cg_tolerance"]) == 1e-4 and float(r["time_step"]) == 1e-3]
+            if not lumped:
+                continue
+            lr = lumped[0]
+            text = (f"- Lumped mass, {model.replace('_', '-')} level {lv} (central difference, "
+                    f"CG 1e-4, h 1e-3): first frequency {float(lr['error_percent']):+.2f} % against "
+                    f"Euler-Bernoulli at {fmt(lr['wall_per_sim_s'], 3)} wall s per simulated s, "
+                    f"{lr['substeps']} sub-step(s)")
+            if consistent:
+                cr = consistent[0]
+                text += (f"; the consistent mass {float(cr['error_percent']):+.2f} % at "
+                         f"{fmt(cr['wall_per_sim_s'], 3)} s, {cr['substeps']} sub-step(s)")
+            out.append(text + ".")
     out += [
         "",
         "Euler-Bernoulli neglects shear and rotary inertia; at L / h = 10 the first bending "

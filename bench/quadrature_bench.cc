@@ -119,9 +119,13 @@ int Run(const Case& c) {
         group_size == 0 ? ""
                         : (" | " + std::to_string(dense_ms / ms).substr(0, 4) + "x the dense pass")
                               .c_str(),
-        c.corotational ? (", float linearization " + std::to_string(lin_ms).substr(0, 5) + " ms")
-                             .c_str()
-                       : "");
+        c.corotational
+            ? (", float linearization " + std::to_string(lin_ms).substr(0, 5) + " ms" +
+               (group_size == 0 ? std::string()
+                                : " (" + std::to_string(dense_lin_ms / lin_ms).substr(0, 4) +
+                                      "x the dense)"))
+                  .c_str()
+            : "");
     if (group_size == 0) dense_lin_ms = lin_ms;
   }
   return 0;

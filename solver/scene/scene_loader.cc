@@ -409,6 +409,7 @@ SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
   if (s.element_products() == SolverSettings::PRECISION_DEFAULT) {
     s.set_element_products(SolverSettings::FLOAT);
   }
+  if (s.mass() == SolverSettings::MASS_DEFAULT) s.set_mass(SolverSettings::CONSISTENT);
   return s;
 }
 

@@ -124,7 +124,8 @@ class Hash128 {
 // shared per group; B_e^T M_e B_e is cached by (group, B_e values), which
 // regular grids repeat.
 void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
-                                          bool has_damping, SparseMatrix& mt, SparseMatrix& dt) {
+                                          bool has_damping, SparseMatrix& mt,
+                                          SparseMatrix& dt) const {
   const int32_t nc = static_cast<int32_t>(nm.cols());
   // Small control meshes accumulate densely; large ones through triplets.
   const bool dense = nc <= 6000;
@@ -197,6 +198,20 @@ void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::
   }
   mt.makeCompressed();
   if (has_damping) dt.makeCompressed();
+  if (settings.mass() == SolverSettings::LUMPED) {
+    // Row sums on the diagonal: the same total (and each control point's
+    // share of it), summed in row order.
+    auto lump = [nc](SparseMatrix& m) {
+      const Eigen::VectorXd rows = m * Eigen::VectorXd::Ones(nc);
+      SparseMatrix d(nc, nc);
+      d.reserve(Eigen::VectorXi::Ones(nc));
+      for (int32_t i = 0; i < nc; ++i) d.insert(i, i) = rows[i];
+      d.makeCompressed();
+      m = std::move(d);
+    };
+    lump(mt);
+    if (has_damping) lump(dt);
+  }
 }
 
 bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {

@@ -385,8 +385,8 @@ struct Solid::Impl {
   mutable const Points* boxes_rest = nullptr;
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
-  static void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
-                                      bool has_damping, SparseMatrix& mt, SparseMatrix& dt);
+  void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
+                               bool has_damping, SparseMatrix& mt, SparseMatrix& dt) const;
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);

@@ -414,7 +414,7 @@ TEST_F(EveryFieldTest, UndeclaredEnumNumbersAreRejectedNamingTheField) {
     ExpectPositioned(scene, name, rule);
     ++visited;
   });
-  EXPECT_EQ(visited, 3);  // solver.model, solver.integrator, solver.element_products
+  EXPECT_EQ(visited, 4);  // solver.model, .integrator, .element_products, .mass
 }
 
 // ------------------------------------------------------------- defaults
@@ -430,6 +430,7 @@ TEST(DefaultsTest, EmptySolverSettingsResolveToTheDocumentedDefaults) {
   EXPECT_EQ(s.stability_safety(), 0.9);
   EXPECT_FALSE(s.snap_forces_to_quadrature());
   EXPECT_EQ(s.element_products(), SolverSettings::FLOAT);
+  EXPECT_EQ(s.mass(), SolverSettings::CONSISTENT);
   // A resolved scene is still valid, and resolving is idempotent.
   Scene scene;
   scene.mutable_mesh()->set_file("x.vtk");
@@ -450,6 +451,7 @@ TEST(DefaultsTest, GivenSolverSettingsAreKept) {
   given->set_stability_safety(0.5);
   given->set_snap_forces_to_quadrature(true);
   given->set_element_products(SolverSettings::DOUBLE);
+  given->set_mass(SolverSettings::LUMPED);
   EXPECT_TRUE(
       google::protobuf::util::MessageDifferencer::Equals(ResolvedSolverSettings(scene), *given));
 

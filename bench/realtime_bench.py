@@ -89,11 +89,14 @@ def live(build, scene, seconds, work):
         log.close()
     taken = int(stats["step"])
     dropped = int(stats.get("steps_dropped", 0))
+    # A session whose step failed pauses (the stability guard): say so.
+    error = stats.get("last_error", "")
     return {
         "taken": taken,
         "dropped": dropped,
         "rtf": taken / max(1, taken + dropped),
         "step_ms": stats.get("step_ms_median", 0.0),
+        "note": ("paused at step %d: %s" % (taken, error[:80])) if error else "",
     }
 
 
@@ -129,16 +132,16 @@ def main():
           % (os.cpu_count(), cpu, args.steps, args.seconds))
     print("| scene | elements | model, integrator | h (ms) | sub-steps | CG its / step | ms / step "
           "| real-time factor offline | µs / element / pass (x block3) | live: steps taken "
-          "| dropped | real-time factor live | live step ms |")
-    print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+          "| dropped | real-time factor live | live step ms | live note |")
+    print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for scene, (off, on) in rows.items():
         ratio = ""
         if base is not None:
             ratio = " (%.2f)" % (off["us_per_element_pass"] / base[0]["us_per_element_pass"])
-        print("| %s | %d | %s | %g | %d | %.1f | %.2f | %.2f | %.2f%s | %d | %d | %.2f | %.2f |"
+        print("| %s | %d | %s | %g | %d | %.1f | %.2f | %.2f | %.2f%s | %d | %d | %.2f | %.2f | %s |"
               % (scene, off["elements"], off["model"], off["h_ms"], off["substeps"], off["cg"],
                  off["ms"], off["rtf"], off["us_per_element_pass"], ratio, on["taken"],
-                 on["dropped"], on["rtf"], on["step_ms"]))
+                 on["dropped"], on["rtf"], on["step_ms"], on["note"]))
     print("\nPhases offline (ms per step):\n")
     names = []
     for off, _ in rows.values():

@@ -84,17 +84,16 @@ struct Config {
   bool lumped = false;    // solver.mass: LUMPED (CSV integrator "<integrator>_lumped")
 };
 
-// The CSV's integrator column: the scheme, with "_lumped" for a lumped mass.
-std::string IntegratorLabel(const Config& c) {
-  std::string out;
-  for (char ch : c.integrator) out += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  return c.lumped ? out + "_lumped" : out;
-}
 
 std::string Lower(const std::string& s) {
   std::string out = s;
   for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return out;
+}
+
+// The CSV's integrator column: the scheme, with "_lumped" for a lumped mass.
+std::string IntegratorLabel(const Config& c) {
+  return c.lumped ? Lower(c.integrator) + "_lumped" : Lower(c.integrator);
 }
 
 // The bench beam: [0, 1] x [-0.05, 0.05]^2, 10 x 2 x 2 control cells, clamped

@@ -163,12 +163,8 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
   pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
   for (int kind = 1; kind < 3; ++kind) {
-    const ElementBlock& block = layout.blocks[kind];
-    pooled_[kind].assign(block.groups.size(), 0);
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      pooled_[kind][gi] = block.group_start[gi + 1] - block.group_start[gi] <=
-                          std::min(quadrature_group_size, kQuadratureGroupSize);
-    }
+    pooled_[kind] =
+        SmallGroups(layout.blocks[kind], std::min(quadrature_group_size, kQuadratureGroupSize));
   }
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
@@ -232,8 +228,11 @@ void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
   quadrature_.SetFloat(on);
   for (int kind = 1; kind < 3; ++kind) {
     for (size_t gi = 0; gi < small_[kind].size(); ++gi) {
-      small_f_[kind][gi].assign(on ? small_[kind][gi].begin() : small_[kind][gi].end(),
-                                small_[kind][gi].end());
+      if (on) {
+        small_f_[kind][gi].assign(small_[kind][gi].begin(), small_[kind][gi].end());
+      } else {
+        small_f_[kind][gi].clear();
+      }
     }
   }
   for (int kind = 0; kind < 3; ++kind) {
@@ -321,22 +320,10 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       const bool single = !subtract_rest && single_;
       for (int32_t b = 0; b < batch.count; ++b) {
         const int32_t g = block.group[schedule_.order[batch.kind][batch.first + b]];
-        const double* x = u.col(b).data();
-        double* out = y.col(b).data();
         if (single) {
-          const float* k = small_f_[batch.kind][g].data();
-          for (int i = 0; i < m; ++i) {
-            float acc = 0;
-            for (int j = 0; j < m; ++j) acc += k[i * m + j] * static_cast<float>(x[j]);
-            out[i] = acc;
-          }
+          SmallProduct(small_f_[batch.kind][g].data(), m, u.col(b).data(), y.col(b).data());
         } else {
-          const double* k = small_[batch.kind][g].data();
-          for (int i = 0; i < m; ++i) {
-            double acc = 0;
-            for (int j = 0; j < m; ++j) acc += k[i * m + j] * x[j];
-            out[i] = acc;
-          }
+          SmallProduct(small_[batch.kind][g].data(), m, u.col(b).data(), y.col(b).data());
         }
       }
     } else if (pooled) {

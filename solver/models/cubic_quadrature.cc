@@ -227,14 +227,10 @@ void ApplyCubicQuadrature(const CubicQuadratureBasis& basis, const S* factors, i
 std::vector<uint8_t> CubicQuadratureElements::Choose(const ElementLayout& layout,
                                                      int32_t group_size) {
   const ElementBlock& cubic = layout.blocks[0];
-  std::vector<uint8_t> pooled(cubic.groups.size(), 0);
   if (group_size <= 0 || cubic.size() == 0 || !CubicQuadratureBasis::Make(layout.tables[0], basis_)) {
-    return pooled;
+    return std::vector<uint8_t>(cubic.groups.size(), 0);
   }
-  for (size_t gi = 0; gi < cubic.groups.size(); ++gi) {
-    pooled[gi] = cubic.group_start[gi + 1] - cubic.group_start[gi] <= group_size;
-  }
-  return pooled;
+  return SmallGroups(cubic, group_size);
 }
 
 void CubicQuadratureElements::Build(const ElementLayout& layout, const ElementSchedule& schedule,

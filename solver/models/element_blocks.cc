@@ -243,6 +243,14 @@ ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size
   return out;
 }
 
+std::vector<uint8_t> SmallGroups(const ElementBlock& block, int32_t max_members) {
+  std::vector<uint8_t> small(block.groups.size(), 0);
+  for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+    small[gi] = block.group_start[gi + 1] - block.group_start[gi] <= max_members;
+  }
+  return small;
+}
+
 void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
   schedule.batch_nodes.clear();
   schedule.local_ids.clear();

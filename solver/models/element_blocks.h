@@ -112,6 +112,9 @@ struct ElementSchedule {
 // few elements: a painted band, a curved mesh), for a model that applies
 // them per element.
 using PooledGroups = std::array<std::vector<uint8_t>, 3>;
+// One flag per group of `block`: it has at most `max_members` elements (all
+// zero when max_members <= 0).
+std::vector<uint8_t> SmallGroups(const ElementBlock& block, int32_t max_members);
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
                                  int32_t num_nodes, const PooledGroups* pooled = nullptr);
 
@@ -138,6 +141,19 @@ void ClearPartRows(const ElementSchedule& schedule, int k, Points& buffer);
 // split. Rows no part touches become zero.
 void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, int32_t begin,
                  int32_t end, Points& out);
+
+// y (m, double) = K x for a pooled element's own small matrix K (m x m,
+// row-major, entries S), x of type T, each row one S sum over j in order
+// (S = float: x rounded to float as read).
+template <typename S, typename T>
+inline void SmallProduct(const S* k, int m, const T* x, double* y) {
+  for (int i = 0; i < m; ++i) {
+    const S* row = k + static_cast<int64_t>(i) * m;
+    S acc = 0;
+    for (int j = 0; j < m; ++j) acc += row[j] * static_cast<S>(x[j]);
+    y[i] = static_cast<double>(acc);
+  }
+}
 
 // Bytes a model keeps per element beyond the mesh: node ids, group id, the
 // element's place in by_group, and its warm-started frame (a quaternion).

@@ -77,11 +77,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   const ElementBlock& cubic = layout.blocks[0];
   pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
   for (int kind = 1; kind < 3; ++kind) {
-    const ElementBlock& block = layout.blocks[kind];
-    pooled_[kind].assign(block.groups.size(), 0);
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
-      pooled_[kind][gi] = block.group_start[gi + 1] - block.group_start[gi] <= quadrature_group_size;
-    }
+    pooled_[kind] = SmallGroups(layout.blocks[kind], quadrature_group_size);
   }
   // The cubic table's rule is a tensor Gauss rule of n1 points a side.
   std::optional<KroneckerBasis> kron_basis;
@@ -498,14 +494,7 @@ void LocalFrameModel::RunBatches(int part, const Points& d, const KSet& packed, 
           k = small_[batch.kind][g].data();
         }
         for (int a = 0; a < 3; ++a) {
-          const T* x = cols[a] + b * ld;
-          double* y = ys[a] + b * ld;
-          for (int i = 0; i < n; ++i) {
-            const T* row = k + (a * n + i) * n;
-            T acc = 0;
-            for (int j = 0; j < n; ++j) acc += row[j] * x[j];
-            y[i] = static_cast<double>(acc);
-          }
+          SmallProduct(k + a * n * n, n, cols[a] + b * ld, ys[a] + b * ld);
         }
       }
       factorized = true;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "google/protobuf/text_format.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
@@ -81,6 +82,7 @@ int main(int argc, char** argv) {
               name.c_str(), solid.discretization().hierarchy.levels, c.num_cells(),
               static_cast<long long>(solid.discretization().elements.cubic_cell.size() + solid.discretization().elements.linear_cell.size() + solid.discretization().elements.pyramid_cell.size()), solid.threads());
   std::printf("| what | median ms (of 3) | result |\n| --- | ---: | --- |\n");
+  std::vector<std::string> phases;
   for (const auto& [what, text] : edits) {
     TopologyEdit e;
     google::protobuf::TextFormat::ParseFromString(text, &e);
@@ -90,10 +92,26 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       absl::StatusOr<sculpt::AppliedEdit> a = sculpt::ApplyEdit(*scene, solid, e);
       ms.push_back(Ms(t0));
-      result = a.ok() ? a->summary : std::string(a.status().message());
+      result = a.ok() ? a->summary + absl::StrFormat(" (%d cubic, %d linear groups; %d material arrays)", a->solid->build_report().cubic_groups, a->solid->build_report().linear_groups, a->solid->build_report().material_arrays) : std::string(a.status().message());
+      if (a.ok() && r == 2) {
+        const auto& p = a->prepare_phases;
+        const auto& b = a->solid->build_report();
+        phases.push_back(absl::StrFormat(
+            "| %s | %d of %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f |",
+            what, b.mass_cells_made, b.control_cell_partials, p.edit, p.discretize, p.build - b.build_ms, b.phases.layout, b.phases.model,
+            b.phases.mass, b.phases.surface, b.phases.stable_step, b.phases.k0,
+            b.build_ms - b.phases.layout - b.phases.model - b.phases.mass - b.phases.surface -
+                b.phases.stable_step - b.phases.k0,
+            a->milliseconds - a->prepare_milliseconds));
+      }
     }
     std::printf("| %s | %.1f | %s |\n", what.c_str(), Median(ms), result.c_str());
   }
+  std::printf("\nwhere an edit's time goes (ms, last of the 3 runs):\n"
+              "| edit | cells made | edit | discretize | transfer | layout | model | mass | surface | "
+              "stable step | K0 | rest of build | finish |\n"
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  for (const std::string& row : phases) std::printf("%s\n", row.c_str());
   // Undo within one topology: restore a saved state.
   const std::string state = solid.SaveState();
   std::vector<double> save_ms, restore_ms;

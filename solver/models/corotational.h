@@ -107,6 +107,8 @@ class CorotationalModel final : public InternalForceModel {
   // A group applied at its quadrature points has it made here from them
   // (CubicQuadratureElements::Matrix).
   Eigen::MatrixXd K(int kind, int32_t group) const;
+  // Whether K(kind, group) is made from the group's quadrature points.
+  bool at_quadrature_points(int kind, int32_t group) const { return kind == 0 && pooled_[0][group]; }
   // Cubic elements applied at their quadrature points.
   int64_t quadrature_elements() const { return quadrature_.size(); }
   // Bytes of the shared group matrices (float copies included); bytes per element of per-element

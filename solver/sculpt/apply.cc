@@ -132,6 +132,7 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   // points where the solid is then).
   const mesh::CellComplex& rest = d.control();
   ASSIGN_OR_RETURN(EditResult r, Dispatch(rest, rest.positions(), d.control_sharp, edit));
+  auto t_phase = Clock::now();
 
   // The edited scene: the new control mesh inline (final positions: no
   // scale, translation or local refinement left to apply), its sharp edges
@@ -151,6 +152,8 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
     e->set_v0(a);
     e->set_v1(b);
   }
+  out.phases.edit = std::chrono::duration<double, std::milli>(t_phase - t0).count();
+  t_phase = Clock::now();
   absl::StatusOr<scene::Discretization> nd = scene::Discretize(edited, r.mesh, std::nullopt);
   if (!nd.ok()) return absl::Status(nd.status().code(), absl::StrCat("edit: ", nd.status().message()));
   out.cells_before = rest.num_cells();
@@ -159,11 +162,14 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   out.vertices_after = nd->control().num_vertices();
   out.elements_after =
       nd->elements.num_cubic() + nd->elements.num_linear() + nd->elements.num_pyramid();
+  out.phases.discretize = std::chrono::duration<double, std::milli>(Clock::now() - t_phase).count();
+  t_phase = Clock::now();
   absl::StatusOr<std::unique_ptr<solid::Solid>> built =
       solid.BuildRemeshed(edited, *std::move(nd), r.cell_source);
   if (!built.ok()) {
     return absl::Status(built.status().code(), absl::StrCat("edit: ", built.status().message()));
   }
+  out.phases.build = std::chrono::duration<double, std::milli>(Clock::now() - t_phase).count();
   out.built = *std::move(built);
   out.rest_mesh = std::move(r.mesh);
   out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
@@ -195,6 +201,7 @@ absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid
   out.scene = out.transfer.scene;
   out.summary = r.summary;
   out.prepare_milliseconds = prepared.milliseconds;
+  out.prepare_phases = prepared.phases;
   out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   return out;
 }

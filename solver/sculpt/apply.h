@@ -31,6 +31,12 @@ struct AppliedEdit {
   // finishing only (the prepared part in prepare_milliseconds).
   double milliseconds = 0;
   double prepare_milliseconds = 0;
+  // Where the prepared part went (milliseconds): the edit on the control
+  // mesh, its subdivision and element lists, the new solid (its phases in
+  // solid->build_report().phases).
+  struct Phases {
+    double edit = 0, discretize = 0, build = 0;
+  } prepare_phases;
 };
 
 // An edit prepared at rest: the edited scene and the new solid built around
@@ -44,6 +50,7 @@ struct PreparedEdit {
   int32_t vertices_before = 0, vertices_after = 0;
   int32_t elements_after = 0;
   double milliseconds = 0;
+  AppliedEdit::Phases phases;
 };
 
 // Applies `edit` to `solid`, which was built from `scene` (the session's

@@ -71,6 +71,17 @@ struct BuildReport {
   // (cg_tolerance >= kSinglePrecisionCgTolerance; see solid.cc).
   bool single_precision_cg = false;
   double build_ms = 0.0;
+  // Distinct control-cell partial sums of Mt (and Dt) and of K0 this build
+  // made rather than took from the solid it was remeshed from
+  // (cell_assembly.h), of `control_cell_partials`; -1: too large to keep.
+  int32_t mass_cells_made = 0, k0_cells_made = 0, control_cell_partials = 0;
+  // Where build_ms went (milliseconds): the element layout (shapes grouped,
+  // materials sampled), the force model, the mass and damping in control
+  // space, the boundary surface, the stable-step estimate, backward Euler's
+  // K0 (0 when explicit).
+  struct Phases {
+    double layout = 0, model = 0, mass = 0, surface = 0, stable_step = 0, k0 = 0;
+  } phases;
 };
 
 // Wall time of the phases of the last step, milliseconds; a phase the scene
@@ -619,10 +630,13 @@ class Solid {
   absl::Status Restore(std::string_view bytes, const std::pair<double, int64_t>* clock);
   absl::StatusOr<std::shared_ptr<PreparedState>> PrepareStateView(std::string_view bytes) const;
   absl::Status Install(PreparedState& state, const std::pair<double, int64_t>* clock);
-  // Create with materials from `sampler` instead of the scene's (Remeshed).
+  // Create with materials from `sampler` instead of the scene's, and the
+  // cell partials of `carried`'s matrices (cell_assembly.h) where their
+  // cells are unchanged (Remeshed; null: none).
   static absl::StatusOr<std::unique_ptr<Solid>> CreateWith(
       const Scene& scene, scene::Discretization discretization, int threads,
-      const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* sampler);
+      const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* sampler,
+      const Solid* carried = nullptr);
   // Makes impl_->fixed follow fix_count and re-sets the integrators up.
   void ApplyFixed();
 

@@ -14,6 +14,7 @@
 #include <cstring>
 #include <functional>
 #include <map>
+#include <mutex>
 #include <numeric>
 #include <optional>
 #include <span>
@@ -28,6 +29,7 @@
 #include "solver/common/parallel.h"
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
+#include "solver/solid/cell_assembly.h"
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
@@ -41,159 +43,84 @@
 #include "solver/subdivision/mcj.h"
 
 namespace dynsolid::solid {
-namespace {
-
-// An element's rows of the node matrix restricted to its control support:
-// B (n x s) with support[a] the control point of column a, and a 128-bit
-// hash of (kind, group, B) under which B^T X B products are cached
-// (regular grids repeat them).
-struct ElementSupport {
-  std::vector<int32_t> support;
-  Eigen::MatrixXd b;
-  std::pair<uint64_t, uint64_t> key;
-};
-
-void GatherSupport(const subdivision::SparseMatrix& nm, const int32_t* ids, int n, int kind,
-                   int32_t group, ElementSupport& out) {
-  out.support.clear();
-  for (int i = 0; i < n; ++i) {
-    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-      out.support.push_back(static_cast<int32_t>(it.col()));
-    }
-  }
-  std::sort(out.support.begin(), out.support.end());
-  out.support.erase(std::unique(out.support.begin(), out.support.end()), out.support.end());
-  const int s = static_cast<int>(out.support.size());
-  out.b.setZero(n, s);
-  for (int i = 0; i < n; ++i) {
-    for (subdivision::SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-      out.b(i, std::lower_bound(out.support.begin(), out.support.end(), it.col()) -
-                   out.support.begin()) = it.value();
-    }
-  }
-  // FNV-1a and a multiplicative mix over the bits of (kind, group, s, B).
-  uint64_t h1 = 1469598103934665603ull, h2 = 0x9e3779b97f4a7c15ull;
-  auto mix = [&](uint64_t x) {
-    h1 = (h1 ^ x) * 1099511628211ull;
-    h2 = (h2 ^ (x + 0x632be59bd9b4e019ull + (h2 << 6) + (h2 >> 2))) * 0xff51afd7ed558ccdull;
-  };
-  mix(static_cast<uint64_t>(kind));
-  mix(static_cast<uint64_t>(group));
-  mix(static_cast<uint64_t>(s));
-  for (Eigen::Index k = 0; k < out.b.size(); ++k) {
-    uint64_t bits;
-    std::memcpy(&bits, out.b.data() + k, sizeof(bits));
-    mix(bits);
-  }
-  out.key = {h1, h2};
-}
-
-// A 128-bit hash (FNV-1a and a multiplicative mix, as GatherSupport's key).
-class Hash128 {
- public:
-  void Mix(uint64_t x) {
-    h1_ = (h1_ ^ x) * 1099511628211ull;
-    h2_ = (h2_ ^ (x + 0x632be59bd9b4e019ull + (h2_ << 6) + (h2_ >> 2))) * 0xff51afd7ed558ccdull;
-  }
-  void Doubles(const double* v, size_t n) {
-    Mix(n);
-    for (size_t i = 0; i < n; ++i) {
-      uint64_t bits;
-      std::memcpy(&bits, v + i, sizeof(bits));
-      Mix(bits);
-    }
-  }
-  void Ints(const int32_t* v, size_t n) {
-    Mix(n);
-    for (size_t i = 0; i < n; ++i) Mix(static_cast<uint32_t>(v[i]));
-  }
-  void Bytes(std::string_view s) {
-    Mix(s.size());
-    for (unsigned char c : s) Mix(c);
-  }
-  std::pair<uint64_t, uint64_t> value() const { return {h1_, h2_}; }
-
- private:
-  uint64_t h1_ = 1469598103934665603ull, h2_ = 0x9e3779b97f4a7c15ull;
-};
-
-}  // namespace
 
 // Mt = sum_e B_e^T M_e B_e with B_e the element's rows of the node matrix
-// restricted to its control support (and Dt alike). Element matrices are
-// shared per group; B_e^T M_e B_e is cached by (group, B_e values), which
-// regular grids repeat.
-void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
-                                          bool has_damping, SparseMatrix& mt,
-                                          SparseMatrix& dt) const {
+// restricted to its control support (and Dt alike), summed cell by cell
+// (cell_assembly.h): cells whose partial `previous` holds are not made
+// again. M_e = N^T diag(rho dV) N per group, made when a cell needs it.
+std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
+    const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
+    WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt) const {
+  const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
-  // Small control meshes accumulate densely; large ones through triplets.
-  const bool dense = nc <= 6000;
-  Eigen::MatrixXd mt_dense, dt_dense;
-  std::vector<Eigen::Triplet<double, int32_t>> mt_t, dt_t;
-  if (dense) {
-    mt_dense = Eigen::MatrixXd::Zero(nc, nc);
-    if (has_damping) dt_dense = Eigen::MatrixXd::Zero(nc, nc);
-  }
-  ElementSupport es;
-  // Cache of B^T M_e B (and B^T D_e B) by a 128-bit hash of (kind, group, B).
-  std::map<std::pair<uint64_t, uint64_t>, std::pair<Eigen::MatrixXd, Eigen::MatrixXd>> cache;
-  fem::NodeMatrixX3 g;
+  // Per group, when first needed: consistent mass and damping (n x n).
+  std::array<std::vector<std::once_flag>, 3> once;
+  std::array<std::vector<std::array<Eigen::MatrixXd, 2>>, 3> group_md;
   for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout.blocks[kind];
-    const fem::KindTable& table = layout.tables[kind];
-    const int n = block.nodes;
-    // Per group: consistent mass and damping matrices (n x n).
-    std::vector<Eigen::MatrixXd> me(block.groups.size()), de(block.groups.size());
-    for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+    once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
+    group_md[kind].resize(layout.blocks[kind].groups.size());
+  }
+  auto group_matrices = [&](int kind, int32_t gi) -> const std::array<Eigen::MatrixXd, 2>& {
+    std::call_once(once[kind][gi], [&] {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::KindTable& table = layout.tables[kind];
       const models::ElementGroup& grp = block.groups[gi];
       const auto& material = layout.materials[grp.material];
-      me[gi] = Eigen::MatrixXd::Zero(n, n);
-      if (has_damping) de[gi] = Eigen::MatrixXd::Zero(n, n);
-      for (int q = 0; q < table.points; ++q) {
-        const double det = fem::PhysicalGradients(table.dN(q), grp.rest, n, g);
-        const double dv = std::max(det, 0.0) * table.weight[q];
-        const Eigen::Map<const Eigen::VectorXd> nq(table.N(q), n);
-        me[gi].noalias() += (material[q].density * dv) * nq * nq.transpose();
-        if (has_damping) de[gi].noalias() += (material[q].damping * dv) * nq * nq.transpose();
+      const int n = block.nodes, points = table.points;
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
+          shape(table.n.data(), points, n);
+      Eigen::VectorXd dv(points);
+      fem::NodeMatrixX3 g;
+      for (int q = 0; q < points; ++q) {
+        dv[q] = std::max(fem::PhysicalGradients(table.dN(q), grp.rest, n, g), 0.0) * table.weight[q];
       }
+      Eigen::VectorXd w(points);
+      for (int q = 0; q < points; ++q) w[q] = material[q].density * dv[q];
+      auto& out = group_md[kind][gi];
+      out[0].noalias() = shape.transpose() * (w.asDiagonal() * shape);
+      if (has_damping) {
+        for (int q = 0; q < points; ++q) w[q] = material[q].damping * dv[q];
+        out[1].noalias() = shape.transpose() * (w.asDiagonal() * shape);
+      }
+    });
+    return group_md[kind][gi];
+  };
+  CellSumSpec spec;
+  spec.dofs = 1;
+  spec.outputs = has_damping ? 2 : 1;
+  spec.salt = 0x6d617373;  // "mass"
+  spec.group_key = [&](int kind, int32_t gi) {
+    const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
+    Hash128 h;
+    h.Mix(static_cast<uint64_t>(kind));
+    h.Doubles(grp.rest.data(), grp.rest.size());
+    for (const models::MaterialPoint& m : layout.materials[grp.material]) {
+      h.Double(m.density);
+      if (has_damping) h.Double(m.damping);
     }
-    for (int32_t e = 0; e < block.size(); ++e) {
-      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
-      const std::vector<int32_t>& support = es.support;
-      const Eigen::MatrixXd& b = es.b;
-      const int s = static_cast<int>(support.size());
-      auto it = cache.find(es.key);
-      if (it == cache.end()) {
-        Eigen::MatrixXd tm = b.transpose() * me[block.group[e]] * b;
-        Eigen::MatrixXd td;
-        if (has_damping) td = b.transpose() * de[block.group[e]] * b;
-        it = cache.emplace(es.key, std::make_pair(std::move(tm), std::move(td))).first;
-      }
-      const Eigen::MatrixXd& tm = it->second.first;
-      const Eigen::MatrixXd& td = it->second.second;
-      for (int j = 0; j < s; ++j) {
-        for (int i = 0; i < s; ++i) {
-          if (dense) {
-            mt_dense(support[i], support[j]) += tm(i, j);
-            if (has_damping) dt_dense(support[i], support[j]) += td(i, j);
-          } else {
-            mt_t.emplace_back(support[i], support[j], tm(i, j));
-            if (has_damping) dt_t.emplace_back(support[i], support[j], td(i, j));
-          }
-        }
-      }
-    }
-  }
+    return h.value();
+  };
+  spec.make = [&](int kind, int32_t e, const ElementRows& rows, std::vector<Eigen::MatrixXd>& blocks) {
+    const auto& md = group_matrices(kind, layout.blocks[kind].group[e]);
+    blocks.resize(has_damping ? 2 : 1);
+    for (size_t o = 0; o < blocks.size(); ++o) blocks[o] = rows.b.transpose() * md[o] * rows.b;
+  };
+  // Small control meshes accumulate densely; large ones through triplets.
+  const bool dense = nc <= 6000;
+  CellSums sums;
+  std::shared_ptr<const CellPartials> next =
+      SumByCell(nm, layout, d->hierarchy.control_cell, d->control().num_cells(), spec, previous,
+                threads, dense, sums);
+  const std::shared_ptr<const CellPartials> kept = next->bytes <= kMaxCarriedBytes ? next : nullptr;
   if (dense) {
-    mt = mt_dense.sparseView(0.0, 0.0);
-    if (has_damping) dt = dt_dense.sparseView(0.0, 0.0);
+    mt = sums.matrices[0].sparseView(0.0, 0.0);
+    if (has_damping) dt = sums.matrices[1].sparseView(0.0, 0.0);
   } else {
     mt.resize(nc, nc);
-    mt.setFromTriplets(mt_t.begin(), mt_t.end());
+    mt.setFromTriplets(sums.triplets[0].begin(), sums.triplets[0].end());
     if (has_damping) {
       dt.resize(nc, nc);
-      dt.setFromTriplets(dt_t.begin(), dt_t.end());
+      dt.setFromTriplets(sums.triplets[1].begin(), sums.triplets[1].end());
     }
   }
   mt.makeCompressed();
@@ -212,6 +139,7 @@ void Solid::Impl::AssembleControlMatrices(const SparseMatrix& nm, const models::
     lump(mt);
     if (has_damping) lump(dt);
   }
+  return kept;
 }
 
 bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
@@ -252,6 +180,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
   // applied at their quadrature points (every one in the corotational
   // model, those of small groups in the local-frame one) keep 11 numbers
   // per point instead (models/cubic_quadrature.h).
+  const auto t_model = Clock::now();
   const bool corot = settings.model() == SolverSettings::COROTATIONAL;
   double bytes = 0;
   for (int kind = 0; kind < 3; ++kind) {
@@ -297,13 +226,17 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
+  b.model_ms = MsSince(t_model);
   // Mass (and damping) in control-point space.
+  const auto t_mass = Clock::now();
   if (reuse && SameMassAndDamping(*l)) {
     b.mt = mt;
     b.dt = dt;
+    b.mass_cells = mass_cells;
   } else {
-    AssembleControlMatrices(d->node_matrix, *l, b.has_damping, b.mt, b.dt);
+    b.mass_cells = AssembleControlMatrices(*l, b.has_damping, mass_cells.get(), threads, b.mt, b.dt);
   }
+  b.mass_ms = MsSince(t_mass);
   b.layout = std::move(l);
   return b;
 }
@@ -318,6 +251,7 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   layout = std::move(b.layout);
   mt = std::move(b.mt);
   dt = std::move(b.dt);
+  mass_cells = std::move(b.mass_cells);
   has_damping = b.has_damping;
   ++contact.epoch;  // the contact stiffness depends on the material
   ConfigureLinearized();
@@ -363,7 +297,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     const Scene& scene, scene::Discretization discretization, int threads,
-    const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* materials) {
+    const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* materials,
+    const Solid* carried) {
   if (threads < 0 || threads > 8) {
     return absl::InvalidArgumentError(
         absl::StrCat("threads: ", threads, " is outside 0-8 (0: the hardware's)"));
@@ -418,6 +353,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     }
     return m;
   };
+  BuildReport& rep = s->report_;
+  auto t_phase = Clock::now();
   auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
       s->d_.elements, rest, s->d_.hierarchy.control_cell,
       materials != nullptr ? *materials : sampler));
@@ -427,16 +364,26 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
         "point); the subdivided mesh is too distorted for finite elements"));
   }
   s->rest_volume_ = layout->rest_volume;
+  rep.phases.layout = MsSince(t_phase);
+  if (carried != nullptr) {
+    im.mass_cells = carried->impl_->mass_cells;
+    im.k0_cells = carried->impl_->k0_cells;
+  }
   ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout)));
+  rep.phases.model = material.model_ms;
+  rep.phases.mass = material.mass_ms;
+  rep.control_cell_partials = control.num_cells();
+  rep.mass_cells_made = material.mass_cells != nullptr ? material.mass_cells->made : -1;
   im.InstallMaterial(std::move(material));
-  s->total_mass_ = im.mt.sum();
+  s->total_mass_ = SumOfValues(im.mt);
+  t_phase = Clock::now();
   s->BuildSurface();
+  rep.phases.surface = MsSince(t_phase);
 
   // Constraints: the scene's fixed regions, held at rest.
   im.fix_count.assign(nc, 0);
   im.fixed.assign(nc, 0);
   im.hold = im.rest_control;
-  BuildReport& rep = s->report_;
   for (const PenaltySpring& spring : scene.constraints().springs()) {
     for (int32_t i = 0; i < nc; ++i) {
       bool in = InShape(spring.region(), im.rest_control.row(i).transpose());
@@ -500,12 +447,14 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
 
   // Stable step and sub-steps.
+  t_phase = Clock::now();
   im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed);
   im.omega_fixed = im.fixed;
   im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
   rep.omega_max = im.omega_max;
   rep.stable_step = im.stable_step;
   im.substeps = im.SubstepsFor(im.omega_max);
+  rep.phases.stable_step = MsSince(t_phase);
   // Implicit steps: asked for, or chosen by `auto` when the explicit scheme
   // would need more than kAutoImplicitSubsteps sub-steps (corotational only).
   constexpr int kAutoImplicitSubsteps = 4;
@@ -550,7 +499,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     };
   }
   if (im.use_implicit) {
-    im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational);
+    t_phase = Clock::now();
+    im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational, *im.pool, &im.k0_cells);
+    rep.phases.k0 = MsSince(t_phase);
+    rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
   }
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -592,75 +544,78 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
 }
 
 // K0 = A^T K A (3 #control square, node-major DOFs 3 i + c) of the
-// corotational model at rest, plus the penalty springs, as triplets.
+// corotational model at rest, plus the penalty springs, as triplets; summed
+// cell by cell (cell_assembly.h) with the partials of `previous`.
 std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
-    const SparseMatrix& nm, const models::ElementLayout& layout,
+    const scene::Discretization& d, const models::ElementLayout& layout,
     const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
-    const std::vector<double>& spring_k) {
-  std::vector<Eigen::Triplet<double, int32_t>> t;
-  std::map<std::pair<uint64_t, uint64_t>, Eigen::MatrixXd> cache;
-  std::map<std::pair<int, int32_t>, Eigen::MatrixXd> group_k;
-  ElementSupport es;
+    const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
+    std::shared_ptr<const CellPartials>* next) {
+  const SparseMatrix& nm = d.node_matrix;
+  // A group's K once, when a cell first needs it (the model makes K of a
+  // group it applies at its quadrature points anew on each call).
+  std::array<std::vector<std::once_flag>, 3> once;
+  std::array<std::vector<Eigen::MatrixXd>, 3> group_k;
+  for (int kind = 0; kind < 3; ++kind) {
+    once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
+    group_k[kind].resize(layout.blocks[kind].groups.size());
+  }
+  CellSumSpec spec;
+  spec.dofs = 3;
+  spec.outputs = 1;
+  spec.salt = 0x6b30;  // "k0"
+  spec.group_key = [&](int kind, int32_t gi) {
+    const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
+    Hash128 h;
+    h.Mix(static_cast<uint64_t>(kind));
+    h.Mix(corotational.at_quadrature_points(kind, gi) ? 1 : 0);
+    h.Doubles(grp.rest.data(), grp.rest.size());
+    for (const models::MaterialPoint& m : layout.materials[grp.material]) {
+      h.Double(m.young);
+      h.Double(m.poisson);
+    }
+    return h.value();
+  };
+  spec.make = [&](int kind, int32_t e, const ElementRows& rows, std::vector<Eigen::MatrixXd>& blocks) {
+    const int32_t gi = layout.blocks[kind].group[e];
+    std::call_once(once[kind][gi], [&] { group_k[kind][gi] = corotational.K(kind, gi); });
+    const Eigen::MatrixXd& k = group_k[kind][gi];
+    // E^T K E with E = B (x) I3 (node-major element DOFs from control
+    // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
+    const Eigen::MatrixXd& b = rows.b;
+    const int n = static_cast<int>(b.rows()), s = static_cast<int>(b.cols());
+    blocks.resize(1);
+    Eigen::MatrixXd& tk = blocks[0];
+    tk.resize(3 * s, 3 * s);
+    Eigen::MatrixXd kcd(n, n), tcd;
+    for (int c = 0; c < 3; ++c) {
+      for (int dd = 0; dd < 3; ++dd) {
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + dd);
+        tcd.noalias() = b.transpose() * (kcd * b);
+        for (int bb = 0; bb < s; ++bb)
+          for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + dd) = tcd(a, bb);
+      }
+    }
+  };
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.
   const int64_t dofs = 3 * static_cast<int64_t>(nm.cols());
   const bool dense = dofs <= 2048;
-  Eigen::MatrixXd sum;
-  if (dense) sum.setZero(dofs, dofs);
-  Eigen::MatrixXd kcd, tcd;
-  for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout.blocks[kind];
-    const int n = block.nodes;
-    for (int32_t e = 0; e < block.size(); ++e) {
-      GatherSupport(nm, block.element_nodes(e), n, kind, block.group[e], es);
-      const std::vector<int32_t>& support = es.support;
-      const Eigen::MatrixXd& b = es.b;
-      const int s = static_cast<int>(support.size());
-      auto it = cache.find(es.key);
-      if (it == cache.end()) {
-        // E^T K E with E = B (x) I3 (node-major element DOFs from control
-        // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
-        // A group's K once (the model makes K of a group it applies at its
-        // quadrature points anew on each call).
-        auto kt = group_k.find({kind, block.group[e]});
-        if (kt == group_k.end()) {
-          kt = group_k.emplace(std::pair{kind, block.group[e]}, corotational.K(kind, block.group[e]))
-                   .first;
-        }
-        const Eigen::MatrixXd& k = kt->second;
-        Eigen::MatrixXd tk(3 * s, 3 * s);
-        for (int c = 0; c < 3; ++c) {
-          for (int d = 0; d < 3; ++d) {
-            kcd.resize(n, n);
-            for (int j = 0; j < n; ++j)
-              for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + d);
-            tcd.noalias() = b.transpose() * (kcd * b);
-            for (int bb = 0; bb < s; ++bb)
-              for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + d) = tcd(a, bb);
-          }
-        }
-        it = cache.emplace(es.key, std::move(tk)).first;
-      }
-      const Eigen::MatrixXd& tk = it->second;
-      for (int c = 0; c < 3 * s; ++c) {
-        const int64_t col = 3 * static_cast<int64_t>(support[c / 3]) + c % 3;
-        for (int a = 0; a < 3 * s; ++a) {
-          if (tk(a, c) == 0) continue;
-          const int64_t row = 3 * static_cast<int64_t>(support[a / 3]) + a % 3;
-          if (dense) {
-            sum(row, col) += tk(a, c);
-          } else {
-            t.emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), tk(a, c));
-          }
-        }
-      }
-    }
-  }
+  CellSums sums;
+  std::shared_ptr<const CellPartials> made =
+      SumByCell(nm, layout, d.hierarchy.control_cell, d.control().num_cells(), spec, previous,
+                threads, dense, sums);
+  if (next != nullptr) *next = made->bytes <= kMaxCarriedBytes ? made : nullptr;
+  std::vector<Eigen::Triplet<double, int32_t>> t;
   if (dense) {
+    const Eigen::MatrixXd& sum = sums.matrices[0];
     for (int64_t c = 0; c < dofs; ++c)
       for (int64_t r = 0; r < dofs; ++r) {
         if (sum(r, c) != 0) t.emplace_back(static_cast<int32_t>(r), static_cast<int32_t>(c), sum(r, c));
       }
+  } else {
+    t = std::move(sums.triplets[0]);
   }
   for (size_t k = 0; k < spring_point.size(); ++k) {
     for (int c = 0; c < 3; ++c) {

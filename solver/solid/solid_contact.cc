@@ -355,18 +355,21 @@ std::function<absl::StatusOr<std::shared_ptr<Solid::PreparedContact>>()> Solid::
   // may replace them meanwhile), and never changed once built.
   std::shared_ptr<const models::ElementLayout> layout = im.layout;
   std::shared_ptr<const models::InternalForceModel> model = im.model;
-  const SparseMatrix* nm = &d_.node_matrix;
+  const scene::Discretization* dd = &d_;
   const fem::NodeRows* rows = &im.node_rows;
   const bool corotational = im.corotational != nullptr;
-  return [this, in, layout, model, nm, rows,
-          corotational]() -> absl::StatusOr<std::shared_ptr<PreparedContact>> {
+  std::shared_ptr<const CellPartials> k0_cells = im.k0_cells;
+  return [this, in, layout, model, dd, rows, corotational,
+          k0_cells]() -> absl::StatusOr<std::shared_ptr<PreparedContact>> {
     auto out = std::make_shared<PreparedContact>();
     out->solid = this;
     out->cache = std::make_shared<Impl::ContactCache>();
     if (corotational) {
       const auto& corot = static_cast<const models::CorotationalModel&>(*model);
       in->triplets = [&] {
-        return Impl::StiffnessTriplets(*nm, *layout, corot, in->spring_point, in->spring_k);
+        WorkerPool pool(1);
+        return Impl::StiffnessTriplets(*dd, *layout, corot, in->spring_point, in->spring_k, pool,
+                                       k0_cells.get());
       };
       RETURN_IF_ERROR(Impl::BuildContactCache(*in, *out->cache));
       return out;

@@ -38,6 +38,8 @@
 
 namespace dynsolid::solid {
 
+struct CellPartials;  // cell_assembly.h
+
 using SparseMatrix = subdivision::SparseMatrix;
 using Clock = std::chrono::steady_clock;
 
@@ -53,6 +55,17 @@ constexpr double kSinglePrecisionCgTolerance = 1e-5;
 
 // std::string_view as Abseil's string_view (Debian's Abseil has its own).
 inline absl::string_view A(std::string_view s) { return absl::string_view(s.data(), s.size()); }
+
+// The sum of a sparse matrix's stored values, in storage order. (Eigen's
+// sum() reduces with SIMD from the first 32-byte boundary of the value
+// array, which the heap places differently from run to run: its bits would
+// depend on where the array lands.)
+inline double SumOfValues(const SparseMatrix& m) {
+  double sum = 0;
+  const double* v = m.valuePtr();
+  for (Eigen::Index k = 0; k < m.nonZeros(); ++k) sum += v[k];
+  return sum;
+}
 
 inline double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
@@ -102,6 +115,8 @@ struct MaterialBuild {
   SparseMatrix mt, dt;
   bool has_damping = false;
   int64_t shared_matrix_bytes = 0, element_bytes = 0;
+  double model_ms = 0, mass_ms = 0;  // BuildReport::Phases
+  std::shared_ptr<const CellPartials> mass_cells;
 };
 
 // What a change prepared off the loop (a paint, an unfix) was made for:
@@ -122,6 +137,7 @@ class Solid::PreparedPaint {
   PreparedFor made_for;
   MaterialBuild build;
   Eigen::SparseMatrix<double> k0;  // the implicit scheme's, for build
+  std::shared_ptr<const CellPartials> k0_cells;  // k0's (Impl::k0_cells)
   // Backward Euler's Setup for build at one sub-step, with k0.
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
   // The stable step and sub-steps for build, from the solid's as they were,
@@ -359,25 +375,34 @@ struct Solid::Impl {
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);
 
+  // K0 as triplets, its cells' partials taken from `previous` where their
+  // keys match and this build's stored in *next (cell_assembly.h).
   static std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets(
-      const SparseMatrix& nm, const models::ElementLayout& layout,
+      const scene::Discretization& d, const models::ElementLayout& layout,
       const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
-      const std::vector<double>& spring_k);
+      const std::vector<double>& spring_k, WorkerPool& threads,
+      const CellPartials* previous = nullptr, std::shared_ptr<const CellPartials>* next = nullptr);
   std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const {
-    return StiffnessTriplets(d->node_matrix, *layout, *corotational, spring_point, spring_k);
+    return StiffnessTriplets(*d, *layout, *corotational, spring_point, spring_k, *pool,
+                             k0_cells.get());
   }
   // The same as a 3 #control square sparse matrix (K0 of the implicit
-  // preconditioner) for layout `l` and its model `m`.
+  // preconditioner) for layout `l` and its model `m`, on `threads`.
   Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
-                                              const models::CorotationalModel& m) const {
+                                              const models::CorotationalModel& m,
+                                              WorkerPool& threads,
+                                              std::shared_ptr<const CellPartials>* next) const {
     const std::vector<Eigen::Triplet<double, int32_t>> t =
-        StiffnessTriplets(d->node_matrix, l, m, spring_point, spring_k);
+        StiffnessTriplets(*d, l, m, spring_point, spring_k, threads, k0_cells.get(), next);
     const Eigen::Index dofs = 3 * d->node_matrix.cols();
     Eigen::SparseMatrix<double> k(dofs, dofs);
     k.setFromTriplets(t.begin(), t.end());
     return k;
   }
   Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
+  // The cells' partial sums of Mt (and Dt) and of K0 (cell_assembly.h),
+  // for the next build of this solid or of one remeshed from it.
+  std::shared_ptr<const CellPartials> mass_cells, k0_cells;
 
   // Locate's cache: each element's rest bounding box, for the current
   // layout (cleared by InstallMaterial) and the rest nodes they came from.
@@ -385,8 +410,13 @@ struct Solid::Impl {
   mutable const Points* boxes_rest = nullptr;
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
                                           bool snap) const;
-  void AssembleControlMatrices(const SparseMatrix& nm, const models::ElementLayout& layout,
-                               bool has_damping, SparseMatrix& mt, SparseMatrix& dt) const;
+  // Mt and Dt of `layout` on `threads`; returns their cells' partials
+  // (cell_assembly.h), those of `previous` taken over where keys match.
+  std::shared_ptr<const CellPartials> AssembleControlMatrices(const models::ElementLayout& layout,
+                                                              bool has_damping,
+                                                              const CellPartials* previous,
+                                                              WorkerPool& threads, SparseMatrix& mt,
+                                                              SparseMatrix& dt) const;
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
                           const std::vector<uint8_t>& fixed_set) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
@@ -515,7 +545,11 @@ class Solid::PreparedState {
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
   Eigen::SparseMatrix<double> k0;      // with build, implicit
+  std::shared_ptr<const CellPartials> k0_cells;
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
+  // build is made on this pool (the solid's may be stepping); its model
+  // runs on the solid's once installed.
+  std::unique_ptr<WorkerPool> pool;
 };
 
 // An unfix's decision and stable-step estimate (Solid::PrepareUnfix).

@@ -135,7 +135,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   out->omega = omega;
   out->substeps = substeps;
   if (im.use_implicit) {
-    out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational);
+    out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational, *out->pool,
+                                 &out->k0_cells);
     // The float copies of the element matrices, here rather than when
     // installed (ConfigureLinearized then finds them made).
     out->build.corotational->SetSinglePrecisionLinearized(im.SinglePrecisionLinearized());
@@ -164,7 +165,10 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   build.model->set_frames(im.model->frames());
   build.model->set_pool(*im.pool);
   im.InstallMaterial(std::move(build));
-  if (im.use_implicit) im.k0 = std::move(p->k0);
+  if (im.use_implicit) {
+    im.k0 = std::move(p->k0);
+    im.k0_cells = std::move(p->k0_cells);
+  }
   im.omega_max = omega;
   if (estimated) im.omega_fixed = im.fixed;  // a bound holds for the old estimate's set
   im.stable_step = omega > 0 ? 2.0 / omega : INFINITY;
@@ -172,7 +176,7 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   im.SetSubsteps(substeps, h_, &p->implicit_setup);
   if (im.h_sub != old_h) p_prev_ = p_ - (im.h_sub / old_h) * (p_ - p_prev_);  // keep the velocity
   im.RebuildConstantLoads();  // gravity follows the density
-  total_mass_ = im.mt.sum();
+  total_mass_ = SumOfValues(im.mt);
   ReportMaterial();
   report_.omega_max = im.omega_max;
   report_.stable_step = im.stable_step;

@@ -179,7 +179,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     };
   }
   return CreateWith(CleanScene(scene, cell_source), std::move(discretization), old.pool->size(),
-                    uniform ? nullptr : &sampler);
+                    uniform ? nullptr : &sampler, this);
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> out,

@@ -527,6 +527,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   }
   std::optional<MaterialBuild> build;
   Eigen::SparseMatrix<double> k0;
+  std::shared_ptr<const CellPartials> k0_cells;
+  std::unique_ptr<WorkerPool> own_pool;
   if (!same_material) {
     OrderedSampler sampler(cur, im.rest_nodes,
                            [&](int kind, int32_t e, int q, const Eigen::Vector3d&, int32_t) {
@@ -538,9 +540,10 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     if (!sampler.ok()) {
       return absl::InternalError("solid state: the element layout sampled materials out of order");
     }
-    ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true));
+    own_pool = std::make_unique<WorkerPool>(1);
+    ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true, own_pool.get()));
     if (im.use_implicit) {
-      k0 = im.StiffnessMatrix(*build->layout, *build->corotational);
+      k0 = im.StiffnessMatrix(*build->layout, *build->corotational, *own_pool, &k0_cells);
     }
   }
 
@@ -587,7 +590,9 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   out->frames = std::move(frames);
   out->build = std::move(build);
   out->k0 = std::move(k0);
+  out->k0_cells = std::move(k0_cells);
   out->implicit_setup = std::move(implicit_setup);
+  out->pool = std::move(own_pool);
   return out;
 }
 
@@ -624,9 +629,13 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   s.used = true;
   // Nothing can fail from here on.
   if (s.build) {
+    s.build->model->set_pool(*im.pool);
     im.InstallMaterial(*std::move(s.build));
-    if (im.use_implicit) im.k0 = std::move(s.k0);
-    total_mass_ = im.mt.sum();
+    if (im.use_implicit) {
+      im.k0 = std::move(s.k0);
+      im.k0_cells = std::move(s.k0_cells);
+    }
+    total_mass_ = SumOfValues(im.mt);
     ReportMaterial();
   }
   im.model->set_frames(s.frames);

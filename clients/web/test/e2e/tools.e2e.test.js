@@ -42,6 +42,17 @@ const caughtUp = async () => {
     `the page at topology ${v}`);
   await sleep(200);
 };
+// The highest point of the drawn surface above the square of side 1 around
+// (x, 2.5): a column's top wherever the column leans now.
+const columnTop = (x) => page.evaluate((cx) => {
+  const pos = window.__dynsolid.view.geometry.getAttribute('position');
+  let best = null;
+  for (let i = 0; i < pos.count; ++i) {
+    const p = { x: pos.getX(i), y: pos.getY(i), z: pos.getZ(i) };
+    if (Math.abs(p.x - cx) < 0.5 && Math.abs(p.y - 2.5) < 0.5 && (!best || p.z > best.z)) best = p;
+  }
+  return { x: best.x, y: best.y, z: best.z - 0.05 };
+}, x);
 const clickAt = async (point, dy = 0) => {
   const a = await project(point);
   lastClick = await page.evaluate(({ x, y }) => {
@@ -182,15 +193,21 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
       `the column at x = ${x}`, 60000);
   }
   // Paused from here to the handle: the columns (soft, local-frame model)
-  // lean under gravity, and the clicks below aim at faces where they stand.
+  // lean under gravity, and the clicks below aim at faces where they stand,
+  // once they have stopped swaying (the block's damping: motion decays in
+  // about 1 s of simulated time; 2000 steps of 1 ms).
+  const settled = (await stats()).step + 2000;
+  await until(async () => ((await stats()).step >= settled) || null, 'the columns at rest', 120000);
   await caughtUp();
   await page.click('#pause');
   await until(async () => (await stats()).paused, 'paused');
-  // Refused: the two columns' top faces (parallel, facing the same way).
+  // Refused: the two columns' top faces (parallel, facing the same way),
+  // clicked where each top is now (1 m in 2 layers: near z = 4, leaning
+  // by as much as the column swayed when paused).
   await tool('merge');
-  await clickAt({ x: 0.5, y: 2.5, z: 3.9 }, 4);  // 1 m in 2 layers: tops near z = 4
+  await clickAt(await columnTop(0.5), 4);
   await sleep(300);
-  await clickAt({ x: 2.5, y: 2.5, z: 3.9 }, 4);
+  await clickAt(await columnTop(2.5), 4);
   await until(async () => /refused/.test(await banner()), 'the refusal on the page', 60000).catch(async (e) => {
     await shot('merge_failed');
     const m = await page.evaluate(() => window.__dynsolid.metrics.messages.map((x) => x.text));

@@ -92,7 +92,7 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       absl::StatusOr<sculpt::AppliedEdit> a = sculpt::ApplyEdit(*scene, solid, e);
       ms.push_back(Ms(t0));
-      result = a.ok() ? a->summary + absl::StrFormat(" (%d cubic, %d linear groups; %d material arrays)", a->solid->build_report().cubic_groups, a->solid->build_report().linear_groups, a->solid->build_report().material_arrays) : std::string(a.status().message());
+      result = a.ok() ? a->summary + absl::StrFormat(" (%d cubic, %d linear groups; %d material arrays; %d estimate passes)", a->solid->build_report().cubic_groups, a->solid->build_report().linear_groups, a->solid->build_report().material_arrays, a->solid->build_report().stable_step_passes) : std::string(a.status().message());
       if (a.ok() && r == 2) {
         const auto& p = a->prepare_phases;
         const auto& b = a->solid->build_report();

@@ -27,13 +27,24 @@ KindTable MakeKindTable(ElementKind kind, int order) {
   return t;
 }
 
-double PhysicalGradients(const double* dn, const NodeMatrixX3& x, int nodes, NodeMatrixX3& g) {
-  // J0 = sum_i x_i dN_i^T (3 x 3: rows physical, columns parametric).
+namespace {
+// J0 = sum_i x_i dN_i^T (3 x 3: rows physical, columns parametric).
+Eigen::Matrix3d RestJacobian(const double* dn, const NodeMatrixX3& x, int nodes) {
   Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
   for (int i = 0; i < nodes; ++i) {
     const Eigen::Map<const Eigen::RowVector3d> d(dn + 3 * i);
     j += x.row(i).transpose() * d;
   }
+  return j;
+}
+}  // namespace
+
+double JacobianDeterminant(const double* dn, const NodeMatrixX3& x, int nodes) {
+  return RestJacobian(dn, x, nodes).determinant();
+}
+
+double PhysicalGradients(const double* dn, const NodeMatrixX3& x, int nodes, NodeMatrixX3& g) {
+  const Eigen::Matrix3d j = RestJacobian(dn, x, nodes);
   const double det = j.determinant();
   g.resize(nodes, 3);
   if (det <= 0.0) {

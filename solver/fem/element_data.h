@@ -50,5 +50,7 @@ struct PointGeometry {
 // Returns det(J0) (m^3 per unit parametric volume; <= 0 for an inverted
 // element).
 double PhysicalGradients(const double* dn, const NodeMatrixX3& x, int nodes, NodeMatrixX3& g);
+// det(J0) alone, the same bits as PhysicalGradients' return value.
+double JacobianDeterminant(const double* dn, const NodeMatrixX3& x, int nodes);
 
 }  // namespace dynsolid::fem

@@ -5,6 +5,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <unordered_map>
 
 namespace dynsolid::models {
 namespace {
@@ -367,12 +368,14 @@ std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
 
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
-                                 const MaterialSampler& sampler) {
+                                 const MaterialSampler& sampler, const ElementMaterials* whole) {
   ElementLayout layout;
   std::map<std::vector<double>, int32_t> material_index;
+  // Arrays `whole` gave, by address: their material index once known.
+  std::unordered_map<const void*, int32_t> whole_index;
   std::vector<double> material_key;
   std::vector<MaterialPoint> samples;
-  fem::NodeMatrixX3 x, g;
+  fem::NodeMatrixX3 x;
   std::vector<int64_t> shape_key;
   for (int kind = 0; kind < 3; ++kind) {
     const auto k = static_cast<fem::ElementKind>(kind);
@@ -408,18 +411,35 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
       // Material samples at the quadrature points' rest positions.
       const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]
                                                              : cell_control_cell[block.cell[e]];
-      samples.resize(table.points);
-      material_key.clear();
-      for (int q = 0; q < table.points; ++q) {
-        const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q), n);
-        const Eigen::Vector3d xq = (nq * x).transpose();
-        samples[q] = sampler(xq, control_cell);
-        material_key.insert(material_key.end(), {samples[q].young, samples[q].poisson,
-                                                 samples[q].density, samples[q].damping});
+      const std::vector<MaterialPoint>* given =
+          whole != nullptr ? (*whole)(kind, x, control_cell) : nullptr;
+      if (given != nullptr && static_cast<int>(given->size()) != table.points) given = nullptr;
+      int32_t material = -1;
+      if (given != nullptr) {
+        auto w = whole_index.find(given);
+        if (w != whole_index.end()) material = w->second;
       }
-      auto [mit, new_material] = material_index.try_emplace(
-          material_key, static_cast<int32_t>(layout.materials.size()));
-      if (new_material) layout.materials.push_back(samples);
+      if (material < 0) {
+        if (given != nullptr) {
+          samples = *given;
+        } else {
+          samples.resize(table.points);
+          for (int q = 0; q < table.points; ++q) {
+            const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q), n);
+            const Eigen::Vector3d xq = (nq * x).transpose();
+            samples[q] = sampler(xq, control_cell);
+          }
+        }
+        material_key.clear();
+        for (const MaterialPoint& m : samples) {
+          material_key.insert(material_key.end(), {m.young, m.poisson, m.density, m.damping});
+        }
+        auto [it, fresh] = material_index.try_emplace(
+            material_key, static_cast<int32_t>(layout.materials.size()));
+        if (fresh) layout.materials.push_back(samples);
+        material = it->second;
+        if (given != nullptr) whole_index.emplace(given, material);
+      }
       // Rest shape up to translation, quantized to 1e-9 of its size.
       double size = 0;
       for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
@@ -439,20 +459,20 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
         ShapeData sd;
         fem::PhysicalGradients(table.centre_dn.data(), x, n, sd.centre_gradient);
         for (int q = 0; q < table.points; ++q) {
-          const double det = fem::PhysicalGradients(table.dN(q), x, n, g);
+          const double det = fem::JacobianDeterminant(table.dN(q), x, n);
           sd.inverted |= det <= 0;
           sd.volume += det * table.weight[q];
         }
         shape_data.push_back(std::move(sd));
       }
-      const std::vector<int64_t> group_key{mit->second, sit->second};
+      const std::vector<int64_t> group_key{material, sit->second};
       auto [git, new_group] =
           group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
       block.group[e] = git->second;
       if (new_group) {
         ElementGroup grp;
         grp.representative = e;
-        grp.material = mit->second;
+        grp.material = material;
         grp.rest = shape_rest[sit->second];
         grp.centre_gradient = shape_data[sit->second].centre_gradient;
         block.groups.push_back(std::move(grp));

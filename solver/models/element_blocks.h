@@ -34,6 +34,15 @@ struct MaterialPoint {
 // Material at a rest position x inside level-0 control cell `control_cell`.
 using MaterialSampler = std::function<MaterialPoint(const Eigen::Vector3d& x, int32_t control_cell)>;
 
+// An element's whole sample array, when the caller has one for an element
+// of `kind` with rest nodes x (n x 3, in the layout's node order) in
+// `control_cell` (a topology edit: an element whose rest nodes are those of
+// an element of the solid it came from keeps that element's samples); null:
+// sample it point by point. The array must stay alive while the layout is
+// built.
+using ElementMaterials = std::function<const std::vector<MaterialPoint>*(
+    int kind, const fem::NodeMatrixX3& x, int32_t control_cell)>;
+
 struct ElementGroup {
   int32_t representative = 0;         // an element of the group (block index)
   int32_t material = 0;               // material array id
@@ -169,8 +178,10 @@ std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
 
 // Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
 // `cell_control_cell` maps level-L cells to control cells for the sampler.
+// `whole` (optional) is asked first for each element.
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
-                                 const MaterialSampler& sampler);
+                                 const MaterialSampler& sampler,
+                                 const ElementMaterials* whole = nullptr);
 
 }  // namespace dynsolid::models

@@ -63,8 +63,9 @@ struct BuildReport {
   // (models::QuadPathName: "avx512", "avx2", "per-corner"); empty for the
   // corotational model.
   std::string measure_quad_path;
-  double omega_max = 0.0;          // rad/s, from power iteration
+  double omega_max = 0.0;          // rad/s, Lanczos estimate (solid.cc EstimateOmegaMax)
   double stable_step = 0.0;        // 2 / omega_max, seconds
+  int32_t stable_step_passes = 0;  // element passes the estimate took (Lanczos steps)
   int32_t substeps = 1;            // explicit sub-steps per scene step
   bool implicit = false;           // backward Euler (asked for, or chosen by auto)
   // Backward Euler's CG applies the element matrices in single precision
@@ -630,13 +631,17 @@ class Solid {
   absl::Status Restore(std::string_view bytes, const std::pair<double, int64_t>* clock);
   absl::StatusOr<std::shared_ptr<PreparedState>> PrepareStateView(std::string_view bytes) const;
   absl::Status Install(PreparedState& state, const std::pair<double, int64_t>* clock);
-  // Create with materials from `sampler` instead of the scene's, and the
+  // Create with materials from `whole` (whole elements' arrays, when it has
+  // them) and `sampler` instead of the scene's, and the
   // cell partials of `carried`'s matrices (cell_assembly.h) where their
   // cells are unchanged (Remeshed; null: none).
   static absl::StatusOr<std::unique_ptr<Solid>> CreateWith(
       const Scene& scene, scene::Discretization discretization, int threads,
       const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* sampler,
-      const Solid* carried = nullptr);
+      const Solid* carried = nullptr,
+      const std::function<const std::vector<models::MaterialPoint>*(
+          int, const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>&, int32_t)>* whole =
+          nullptr);  // models::ElementMaterials
   // Makes impl_->fixed follow fix_count and re-sets the integrators up.
   void ApplyFixed();
 

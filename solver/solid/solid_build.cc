@@ -70,9 +70,8 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
       const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
           shape(table.n.data(), points, n);
       Eigen::VectorXd dv(points);
-      fem::NodeMatrixX3 g;
       for (int q = 0; q < points; ++q) {
-        dv[q] = std::max(fem::PhysicalGradients(table.dN(q), grp.rest, n, g), 0.0) * table.weight[q];
+        dv[q] = std::max(fem::JacobianDeterminant(table.dN(q), grp.rest, n), 0.0) * table.weight[q];
       }
       Eigen::VectorXd w(points);
       for (int q = 0; q < points; ++q) w[q] = material[q].density * dv[q];
@@ -298,7 +297,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     const Scene& scene, scene::Discretization discretization, int threads,
     const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* materials,
-    const Solid* carried) {
+    const Solid* carried, const models::ElementMaterials* whole) {
   if (threads < 0 || threads > 8) {
     return absl::InvalidArgumentError(
         absl::StrCat("threads: ", threads, " is outside 0-8 (0: the hardware's)"));
@@ -357,7 +356,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   auto t_phase = Clock::now();
   auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
       s->d_.elements, rest, s->d_.hierarchy.control_cell,
-      materials != nullptr ? *materials : sampler));
+      materials != nullptr ? *materials : sampler, whole));
   if (layout->inverted_elements > 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         layout->inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "
@@ -453,6 +452,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
   rep.omega_max = im.omega_max;
   rep.stable_step = im.stable_step;
+  rep.stable_step_passes = im.last_omega_passes;
   im.substeps = im.SubstepsFor(im.omega_max);
   rep.phases.stable_step = MsSince(t_phase);
   // Implicit steps: asked for, or chosen by `auto` when the explicit scheme

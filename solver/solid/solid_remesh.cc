@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/solid/solid.h"
+#include "solver/solid/cell_assembly.h"
 #include "solver/solid/solid_impl.h"
 
 namespace dynsolid::solid {
@@ -152,34 +153,73 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   for (size_t k = 0; uniform && k < layout.materials[0].size(); ++k) {
     uniform = layout.materials[0][k] == base;
   }
+  // Painted: an element whose rest nodes are, bit for bit, those of an old
+  // element in its source cell keeps that element's samples (the edit left
+  // it alone); any other sample takes the material of the nearest old
+  // sample in its source cell, whose samples are binned when first needed.
+  std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
+  std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
+  auto node_key = [](int kind, const Points& rest, const int32_t* ids, int n) {
+    Hash128 h;
+    h.Mix(static_cast<uint64_t>(kind));
+    for (int i = 0; i < n; ++i) h.Doubles(rest.row(ids[i]).data(), 3);
+    return h.value();
+  };
   std::vector<CellSamples> by_cell;
+  std::vector<uint8_t> binned;
   std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
+  models::ElementMaterials whole;
   if (!uniform) {
-    by_cell.resize(old_cells);
     for (int kind = 0; kind < 3; ++kind) {
       const models::ElementBlock& block = layout.blocks[kind];
-      const fem::KindTable& table = layout.tables[kind];
       for (int32_t e = 0; e < block.size(); ++e) {
-        const int32_t* ids = block.element_nodes(e);
-        const int32_t cell = d_.hierarchy.control_cell[block.cell[e]];
-        const std::vector<models::MaterialPoint>& array =
-            layout.materials[block.groups[block.group[e]].material];
-        for (int q = 0; q < table.points; ++q) {
-          Eigen::Vector3d x = Eigen::Vector3d::Zero();
-          for (int i = 0; i < block.nodes; ++i) x += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
-          by_cell[cell].Add(x, array[q]);
-        }
+        old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
+        by_nodes.try_emplace(node_key(kind, old.rest_nodes, block.element_nodes(e), block.nodes),
+                             kind, e);
       }
     }
-    for (CellSamples& c : by_cell) c.Index();
+    by_cell.resize(old_cells);
+    binned.assign(old_cells, 0);
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
       const int32_t src = cell_source[cell];
-      if (src < 0 || by_cell[src].empty()) return base;
+      if (src < 0 || old_elements[src].empty()) return base;
+      if (!binned[src]) {
+        for (const auto& [kind, e] : old_elements[src]) {
+          const models::ElementBlock& block = layout.blocks[kind];
+          const fem::KindTable& table = layout.tables[kind];
+          const int32_t* ids = block.element_nodes(e);
+          const std::vector<models::MaterialPoint>& array =
+              layout.materials[block.groups[block.group[e]].material];
+          for (int q = 0; q < table.points; ++q) {
+            Eigen::Vector3d p = Eigen::Vector3d::Zero();
+            for (int i = 0; i < block.nodes; ++i) p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
+            by_cell[src].Add(p, array[q]);
+          }
+        }
+        by_cell[src].Index();
+        binned[src] = 1;
+      }
       return by_cell[src].Nearest(x);
+    };
+    whole = [&](int kind, const fem::NodeMatrixX3& x,
+                int32_t cell) -> const std::vector<models::MaterialPoint>* {
+      Hash128 h;
+      h.Mix(static_cast<uint64_t>(kind));
+      for (Eigen::Index i = 0; i < x.rows(); ++i) h.Doubles(x.row(i).data(), 3);
+      auto it = by_nodes.find(h.value());
+      if (it == by_nodes.end()) return nullptr;
+      const auto [k, e] = it->second;
+      const models::ElementBlock& block = layout.blocks[k];
+      if (d_.hierarchy.control_cell[block.cell[e]] != cell_source[cell]) return nullptr;
+      const int32_t* ids = block.element_nodes(e);
+      for (Eigen::Index i = 0; i < x.rows(); ++i) {
+        if (x.row(i) != old.rest_nodes.row(ids[i])) return nullptr;
+      }
+      return &layout.materials[block.groups[block.group[e]].material];
     };
   }
   return CreateWith(CleanScene(scene, cell_source), std::move(discretization), old.pool->size(),
-                    uniform ? nullptr : &sampler, this);
+                    uniform ? nullptr : &sampler, this, uniform ? nullptr : &whole);
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> out,

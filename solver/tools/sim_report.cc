@@ -79,6 +79,7 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
         .Add("rest_volume", run.rest_volume)
         .Add("omega_max", b.omega_max)
         .Add("stable_step", b.stable_step)
+        .Add("stable_step_passes", b.stable_step_passes)
         .Add("substeps_estimated", b.substeps)
         .Add("substeps", run.final_substeps)
         .Add("rollbacks", run.rollbacks)

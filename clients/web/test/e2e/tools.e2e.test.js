@@ -186,19 +186,25 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
   await page.dispatchEvent('#params input[data-param=extrudeLayers]', 'change');
   await page.fill('#params input[data-param=extrudeDistance]', '1');
   await page.dispatchEvent('#params input[data-param=extrudeDistance]', 'change');
+  // The block at rest first (the edits before this test set it moving;
+  // damping: motion decays in about 1 s of simulated time), as before each
+  // column's click.
+  const rest = async () => {
+    const settled = (await stats()).step + 2000;
+    await until(async () => ((await stats()).step >= settled) || null, 'the block at rest', 120000);
+    await caughtUp();
+  };
   let cells = (await stats()).control_cells;
   for (const x of [0.5, 2.5]) {
+    await rest();
     await clickAt({ x, y: 2.5, z: 3 }, 2);
     cells = await until(async () => { const s = await stats(); return s.control_cells > cells ? s.control_cells : null; },
-      `the column at x = ${x}`, 60000);
+      `the column at x = ${x}`, 60000).catch(async (e) => { await shot(`column_${x}_failed`); throw e; });
   }
   // Paused from here to the handle: the columns (soft, local-frame model)
   // lean under gravity, and the clicks below aim at faces where they stand,
-  // once they have stopped swaying (the block's damping: motion decays in
-  // about 1 s of simulated time; 2000 steps of 1 ms).
-  const settled = (await stats()).step + 2000;
-  await until(async () => ((await stats()).step >= settled) || null, 'the columns at rest', 120000);
-  await caughtUp();
+  // once they have stopped swaying.
+  await rest();
   await page.click('#pause');
   await until(async () => (await stats()).paused, 'paused');
   // Refused: the two columns' top faces (parallel, facing the same way),
@@ -228,11 +234,26 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
     const box = await page.locator('#view canvas').boundingBox();
     await page.mouse.click(box.x + box.width / 2, box.y + box.height / 2);
   };
-  await look({ x: 1.9, y: 2.5, z: 3.75 }, { x: 1, y: 2.5, z: 3.75 });
+  // Where those sides are now: half a layer below the lower column top,
+  // the drawn surface's points nearest the gap from either side.
+  const sides = await page.evaluate(({ l, r }) => {
+    const pos = window.__dynsolid.view.geometry.getAttribute('position');
+    const z = Math.min(l.z, r.z) - 0.2;
+    let left = null, right = null;
+    for (let i = 0; i < pos.count; ++i) {
+      const p = { x: pos.getX(i), y: pos.getY(i), z: pos.getZ(i) };
+      if (Math.abs(p.y - 2.5) > 0.25 || Math.abs(p.z - z) > 0.15) continue;
+      if (p.x < (l.x + r.x) / 2 && (!left || p.x > left.x)) left = p;
+      if (p.x > (l.x + r.x) / 2 && (!right || p.x < right.x)) right = p;
+    }
+    return { left: { x: left.x, y: 2.5, z }, right: { x: right.x, y: 2.5, z } };
+  }, { l: await columnTop(0.5), r: await columnTop(2.5) });
+  const gap = (sides.left.x + sides.right.x) / 2;
+  await look({ x: gap, y: 2.5, z: sides.left.z }, sides.left);
   await sleep(200);
   await centre();
   await until(async () => /face \d+ chosen/.test(await banner()), 'the first face chosen');
-  await look({ x: 1.1, y: 2.5, z: 3.75 }, { x: 2, y: 2.5, z: 3.75 });
+  await look({ x: gap, y: 2.5, z: sides.right.z }, sides.right);
   await sleep(200);
   await centre();
   const merged = await until(async () => { const s = await stats(); return s.control_cells > cells ? s : null; },

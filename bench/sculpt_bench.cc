@@ -1,9 +1,10 @@
 // Sculpting hold times: how long a topology edit (the pure edit, the edited
 // scene, the new solid with its state carried over) and a restore (what undo
 // does within one topology) hold a session's loop. Prints figures only.
-//   sculpt_bench [scene=block3] [levels=-1: the scene's]
-// Each edit is applied to the scene's solid after 20 steps, timed over 3
-// repetitions (median printed).
+//   sculpt_bench [scene=block3] [levels=-1: the scene's] [edit: all, or
+//                extrude, delete or subdivide alone] [repetitions=3]
+// Each edit is applied to the scene's solid after 20 steps, timed over the
+// repetitions (median printed), with where the last one's time went.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -81,19 +82,22 @@ int main(int argc, char** argv) {
   std::printf("sculpt_bench: %s at %d levels: %d control cells, %lld elements, %d threads\n",
               name.c_str(), solid.discretization().hierarchy.levels, c.num_cells(),
               static_cast<long long>(solid.discretization().elements.cubic_cell.size() + solid.discretization().elements.linear_cell.size() + solid.discretization().elements.pyramid_cell.size()), solid.threads());
-  std::printf("| what | median ms (of 3) | result |\n| --- | ---: | --- |\n");
+  std::printf("| what | median ms | result |\n| --- | ---: | --- |\n");
   std::vector<std::string> phases;
+  const std::string only = argc > 3 ? argv[3] : "";
+  const int repetitions = argc > 4 ? std::max(1, std::atoi(argv[4])) : 3;
   for (const auto& [what, text] : edits) {
+    if (!only.empty() && only != "all" && only != what) continue;
     TopologyEdit e;
     google::protobuf::TextFormat::ParseFromString(text, &e);
     std::vector<double> ms;
     std::string result;
-    for (int r = 0; r < 3; ++r) {
+    for (int r = 0; r < repetitions; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
       absl::StatusOr<sculpt::AppliedEdit> a = sculpt::ApplyEdit(*scene, solid, e);
       ms.push_back(Ms(t0));
       result = a.ok() ? a->summary + absl::StrFormat(" (%d cubic, %d linear groups; %d material arrays; %d estimate passes)", a->solid->build_report().cubic_groups, a->solid->build_report().linear_groups, a->solid->build_report().material_arrays, a->solid->build_report().stable_step_passes) : std::string(a.status().message());
-      if (a.ok() && r == 2) {
+      if (a.ok() && r == repetitions - 1) {
         const auto& p = a->prepare_phases;
         const auto& b = a->solid->build_report();
         phases.push_back(absl::StrFormat(
@@ -107,7 +111,7 @@ int main(int argc, char** argv) {
     }
     std::printf("| %s | %.1f | %s |\n", what.c_str(), Median(ms), result.c_str());
   }
-  std::printf("\nwhere an edit's time goes (ms, last of the 3 runs):\n"
+  std::printf("\nwhere an edit's time goes (ms, the last run):\n"
               "| edit | cells made | edit | discretize | transfer | layout | model | mass | surface | "
               "stable step | K0 | rest of build | finish |\n"
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");

@@ -256,6 +256,13 @@ void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
   schedule.batch_nodes.clear();
   schedule.local_ids.clear();
   schedule.max_batch_nodes = 0;
+  int32_t max_node = -1;
+  for (const ElementBlock& block : layout.blocks) {
+    for (int32_t id : block.node_ids) max_node = std::max(max_node, id);
+  }
+  // local[node]: the node's place in the current batch's sorted list (-1:
+  // not in it; reset after each batch).
+  std::vector<int32_t> local(static_cast<size_t>(max_node) + 1, -1);
   std::vector<int32_t> nodes;
   for (ElementBatch& batch : schedule.batches) {
     const ElementBlock& block = layout.blocks[batch.kind];
@@ -263,10 +270,15 @@ void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
     nodes.clear();
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t* ids = block.element_nodes(schedule.order[batch.kind][batch.first + b]);
-      nodes.insert(nodes.end(), ids, ids + n);
+      for (int i = 0; i < n; ++i) {
+        if (local[ids[i]] < 0) {
+          local[ids[i]] = 0;
+          nodes.push_back(ids[i]);
+        }
+      }
     }
     std::sort(nodes.begin(), nodes.end());
-    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+    for (size_t k = 0; k < nodes.size(); ++k) local[nodes[k]] = static_cast<int32_t>(k);
     batch.nodes_begin = static_cast<int64_t>(schedule.batch_nodes.size());
     batch.num_nodes = static_cast<int32_t>(nodes.size());
     batch.local_begin = static_cast<int64_t>(schedule.local_ids.size());
@@ -274,11 +286,9 @@ void IndexBatchNodes(const ElementLayout& layout, ElementSchedule& schedule) {
     schedule.batch_nodes.insert(schedule.batch_nodes.end(), nodes.begin(), nodes.end());
     for (int32_t b = 0; b < batch.count; ++b) {
       const int32_t* ids = block.element_nodes(schedule.order[batch.kind][batch.first + b]);
-      for (int i = 0; i < n; ++i) {
-        const auto at = std::lower_bound(nodes.begin(), nodes.end(), ids[i]) - nodes.begin();
-        schedule.local_ids.push_back(static_cast<uint16_t>(at));
-      }
+      for (int i = 0; i < n; ++i) schedule.local_ids.push_back(static_cast<uint16_t>(local[ids[i]]));
     }
+    for (int32_t v : nodes) local[v] = -1;
   }
 }
 

@@ -134,7 +134,7 @@ def plot_stable_step(rows, path):
     ax.plot(e, [float(r["largest_stable_s"]) for r in cd], "o-", color="tab:red",
             label="central difference: largest stable step (measured)")
     ax.plot(e, [float(r["estimate_s"]) for r in cd], "--", color="tab:red", alpha=0.6,
-            label="central difference: 2 / omega_max (power iteration)")
+            label="central difference: 2 / omega_max (Lanczos estimate)")
     eb = [float(r["young_modulus"]) for r in be]
     ax.plot(eb, [float(r["largest_stable_s"]) for r in be], "^", color="tab:green",
             label="backward Euler: largest tested step, stable (a lower bound)")

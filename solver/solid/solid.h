@@ -289,8 +289,8 @@ class Solid {
   // Freed points start with zero velocity.
   absl::Status Unfix(int64_t constraint_id);
   // Unfix in two halves, like PreparePaint and ApplyPaint below: the
-  // stable-step estimate an unfix may need (power iteration, up to about
-  // 0.5 s) runs in PrepareUnfix on a model of its own, off the simulation
+  // stable-step estimate an unfix may need (Lanczos, 8-32 element passes)
+  // runs in PrepareUnfix on a model of its own, off the simulation
   // thread; ApplyUnfix installs it (prepared again if the solid changed
   // since).
   class PreparedUnfix;

@@ -141,7 +141,7 @@ class Solid::PreparedPaint {
   // Backward Euler's Setup for build at one sub-step, with k0.
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
   // The stable step and sub-steps for build, from the solid's as they were,
-  // with the power iteration done here when the bound would raise the
+  // with the Lanczos estimate done here when the bound would raise the
   // sub-steps (`estimated`).
   double omega = 0;
   int substeps = 1;

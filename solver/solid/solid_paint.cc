@@ -117,7 +117,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   ASSIGN_OR_RETURN(out->build,
                    im.BuildMaterial(std::move(layout), /*reuse=*/true, out->pool.get()));
   // The stable step: from the bound when it keeps the sub-step count (or
-  // the step is implicit), else estimated afresh (power iteration, the
+  // the step is implicit), else estimated afresh (Lanczos, the
   // costliest part of a paint). Sub-steps never drop on a paint.
   double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
   int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));

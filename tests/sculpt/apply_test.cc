@@ -15,16 +15,12 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::sculpt {
 namespace {
 
-template <typename T>
-T Parse(const std::string& text) {
-  T msg;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &msg)) << text;
-  return msg;
-}
+using ::dynsolid::testing::Parse;
 
 struct Case {
   const char* name;

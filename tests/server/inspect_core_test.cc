@@ -20,6 +20,7 @@
 #include "server/solid_builder.h"
 #include "tests/server/test_core.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::server {
 namespace {
@@ -53,12 +54,7 @@ InspectReply Loads(const Core& c) {
   return r;
 }
 
-template <typename T>
-T Parse(const std::string& text) {
-  T m;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &m)) << text;
-  return m;
-}
+using ::dynsolid::testing::Parse;
 
 Eigen::Vector3d E(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 

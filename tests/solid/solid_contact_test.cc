@@ -16,6 +16,7 @@
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::solid {
 namespace {
@@ -47,12 +48,7 @@ std::unique_ptr<Solid> Block3Corotational(int levels) {
   return MakeScene(*scene, levels);
 }
 
-template <typename T>
-T Parse(const std::string& text) {
-  T msg;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &msg)) << text;
-  return msg;
-}
+using ::dynsolid::testing::Parse;
 
 void ExpectNear(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double tol,
                 const std::string& what) {

@@ -12,6 +12,7 @@
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::solid {
 namespace {
@@ -31,12 +32,7 @@ std::unique_ptr<Solid> Make(const std::string& text) {
   return s.ok() ? *std::move(s) : nullptr;
 }
 
-template <typename T>
-T Parse(const std::string& text) {
-  T msg;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &msg)) << text;
-  return msg;
-}
+using ::dynsolid::testing::Parse;
 
 Eigen::Vector3d Centre(const Solid& s) {
   const Points& p = s.control_positions();

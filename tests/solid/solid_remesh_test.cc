@@ -15,16 +15,12 @@
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::solid {
 namespace {
 
-template <typename T>
-T Parse(const std::string& text) {
-  T msg;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &msg)) << text;
-  return msg;
-}
+using ::dynsolid::testing::Parse;
 
 mesh::MeshInput ToInput(const mesh::CellComplex& c) {
   mesh::MeshInput m;

@@ -18,6 +18,7 @@
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::solid {
 namespace {
@@ -37,12 +38,7 @@ std::unique_ptr<Solid> Make(const std::string& text) {
   return s.ok() ? *std::move(s) : nullptr;
 }
 
-template <typename T>
-T Parse(const std::string& text) {
-  T msg;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &msg)) << text;
-  return msg;
-}
+using ::dynsolid::testing::Parse;
 
 // A block at one level under a load, and the two ways the paint and
 // restore tests step it (local frame + central difference, corotational +

@@ -12,6 +12,7 @@
 #include "solver/mesh/cell_complex.h"
 #include "tests/scene/mesh_input_checks.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/text_proto.h"
 
 namespace dynsolid::scene {
 namespace {
@@ -19,12 +20,7 @@ namespace {
 using ::dynsolid::testing::StatusIs;
 using ::testing::HasSubstr;
 
-template <typename Message>
-Message Parse(const std::string& text) {
-  Message m;
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &m)) << text;
-  return m;
-}
+using ::dynsolid::testing::Parse;
 
 // What a generated mesh must be, checked twice: by the independent
 // reference (CheckMeshInput) and by CellComplex::FromInput.

@@ -18,6 +18,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
 // The edit's error with the command's field path in front: the topology
 // functions name their argument ("cells[2]: ..."), the reply names the
 // request field ("edit.delete_cells.cells[2]: ...").
@@ -132,7 +136,6 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   // points where the solid is then).
   const mesh::CellComplex& rest = d.control();
   ASSIGN_OR_RETURN(EditResult r, Dispatch(rest, rest.positions(), d.control_sharp, edit));
-  auto t_phase = Clock::now();
 
   // The edited scene: the new control mesh inline (final positions: no
   // scale, translation or local refinement left to apply), its sharp edges
@@ -152,8 +155,8 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
     e->set_v0(a);
     e->set_v1(b);
   }
-  out.phases.edit = std::chrono::duration<double, std::milli>(t_phase - t0).count();
-  t_phase = Clock::now();
+  out.phases.edit = MsSince(t0);
+  auto t_phase = Clock::now();
   absl::StatusOr<scene::Discretization> nd = scene::Discretize(edited, r.mesh, std::nullopt);
   if (!nd.ok()) return absl::Status(nd.status().code(), absl::StrCat("edit: ", nd.status().message()));
   out.cells_before = rest.num_cells();
@@ -162,17 +165,17 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   out.vertices_after = nd->control().num_vertices();
   out.elements_after =
       nd->elements.num_cubic() + nd->elements.num_linear() + nd->elements.num_pyramid();
-  out.phases.discretize = std::chrono::duration<double, std::milli>(Clock::now() - t_phase).count();
+  out.phases.discretize = MsSince(t_phase);
   t_phase = Clock::now();
   absl::StatusOr<std::unique_ptr<solid::Solid>> built =
       solid.BuildRemeshed(edited, *std::move(nd), r.cell_source);
   if (!built.ok()) {
     return absl::Status(built.status().code(), absl::StrCat("edit: ", built.status().message()));
   }
-  out.phases.build = std::chrono::duration<double, std::milli>(Clock::now() - t_phase).count();
+  out.phases.build = MsSince(t_phase);
   out.built = *std::move(built);
   out.rest_mesh = std::move(r.mesh);
-  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  out.milliseconds = MsSince(t0);
   return out;
 }
 
@@ -202,7 +205,7 @@ absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid
   out.summary = r.summary;
   out.prepare_milliseconds = prepared.milliseconds;
   out.prepare_phases = prepared.phases;
-  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  out.milliseconds = MsSince(t0);
   return out;
 }
 
@@ -211,7 +214,7 @@ absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& so
   const auto t0 = Clock::now();
   ASSIGN_OR_RETURN(PreparedEdit prepared, PrepareEdit(scene, solid, edit));
   ASSIGN_OR_RETURN(AppliedEdit out, FinishEdit(std::move(prepared), solid));
-  out.milliseconds = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  out.milliseconds = MsSince(t0);
   return out;
 }
 

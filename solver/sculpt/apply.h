@@ -32,8 +32,8 @@ struct AppliedEdit {
   double milliseconds = 0;
   double prepare_milliseconds = 0;
   // Where the prepared part went (milliseconds): the edit on the control
-  // mesh, its subdivision and element lists, the new solid (its phases in
-  // solid->build_report().phases).
+  // mesh and the edited scene, its subdivision and element lists, the new
+  // solid (its phases in solid->build_report().phases).
   struct Phases {
     double edit = 0, discretize = 0, build = 0;
   } prepare_phases;

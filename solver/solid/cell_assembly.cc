@@ -213,8 +213,6 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
   for (int32_t c = 0; c < control_cells; ++c) partial[c] = next->by_key[cells[c].key];
 
   // The sums, in cell order.
-  out.dense = dense;
-  next->cells = control_cells;
   next->made = static_cast<int32_t>(to_make.size());
   next->bytes = bytes;
   const int64_t n = static_cast<int64_t>(dofs) * nc;

@@ -115,7 +115,7 @@ absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, c
 // Chebyshev polynomials do); at 1e-3 it lands within 1.3e-4 of where 1e-4
 // does, with a fifth fewer passes.
 double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
-                                     const std::vector<uint8_t>& fixed_set) const {
+                                     const std::vector<uint8_t>& fixed_set, int* passes) const {
   constexpr int kMinSteps = 8, kMaxSteps = 40;
   constexpr double kRitzTolerance = 1e-3;
   const Points& rest = rest_nodes;
@@ -173,7 +173,7 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
                                Eigen::ComputeEigenvectors);
     lambda = std::max(lambda, tri.eigenvalues()[n - 1]);
     const double residual = b * std::abs(tri.eigenvectors()(n - 1, n - 1));
-    last_omega_passes = n;
+    if (passes != nullptr) *passes = n;
     if (b == 0 || (n >= kMinSteps && residual <= kRitzTolerance * lambda)) break;
     beta.push_back(b);
     q_prev = q;

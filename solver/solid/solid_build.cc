@@ -11,9 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <functional>
-#include <map>
 #include <mutex>
 #include <numeric>
 #include <optional>
@@ -447,12 +445,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
 
   // Stable step and sub-steps.
   t_phase = Clock::now();
-  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed);
+  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed, &rep.stable_step_passes);
   im.omega_fixed = im.fixed;
   im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
   rep.omega_max = im.omega_max;
   rep.stable_step = im.stable_step;
-  rep.stable_step_passes = im.last_omega_passes;
   im.substeps = im.SubstepsFor(im.omega_max);
   rep.phases.stable_step = MsSince(t_phase);
   // Implicit steps: asked for, or chosen by `auto` when the explicit scheme

@@ -417,9 +417,9 @@ struct Solid::Impl {
                                                               const CellPartials* previous,
                                                               WorkerPool& threads, SparseMatrix& mt,
                                                               SparseMatrix& dt) const;
+  // *passes (optional): the element passes it took.
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
-                          const std::vector<uint8_t>& fixed_set) const;
-  mutable int last_omega_passes = 0;  // element passes of the last EstimateOmegaMax
+                          const std::vector<uint8_t>& fixed_set, int* passes = nullptr) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
   // out = A p (A the node matrix, as node_rows), its rows split over the
   // pool: each row's sum is taken whole by one thread, so the bits do not

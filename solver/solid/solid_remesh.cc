@@ -12,7 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/solid/solid.h"
-#include "solver/solid/cell_assembly.h"
+#include "solver/common/hash128.h"
 #include "solver/solid/solid_impl.h"
 
 namespace dynsolid::solid {
@@ -66,7 +66,6 @@ class CellSamples {
     }
     return ms_[best_k];
   }
-  bool empty() const { return xs_.empty(); }
 
  private:
   Eigen::Vector3i Cell(const Eigen::Vector3d& x) const {
@@ -159,10 +158,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   // sample in its source cell, whose samples are binned when first needed.
   std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
   std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
-  auto node_key = [](int kind, const Points& rest, const int32_t* ids, int n) {
+  // The key of an element's rest nodes: kind, then node row(i) for i < n.
+  auto nodes_key = [](int kind, int n, const auto& row) {
     Hash128 h;
     h.Mix(static_cast<uint64_t>(kind));
-    for (int i = 0; i < n; ++i) h.Doubles(rest.row(ids[i]).data(), 3);
+    for (int i = 0; i < n; ++i) h.Doubles(row(i), 3);
     return h.value();
   };
   std::vector<CellSamples> by_cell;
@@ -174,8 +174,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       const models::ElementBlock& block = layout.blocks[kind];
       for (int32_t e = 0; e < block.size(); ++e) {
         old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
-        by_nodes.try_emplace(node_key(kind, old.rest_nodes, block.element_nodes(e), block.nodes),
-                             kind, e);
+        const int32_t* ids = block.element_nodes(e);
+        by_nodes.try_emplace(
+            nodes_key(kind, block.nodes, [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
+            kind, e);
       }
     }
     by_cell.resize(old_cells);
@@ -203,10 +205,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     };
     whole = [&](int kind, const fem::NodeMatrixX3& x,
                 int32_t cell) -> const std::vector<models::MaterialPoint>* {
-      Hash128 h;
-      h.Mix(static_cast<uint64_t>(kind));
-      for (Eigen::Index i = 0; i < x.rows(); ++i) h.Doubles(x.row(i).data(), 3);
-      auto it = by_nodes.find(h.value());
+      auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
+                                        [&](int i) { return x.row(i).data(); }));
       if (it == by_nodes.end()) return nullptr;
       const auto [k, e] = it->second;
       const models::ElementBlock& block = layout.blocks[k];

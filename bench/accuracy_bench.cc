@@ -75,7 +75,7 @@ constexpr int kLoadPoints = 3;  // k x k point forces over the end face
 double Since(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
 
 struct Config {
-  std::string model;       // COROTATIONAL, LOCAL_FRAME
+  std::string model;       // COROTATIONAL, COROTATIONAL_CELLS (a frame per control cell), LOCAL_FRAME
   int levels = 0;
   std::string integrator;  // CENTRAL_DIFFERENCE, BACKWARD_EULER
   double tol = 1e-4;
@@ -94,6 +94,11 @@ std::string Lower(const std::string& s) {
 // The CSV's integrator column: the scheme, with "_lumped" for a lumped mass.
 std::string IntegratorLabel(const Config& c) {
   return c.lumped ? Lower(c.integrator) + "_lumped" : Lower(c.integrator);
+}
+
+// The scene's solver.model (and corotation) for a Config's model.
+std::string ModelFields(const std::string& model) {
+  return model == "COROTATIONAL_CELLS" ? "COROTATIONAL corotation: CONTROL_CELL" : model;
 }
 
 // The bench beam: [0, 1] x [-0.05, 0.05]^2, 10 x 2 x 2 control cells, clamped
@@ -125,7 +130,7 @@ std::string SceneText(const Config& c, double damping, const std::string& axis, 
     loads { %s }
     %s
     solver { model: %s integrator: %s time_step: %.17g cg_tolerance: %.17g max_substeps: 100000 mass: %s }
-  )pb", kL, kW, kW, c.levels, kE, nu, kRho, damping, loads, traced, c.model, c.integrator, c.h, c.tol,
+  )pb", kL, kW, kW, c.levels, kE, nu, kRho, damping, loads, traced, ModelFields(c.model), c.integrator, c.h, c.tol,
       c.lumped ? "LUMPED" : "CONSISTENT");
 }
 
@@ -236,7 +241,7 @@ Static SolveStatic(const Problem& pr, const std::string& model, int levels, int 
   }
   const Eigen::VectorXd f = Gather(LoadVector(*s, pr), dofs);
   Points p = rest;
-  if (model == "COROTATIONAL") {
+  if (model != "LOCAL_FRAME") {
     auto lin = s->SolveStaticLinear();
     if (!lin.ok()) return out;
     p = *lin;
@@ -356,6 +361,21 @@ std::vector<Config> Configs(int max_levels, bool full) {
               lumped.lumped = true;
               lumped.frequency = model == "COROTATIONAL" || levels <= 1 || full;
               out.push_back(lumped);
+            }
+            // The corotational model with a frame per control cell
+            // (solver.corotation CONTROL_CELL) where the element one runs:
+            // central difference at the default settings (consistent and
+            // lumped) and backward Euler at CG 1e-4, levels 0-2.
+            if (model == "COROTATIONAL" && levels <= 2 && tol == 1e-4 &&
+                (be ? h >= 1e-2 : h == 1e-3)) {
+              Config cells = c;
+              cells.model = "COROTATIONAL_CELLS";
+              cells.frequency = true;
+              out.push_back(cells);
+              if (!be) {
+                cells.lumped = true;
+                out.push_back(cells);
+              }
             }
           }
         }

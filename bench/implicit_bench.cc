@@ -57,6 +57,9 @@ ABSL_FLAG(bool, two_pass, false,
           "backward Euler's unfolded right-hand side (F, then a Kt product): the reference "
           "path Solid keeps for tests, for an A/B in one binary");
 ABSL_FLAG(std::string, cases, "static,pull,twist,orbit", "comma-separated cases to run");
+ABSL_FLAG(std::string, corotation, "element",
+          "element: a frame per finite element (MODEL.md 4b); cells: a frame per control cell "
+          "(solver.corotation CONTROL_CELL, models/cell_corotation.h)");
 
 namespace {
 
@@ -256,10 +259,14 @@ int main(int argc, char** argv) {
   dynsolid::Scene scene = loaded->scene;
   scene.mutable_solver()->set_model(dynsolid::SolverSettings::COROTATIONAL);
   scene.mutable_solver()->set_integrator(dynsolid::SolverSettings::BACKWARD_EULER);
+  const bool cells = absl::GetFlag(FLAGS_corotation) == "cells";
+  scene.mutable_solver()->set_corotation(cells ? dynsolid::SolverSettings::CONTROL_CELL
+                                               : dynsolid::SolverSettings::ELEMENT);
   const dynsolid::SolverSettings settings = dynsolid::scene::ResolvedSolverSettings(scene);
-  std::printf("# %s, corotational model, backward Euler (%s right-hand side), h = %g s, "
-              "CG tolerance %g, %s threads, %d warm-up + %d measured steps\n\n",
-              scene.name().c_str(), absl::GetFlag(FLAGS_two_pass) ? "two-pass" : "folded",
+  std::printf("# %s, corotational model (a frame per %s), backward Euler (%s right-hand side), "
+              "h = %g s, CG tolerance %g, %s threads, %d warm-up + %d measured steps\n\n",
+              scene.name().c_str(), cells ? "control cell" : "element",
+              absl::GetFlag(FLAGS_two_pass) ? "two-pass" : "folded",
               settings.time_step(), settings.cg_tolerance(),
               std::getenv("DYNSOLID_THREADS"), absl::GetFlag(FLAGS_warmup),
               absl::GetFlag(FLAGS_steps));

@@ -276,6 +276,13 @@ absl::Status ValidateSolverSettings(const SolverSettings& s) {
         "solver.stability_safety must be in (0, 1], or 0 for the default ",
         kDefaultStabilitySafety, ", got ", s.stability_safety()));
   }
+  if (s.corotation() == SolverSettings::CONTROL_CELL) {
+    if (s.model() != SolverSettings::COROTATIONAL) {
+      return absl::InvalidArgumentError(
+          "solver.corotation: CONTROL_CELL takes the corotational model's frames per control "
+          "cell; it needs solver.model: COROTATIONAL");
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -410,6 +417,9 @@ SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
     s.set_element_products(SolverSettings::FLOAT);
   }
   if (s.mass() == SolverSettings::MASS_DEFAULT) s.set_mass(SolverSettings::CONSISTENT);
+  if (s.corotation() == SolverSettings::COROTATION_DEFAULT) {
+    s.set_corotation(SolverSettings::ELEMENT);
+  }
   return s;
 }
 

@@ -212,9 +212,19 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
   for (size_t k = 0; k < to_make.size(); ++k) next->by_key[cells[to_make[k]].key] = made[k];
   for (int32_t c = 0; c < control_cells; ++c) partial[c] = next->by_key[cells[c].key];
 
-  // The sums, in cell order.
   next->made = static_cast<int32_t>(to_make.size());
   next->bytes = bytes;
+  out.supports.clear();
+  out.partials.clear();
+  if (spec.per_cell) {
+    out.matrices.clear();
+    out.triplets.clear();
+    out.supports.reserve(control_cells);
+    for (int32_t c = 0; c < control_cells; ++c) out.supports.push_back(std::move(cells[c].support));
+    out.partials = std::move(partial);
+    return next;
+  }
+  // The sums, in cell order.
   const int64_t n = static_cast<int64_t>(dofs) * nc;
   out.matrices.clear();
   out.triplets.assign(outputs, {});

@@ -53,6 +53,9 @@ struct CellSumSpec {
   int dofs = 1;     // rows per control point (1: mass; 3: stiffness, node-major 3 i + c)
   int outputs = 1;  // matrices summed side by side (mass and damping: 2)
   uint64_t salt = 0;  // what else the blocks depend on (settings)
+  // Hand each cell's support and partial out (CellSums::supports,
+  // partials) instead of summing them.
+  bool per_cell = false;
   // A key of everything the blocks of a group's elements depend on besides
   // their node rows.
   std::function<Key128(int kind, int32_t group)> group_key;
@@ -68,6 +71,10 @@ struct CellSumSpec {
 struct CellSums {
   std::vector<Eigen::MatrixXd> matrices;
   std::vector<std::vector<Eigen::Triplet<double, int32_t>>> triplets;
+  // With CellSumSpec::per_cell, per control cell: its support (ascending
+  // control points) and its partial (cells of one key share one).
+  std::vector<std::vector<int32_t>> supports;
+  std::vector<std::shared_ptr<const std::vector<Eigen::MatrixXd>>> partials;
 };
 
 // Sums the layout's element blocks as above into out (dense when `dense`).

@@ -115,7 +115,9 @@ absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, c
 // Chebyshev polynomials do); at 1e-3 it lands within 1.3e-4 of where 1e-4
 // does, with a fifth fewer passes.
 double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
-                                     const std::vector<uint8_t>& fixed_set, int* passes) const {
+                                     const std::vector<uint8_t>& fixed_set, int* passes,
+                                     const models::CellCorotation* cells,
+                                     WorkerPool* cell_pool) const {
   constexpr int kMinSteps = 8, kMaxSteps = 40;
   constexpr double kRitzTolerance = 1e-3;
   const Points& rest = rest_nodes;
@@ -148,11 +150,15 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
   std::vector<double> alpha, beta;
   double lambda = 0;
   for (int k = 0; k < kMaxSteps; ++k) {
-    dn = rest + eps * (nm * q);
-    m.ResetFrames();
-    m.ExactForces(dn, gn);
-    kq.noalias() = nm.transpose() * gn;
-    kq /= eps;
+    if (cells != nullptr) {
+      cells->ApplyRest(q, kq, cell_pool);  // the same K, in control space
+    } else {
+      dn = rest + eps * (nm * q);
+      m.ResetFrames();
+      m.ExactForces(dn, gn);
+      kq.noalias() = nm.transpose() * gn;
+      kq /= eps;
+    }
     for (size_t s = 0; s < spring_point.size(); ++s) kq.row(spring_point[s]) += spring_k[s] * q.row(spring_point[s]);
     free_rows(kq);
     alpha.push_back((q.array() * kq.array()).sum());
@@ -179,7 +185,7 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
     q_prev = q;
     q = w / b;
   }
-  m.ResetFrames();
+  if (cells == nullptr) m.ResetFrames();
   return std::sqrt(std::max(lambda, 0.0));
 }
 
@@ -205,18 +211,28 @@ void Solid::Impl::FromNodes(const Points& g, Points& out) {
 void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases,
                                 Points& pressure) {
   auto t0 = Clock::now();
-  ToNodes(p, nodes);
-  phases.nodes = MsSince(t0);
-  t0 = Clock::now();
-  last_strain_energy = model->Forces(nodes, g);
-  ++element_passes;
-  const models::InternalForceModel::Timing timing = model->last_timing();
-  phases.measure = timing.measure_ms;
-  phases.stiffness = timing.elements_ms;
-  t0 = Clock::now();
-  FromNodes(g, out);
-  out = -out;
-  phases.project = MsSince(t0);
+  if (cell_model != nullptr) {
+    // Control space throughout: no node positions, no projection.
+    last_strain_energy = cell_model->Forces(p, out);
+    out = -out;
+    ++element_passes;
+    phases.nodes = phases.project = 0;
+    phases.measure = -1;
+    phases.stiffness = MsSince(t0);
+  } else {
+    ToNodes(p, nodes);
+    phases.nodes = MsSince(t0);
+    t0 = Clock::now();
+    last_strain_energy = model->Forces(nodes, g);
+    ++element_passes;
+    const models::InternalForceModel::Timing timing = model->last_timing();
+    phases.measure = timing.measure_ms;
+    phases.stiffness = timing.elements_ms;
+    t0 = Clock::now();
+    FromNodes(g, out);
+    out = -out;
+    phases.project = MsSince(t0);
+  }
   if (has_const_force || !spring_point.empty() || has_pressure || contact.active) {
     t0 = Clock::now();
     if (has_const_force) out += f_const;
@@ -236,10 +252,19 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
 void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
                                  Points& pressure, bool energy) {
   auto t0 = Clock::now();
-  ToNodes(p, nodes);
+  if (cell_model == nullptr) ToNodes(p, nodes);
   phases.nodes = MsSince(t0);
   t0 = Clock::now();
-  if (energy) {
+  if (cell_model != nullptr) {
+    // Control space: frames held at p for the next step (cell_corotation.h).
+    if (energy) {
+      last_strain_energy = cell_model->Forces(p, g_cells);
+      ++element_passes;
+    } else {
+      cell_model->UpdateFrames(p);
+      ++frame_passes;
+    }
+  } else if (energy) {
     last_strain_energy = model->Forces(nodes, g);  // frames and the exact energy
     ++element_passes;
   } else {
@@ -475,6 +500,11 @@ void Solid::SetSubstepsForTesting(int substeps) {
 
 Points Solid::InternalControlForces(const Points& p) {
   Impl& im = *impl_;
+  if (im.cell_model != nullptr) {
+    Points g;
+    im.cell_model->ForcesAt(p, g);
+    return g;
+  }
   const Points d = im.node_rows.Multiply(p);
   Points g(d.rows(), 3);
   // Frames found afresh; the solid's own (warm starts, and the frames the
@@ -490,6 +520,10 @@ Points Solid::InternalControlForces(const Points& p) {
 
 double Solid::StrainEnergy(const Points& p) {
   Impl& im = *impl_;
+  if (im.cell_model != nullptr) {
+    Points g;
+    return im.cell_model->ForcesAt(p, g);
+  }
   const Points d = im.node_rows.Multiply(p);
   Points g(d.rows(), 3);
   const models::InternalForceModel::Frames frames = im.model->frames();  // as above

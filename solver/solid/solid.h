@@ -59,6 +59,12 @@ struct BuildReport {
   int64_t factorized_elements = 0;
   // Cubic elements applied at their quadrature points (models/cubic_quadrature.h).
   int64_t quadrature_elements = 0;
+  // solver.corotation CONTROL_CELL (models/cell_corotation.h): the control
+  // cells it steps, their distinct stiffness matrices and those matrices'
+  // bytes (all 0 otherwise).
+  int32_t corotated_cells = 0;
+  int32_t cell_matrices = 0;
+  int64_t cell_matrix_bytes = 0;
   // How the local-frame measure runs its quadrilateral faces
   // (models::QuadPathName: "avx512", "avx2", "per-corner"); empty for the
   // corotational model.

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <numeric>
 #include <optional>
@@ -31,6 +32,7 @@
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
+#include "solver/models/cell_corotation.h"
 #include "solver/models/corotational.h"
 #include "solver/models/cubic_quadrature.h"
 #include "solver/models/element_blocks.h"
@@ -223,6 +225,12 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
+  if (corot && settings.corotation() == SolverSettings::CONTROL_CELL) {
+    std::shared_ptr<const CellPartials> made;
+    b.cell_model = BuildCellCorotation(*l, *b.corotational, threads, k0_cells.get(), &made);
+    b.k_cells_made = made->made;
+    b.k_cells = made->bytes <= kMaxCarriedBytes ? made : nullptr;
+  }
   b.model_ms = MsSince(t_model);
   // Mass (and damping) in control-point space.
   const auto t_mass = Clock::now();
@@ -245,6 +253,11 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   // The old model references the old layout: replace the model first.
   model = std::move(b.model);
   corotational = b.corotational;
+  cell_model = std::move(b.cell_model);
+  if (cell_model != nullptr) {
+    cell_model->set_pool(*pool);
+    k0_cells = std::move(b.k_cells);
+  }
   layout = std::move(b.layout);
   mt = std::move(b.mt);
   dt = std::move(b.dt);
@@ -371,6 +384,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   rep.phases.mass = material.mass_ms;
   rep.control_cell_partials = control.num_cells();
   rep.mass_cells_made = material.mass_cells != nullptr ? material.mass_cells->made : -1;
+  if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
   s->total_mass_ = SumOfValues(im.mt);
   t_phase = Clock::now();
@@ -445,7 +459,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
 
   // Stable step and sub-steps.
   t_phase = Clock::now();
-  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed, &rep.stable_step_passes);
+  im.omega_max = im.EstimateOmegaMax(*im.model, im.mt, im.fixed, &rep.stable_step_passes,
+                                     im.cell_model.get(), im.pool.get());
   im.omega_fixed = im.fixed;
   im.stable_step = im.omega_max > 0 ? 2.0 / im.omega_max : INFINITY;
   rep.omega_max = im.omega_max;
@@ -468,10 +483,14 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     im.kx_nodes.setZero(rest.rows(), 3);
     Impl* ip = &im;
     im.stiffness_op = [ip](const Points& x, Points& out) {
-      ip->ToNodes(x, ip->x_nodes);
-      ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+      if (ip->cell_model != nullptr) {
+        ip->cell_model->ApplyLinearized(x, out);
+      } else {
+        ip->ToNodes(x, ip->x_nodes);
+        ip->corotational->ApplyLinearized(ip->x_nodes, ip->kx_nodes);
+        ip->FromNodes(ip->kx_nodes, out);
+      }
       ++ip->element_passes;
-      ip->FromNodes(ip->kx_nodes, out);
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         out.row(ip->spring_point[s]) += ip->spring_k[s] * x.row(ip->spring_point[s]);
       }
@@ -483,10 +502,14 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
       const auto t0 = Clock::now();
       const Points& p = *ip->ahead_from;
       ip->ahead = p + ip->implicit.h() * v;
-      ip->ToNodes(ip->ahead, ip->x_nodes);
-      ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+      if (ip->cell_model != nullptr) {
+        ip->ahead_energy = ip->cell_model->AffineForces(ip->ahead, ip->g_ahead);
+      } else {
+        ip->ToNodes(ip->ahead, ip->x_nodes);
+        ip->ahead_energy = ip->corotational->AffineForces(ip->x_nodes, ip->kx_nodes);
+        ip->FromNodes(ip->kx_nodes, ip->g_ahead);
+      }
       ++ip->element_passes;
-      ip->FromNodes(ip->kx_nodes, ip->g_ahead);
       out = ip->f - ip->g_ahead;
       for (size_t s = 0; s < ip->spring_point.size(); ++s) {
         const int32_t i = ip->spring_point[s];
@@ -499,7 +522,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     t_phase = Clock::now();
     im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational, *im.pool, &im.k0_cells);
     rep.phases.k0 = MsSince(t_phase);
-    rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
+    // (The per-cell corotation made these partials already: counted there.)
+    if (im.cell_model == nullptr) rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
   }
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -540,61 +564,103 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   return s;
 }
 
-// K0 = A^T K A (3 #control square, node-major DOFs 3 i + c) of the
-// corotational model at rest, plus the penalty springs, as triplets; summed
-// cell by cell (cell_assembly.h) with the partials of `previous`.
+namespace {
+
+// The cell partials of K0 = A^T K A (3 #control square, node-major DOFs
+// 3 i + c) of the corotational model at rest: the spec's blocks are the
+// elements' E^T K E, each group's K made once, when a cell first needs it
+// (the model makes K of a group it applies at its quadrature points anew
+// on each call). Not movable: the spec's functions point into it.
+struct StiffnessBlocks {
+  StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational) {
+    for (int kind = 0; kind < 3; ++kind) {
+      once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
+      group_k[kind].resize(layout.blocks[kind].groups.size());
+    }
+    spec.dofs = 3;
+    spec.outputs = 1;
+    spec.salt = 0x6b30;  // "k0"
+    spec.group_key = [&layout, &corotational](int kind, int32_t gi) {
+      const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
+      Hash128 h;
+      h.Mix(static_cast<uint64_t>(kind));
+      h.Mix(corotational.at_quadrature_points(kind, gi) ? 1 : 0);
+      h.Doubles(grp.rest.data(), grp.rest.size());
+      for (const models::MaterialPoint& m : layout.materials[grp.material]) {
+        h.Double(m.young);
+        h.Double(m.poisson);
+      }
+      return h.value();
+    };
+    spec.make = [this, &layout, &corotational](int kind, int32_t e, const ElementRows& rows,
+                                               std::vector<Eigen::MatrixXd>& blocks) {
+      const int32_t gi = layout.blocks[kind].group[e];
+      std::call_once(once[kind][gi], [&] { group_k[kind][gi] = corotational.K(kind, gi); });
+      const Eigen::MatrixXd& k = group_k[kind][gi];
+      // E^T K E with E = B (x) I3 (node-major element DOFs from control
+      // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
+      const Eigen::MatrixXd& b = rows.b;
+      const int n = static_cast<int>(b.rows()), s = static_cast<int>(b.cols());
+      blocks.resize(1);
+      Eigen::MatrixXd& tk = blocks[0];
+      tk.resize(3 * s, 3 * s);
+      Eigen::MatrixXd kcd(n, n), tcd;
+      for (int c = 0; c < 3; ++c) {
+        for (int dd = 0; dd < 3; ++dd) {
+          for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + dd);
+          tcd.noalias() = b.transpose() * (kcd * b);
+          for (int bb = 0; bb < s; ++bb)
+            for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + dd) = tcd(a, bb);
+        }
+      }
+    };
+  }
+  StiffnessBlocks(const StiffnessBlocks&) = delete;
+  StiffnessBlocks& operator=(const StiffnessBlocks&) = delete;
+
+  CellSumSpec spec;
+  std::array<std::vector<std::once_flag>, 3> once;
+  std::array<std::vector<Eigen::MatrixXd>, 3> group_k;
+};
+
+}  // namespace
+
+std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
+    const models::ElementLayout& layout, const models::CorotationalModel& corotational,
+    WorkerPool& threads, const CellPartials* previous,
+    std::shared_ptr<const CellPartials>* next) const {
+  StiffnessBlocks blocks(layout, corotational);
+  blocks.spec.per_cell = true;
+  CellSums sums;
+  std::shared_ptr<const CellPartials> made =
+      SumByCell(d->node_matrix, layout, d->hierarchy.control_cell, d->control().num_cells(),
+                blocks.spec, previous, threads, /*dense=*/false, sums);
+  *next = made;
+  std::vector<models::CellCorotation::Cell> cells(sums.supports.size());
+  // One matrix per distinct partial (cells of one key share it).
+  std::map<const std::vector<Eigen::MatrixXd>*, std::shared_ptr<const Eigen::MatrixXd>> matrix;
+  for (size_t c = 0; c < cells.size(); ++c) {
+    cells[c].support = std::move(sums.supports[c]);
+    const auto& partial = sums.partials[c];
+    auto [it, fresh] = matrix.try_emplace(partial.get());
+    if (fresh) it->second = std::shared_ptr<const Eigen::MatrixXd>(partial, &(*partial)[0]);
+    cells[c].k = it->second;
+  }
+  return std::make_unique<models::CellCorotation>(std::move(cells), rest_control, threads);
+}
+
+// K0 = A^T K A of the corotational model at rest, plus the penalty springs,
+// as triplets; summed cell by cell (cell_assembly.h) with the partials of
+// `previous`.
 std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
     const scene::Discretization& d, const models::ElementLayout& layout,
     const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
     const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) {
   const SparseMatrix& nm = d.node_matrix;
-  // A group's K once, when a cell first needs it (the model makes K of a
-  // group it applies at its quadrature points anew on each call).
-  std::array<std::vector<std::once_flag>, 3> once;
-  std::array<std::vector<Eigen::MatrixXd>, 3> group_k;
-  for (int kind = 0; kind < 3; ++kind) {
-    once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
-    group_k[kind].resize(layout.blocks[kind].groups.size());
-  }
-  CellSumSpec spec;
-  spec.dofs = 3;
-  spec.outputs = 1;
-  spec.salt = 0x6b30;  // "k0"
-  spec.group_key = [&](int kind, int32_t gi) {
-    const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
-    Hash128 h;
-    h.Mix(static_cast<uint64_t>(kind));
-    h.Mix(corotational.at_quadrature_points(kind, gi) ? 1 : 0);
-    h.Doubles(grp.rest.data(), grp.rest.size());
-    for (const models::MaterialPoint& m : layout.materials[grp.material]) {
-      h.Double(m.young);
-      h.Double(m.poisson);
-    }
-    return h.value();
-  };
-  spec.make = [&](int kind, int32_t e, const ElementRows& rows, std::vector<Eigen::MatrixXd>& blocks) {
-    const int32_t gi = layout.blocks[kind].group[e];
-    std::call_once(once[kind][gi], [&] { group_k[kind][gi] = corotational.K(kind, gi); });
-    const Eigen::MatrixXd& k = group_k[kind][gi];
-    // E^T K E with E = B (x) I3 (node-major element DOFs from control
-    // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
-    const Eigen::MatrixXd& b = rows.b;
-    const int n = static_cast<int>(b.rows()), s = static_cast<int>(b.cols());
-    blocks.resize(1);
-    Eigen::MatrixXd& tk = blocks[0];
-    tk.resize(3 * s, 3 * s);
-    Eigen::MatrixXd kcd(n, n), tcd;
-    for (int c = 0; c < 3; ++c) {
-      for (int dd = 0; dd < 3; ++dd) {
-        for (int j = 0; j < n; ++j)
-          for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + dd);
-        tcd.noalias() = b.transpose() * (kcd * b);
-        for (int bb = 0; bb < s; ++bb)
-          for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + dd) = tcd(a, bb);
-      }
-    }
-  };
+  StiffnessBlocks blocks(layout, corotational);
+  const CellSumSpec& spec = blocks.spec;
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.
   const int64_t dofs = 3 * static_cast<int64_t>(nm.cols());
@@ -638,6 +704,9 @@ void Solid::ReportMaterial() {
     report_.element_bytes = im.corotational->per_element_bytes();
     report_.quadrature_elements = im.corotational->quadrature_elements();
     report_.measure_quad_path.clear();
+    report_.corotated_cells = im.cell_model != nullptr ? im.cell_model->cells() : 0;
+    report_.cell_matrices = im.cell_model != nullptr ? im.cell_model->distinct_matrices() : 0;
+    report_.cell_matrix_bytes = im.cell_model != nullptr ? im.cell_model->matrix_bytes() : 0;
   } else {
     const auto* lf = static_cast<const models::LocalFrameModel*>(im.model.get());
     report_.shared_matrix_bytes = lf->shared_matrix_bytes();

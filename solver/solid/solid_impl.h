@@ -28,6 +28,7 @@
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
+#include "solver/models/cell_corotation.h"
 #include "solver/models/corotational.h"
 #include "solver/models/element_blocks.h"
 #include "solver/fem/shape.h"
@@ -117,6 +118,12 @@ struct MaterialBuild {
   int64_t shared_matrix_bytes = 0, element_bytes = 0;
   double model_ms = 0, mass_ms = 0;  // BuildReport::Phases
   std::shared_ptr<const CellPartials> mass_cells;
+  // solver.corotation CONTROL_CELL: the model that steps (`model` then
+  // serves the stable-step estimate, contact and fields) and its cells'
+  // stiffness partials (Impl::k0_cells).
+  std::shared_ptr<models::CellCorotation> cell_model;
+  std::shared_ptr<const CellPartials> k_cells;
+  int32_t k_cells_made = -1;
 };
 
 // What a change prepared off the loop (a paint, an unfix) was made for:
@@ -166,6 +173,10 @@ struct Solid::Impl {
   integrators::BackwardEuler implicit;
   bool use_implicit = false;
   models::CorotationalModel* corotational = nullptr;  // == model when corotational
+  // solver.corotation CONTROL_CELL: steps the internal forces in control
+  // space (models/cell_corotation.h) instead of `model`.
+  std::shared_ptr<models::CellCorotation> cell_model;
+  Points g_cells;  // its forces where only their energy is wanted
   Points x_nodes, kx_nodes;
   integrators::BackwardEuler::StiffnessOperator stiffness_op;
   // Backward Euler's folded right-hand side (the default): F - h Kt w =
@@ -386,6 +397,12 @@ struct Solid::Impl {
     return StiffnessTriplets(*d, *layout, *corotational, spring_point, spring_k, *pool,
                              k0_cells.get());
   }
+  // The per-control-cell corotational model of layout `l` (its K0
+  // partials from `previous` where their keys match; this build's in *next,
+  // to carry unless above kMaxCarriedBytes).
+  std::unique_ptr<models::CellCorotation> BuildCellCorotation(
+      const models::ElementLayout& l, const models::CorotationalModel& m, WorkerPool& threads,
+      const CellPartials* previous, std::shared_ptr<const CellPartials>* next) const;
   // The same as a 3 #control square sparse matrix (K0 of the implicit
   // preconditioner) for layout `l` and its model `m`, on `threads`.
   Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
@@ -417,9 +434,13 @@ struct Solid::Impl {
                                                               const CellPartials* previous,
                                                               WorkerPool& threads, SparseMatrix& mt,
                                                               SparseMatrix& dt) const;
-  // *passes (optional): the element passes it took.
+  // *passes (optional): the element passes it took. With `cells` (the
+  // per-control-cell corotation of m's layout) Kt is applied in control
+  // space (CellCorotation::ApplyRest on cell_pool) instead of through m.
   double EstimateOmegaMax(models::InternalForceModel& m, const SparseMatrix& mass,
-                          const std::vector<uint8_t>& fixed_set, int* passes = nullptr) const;
+                          const std::vector<uint8_t>& fixed_set, int* passes = nullptr,
+                          const models::CellCorotation* cells = nullptr,
+                          WorkerPool* cell_pool = nullptr) const;
   void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
   // out = A p (A the node matrix, as node_rows), its rows split over the
   // pool: each row's sum is taken whole by one thread, so the bits do not

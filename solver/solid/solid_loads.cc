@@ -375,7 +375,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> Solid::PrepareUnfix(
     WorkerPool pool(1);
     const std::shared_ptr<const models::ElementLayout> layout = im.layout;  // kept for `own`
     std::unique_ptr<models::InternalForceModel> own = im.ModelCopy(*layout, *im.model, pool);
-    out->omega = im.EstimateOmegaMax(*own, im.mt, out->new_fixed);
+    out->omega = im.EstimateOmegaMax(*own, im.mt, out->new_fixed, nullptr, im.cell_model.get(),
+                                     &pool);
     if (!im.use_implicit) {
       out->substeps = std::max(im.substeps, im.SubstepsFor(out->omega));
       if (out->substeps > im.settings.max_substeps()) {

@@ -122,7 +122,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
   int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
   if (!im.use_implicit && substeps > im.substeps) {
-    omega = im.EstimateOmegaMax(*out->build.model, out->build.mt, im.fixed);
+    omega = im.EstimateOmegaMax(*out->build.model, out->build.mt, im.fixed, nullptr,
+                                out->build.cell_model.get(), out->pool.get());
     out->estimated = true;
     substeps = std::max(im.substeps, im.SubstepsFor(omega));
   }

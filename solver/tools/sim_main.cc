@@ -136,9 +136,11 @@ int main(int argc, char** argv) {
     run.build = &rep_at_build;
     run.time_step = s.time_step();
     run.integrator = rep_at_build.implicit ? "backward_euler" : "central_difference";
-    run.model = loaded->scene.solver().model() == dynsolid::SolverSettings::COROTATIONAL
-                    ? "corotational"
-                    : "local_frame";
+    run.model = loaded->scene.solver().model() != dynsolid::SolverSettings::COROTATIONAL
+                    ? "local_frame"
+                : loaded->scene.solver().corotation() == dynsolid::SolverSettings::CONTROL_CELL
+                    ? "corotational_cells"
+                    : "corotational";
     run.element_products =
         run.model == "local_frame" && dynsolid::scene::ResolvedSolverSettings(loaded->scene)
                                               .element_products() == dynsolid::SolverSettings::FLOAT

@@ -98,6 +98,9 @@ std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings&
         .Add("node_matrix_float_values", b.node_matrix_float_values)
         .Add("factorized_elements", b.factorized_elements)
         .Add("quadrature_elements", b.quadrature_elements)
+        .Add("corotated_cells", b.corotated_cells)
+        .Add("cell_matrices", b.cell_matrices)
+        .Add("cell_matrix_bytes", b.cell_matrix_bytes)
         .Add("measure_quad_path", b.measure_quad_path)
         .Add("build_ms", b.build_ms)
         .End();

@@ -414,7 +414,7 @@ TEST_F(EveryFieldTest, UndeclaredEnumNumbersAreRejectedNamingTheField) {
     ExpectPositioned(scene, name, rule);
     ++visited;
   });
-  EXPECT_EQ(visited, 4);  // solver.model, .integrator, .element_products, .mass
+  EXPECT_EQ(visited, 5);  // solver.model, .integrator, .element_products, .mass, .corotation
 }
 
 // ------------------------------------------------------------- defaults
@@ -431,6 +431,7 @@ TEST(DefaultsTest, EmptySolverSettingsResolveToTheDocumentedDefaults) {
   EXPECT_FALSE(s.snap_forces_to_quadrature());
   EXPECT_EQ(s.element_products(), SolverSettings::FLOAT);
   EXPECT_EQ(s.mass(), SolverSettings::CONSISTENT);
+  EXPECT_EQ(s.corotation(), SolverSettings::ELEMENT);
   // A resolved scene is still valid, and resolving is idempotent.
   Scene scene;
   scene.mutable_mesh()->set_file("x.vtk");
@@ -452,6 +453,7 @@ TEST(DefaultsTest, GivenSolverSettingsAreKept) {
   given->set_snap_forces_to_quadrature(true);
   given->set_element_products(SolverSettings::DOUBLE);
   given->set_mass(SolverSettings::LUMPED);
+  given->set_corotation(SolverSettings::CONTROL_CELL);
   EXPECT_TRUE(
       google::protobuf::util::MessageDifferencer::Equals(ResolvedSolverSettings(scene), *given));
 

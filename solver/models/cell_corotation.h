@@ -1,0 +1,150 @@
+// The corotational model with one frame per control cell
+// (solver.corotation: CONTROL_CELL), applied in control-point space.
+//
+// MODEL.md 4b rotates each finite element's stiffness by the element's own
+// frame, so every step passes over all elements (64 per control cell at two
+// levels, 64 quadrature points each). Here the stiffness of a control cell
+// is summed once, at rest, over its elements and mapped to its control
+// points:
+//
+//   K_c = sum over the cell's elements of E_e^T K_e E_e   (3 S square),
+//
+// S the control points the cell's elements depend on (64 for a regular cell
+// at two levels), E_e the element's rows of the node matrix on them (the
+// same partials backward Euler's K0 is summed from: solid/cell_assembly.h).
+// A step then needs, per cell, one frame and one product:
+//
+//   F_c = sum_j w_j (x_j - xbar)(X_j - Xbar)^T (sum_j w_j (X_j - Xbar)(X_j - Xbar)^T)^-1,
+//   R_c = polar factor of F_c,
+//   u_c = R_c^T (x - xbar) - (X - Xbar),   g_c = R_c K_c u_c,
+//   energy = 1/2 sum_c u_c . K_c u_c,
+//
+// the least-squares affine fit of the cell's control points (x current, X
+// at rest, weights w_j the trace of K_c's diagonal block of point j: the
+// points the cell's strain depends on most) and its rotation, found afresh
+// every step (no warm start, so no state: a Newton polar iteration, scaled,
+// quadratically convergent from any F with det F > 0; an SVD otherwise).
+//
+// Properties: for small displacements R_c = I + O(u) and g = K u to first
+// order, the linear stiffness A^T K A of the element model (so stable step,
+// static answers and small vibrations are the same); rigid motion gives
+// exactly no force and no energy; each cell's forces sum to zero (linear
+// momentum). What it gives up: a cell bent through a large angle is rotated
+// by its average frame rather than element by element.
+//
+// Backward Euler (MODEL.md 5) holds the frames of p(t) for a step:
+// UpdateFrames(p) finds them as Forces(p) does, AffineForces(x) is the force
+// with them held (affine in x; AffineForces(p) after UpdateFrames(p) equals
+// Forces(p) bit for bit) and ApplyLinearized(v) = sum_c E_c^T R_c K_c R_c^T
+// (v_c - vbar_c), the step's Kt. The held frames are a function of the
+// positions they were found at, so they are no state of their own.
+//
+// Cells whose partials are equal (congruent cells of one material: the
+// interior of a block, the legs of a chair) share one K_c and are applied
+// together as one matrix product. The cells are split into kForceParts
+// fixed parts summed in part order: results do not depend on the thread
+// count.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "solver/common/worker_pool.h"
+#include "solver/mesh/points.h"
+
+namespace dynsolid::models {
+
+class CellCorotation {
+ public:
+  struct Cell {
+    std::vector<int32_t> support;                 // ascending control points
+    std::shared_ptr<const Eigen::MatrixXd> k;     // 3 S square, DOF 3 a + c
+  };
+
+  // rest: the control points at rest (#control by 3).
+  CellCorotation(std::vector<Cell> cells, const Points& rest, WorkerPool& pool);
+
+  // g = sum_c E_c^T g_c: the internal forces on the control points (#control
+  // by 3; the force acting on the solid is -g) at control positions p,
+  // written over g. Holds the frames of p for the calls below. Returns the
+  // strain energy. Allocates nothing after the first call.
+  double Forces(const Points& p, Points& g);
+  // The same without holding the frames (a query that leaves the model as
+  // it was).
+  double ForcesAt(const Points& p, Points& g);
+  // Backward Euler's calls (above).
+  void UpdateFrames(const Points& p);
+  double AffineForces(const Points& x, Points& g);
+  void ApplyLinearized(const Points& v, Points& out);
+  // out = sum_c E_c^T K_c E_c v: the stiffness at rest (all frames the
+  // identity), A^T K A of the element model to rounding, for the
+  // stable-step estimate. Leaves the model as it was; on `pool` (null: this
+  // thread alone), so it may run beside the calls above.
+  void ApplyRest(const Points& v, Points& out, WorkerPool* pool) const;
+
+  // The frame of cell c at p (tests).
+  Eigen::Matrix3d Frame(const Points& p, int32_t c) const;
+
+  void set_pool(WorkerPool& pool) { pool_ = &pool; }
+  int32_t cells() const { return static_cast<int32_t>(cells_.size()); }
+  int32_t distinct_matrices() const { return static_cast<int32_t>(matrices_.size()); }
+  int64_t matrix_bytes() const { return matrix_bytes_; }
+  double last_ms() const { return last_ms_; }
+
+ private:
+  struct CellData {
+    int32_t matrix = 0;    // index into matrices_
+    int32_t first = 0;     // its support's range in support_
+    int32_t size = 0;
+    Eigen::Vector3d rest_centre;
+    Eigen::Matrix3d fit;   // (sum w (X - Xbar)(X - Xbar)^T)^-1
+  };
+  // Cells of one part with one matrix: applied as one product.
+  struct Batch {
+    int32_t matrix = 0;
+    std::vector<int32_t> cells;
+  };
+  Eigen::Matrix3d FrameOf(const CellData& c, const Points& p, Eigen::Vector3d& centre) const;
+  Eigen::Vector3d CentreOf(const CellData& c, const Points& p) const;
+  // How a pass gets its frames and local displacements.
+  enum class Mode {
+    kFind,     // frames found at x, not held; u = R^T (x - xbar) - X
+    kHold,     // found at x and held; u as kFind
+    kFrames,   // found and held, no product
+    kAffine,   // held frames; u as kFind
+    kLinear,   // held frames; u = R^T (x - xbar)
+    kRest,     // identity frames; u = x - xbar
+  };
+  struct Scratch;
+  // One pass in `mode` on `pool`, with per-part `scratch`; `held` the frames
+  // held (read or written as mode says).
+  double Run(const Points& x, Points& g, Mode mode, std::vector<Scratch>& scratch,
+             std::vector<Eigen::Matrix3d>* held, WorkerPool& pool) const;
+  std::vector<Scratch> MakeScratch(int64_t points) const;
+
+  WorkerPool* pool_;
+  std::vector<CellData> cells_;
+  std::vector<int32_t> support_;      // all cells' supports, concatenated
+  std::vector<double> weight_;        // w_j, normalized per cell, same order
+  std::vector<double> rest_local_;    // X_j - Xbar, 3 per support entry
+  std::vector<std::shared_ptr<const Eigen::MatrixXd>> matrices_;
+  std::vector<std::vector<Batch>> parts_;
+  std::vector<Eigen::Matrix3d> held_;  // per cell: the frames backward Euler holds
+  int64_t matrix_bytes_ = 0;
+  int max_side_ = 0, max_batch_ = 1;
+  std::vector<Scratch> scratch_;
+  double last_ms_ = 0;
+};
+
+// Per part: its force sum over all control points and its scratch.
+struct CellCorotation::Scratch {
+  Points f;
+  Eigen::MatrixXd u, y;
+  std::vector<Eigen::Matrix3d> frames;
+  double energy = 0;
+};
+
+}  // namespace dynsolid::models

@@ -294,6 +294,10 @@ void SessionLoop::Run() {
   NameThisThread("sim");
   using std::chrono::duration;
   const auto h = std::chrono::duration_cast<Clock::duration>(duration<double>(time_step_));
+  // The most real-time debt the loop catches up rather than drops (a step,
+  // if that is longer).
+  const Clock::duration catch_up =
+      std::max<Clock::duration>(h, std::chrono::duration_cast<Clock::duration>(kCatchUp));
   Clock::time_point next_step{};
   bool anchored = false;
   Clock::time_point rate_start = Clock::now();
@@ -405,8 +409,11 @@ void SessionLoop::Run() {
         int64_t dropped = 0;
         bool overrun = false;
         if (lag > Clock::duration::zero()) behind = lag / h;
-        if (lag > h) {
-          // More than a whole step behind: give the debt up and re-anchor.
+        if (lag > catch_up) {
+          // Further behind than it may catch up: give the debt up and
+          // re-anchor. Below that, the next steps run back to back until
+          // the loop is on time again (a first step that warms its caches,
+          // an edit installed, a moment without the CPU cost no step).
           overrun = true;
           dropped = behind;
           next_step = t1;

@@ -64,6 +64,10 @@ class WatchSink {
   virtual double rate_hz() const = 0;
 };
 
+// Real-time debt the loop catches up by stepping back to back; beyond it,
+// it gives the debt up (SessionStats.overruns, steps_dropped).
+inline constexpr std::chrono::milliseconds kCatchUp{25};
+
 struct LoopOptions {
   // Default and largest watch rate, frames per second.
   double watch_hz = 60;

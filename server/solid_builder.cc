@@ -120,6 +120,10 @@ absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& req
     case SolverSettings::MODEL_DEFAULT:
       break;
     case SolverSettings::LOCAL_FRAME:
+      // Its frames are its own: no corotation setting goes with it.
+      out.scene.mutable_solver()->set_model(request.model_override());
+      out.scene.mutable_solver()->clear_corotation();
+      break;
     case SolverSettings::COROTATIONAL:
       out.scene.mutable_solver()->set_model(request.model_override());
       break;
@@ -184,9 +188,7 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
                         std::chrono::steady_clock::now() - start).count();
   stats.set_build_milliseconds(ms);
   const solid::BuildReport& report = (*solid)->build_report();
-  stats.set_model(scene::ResolvedSolverSettings(request.scene).model() == SolverSettings::COROTATIONAL
-                      ? "corotational"
-                      : "local_frame");
+  stats.set_model(scene::ModelName(request.scene.solver()));
   stats.set_integrator(report.implicit ? "backward_euler" : "central_difference");
   stats.set_substeps(report.substeps);
   BuiltSolid out;

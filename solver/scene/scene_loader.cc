@@ -423,6 +423,12 @@ SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
   return s;
 }
 
+std::string ModelName(const SolverSettings& settings) {
+  const SolverSettings s = ResolvedSolverSettings(settings);
+  if (s.model() != SolverSettings::COROTATIONAL) return "local_frame";
+  return s.corotation() == SolverSettings::CONTROL_CELL ? "corotational_cells" : "corotational";
+}
+
 SolverSettings ResolvedSolverSettings(const Scene& scene) {
   return ResolvedSolverSettings(scene.solver());
 }

@@ -118,6 +118,11 @@ SolverSettings ResolvedSolverSettings(const Scene& scene);
 // "builtin:chair"). Errors: InvalidArgument "origin:line:col: message".
 absl::StatusOr<Scene> ParseScene(std::string_view text, std::string_view origin);
 
+// The stiffness model a scene's solver settings name, as reports and
+// session stats spell it: "local_frame", "corotational" (a frame per
+// element) or "corotational_cells" (a frame per control cell).
+std::string ModelName(const SolverSettings& settings);
+
 // Reads and parses a scene file. NotFound when `path` does not exist.
 absl::StatusOr<Scene> LoadSceneFile(const std::string& path);
 

@@ -409,6 +409,11 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     forces_valid = true;
     ++stats.substeps;
   }
+  // Phases the model does not have are absent, not zero: the deformation
+  // measure is the local-frame model's; the per-cell corotation works in
+  // control space (no node positions, no projection).
+  if (corotational != nullptr) sum.measure = -1;
+  if (cell_model != nullptr) sum.nodes = sum.project = -1;
   out = sum;
   return absl::OkStatus();
 }

@@ -136,11 +136,7 @@ int main(int argc, char** argv) {
     run.build = &rep_at_build;
     run.time_step = s.time_step();
     run.integrator = rep_at_build.implicit ? "backward_euler" : "central_difference";
-    run.model = loaded->scene.solver().model() != dynsolid::SolverSettings::COROTATIONAL
-                    ? "local_frame"
-                : loaded->scene.solver().corotation() == dynsolid::SolverSettings::CONTROL_CELL
-                    ? "corotational_cells"
-                    : "corotational";
+    run.model = dynsolid::scene::ModelName(loaded->scene.solver());
     run.element_products =
         run.model == "local_frame" && dynsolid::scene::ResolvedSolverSettings(loaded->scene)
                                               .element_products() == dynsolid::SolverSettings::FLOAT

@@ -134,7 +134,13 @@ TEST(ResolveSceneRequestTest, ChecksSourceLevelsAndFiles) {
   // The model: the scene's, or the one asked for; nothing else.
   request.clear_levels_override();
   request.set_builtin_scene("block3");
+  EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().model(), SolverSettings::COROTATIONAL);
+  EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().corotation(), SolverSettings::CONTROL_CELL);
+  // The local-frame model has no corotation setting: the override clears it.
+  request.set_model_override(SolverSettings::LOCAL_FRAME);
   EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().model(), SolverSettings::LOCAL_FRAME);
+  EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().corotation(),
+            SolverSettings::COROTATION_DEFAULT);
   request.set_model_override(SolverSettings::COROTATIONAL);
   EXPECT_EQ(ResolveSceneRequest(request)->scene.solver().model(), SolverSettings::COROTATIONAL);
   request.set_model_override(static_cast<SolverSettings::Model>(7));

@@ -59,26 +59,26 @@ test('create block3 from the scene picker: the solid appears', async () => {
   ref = m.session;
   const s = await grpc.call('GetSession', ref);
   assert.equal(s.scene_name, 'block3');
-  assert.equal(s.stats.model, 'local_frame');
+  assert.equal(s.stats.model, 'corotational_cells');
   const info = await inspect({ surface_positions: true });
   assert.equal(m.vertices, info.surface_vertices);
   // The status line (refreshed twice a second) names the model and integrator.
-  await until(async () => /block3 .* local_frame \/ central_difference .* steps\/s/.test((await metrics(page)).status),
+  await until(async () => /block3 .* corotational_cells \/ central_difference .* steps\/s/.test((await metrics(page)).status),
     'the status line');
   assert.match(page.url(), new RegExp(`#session=${ref.id}&token=${ref.token}`));
   await shot(page, '01_created');
 });
 
-test('a second session with the corotational model from the picker; closed from the page', async () => {
-  await page.selectOption('#model-select', 'COROTATIONAL');
+test('a second session with the local-frame model from the picker; closed from the page', async () => {
+  await page.selectOption('#model-select', 'LOCAL_FRAME');
   await page.click('#create');
   const other = await until(async () => {
     const m = await metrics(page);
     return m.session && m.session.id !== ref.id && m.rendered > 0 ? m : null;
   }, 'the page in the new session', 60000);
   const s = await grpc.call('GetSession', other.session);
-  assert.equal(s.stats.model, 'corotational');
-  await until(async () => /corotational \//.test((await metrics(page)).status), 'the status line naming it');
+  assert.equal(s.stats.model, 'local_frame');
+  await until(async () => /local_frame \//.test((await metrics(page)).status), 'the status line naming it');
   await page.click('#close-session');
   await until(async () => !(await grpc.call('ListSessions', {})).sessions.some((x) => x.id === other.session.id),
     'the session closed');
@@ -149,10 +149,13 @@ test('drag the top of block3: the server\'s solid moves up, and the drag is gone
 // pixels (the low end of the colour map: red and blue well above green) and
 // the colour at `at` (client coordinates), averaged over 5 x 5 pixels.
 async function readPixels(p, file, at) {
-  await p.mouse.move(300, 790);  // off the solid: no cursor in the picture
-  await sleep(200);
   const canvas = p.locator('#view canvas');
   const box = await canvas.boundingBox();
+  // Over the canvas but off the solid (its bottom left corner): the tool
+  // cursor hides (a move outside the canvas would leave it where the last
+  // press was, on the surface).
+  await p.mouse.move(box.x + 8, box.y + box.height - 8);
+  await sleep(200);
   const buf = await canvas.screenshot({ path: path.join(out, file) });
   return p.evaluate(async ({ b64, x, y }) => {
     const img = new Image();

@@ -52,6 +52,7 @@ struct Scratch {
   ElementRows rows;
   std::map<Key128, std::vector<Eigen::MatrixXd>> blocks;
   std::vector<Eigen::MatrixXd> made;
+  std::vector<int32_t> place;
 };
 
 // job(thread, part) once for every part in [0, parts), each thread taking
@@ -192,17 +193,19 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
       if (fresh) spec.make(kind, e, s.rows, bit->second);
       const std::vector<Eigen::MatrixXd>& blocks = bit->second;
       const int se = static_cast<int>(s.rows.support.size());
+      // Each element row's place in the cell's partial.
+      s.place.resize(static_cast<size_t>(dofs) * se);
+      for (int i = 0; i < se; ++i) {
+        for (int c = 0; c < dofs; ++c) s.place[dofs * i + c] = dofs * s.cell_mark[s.rows.support[i]] + c;
+      }
+      const int side_e = dofs * se;
       for (int o = 0; o < outputs; ++o) {
         Eigen::MatrixXd& dst = (*p)[o];
         const Eigen::MatrixXd& src = blocks[o];
-        for (int j = 0; j < se; ++j) {
-          const int cj = dofs * s.cell_mark[s.rows.support[j]];
-          for (int d = 0; d < dofs; ++d) {
-            for (int i = 0; i < se; ++i) {
-              const int ci = dofs * s.cell_mark[s.rows.support[i]];
-              for (int c = 0; c < dofs; ++c) dst(ci + c, cj + d) += src(dofs * i + c, dofs * j + d);
-            }
-          }
+        for (int j = 0; j < side_e; ++j) {
+          double* to = dst.col(s.place[j]).data();
+          const double* from = src.col(j).data();
+          for (int i = 0; i < side_e; ++i) to[s.place[i]] += from[i];
         }
       }
     }

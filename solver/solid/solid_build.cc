@@ -595,25 +595,31 @@ struct StiffnessBlocks {
     spec.make = [this, &layout, &corotational](int kind, int32_t e, const ElementRows& rows,
                                                std::vector<Eigen::MatrixXd>& blocks) {
       const int32_t gi = layout.blocks[kind].group[e];
-      std::call_once(once[kind][gi], [&] { group_k[kind][gi] = corotational.K(kind, gi); });
+      // The group's K, kept component-major (c n + i): K_cm = P K P^T.
+      std::call_once(once[kind][gi], [&] {
+        const Eigen::MatrixXd k = corotational.K(kind, gi);
+        const int n = static_cast<int>(k.rows()) / 3;
+        Eigen::MatrixXd& cm = group_k[kind][gi];
+        cm.resize(3 * n, 3 * n);
+        for (int j = 0; j < 3 * n; ++j)
+          for (int i = 0; i < 3 * n; ++i) cm((i % 3) * n + i / 3, (j % 3) * n + j / 3) = k(i, j);
+      });
       const Eigen::MatrixXd& k = group_k[kind][gi];
       // E^T K E with E = B (x) I3 (node-major element DOFs from control
-      // DOFs), by component blocks: (E^T K E)(3a+c, 3b+d) = B^T K_cd B.
+      // DOFs). Component-major, E is diag(B, B, B): six products with B,
+      // T = K_cm diag(B) by column blocks, then diag(B)^T T by row blocks.
       const Eigen::MatrixXd& b = rows.b;
       const int n = static_cast<int>(b.rows()), s = static_cast<int>(b.cols());
+      Eigen::MatrixXd t(3 * n, 3 * s), r(3 * s, 3 * s);
+      for (int d = 0; d < 3; ++d) t.middleCols(d * s, s).noalias() = k.middleCols(d * n, n) * b;
+      for (int c = 0; c < 3; ++c) r.middleRows(c * s, s).noalias() = b.transpose() * t.middleRows(c * n, n);
       blocks.resize(1);
       Eigen::MatrixXd& tk = blocks[0];
       tk.resize(3 * s, 3 * s);
-      Eigen::MatrixXd kcd(n, n), tcd;
-      for (int c = 0; c < 3; ++c) {
-        for (int dd = 0; dd < 3; ++dd) {
-          for (int j = 0; j < n; ++j)
-            for (int i = 0; i < n; ++i) kcd(i, j) = k(3 * i + c, 3 * j + dd);
-          tcd.noalias() = b.transpose() * (kcd * b);
-          for (int bb = 0; bb < s; ++bb)
-            for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + dd) = tcd(a, bb);
-        }
-      }
+      for (int d = 0; d < 3; ++d)
+        for (int bb = 0; bb < s; ++bb)
+          for (int c = 0; c < 3; ++c)
+            for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + d) = r(c * s + a, d * s + bb);
     };
   }
   StiffnessBlocks(const StiffnessBlocks&) = delete;

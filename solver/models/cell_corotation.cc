@@ -85,16 +85,14 @@ CellCorotation::CellCorotation(std::vector<Cell> cells, const Points& rest, Work
       w[a] /= total;
       centre += w[a] * rest.row(in.support[a]).transpose();
     }
-    Eigen::Matrix3d aqq = Eigen::Matrix3d::Zero();
     for (int a = 0; a < out.size; ++a) {
       const Eigen::Vector3d x = rest.row(in.support[a]).transpose() - centre;
-      aqq += w[a] * x * x.transpose();
       support_.push_back(in.support[a]);
       weight_.push_back(w[a]);
       rest_local_.insert(rest_local_.end(), {x.x(), x.y(), x.z()});
+      const Eigen::Vector3d& g = in.gradient[a];
+      gradient_.insert(gradient_.end(), {g.x(), g.y(), g.z()});
     }
-    out.rest_centre = centre;
-    out.fit = aqq.inverse();
   }
   // kForceParts contiguous parts of about equal cost; in each, the cells of
   // one matrix form a batch (in order of first appearance).
@@ -158,16 +156,14 @@ Eigen::Vector3d CellCorotation::CentreOf(const CellData& c, const Points& p) con
 Eigen::Matrix3d CellCorotation::FrameOf(const CellData& c, const Points& p,
                                         Eigen::Vector3d& centre) const {
   const int32_t* support = support_.data() + c.first;
-  const double* w = weight_.data() + c.first;
-  const double* rest = rest_local_.data() + 3 * static_cast<int64_t>(c.first);
+  const double* g = gradient_.data() + 3 * static_cast<int64_t>(c.first);
   centre = CentreOf(c, p);
-  Eigen::Matrix3d apq = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d f = Eigen::Matrix3d::Zero();
   for (int a = 0; a < c.size; ++a) {
     const Eigen::Vector3d x = p.row(support[a]).transpose() - centre;
-    const Eigen::Vector3d r(rest[3 * a], rest[3 * a + 1], rest[3 * a + 2]);
-    apq += (w[a] * x) * r.transpose();
+    f += x * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
   }
-  return Polar(apq * c.fit);
+  return Polar(f);
 }
 
 Eigen::Matrix3d CellCorotation::Frame(const Points& p, int32_t c) const {

@@ -14,16 +14,19 @@
 // same partials backward Euler's K0 is summed from: solid/cell_assembly.h).
 // A step then needs, per cell, one frame and one product:
 //
-//   F_c = sum_j w_j (x_j - xbar)(X_j - Xbar)^T (sum_j w_j (X_j - Xbar)(X_j - Xbar)^T)^-1,
-//   R_c = polar factor of F_c,
+//   F_c = sum_j x_j g_j^T,   R_c = polar factor of F_c,
 //   u_c = R_c^T (x - xbar) - (X - Xbar),   g_c = R_c K_c u_c,
 //   energy = 1/2 sum_c u_c . K_c u_c,
 //
-// the least-squares affine fit of the cell's control points (x current, X
-// at rest, weights w_j the trace of K_c's diagonal block of point j: the
-// points the cell's strain depends on most) and its rotation, found afresh
-// every step (no warm start, so no state: a Newton polar iteration, scaled,
-// quadratically convergent from any F with det F > 0; an SVD otherwise).
+// F_c the cell's deformation gradient averaged over its elements (each
+// element's at its centre, weighted by its rest volume): g_j = sum_e V_e
+// sum_i B_e(i, j) grad N_i(centre_e) / sum_e V_e, made at build time, so
+// that F_c = I at rest and F_c = Q for any rigid motion (sum_j g_j = 0).
+// xbar is the cell's control points' centroid weighted by their diagonal
+// stiffness in K_c (any point would do: K_c ignores translations). Frames
+// are found afresh every step (no warm start, so no state: a scaled Newton
+// polar iteration, quadratically convergent from any F with det F > 0; an
+// SVD otherwise).
 //
 // Properties: for small displacements R_c = I + O(u) and g = K u to first
 // order, the linear stiffness A^T K A of the element model (so stable step,
@@ -62,6 +65,7 @@ class CellCorotation {
   struct Cell {
     std::vector<int32_t> support;                 // ascending control points
     std::shared_ptr<const Eigen::MatrixXd> k;     // 3 S square, DOF 3 a + c
+    std::vector<Eigen::Vector3d> gradient;        // g_a per support point (above)
   };
 
   // rest: the control points at rest (#control by 3).
@@ -99,8 +103,6 @@ class CellCorotation {
     int32_t matrix = 0;    // index into matrices_
     int32_t first = 0;     // its support's range in support_
     int32_t size = 0;
-    Eigen::Vector3d rest_centre;
-    Eigen::Matrix3d fit;   // (sum w (X - Xbar)(X - Xbar)^T)^-1
   };
   // Cells of one part with one matrix: applied as one product.
   struct Batch {
@@ -130,6 +132,7 @@ class CellCorotation {
   std::vector<int32_t> support_;      // all cells' supports, concatenated
   std::vector<double> weight_;        // w_j, normalized per cell, same order
   std::vector<double> rest_local_;    // X_j - Xbar, 3 per support entry
+  std::vector<double> gradient_;      // g_j, 3 per support entry
   std::vector<std::shared_ptr<const Eigen::MatrixXd>> matrices_;
   std::vector<std::vector<Batch>> parts_;
   std::vector<Eigen::Matrix3d> held_;  // per cell: the frames backward Euler holds

@@ -644,6 +644,52 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
                 blocks.spec, previous, threads, /*dense=*/false, sums);
   *next = made;
   std::vector<models::CellCorotation::Cell> cells(sums.supports.size());
+  // Each cell's deformation-gradient weights g_j (cell_corotation.h): its
+  // elements' gradients at their centres, by rest volume, on its support.
+  const SparseMatrix& nm = d->node_matrix;
+  const std::vector<int32_t>& control_cell = d->hierarchy.control_cell;
+  std::vector<std::vector<std::pair<int, int32_t>>> elements_of(cells.size());
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout.blocks[kind];
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t fine = block.cell[e];
+      elements_of[control_cell.empty() ? fine : control_cell[fine]].push_back({kind, e});
+    }
+  }
+  const int64_t ncells = static_cast<int64_t>(cells.size());
+  constexpr int kParts = 16;
+  threads.RunParts(kParts, [&](int part) {
+   for (int64_t c = ncells * part / kParts; c < ncells * (part + 1) / kParts; ++c) {
+    const std::vector<int32_t>& support = sums.supports[c];
+    std::vector<Eigen::Vector3d> g(support.size(), Eigen::Vector3d::Zero());
+    double volume = 0;
+    std::vector<Eigen::Vector3d> grad;
+    for (const auto& [kind, e] : elements_of[c]) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::KindTable& table = layout.tables[kind];
+      const int32_t* ids = block.element_nodes(e);
+      const int n = block.nodes;
+      const double* dn = table.centre_dn.data();
+      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        j += rest_nodes.row(ids[i]).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
+      }
+      const double det = j.determinant();
+      if (!(det > 0)) continue;
+      const Eigen::Matrix3d jit = j.inverse().transpose();
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector3d gi = det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]));
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
+          g[at - support.begin()] += it.value() * gi;
+        }
+      }
+      volume += det;
+    }
+    for (Eigen::Vector3d& x : g) x /= volume;
+    cells[c].gradient = std::move(g);
+   }
+  });
   // One matrix per distinct partial (cells of one key share it).
   std::map<const std::vector<Eigen::MatrixXd>*, std::shared_ptr<const Eigen::MatrixXd>> matrix;
   for (size_t c = 0; c < cells.size(); ++c) {

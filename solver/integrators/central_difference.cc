@@ -1,3 +1,4 @@
+#include <algorithm>
 #include "solver/integrators/central_difference.h"
 
 namespace dynsolid::integrators {
@@ -10,6 +11,8 @@ void CentralDifference::Setup(const SparseMatrix* mt, const SparseMatrix* dt, do
   lhs_ = 2.0 * (*mt);
   if (dt != nullptr) lhs_ += h * (*dt);
   cg_.Setup(&lhs_, std::move(fixed));
+  lhs_diagonal_max_ = 0;
+  for (int64_t i = 0; i < lhs_.rows(); ++i) lhs_diagonal_max_ = std::max(lhs_diagonal_max_, lhs_.coeff(i, i));
   rhs_.setZero(mt->rows(), 3);
   tmp_.setZero(mt->rows(), 3);
   delta_.setZero(mt->rows(), 3);
@@ -28,7 +31,12 @@ CgStats CentralDifference::Step(const Points& p, const Points& p_prev, const Poi
     rhs_ -= (2.0 * h_) * delta_;
   }
   delta_.setZero();
-  const CgStats stats = cg_.Solve(rhs_, delta_, tolerance, max_iterations);
+  // A residual this small moves no control point by more than rounding
+  // of its coordinates (about 1e-16 of them): at rest the forces are
+  // rounding noise, and 1e-4 of noise is not worth iterating for.
+  double floor[3];
+  for (int c = 0; c < 3; ++c) floor[c] = kRoundingFloor * lhs_diagonal_max_ * p.col(c).norm();
+  const CgStats stats = cg_.Solve(rhs_, delta_, tolerance, max_iterations, floor);
   p_next = 2.0 * p - p_prev + delta_;
   return stats;
 }

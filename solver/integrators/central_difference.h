@@ -33,6 +33,10 @@ class CentralDifference {
   SparseMatrix lhs_;
   ConjugateGradient cg_;
   Points rhs_, tmp_, delta_;
+  double lhs_diagonal_max_ = 0;
+  // CG's absolute floor per column: this times the largest diagonal entry
+  // of 2 Mt + h Dt times the column's norm of p (Step).
+  static constexpr double kRoundingFloor = 1e-16;
 };
 
 }  // namespace dynsolid::integrators

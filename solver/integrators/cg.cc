@@ -83,7 +83,7 @@ void ConjugateGradient::MaskFixed(Points& m) const {
 }
 
 CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
-                                 int max_iterations) {
+                                 int max_iterations, const double* floor) {
   CgStats stats;
   // A zero start (the integrators' usual one) needs none of the products
   // with x below: they would be zero.
@@ -103,6 +103,12 @@ CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
     MaskFixed(b0_);
   }
   for (int c = 0; c < 3; ++c) bnorm2[c] = b0_.col(c).squaredNorm();
+  // Done at this squared residual: the relative test, or the floor.
+  double stop2[3];
+  for (int c = 0; c < 3; ++c) {
+    stop2[c] = tolerance * tolerance * bnorm2[c];
+    if (floor != nullptr) stop2[c] = std::max(stop2[c], floor[c] * floor[c]);
+  }
 
   if (x_zero) {
     r_ = b;
@@ -116,7 +122,7 @@ CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
   int iters[3] = {0, 0, 0};
   for (int c = 0; c < 3; ++c) {
     rr[c] = r_.col(c).squaredNorm();
-    done[c] = rr[c] <= tolerance * tolerance * bnorm2[c] || bnorm2[c] == 0.0;
+    done[c] = rr[c] <= stop2[c] || bnorm2[c] == 0.0;
   }
   // (A start that already meets the tolerance needs no preconditioning.)
   if (!(done[0] && done[1] && done[2])) {
@@ -139,7 +145,7 @@ CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
       r_.col(c) -= alpha * q_.col(c);
       rr[c] = r_.col(c).squaredNorm();
       ++iters[c];
-      if (rr[c] <= tolerance * tolerance * bnorm2[c]) done[c] = true;
+      if (rr[c] <= stop2[c]) done[c] = true;
     }
     if (done[0] && done[1] && done[2]) break;
     Precondition();
@@ -153,9 +159,11 @@ CgStats ConjugateGradient::Solve(const Points& b, Points& x, double tolerance,
   for (int c = 0; c < 3; ++c) {
     stats.iterations += iters[c];
     stats.max_iterations = std::max(stats.max_iterations, iters[c]);
-    const double rel = bnorm2[c] > 0 ? std::sqrt(rr[c] / bnorm2[c]) : 0.0;
+    // (A column below the floor is solved: its relative residual, of noise, is not reported.)
+    const bool below_floor = floor != nullptr && rr[c] <= floor[c] * floor[c];
+    const double rel = bnorm2[c] > 0 && !below_floor ? std::sqrt(rr[c] / bnorm2[c]) : 0.0;
     stats.relative_residual = std::max(stats.relative_residual, rel);
-    stats.converged &= rel <= tolerance || bnorm2[c] == 0.0;
+    stats.converged &= rel <= tolerance || bnorm2[c] == 0.0 || rr[c] <= stop2[c];
   }
   return stats;
 }

@@ -64,7 +64,11 @@ class ConjugateGradient {
   // X holds the initial guess (and the fixed values) on entry, the solution
   // on exit. Stops per column at ||r|| <= tolerance ||b_free||, where b_free
   // is the right-hand side of the reduced system.
-  CgStats Solve(const Points& b, Points& x, double tolerance, int max_iterations);
+  // `floor` (optional, one per column): an absolute residual norm below
+  // which a column is done whatever its relative residual (a right-hand
+  // side of rounding noise, as at rest, is not chased to 1e-4 of itself).
+  CgStats Solve(const Points& b, Points& x, double tolerance, int max_iterations,
+                const double* floor = nullptr);
 
   const std::vector<uint8_t>& fixed() const { return fixed_; }
 

@@ -4,14 +4,30 @@
 // off the simulation loop, and ApplyPaint, which holds the loop. Prints
 // figures only. Then the painted solid's SaveState (what the undo history
 // copies for every undoable command).
-//   paint_bench [scene=block3]
+//   paint_bench [scene=block3] [model=the scene's: local_frame, corotational, corotational_cells]
 #include <chrono>
 #include <cstdio>
+#include <string>
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
 int main(int argc, char** argv) {
   auto scene = dynsolid::scene::BuiltinScene(argc > 1 ? argv[1] : "block3");
+  if (!scene.ok()) { std::printf("%s\n", std::string(scene.status().message()).c_str()); return 1; }
+  if (argc > 2) {
+    // The brush figures name a model: block3 with the local frame.
+    const std::string model = argv[2];
+    dynsolid::SolverSettings* s = scene->mutable_solver();
+    s->set_model(model == "local_frame" ? dynsolid::SolverSettings::LOCAL_FRAME
+                                        : dynsolid::SolverSettings::COROTATIONAL);
+    s->set_corotation(model == "corotational_cells" ? dynsolid::SolverSettings::CONTROL_CELL
+                                                    : dynsolid::SolverSettings::COROTATION_DEFAULT);
+    if (model == "local_frame" && s->integrator() == dynsolid::SolverSettings::BACKWARD_EULER) {
+      s->set_integrator(dynsolid::SolverSettings::CENTRAL_DIFFERENCE);
+    }
+  }
+  std::printf("paint_bench: %s, %s\n", scene->name().c_str(),
+              dynsolid::scene::ModelName(scene->solver()).c_str());
   auto d = dynsolid::scene::BuildDiscretization(*scene, dynsolid::scene::BuiltinSceneDir(), std::nullopt);
   auto s = dynsolid::solid::Solid::Create(*scene, *std::move(d));
   if (!s.ok()) { std::printf("%s\n", std::string(s.status().message()).c_str()); return 1; }

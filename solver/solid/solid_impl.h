@@ -405,12 +405,15 @@ struct Solid::Impl {
       const CellPartials* previous, std::shared_ptr<const CellPartials>* next) const;
   // The same as a 3 #control square sparse matrix (K0 of the implicit
   // preconditioner) for layout `l` and its model `m`, on `threads`.
+  // `made` (optional): partials of l made already (a build's per-cell
+  // corotation, MaterialBuild::k_cells), taken first.
   Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
                                               const models::CorotationalModel& m,
                                               WorkerPool& threads,
-                                              std::shared_ptr<const CellPartials>* next) const {
-    const std::vector<Eigen::Triplet<double, int32_t>> t =
-        StiffnessTriplets(*d, l, m, spring_point, spring_k, threads, k0_cells.get(), next);
+                                              std::shared_ptr<const CellPartials>* next,
+                                              const CellPartials* made = nullptr) const {
+    const std::vector<Eigen::Triplet<double, int32_t>> t = StiffnessTriplets(
+        *d, l, m, spring_point, spring_k, threads, made != nullptr ? made : k0_cells.get(), next);
     const Eigen::Index dofs = 3 * d->node_matrix.cols();
     Eigen::SparseMatrix<double> k(dofs, dofs);
     k.setFromTriplets(t.begin(), t.end());

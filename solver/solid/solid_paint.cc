@@ -137,7 +137,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   out->substeps = substeps;
   if (im.use_implicit) {
     out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational, *out->pool,
-                                 &out->k0_cells);
+                                 &out->k0_cells, out->build.k_cells.get());
     // The float copies of the element matrices, here rather than when
     // installed (ConfigureLinearized then finds them made).
     out->build.corotational->SetSinglePrecisionLinearized(im.SinglePrecisionLinearized());

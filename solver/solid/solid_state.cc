@@ -543,7 +543,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     own_pool = std::make_unique<WorkerPool>(1);
     ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true, own_pool.get()));
     if (im.use_implicit) {
-      k0 = im.StiffnessMatrix(*build->layout, *build->corotational, *own_pool, &k0_cells);
+      k0 = im.StiffnessMatrix(*build->layout, *build->corotational, *own_pool, &k0_cells,
+                              build->k_cells.get());
     }
   }
 

@@ -568,18 +568,37 @@ namespace {
 
 // The cell partials of K0 = A^T K A (3 #control square, node-major DOFs
 // 3 i + c) of the corotational model at rest: the spec's blocks are the
-// elements' E^T K E, each group's K made once, when a cell first needs it
-// (the model makes K of a group it applies at its quadrature points anew
-// on each call). Not movable: the spec's functions point into it.
+// elements' E^T K E with E = B (x) I3 (B the element's rows of the node
+// matrix on its support), integrated straight at the quadrature points of
+// the model's K = int B^T C B dV (isotropic C):
+//
+//   (E^T K E)(3a+c, 3b+d) = sum_q dV [lambda H(c,a) H(d,b) + mu H(d,a) H(c,b)
+//                                     + mu delta_cd sum_k H(k,a) H(k,b)],
+//
+// H_q = J_q^-T dN_q B the physical gradients of the control points' basis
+// at point q (3 x S). Per element: H for all points as one product
+// (3Q x n times n x S), then the Gram matrix of sqrt(dV mu) H (3S x 3S),
+// and for a lambda that is not the same multiple of mu at every point that
+// of sqrt(dV lambda) H. (The 3n x 3n element K is never formed; the same
+// points, weights and clamped dV = max(det J, 0) as the model's K.)
+// Per group, once, when a cell first needs it: the points' J^-T dN and
+// weights. Not movable: the spec's functions point into it.
 struct StiffnessBlocks {
+  struct Group {
+    Eigen::MatrixXd d;         // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
+    Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
+    Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda) (empty: ratio * mu)
+    double ratio = 0;          // lambda / mu when the same at every point
+  };
+
   StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational) {
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
-      group_k[kind].resize(layout.blocks[kind].groups.size());
+      groups[kind].resize(layout.blocks[kind].groups.size());
     }
     spec.dofs = 3;
     spec.outputs = 1;
-    spec.salt = 0x6b30;  // "k0"
+    spec.salt = 0x6b31;  // "k1": integrated at the points
     spec.group_key = [&layout, &corotational](int kind, int32_t gi) {
       const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
       Hash128 h;
@@ -592,42 +611,95 @@ struct StiffnessBlocks {
       }
       return h.value();
     };
-    spec.make = [this, &layout, &corotational](int kind, int32_t e, const ElementRows& rows,
-                                               std::vector<Eigen::MatrixXd>& blocks) {
+    spec.make = [this, &layout](int kind, int32_t e, const ElementRows& rows,
+                                std::vector<Eigen::MatrixXd>& blocks) {
       const int32_t gi = layout.blocks[kind].group[e];
-      // The group's K, kept component-major (c n + i): K_cm = P K P^T.
-      std::call_once(once[kind][gi], [&] {
-        const Eigen::MatrixXd k = corotational.K(kind, gi);
-        const int n = static_cast<int>(k.rows()) / 3;
-        Eigen::MatrixXd& cm = group_k[kind][gi];
-        cm.resize(3 * n, 3 * n);
-        for (int j = 0; j < 3 * n; ++j)
-          for (int i = 0; i < 3 * n; ++i) cm((i % 3) * n + i / 3, (j % 3) * n + j / 3) = k(i, j);
-      });
-      const Eigen::MatrixXd& k = group_k[kind][gi];
-      // E^T K E with E = B (x) I3 (node-major element DOFs from control
-      // DOFs). Component-major, E is diag(B, B, B): six products with B,
-      // T = K_cm diag(B) by column blocks, then diag(B)^T T by row blocks.
+      std::call_once(once[kind][gi], [&] { groups[kind][gi] = MakeGroup(layout, kind, gi); });
+      const Group& g = groups[kind][gi];
       const Eigen::MatrixXd& b = rows.b;
-      const int n = static_cast<int>(b.rows()), s = static_cast<int>(b.cols());
-      Eigen::MatrixXd t(3 * n, 3 * s), r(3 * s, 3 * s);
-      for (int d = 0; d < 3; ++d) t.middleCols(d * s, s).noalias() = k.middleCols(d * n, n) * b;
-      for (int c = 0; c < 3; ++c) r.middleRows(c * s, s).noalias() = b.transpose() * t.middleRows(c * n, n);
+      const int s = static_cast<int>(b.cols());
+      const int q = static_cast<int>(g.root_mu.size());
+      const Eigen::MatrixXd h = g.d * b;  // 3Q x S
+      Eigen::MatrixXd w(q, 3 * s);
+      for (int k = 0; k < 3; ++k) {
+        w.middleCols(k * s, s) = g.root_mu.asDiagonal() * h.middleRows(k * q, q);
+      }
+      Eigen::MatrixXd gm(3 * s, 3 * s);
+      gm.noalias() = w.transpose() * w;
+      Eigen::MatrixXd gl;
+      if (g.root_lambda.size() > 0) {
+        for (int k = 0; k < 3; ++k) {
+          w.middleCols(k * s, s) = g.root_lambda.asDiagonal() * h.middleRows(k * q, q);
+        }
+        gl.noalias() = w.transpose() * w;
+      }
       blocks.resize(1);
       Eigen::MatrixXd& tk = blocks[0];
       tk.resize(3 * s, 3 * s);
-      for (int d = 0; d < 3; ++d)
-        for (int bb = 0; bb < s; ++bb)
-          for (int c = 0; c < 3; ++c)
-            for (int a = 0; a < s; ++a) tk(3 * a + c, 3 * bb + d) = r(c * s + a, d * s + bb);
+      for (int bb = 0; bb < s; ++bb) {
+        for (int a = 0; a < s; ++a) {
+          const double trace = gm(a, bb) + gm(s + a, s + bb) + gm(2 * s + a, 2 * s + bb);
+          for (int dd = 0; dd < 3; ++dd) {
+            for (int c = 0; c < 3; ++c) {
+              const double lambda_term =
+                  gl.size() > 0 ? gl(c * s + a, dd * s + bb) : g.ratio * gm(c * s + a, dd * s + bb);
+              tk(3 * a + c, 3 * bb + dd) =
+                  lambda_term + gm(dd * s + a, c * s + bb) + (c == dd ? trace : 0.0);
+            }
+          }
+        }
+      }
     };
   }
   StiffnessBlocks(const StiffnessBlocks&) = delete;
   StiffnessBlocks& operator=(const StiffnessBlocks&) = delete;
 
+  static Group MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi) {
+    const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
+    const fem::KindTable& table = layout.tables[kind];
+    const std::vector<models::MaterialPoint>& material = layout.materials[grp.material];
+    const int n = table.nodes, points = table.points;
+    Group g;
+    g.d.resize(3 * points, n);
+    g.root_mu.resize(points);
+    Eigen::VectorXd lambda(points), mu(points);
+    for (int q = 0; q < points; ++q) {
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dn(
+          table.dN(q), n, 3);
+      const Eigen::Matrix3d j = grp.rest.transpose() * dn;
+      const double dv = std::max(j.determinant(), 0.0) * table.weight[q];
+      const Eigen::Matrix3d jit =
+          dv > 0 ? Eigen::Matrix3d(j.inverse().transpose()) : Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector3d grad = jit * dn.row(i).transpose();
+        for (int k = 0; k < 3; ++k) g.d(k * points + q, i) = grad[k];
+      }
+      lambda[q] = dv * material[q].lame_lambda();
+      mu[q] = dv * material[q].lame_mu();
+      g.root_mu[q] = std::sqrt(std::max(mu[q], 0.0));
+    }
+    // lambda / mu is 2 nu / (1 - 2 nu): one number when nu is one number.
+    bool same = true, first = true;
+    double ratio = 0;
+    for (int q = 0; q < points && same; ++q) {
+      if (mu[q] <= 0) continue;
+      const double r = material[q].lame_lambda() / material[q].lame_mu();
+      if (first) ratio = r;
+      first = false;
+      same = r == ratio;
+    }
+    if (same) {
+      g.ratio = ratio;
+    } else {
+      g.root_lambda.resize(points);
+      for (int q = 0; q < points; ++q) g.root_lambda[q] = std::sqrt(std::max(lambda[q], 0.0));
+    }
+    return g;
+  }
+
   CellSumSpec spec;
   std::array<std::vector<std::once_flag>, 3> once;
-  std::array<std::vector<Eigen::MatrixXd>, 3> group_k;
+  std::array<std::vector<Group>, 3> groups;
 };
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
+#include "tests/testing/make_solid.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::solid {
@@ -45,15 +46,7 @@ const char kTorus[] = "mesh { torus { major_radius: 1 tube_half_width: 0.3 segme
 const char kBlock[] = "mesh { block { nx: 3 ny: 3 nz: 4 } }";
 
 std::unique_ptr<Solid> Make(const std::string& text, int threads = 2) {
-  auto scene = scene::ParseScene(text, "test");
-  EXPECT_OK(scene);
-  if (!scene.ok()) return nullptr;
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
-  EXPECT_OK(d);
-  if (!d.ok()) return nullptr;
-  auto made = Solid::Create(*scene, *std::move(d), threads);
-  EXPECT_OK(made);
-  return made.ok() ? *std::move(made) : nullptr;
+  return testing::MakeSolid(text, threads);
 }
 
 Points Perturbed(const Points& rest, double amplitude, unsigned seed) {

@@ -11,6 +11,7 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
+#include "tests/testing/make_solid.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/text_proto.h"
 
@@ -20,17 +21,7 @@ namespace {
 using ::dynsolid::testing::StatusIs;
 using ::testing::HasSubstr;
 
-std::unique_ptr<Solid> Make(const std::string& text) {
-  auto scene = scene::ParseScene(text, "test");
-  EXPECT_OK(scene);
-  if (!scene.ok()) return nullptr;
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
-  EXPECT_OK(d);
-  if (!d.ok()) return nullptr;
-  auto s = Solid::Create(*scene, *std::move(d));
-  EXPECT_OK(s);
-  return s.ok() ? *std::move(s) : nullptr;
-}
+std::unique_ptr<Solid> Make(const std::string& text) { return testing::MakeSolid(text); }
 
 using ::dynsolid::testing::Parse;
 

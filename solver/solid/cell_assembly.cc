@@ -210,6 +210,7 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
       }
     }
     for (int32_t col : cell.support) s.cell_mark[col] = -1;
+    if (spec.extra) spec.extra(cell.support, cell.elements, *p);
     made[k] = std::move(p);
   });
   for (size_t k = 0; k < to_make.size(); ++k) next->by_key[cells[to_make[k]].key] = made[k];

@@ -56,6 +56,13 @@ struct CellSumSpec {
   // Hand each cell's support and partial out (CellSums::supports,
   // partials) instead of summing them.
   bool per_cell = false;
+  // Optional: more a partial keeps, appended to its `outputs` matrices when
+  // it is made (so carried with it): a function of the cell's key alone,
+  // given its support and its elements (kind, index in block).
+  std::function<void(const std::vector<int32_t>& support,
+                     const std::vector<std::pair<int, int32_t>>& elements,
+                     std::vector<Eigen::MatrixXd>& partial)>
+      extra;
   // A key of everything the blocks of a group's elements depend on besides
   // their node rows.
   std::function<Key128(int kind, int32_t group)> group_key;

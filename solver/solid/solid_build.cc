@@ -710,61 +710,74 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
     std::shared_ptr<const CellPartials>* next) const {
   StiffnessBlocks blocks(layout, corotational);
   blocks.spec.per_cell = true;
+  // Each cell's deformation-gradient weights g_j (cell_corotation.h), kept
+  // with its partial as an S x 3 matrix: its elements' gradients at their
+  // centres, by rest volume, on its support (of the group's rest shape and
+  // the node rows, so of the cell's key).
+  const SparseMatrix& nm = d->node_matrix;
+  auto gradients = [&layout, &nm](const std::vector<int32_t>& support,
+                                  const std::vector<std::pair<int, int32_t>>& elements,
+                                  Eigen::MatrixXd& g) {
+    g.setZero(static_cast<Eigen::Index>(support.size()), 3);
+    double volume = 0;
+    for (const auto& [kind, e] : elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::NodeMatrixX3& rest = block.groups[block.group[e]].rest;
+      const double* dn = layout.tables[kind].centre_dn.data();
+      const int32_t* ids = block.element_nodes(e);
+      const int n = block.nodes;
+      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        j += rest.row(i).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
+      }
+      const double det = j.determinant();
+      if (!(det > 0)) continue;
+      const Eigen::Matrix3d jit = j.inverse().transpose();
+      for (int i = 0; i < n; ++i) {
+        const Eigen::RowVector3d gi =
+            det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2])).transpose();
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
+          g.row(at - support.begin()) += it.value() * gi;
+        }
+      }
+      volume += det;
+    }
+    if (volume > 0) g /= volume;
+  };
+  blocks.spec.extra = [&gradients](const std::vector<int32_t>& support,
+                                   const std::vector<std::pair<int, int32_t>>& elements,
+                                   std::vector<Eigen::MatrixXd>& partial) {
+    partial.emplace_back();
+    gradients(support, elements, partial.back());
+  };
   CellSums sums;
   std::shared_ptr<const CellPartials> made =
       SumByCell(d->node_matrix, layout, d->hierarchy.control_cell, d->control().num_cells(),
                 blocks.spec, previous, threads, /*dense=*/false, sums);
   *next = made;
   std::vector<models::CellCorotation::Cell> cells(sums.supports.size());
-  // Each cell's deformation-gradient weights g_j (cell_corotation.h): its
-  // elements' gradients at their centres, by rest volume, on its support.
-  const SparseMatrix& nm = d->node_matrix;
-  const std::vector<int32_t>& control_cell = d->hierarchy.control_cell;
-  std::vector<std::vector<std::pair<int, int32_t>>> elements_of(cells.size());
-  for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout.blocks[kind];
-    for (int32_t e = 0; e < block.size(); ++e) {
-      const int32_t fine = block.cell[e];
-      elements_of[control_cell.empty() ? fine : control_cell[fine]].push_back({kind, e});
-    }
-  }
-  const int64_t ncells = static_cast<int64_t>(cells.size());
-  constexpr int kParts = 16;
-  threads.RunParts(kParts, [&](int part) {
-   for (int64_t c = ncells * part / kParts; c < ncells * (part + 1) / kParts; ++c) {
-    const std::vector<int32_t>& support = sums.supports[c];
-    std::vector<Eigen::Vector3d> g(support.size(), Eigen::Vector3d::Zero());
-    double volume = 0;
-    std::vector<Eigen::Vector3d> grad;
-    for (const auto& [kind, e] : elements_of[c]) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      const fem::KindTable& table = layout.tables[kind];
-      const int32_t* ids = block.element_nodes(e);
-      const int n = block.nodes;
-      const double* dn = table.centre_dn.data();
-      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < n; ++i) {
-        j += rest_nodes.row(ids[i]).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
-      }
-      const double det = j.determinant();
-      if (!(det > 0)) continue;
-      const Eigen::Matrix3d jit = j.inverse().transpose();
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector3d gi = det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]));
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
-          g[at - support.begin()] += it.value() * gi;
-        }
-      }
-      volume += det;
-    }
-    for (Eigen::Vector3d& x : g) x /= volume;
-    cells[c].gradient = std::move(g);
-   }
-  });
   // One matrix per distinct partial (cells of one key share it).
   std::map<const std::vector<Eigen::MatrixXd>*, std::shared_ptr<const Eigen::MatrixXd>> matrix;
   for (size_t c = 0; c < cells.size(); ++c) {
+    const std::vector<Eigen::MatrixXd>& with = *sums.partials[c];
+    // (A partial made for backward Euler's K0 alone has no gradients.)
+    Eigen::MatrixXd made_here;
+    if (with.size() < 2) {
+      std::vector<std::pair<int, int32_t>> elements;
+      for (int kind = 0; kind < 3; ++kind) {
+        const models::ElementBlock& block = layout.blocks[kind];
+        for (int32_t e = 0; e < block.size(); ++e) {
+          const int32_t fine = block.cell[e];
+          const int32_t cc = d->hierarchy.control_cell.empty() ? fine : d->hierarchy.control_cell[fine];
+          if (cc == static_cast<int32_t>(c)) elements.push_back({kind, e});
+        }
+      }
+      gradients(sums.supports[c], elements, made_here);
+    }
+    const Eigen::MatrixXd& g = with.size() >= 2 ? with[1] : made_here;
+    cells[c].gradient.resize(g.rows());
+    for (Eigen::Index a = 0; a < g.rows(); ++a) cells[c].gradient[a] = g.row(a).transpose();
     cells[c].support = std::move(sums.supports[c]);
     const auto& partial = sums.partials[c];
     auto [it, fresh] = matrix.try_emplace(partial.get());

@@ -880,13 +880,16 @@ TEST_F(LiveTest, InspectListsTheLoadsAndConstraintsOfEveryClient) {
 }
 
 TEST_F(LiveTest, StepsSlowerThanRealTimeAreCountedAsOverrunsAndNeverBuildDebt) {
-  // h = 10 microseconds: no machine steps this block in real time, so every
-  // step overruns. The loop must count that and re-anchor its clock rather
-  // than owe ever more steps (counts only; no wall time is asserted).
+  // h = 10 microseconds: no machine steps this block (two levels, the
+  // local-frame model: about 0.5 ms a step) in real time. The loop catches
+  // up at most 25 ms of debt (kCatchUp); 200 such steps take far longer
+  // than that beyond their 2 ms of simulated time, so it must count overruns
+  // and re-anchor its clock rather than owe ever more steps (counts only; no
+  // wall time is asserted).
   const Session s = CreateText(R"(
     name: "tiny_step"
     mesh { block { nx: 3 ny: 3 nz: 3 } }
-    subdivision { levels: 1 }
+    subdivision { levels: 2 }
     materials { base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 } }
     constraints { fixed { box { min { z: -0.01 } max { x: 3 y: 3 z: 0.01 } } } }
     solver { time_step: 1e-5 }

@@ -296,8 +296,10 @@ TEST_F(ProbeTest, ProbeGoesOnAcrossATopologyEditAsItsStiffnessIsRebuilt) {
       const auto& n = r.model().normal();
       EXPECT_NEAR(n.x() * n.x() + n.y() * n.y() + n.z() * n.z(), 1.0, 1e-9);
     }
-    // A model for the earlier pose (now inside the column) does not count.
-    return r.model().stiffness() > 0 && r.last_pose_seq() >= p.seq;
+    // A model for the earlier pose (now inside the column) does not count:
+    // the model's own pose, not the reply's last received one (a pose can
+    // arrive after the refresh that made this model began).
+    return r.model().stiffness() > 0 && r.model().pose_seq() >= p.seq;
   });
   std::printf("%d models went out while the stiffness was being built\n", unknown);
   EXPECT_GT(after.model().point().z(), 3.5) << "on the new column";

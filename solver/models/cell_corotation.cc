@@ -1,7 +1,6 @@
 #include "solver/models/cell_corotation.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <map>
 
@@ -166,11 +165,6 @@ Eigen::Matrix3d CellCorotation::FrameOf(const CellData& c, const Points& p,
   return Polar(f);
 }
 
-Eigen::Matrix3d CellCorotation::Frame(const Points& p, int32_t c) const {
-  Eigen::Vector3d centre;
-  return FrameOf(cells_[c], p, centre);
-}
-
 double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Scratch>& scratch,
                            std::vector<Eigen::Matrix3d>* held, WorkerPool& pool) const {
   pool.RunParts(kForceParts, [&](int part) {
@@ -240,18 +234,8 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
   return energy;
 }
 
-namespace {
-using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
-}  // namespace
-
 double CellCorotation::Forces(const Points& p, Points& g) {
-  const auto t0 = Clock::now();
-  const double e = Run(p, g, Mode::kHold, scratch_, &held_, *pool_);
-  last_ms_ = MsSince(t0);
-  return e;
+  return Run(p, g, Mode::kHold, scratch_, &held_, *pool_);
 }
 
 double CellCorotation::ForcesAt(const Points& p, Points& g) {
@@ -259,10 +243,8 @@ double CellCorotation::ForcesAt(const Points& p, Points& g) {
 }
 
 void CellCorotation::UpdateFrames(const Points& p) {
-  const auto t0 = Clock::now();
   Points unused;
   Run(p, unused, Mode::kFrames, scratch_, &held_, *pool_);
-  last_ms_ = MsSince(t0);
 }
 
 double CellCorotation::AffineForces(const Points& x, Points& g) {

@@ -89,14 +89,11 @@ class CellCorotation {
   // thread alone), so it may run beside the calls above.
   void ApplyRest(const Points& v, Points& out, WorkerPool* pool) const;
 
-  // The frame of cell c at p (tests).
-  Eigen::Matrix3d Frame(const Points& p, int32_t c) const;
 
   void set_pool(WorkerPool& pool) { pool_ = &pool; }
   int32_t cells() const { return static_cast<int32_t>(cells_.size()); }
   int32_t distinct_matrices() const { return static_cast<int32_t>(matrices_.size()); }
   int64_t matrix_bytes() const { return matrix_bytes_; }
-  double last_ms() const { return last_ms_; }
 
  private:
   struct CellData {
@@ -139,7 +136,6 @@ class CellCorotation {
   int64_t matrix_bytes_ = 0;
   int max_side_ = 0, max_batch_ = 1;
   std::vector<Scratch> scratch_;
-  double last_ms_ = 0;
 };
 
 // Per part: its force sum over all control points and its scratch.

@@ -582,7 +582,10 @@ namespace {
 // of sqrt(dV lambda) H. (The 3n x 3n element K is never formed; the same
 // points, weights and clamped dV = max(det J, 0) as the model's K.)
 // Per group, once, when a cell first needs it: the points' J^-T dN and
-// weights. Not movable: the spec's functions point into it.
+// weights. Each partial also keeps, as its second matrix, the cell's
+// deformation-gradient weights g_j (S x 3, cell_corotation.h), so that the
+// per-cell corotation and K0 share their partials whichever made them.
+// Not movable: the spec's functions point into it.
 struct StiffnessBlocks {
   struct Group {
     Eigen::MatrixXd d;         // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
@@ -591,7 +594,8 @@ struct StiffnessBlocks {
     double ratio = 0;          // lambda / mu when the same at every point
   };
 
-  StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational) {
+  StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
+                  const SparseMatrix& nm) {
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
       groups[kind].resize(layout.blocks[kind].groups.size());
@@ -650,9 +654,48 @@ struct StiffnessBlocks {
         }
       }
     };
+    spec.extra = [&layout, &nm](const std::vector<int32_t>& support,
+                                const std::vector<std::pair<int, int32_t>>& elements,
+                                std::vector<Eigen::MatrixXd>& partial) {
+      partial.emplace_back();
+      Gradients(layout, nm, support, elements, partial.back());
+    };
   }
   StiffnessBlocks(const StiffnessBlocks&) = delete;
   StiffnessBlocks& operator=(const StiffnessBlocks&) = delete;
+
+  // A cell's g_j: its elements' gradients at their centres (from the
+  // group's rest shape), by rest volume, on its support (of its key alone).
+  static void Gradients(const models::ElementLayout& layout, const SparseMatrix& nm,
+                        const std::vector<int32_t>& support,
+                        const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& g) {
+    g.setZero(static_cast<Eigen::Index>(support.size()), 3);
+    double volume = 0;
+    for (const auto& [kind, e] : elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::NodeMatrixX3& rest = block.groups[block.group[e]].rest;
+      const double* dn = layout.tables[kind].centre_dn.data();
+      const int32_t* ids = block.element_nodes(e);
+      const int n = block.nodes;
+      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+      for (int i = 0; i < n; ++i) {
+        j += rest.row(i).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
+      }
+      const double det = j.determinant();
+      if (!(det > 0)) continue;
+      const Eigen::Matrix3d jit = j.inverse().transpose();
+      for (int i = 0; i < n; ++i) {
+        const Eigen::RowVector3d gi =
+            det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2])).transpose();
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
+          g.row(at - support.begin()) += it.value() * gi;
+        }
+      }
+      volume += det;
+    }
+    if (volume > 0) g /= volume;
+  }
 
   static Group MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
@@ -708,49 +751,8 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
     const models::ElementLayout& layout, const models::CorotationalModel& corotational,
     WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) const {
-  StiffnessBlocks blocks(layout, corotational);
+  StiffnessBlocks blocks(layout, corotational, d->node_matrix);
   blocks.spec.per_cell = true;
-  // Each cell's deformation-gradient weights g_j (cell_corotation.h), kept
-  // with its partial as an S x 3 matrix: its elements' gradients at their
-  // centres, by rest volume, on its support (of the group's rest shape and
-  // the node rows, so of the cell's key).
-  const SparseMatrix& nm = d->node_matrix;
-  auto gradients = [&layout, &nm](const std::vector<int32_t>& support,
-                                  const std::vector<std::pair<int, int32_t>>& elements,
-                                  Eigen::MatrixXd& g) {
-    g.setZero(static_cast<Eigen::Index>(support.size()), 3);
-    double volume = 0;
-    for (const auto& [kind, e] : elements) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      const fem::NodeMatrixX3& rest = block.groups[block.group[e]].rest;
-      const double* dn = layout.tables[kind].centre_dn.data();
-      const int32_t* ids = block.element_nodes(e);
-      const int n = block.nodes;
-      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < n; ++i) {
-        j += rest.row(i).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
-      }
-      const double det = j.determinant();
-      if (!(det > 0)) continue;
-      const Eigen::Matrix3d jit = j.inverse().transpose();
-      for (int i = 0; i < n; ++i) {
-        const Eigen::RowVector3d gi =
-            det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2])).transpose();
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
-          g.row(at - support.begin()) += it.value() * gi;
-        }
-      }
-      volume += det;
-    }
-    if (volume > 0) g /= volume;
-  };
-  blocks.spec.extra = [&gradients](const std::vector<int32_t>& support,
-                                   const std::vector<std::pair<int, int32_t>>& elements,
-                                   std::vector<Eigen::MatrixXd>& partial) {
-    partial.emplace_back();
-    gradients(support, elements, partial.back());
-  };
   CellSums sums;
   std::shared_ptr<const CellPartials> made =
       SumByCell(d->node_matrix, layout, d->hierarchy.control_cell, d->control().num_cells(),
@@ -760,22 +762,7 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
   // One matrix per distinct partial (cells of one key share it).
   std::map<const std::vector<Eigen::MatrixXd>*, std::shared_ptr<const Eigen::MatrixXd>> matrix;
   for (size_t c = 0; c < cells.size(); ++c) {
-    const std::vector<Eigen::MatrixXd>& with = *sums.partials[c];
-    // (A partial made for backward Euler's K0 alone has no gradients.)
-    Eigen::MatrixXd made_here;
-    if (with.size() < 2) {
-      std::vector<std::pair<int, int32_t>> elements;
-      for (int kind = 0; kind < 3; ++kind) {
-        const models::ElementBlock& block = layout.blocks[kind];
-        for (int32_t e = 0; e < block.size(); ++e) {
-          const int32_t fine = block.cell[e];
-          const int32_t cc = d->hierarchy.control_cell.empty() ? fine : d->hierarchy.control_cell[fine];
-          if (cc == static_cast<int32_t>(c)) elements.push_back({kind, e});
-        }
-      }
-      gradients(sums.supports[c], elements, made_here);
-    }
-    const Eigen::MatrixXd& g = with.size() >= 2 ? with[1] : made_here;
+    const Eigen::MatrixXd& g = (*sums.partials[c])[1];  // the cell's g_j (StiffnessBlocks)
     cells[c].gradient.resize(g.rows());
     for (Eigen::Index a = 0; a < g.rows(); ++a) cells[c].gradient[a] = g.row(a).transpose();
     cells[c].support = std::move(sums.supports[c]);
@@ -796,7 +783,7 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
     const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) {
   const SparseMatrix& nm = d.node_matrix;
-  StiffnessBlocks blocks(layout, corotational);
+  StiffnessBlocks blocks(layout, corotational, nm);
   const CellSumSpec& spec = blocks.spec;
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.

@@ -216,8 +216,7 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
     last_strain_energy = cell_model->Forces(p, out);
     out = -out;
     ++element_passes;
-    phases.nodes = phases.project = 0;
-    phases.measure = -1;
+    phases.nodes = phases.project = phases.measure = -1;
     phases.stiffness = MsSince(t0);
   } else {
     ToNodes(p, nodes);
@@ -252,8 +251,12 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
 void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
                                  Points& pressure, bool energy) {
   auto t0 = Clock::now();
-  if (cell_model == nullptr) ToNodes(p, nodes);
-  phases.nodes = MsSince(t0);
+  if (cell_model == nullptr) {
+    ToNodes(p, nodes);
+    phases.nodes = MsSince(t0);
+  } else {
+    phases.nodes = -1;  // control space
+  }
   t0 = Clock::now();
   if (cell_model != nullptr) {
     // Control space: frames held at p for the next step (cell_corotation.h).
@@ -273,7 +276,7 @@ void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phase
   }
   phases.measure = -1;
   phases.stiffness = MsSince(t0);
-  phases.project = 0;
+  phases.project = cell_model != nullptr ? -1 : 0;
   ExternalForces(p, out, pressure, phases);
 }
 
@@ -299,13 +302,19 @@ void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
 absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                                    PhaseTimes& out) {
   PhaseTimes sub, sum;
-  sum.nodes = sum.stiffness = sum.project = sum.measure = sum.solve = 0;
+  // Phases a pass reports as absent (-1) stay absent unless another pass
+  // has them: the deformation measure is the local-frame model's; the
+  // per-cell corotation has no node positions and no projection.
+  sum.stiffness = sum.solve = 0;
   if (has_const_force || !spring_point.empty() || has_pressure || contact.active) sum.loads = 0;
+  auto accumulate = [](double& total, double t) {
+    if (t >= 0) total = std::max(total, 0.0) + t;
+  };
   auto add = [&](const PhaseTimes& t) {
-    sum.nodes += t.nodes;
+    accumulate(sum.nodes, t.nodes);
     sum.stiffness += t.stiffness;
-    sum.measure += std::max(0.0, t.measure);
-    sum.project += t.project;
+    accumulate(sum.measure, t.measure);
+    accumulate(sum.project, t.project);
     if (sum.loads >= 0) sum.loads += t.loads;
   };
   // Forces at p (kept from the end of the last step unless a rollback or
@@ -409,11 +418,6 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     forces_valid = true;
     ++stats.substeps;
   }
-  // Phases the model does not have are absent, not zero: the deformation
-  // measure is the local-frame model's; the per-cell corotation works in
-  // control space (no node positions, no projection).
-  if (corotational != nullptr) sum.measure = -1;
-  if (cell_model != nullptr) sum.nodes = sum.project = -1;
   out = sum;
   return absl::OkStatus();
 }

@@ -53,8 +53,9 @@ LoopSummary Bridge::Run(const std::atomic<bool>& stop) {
   // loop takes no page fault writing its samples (a fault can wait for the
   // mmap lock behind another thread's mapping: measured, 5-10 ms gaps).
   PrefaultStack();
-  const std::string realtime =
+  std::string realtime =
       options_.rt_priority > 0 ? TryRealtime(options_.rt_priority) : "SCHED_OTHER (not asked)";
+  if (options_.cpu >= 0) realtime += ", " + TryPin(options_.cpu);
 
   DeadlineClock clock(cp.period, options_.spin_margin);
   clock.Start();

@@ -28,6 +28,8 @@ struct BridgeOptions {
   double seconds = 0;
   // Ask for SCHED_FIFO at this priority (0: do not ask).
   int rt_priority = 80;
+  // Pin the loop's thread to this CPU (-1: do not pin).
+  int cpu = -1;
   // Keep a per-tick trace (for force-depth curves; TraceCsv).
   bool trace = false;
   // The first pose's sequence number (a link that already sent poses).

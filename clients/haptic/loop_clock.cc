@@ -6,6 +6,7 @@
 #include <string.h>
 #include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <string>
 
@@ -86,6 +87,45 @@ std::string TryRealtime(int priority) {
     out += std::string(", memory not locked (") + strerror(errno) + ")";
   }
   return out;
+}
+
+std::string TryPin(int cpu) {
+  // Not checked against this thread's own mask: KeepOffCpu may have taken
+  // `cpu` out of it on purpose. The kernel refuses a CPU outside the
+  // process's cpuset (EINVAL).
+  const long ncpu = sysconf(_SC_NPROCESSORS_CONF);
+  if (cpu < 0 || cpu >= ncpu || cpu >= CPU_SETSIZE) {
+    return "not pinned (CPU " + std::to_string(cpu) + " out of range: " + std::to_string(ncpu) +
+           " CPUs)";
+  }
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  CPU_SET(cpu, &set);
+  const int rc = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+  if (rc != 0) {
+    return "not pinned to CPU " + std::to_string(cpu) + " (" + strerror(rc) + ")";
+  }
+  return "pinned to CPU " + std::to_string(cpu);
+}
+
+std::string KeepOffCpu(int cpu) {
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  if (sched_getaffinity(0, sizeof(allowed), &allowed) != 0) {
+    return std::string("other threads not moved (sched_getaffinity: ") + strerror(errno) + ")";
+  }
+  cpu_set_t others;
+  CPU_ZERO(&others);
+  std::string list;
+  for (int c = 0; c < CPU_SETSIZE; ++c) {
+    if (c == cpu || !CPU_ISSET(c, &allowed)) continue;
+    CPU_SET(c, &others);
+    list += (list.empty() ? "" : ",") + std::to_string(c);
+  }
+  if (list.empty()) return "other threads not moved (no other CPU)";
+  const int rc = pthread_setaffinity_np(pthread_self(), sizeof(others), &others);
+  if (rc != 0) return std::string("other threads not moved (") + strerror(rc) + ")";
+  return "other threads on CPUs " + list;
 }
 
 }  // namespace dynsolid::haptic

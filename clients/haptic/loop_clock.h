@@ -49,4 +49,15 @@ int64_t MonotonicNs();
 // not permitted; run with CAP_SYS_NICE or an rtprio limit)".
 std::string TryRealtime(int priority);
 
+// Pins the calling thread to CPU `cpu` (a loop alone on a core wakes on
+// time more often: docs/haptic.md "Benchmark"); returns what was obtained,
+// e.g. "pinned to CPU 1" or "not pinned (CPU 7 out of range: 2 CPUs)".
+std::string TryPin(int cpu);
+
+// Moves the calling thread off CPU `cpu`, onto the others it may use, so
+// that the threads (and processes) it starts later leave the loop's core
+// alone. Returns what was done, e.g. "other threads on CPUs 0" or "other
+// threads not moved (no other CPU)".
+std::string KeepOffCpu(int cpu);
+
 }  // namespace dynsolid::haptic

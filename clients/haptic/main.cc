@@ -27,6 +27,7 @@
 #include "clients/haptic/bridge.h"
 #include "clients/haptic/coupling.h"
 #include "clients/haptic/device.h"
+#include "clients/haptic/loop_clock.h"
 #include "clients/haptic/probe_link.h"
 #include "clients/lib/channel.h"
 #include "dynsolid/service.grpc.pb.h"
@@ -61,6 +62,8 @@ ABSL_FLAG(double, near, 0,
           "(0: the server's default, 10 % of the solid's size)");
 ABSL_FLAG(double, horizon, 0, "the contact model's horizon tau, s (0: the server's 0.03)");
 ABSL_FLAG(int, rt_priority, 80, "SCHED_FIFO priority to ask for (0: do not ask)");
+ABSL_FLAG(int, cpu, -1,
+          "pin the loop to this CPU and keep the bridge's other threads off it (-1: do not pin)");
 ABSL_FLAG(double, spin_us, 100, "sleep to this long before each deadline, then spin, us");
 ABSL_FLAG(bool, verbose, false, "log reconnects and refusals to stderr");
 
@@ -127,6 +130,11 @@ int main(int argc, char** argv) {
       dh::MakeDevice(absl::GetFlag(FLAGS_device), absl::GetFlag(FLAGS_script), dp);
   if (!device.ok()) return Usage(std::string(device.status().message()));
 
+  // Before any other thread starts: they inherit this thread's CPUs, and
+  // the loop (this thread again, in Bridge::Run) pins itself to --cpu.
+  if (absl::GetFlag(FLAGS_cpu) >= 0) {
+    std::fprintf(stderr, "bridge: %s\n", dh::KeepOffCpu(absl::GetFlag(FLAGS_cpu)).c_str());
+  }
   dc::ChannelOptions co;
   co.address = absl::GetFlag(FLAGS_server);
   const dc::ChannelFactory channels = dc::ChannelFactoryFor(co);
@@ -172,6 +180,7 @@ int main(int argc, char** argv) {
   bo.coupling = cp;
   bo.seconds = absl::GetFlag(FLAGS_seconds);
   bo.rt_priority = absl::GetFlag(FLAGS_rt_priority);
+  bo.cpu = absl::GetFlag(FLAGS_cpu);
   bo.trace = !absl::GetFlag(FLAGS_trace).empty();
   bo.spin_margin = absl::GetFlag(FLAGS_spin_us) * 1e-6;
   dh::Bridge bridge(**device, &link, bo);

@@ -9,7 +9,12 @@
 #include <cmath>
 #include <vector>
 
+#include <sched.h>
+
+#include <thread>
+
 #include "clients/haptic/device.h"
+#include "clients/haptic/loop_clock.h"
 #include "clients/haptic/metrics.h"
 
 namespace dynsolid::haptic {
@@ -349,6 +354,34 @@ TEST(MetricsTest, PercentilesAndSummary) {
   EXPECT_EQ(s.deadline_misses, 0);  // 100 us late < 250 us
   EXPECT_DOUBLE_EQ(s.largest_force_step_n, 1.5);
   EXPECT_THAT(s.Json(), HasSubstr("\"period_p999_us\""));
+}
+
+// --cpu: the loop's thread runs on the CPU it asked for, the threads
+// started after KeepOffCpu never do, and a CPU that does not exist is
+// refused by name. (On a one-CPU machine only the refusal is checked.)
+TEST(LoopClockTest, PinsTheLoopAndKeepsOtherThreadsOffItsCpu) {
+  EXPECT_THAT(TryPin(1 << 20), HasSubstr("not pinned (CPU 1048576 out of range"));
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  ASSERT_EQ(sched_getaffinity(0, sizeof(allowed), &allowed), 0);
+  if (CPU_COUNT(&allowed) < 2) GTEST_SKIP() << "one CPU: nothing to keep apart";
+  int loop_cpu = -1;
+  for (int c = 0; c < CPU_SETSIZE; ++c) {
+    if (CPU_ISSET(c, &allowed)) loop_cpu = c;
+  }
+  std::thread([&] {
+    EXPECT_THAT(KeepOffCpu(loop_cpu), HasSubstr("other threads on CPUs"));
+    cpu_set_t inherited;
+    bool other_ran_there = true;
+    std::thread([&] {
+      CPU_ZERO(&inherited);
+      (void)sched_getaffinity(0, sizeof(inherited), &inherited);
+      other_ran_there = CPU_ISSET(loop_cpu, &inherited);
+    }).join();
+    EXPECT_FALSE(other_ran_there) << "a thread started later may still run on CPU " << loop_cpu;
+    EXPECT_EQ(TryPin(loop_cpu), "pinned to CPU " + std::to_string(loop_cpu));
+    EXPECT_EQ(sched_getcpu(), loop_cpu);
+  }).join();
 }
 
 }  // namespace

@@ -352,6 +352,7 @@ void SessionLoop::Run() {
       }
       for (PendingCommand& c : held_) unapplied.push_back(std::move(c));
       held_.clear();
+      held_clients_.clear();
       for (PendingCommand& c : commands) unapplied.push_back(std::move(c));
       absl::MutexLock lock(&mu_);
       built_.reset();
@@ -376,11 +377,11 @@ void SessionLoop::Run() {
       building_.reset();
       for (PendingCommand& c : held_) next.push_back(std::move(c));
       held_.clear();
+      held_clients_.clear();
       for (PendingCommand& c : commands) next.push_back(std::move(c));
       commands.swap(next);
     } else if (building_.has_value()) {
-      for (PendingCommand& c : commands) held_.push_back(std::move(c));
-      commands.clear();
+      HoldBehindBuild(commands);
     }
     // Releases wait for a build (the drags it holds back are not acting yet).
     if (!building_.has_value() || finished != nullptr) ReleaseDragsOf(commands);
@@ -471,17 +472,16 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
   PersistBatch batch;
   int64_t duplicates = 0;
   for (size_t k = 0; k < commands.size(); ++k) {
-    PendingCommand& c = commands[k];
-    if (prebuilt == nullptr && core_->NeedsBuild(c.request)) {
-      // Build off the loop; this command and the rest wait for it.
-      std::function<std::shared_ptr<SimCore::Prebuilt>()> job = core_->Prebuild(c.request);
-      for (size_t r = k; r < commands.size(); ++r) {
-        if (r == k) {
-          building_ = std::move(commands[r]);
-        } else {
-          held_.push_back(std::move(commands[r]));
-        }
-      }
+    if (prebuilt == nullptr && core_->NeedsBuild(commands[k].request)) {
+      // Build off the loop; this command waits for it, and so do the rest
+      // but those HoldBehindBuild lets go ahead.
+      std::function<std::shared_ptr<SimCore::Prebuilt>()> job =
+          core_->Prebuild(commands[k].request);
+      building_ = std::move(commands[k]);
+      held_clients_.insert(building_->request.client_id());
+      std::deque<PendingCommand> rest;
+      for (size_t r = k + 1; r < commands.size(); ++r) rest.push_back(std::move(commands[r]));
+      commands.resize(k);
       builder_ = std::thread([this, job = std::move(job)]() {
         NameThisThread("build");
         std::shared_ptr<SimCore::Prebuilt> result = job();
@@ -490,8 +490,13 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
         build_done_ = true;
         wake_.Signal();
       });
-      break;
+      // Those behind it that may go ahead of the build are applied now,
+      // after the ones before it.
+      HoldBehindBuild(rest);
+      for (PendingCommand& p : rest) commands.push_back(std::move(p));
+      if (k == commands.size()) break;
     }
+    PendingCommand& c = commands[k];
     if (c.request.seq() == 0 && c.request.client_id() == kReleaseClient) {
       c.request.set_seq(core_->LastSeq(kReleaseClient) + 1);
     }
@@ -537,6 +542,21 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
     counters_.duplicates += duplicates;
   }
   Deliver(std::move(batch));
+}
+
+void SessionLoop::HoldBehindBuild(std::deque<PendingCommand>& commands) {
+  std::deque<PendingCommand> ahead;
+  const Command& building = building_->request.command();
+  for (PendingCommand& c : commands) {
+    const std::string& client = c.request.client_id();
+    if (SimCore::MayPassBuild(building, c.request.command()) && !held_clients_.contains(client)) {
+      ahead.push_back(std::move(c));
+    } else {
+      held_clients_.insert(client);
+      held_.push_back(std::move(c));
+    }
+  }
+  commands.swap(ahead);
 }
 
 std::string SessionLoop::MakeSnapshotBytes() {

@@ -170,11 +170,17 @@ class SessionLoop {
 
   // Simulation-thread helpers. ApplyCommands applies commands in order
   // until one needs a solid built (SimCore::NeedsBuild): that one starts its
-  // build on a thread of its own, and it and every command after it wait
-  // (held_) while the loop goes on stepping; `prebuilt` is the finished
-  // build for the first command.
+  // build on a thread of its own, and it and the commands after it wait
+  // (held_) while the loop goes on stepping, but for those that may go
+  // ahead of the build (HoldBehindBuild: loads and drags of clients with
+  // nothing waiting); `prebuilt` is the finished build for the first
+  // command.
   void ApplyCommands(std::deque<PendingCommand>& commands,
                      std::shared_ptr<SimCore::Prebuilt> prebuilt = nullptr);
+  // With a build under way: moves to held_ the commands that must wait for
+  // it, and leaves in `commands`, in order, those that may go ahead
+  // (SimCore::MayPassBuild, from a client with nothing held or building).
+  void HoldBehindBuild(std::deque<PendingCommand>& commands);
   std::string MakeSnapshotBytes();
   void Publish(std::chrono::steady_clock::time_point now);
   void AnswerInspects(bool all_unavailable);
@@ -231,6 +237,7 @@ class SessionLoop {
   std::optional<PendingCommand> building_;  // the command whose solid is being built
   std::thread builder_;
   std::deque<PendingCommand> held_;  // commands behind it, in order
+  absl::flat_hash_set<std::string> held_clients_;  // their clients and building_'s
   // Drags and curves by load id -> the command stream that started them.
   absl::flat_hash_map<int64_t, ReplySink*> drag_owner_;
   std::vector<ReplySink*> streams_to_release_;  // ended, waiting for a build

@@ -126,6 +126,29 @@ bool SimCore::NeedsBuild(const CommandRequest& request) const {
   return false;
 }
 
+bool SimCore::MayPassBuild(const Command& building, const Command& command) {
+  switch (building.kind_case()) {
+    case Command::kPaintMaterial:
+    case Command::kEdit:
+    case Command::kUnfix:
+      break;
+    default:  // an undo's or redo's build reads the history
+      return false;
+  }
+  switch (command.kind_case()) {
+    case Command::kAddPointForce:
+    case Command::kAddPressure:
+    case Command::kSetGravity:
+    case Command::kRemoveLoad:
+    case Command::kDrag:
+    case Command::kCurve:
+    case Command::kMoveDrag:
+      return true;
+    default:
+      return false;
+  }
+}
+
 std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
     const CommandRequest& request) const {
   const Command& c = request.command();

@@ -76,8 +76,20 @@ class SimCore {
   // whether `request` is such a new command; Prebuild returns the build to
   // run on another thread while the loop goes on stepping. The caller must
   // apply no other command until it hands the result to Process (the build
-  // reads the current solid's materials and topology, and the history).
+  // reads the current solid's materials and topology, and the history),
+  // except those MayPassBuild allows.
   bool NeedsBuild(const CommandRequest& request) const;
+
+  // Whether `command` may be applied while the build for `building` (a
+  // command NeedsBuild said yes to) is under way, ahead of it: true only
+  // when that build is a paint's, an edit's or an unfix's and `command`
+  // changes nothing such a build reads or installs (loads, drags, curves,
+  // gravity; not materials, topology, constraints, the history or the
+  // clock). The result is the same as applying it after the build: the
+  // build's command then lands on a solid whose loads differ, which it
+  // takes over (an edit carries them across, a paint and an unfix leave
+  // them alone). The caller keeps each client's commands in order.
+  static bool MayPassBuild(const Command& building, const Command& command);
 
   // The last seq applied for `client_id` (0: none).
   uint64_t LastSeq(const std::string& client_id) const;

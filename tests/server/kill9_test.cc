@@ -43,7 +43,10 @@ std::string ServerBinary() {
 // A dynsolid-server child process.
 class ServerProcess {
  public:
-  ServerProcess(const std::string& data_dir, const std::string& log) {
+  ServerProcess(const std::string& data_dir, const std::string& log,
+                int snapshot_every_steps = 40) {
+    const std::string snapshot_flag =
+        absl::StrCat("--snapshot_every_steps=", snapshot_every_steps);
     int out[2];
     if (::pipe(out) != 0) return;
     pid_ = ::fork();
@@ -55,7 +58,7 @@ class ServerProcess {
       const std::string binary = ServerBinary();
       const std::string dir_flag = "--data_dir=" + data_dir;
       ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", dir_flag.c_str(),
-              "--snapshot_every_steps=40", static_cast<char*>(nullptr));
+              snapshot_flag.c_str(), static_cast<char*>(nullptr));
       ::_exit(127);
     }
     ::close(out[1]);
@@ -256,6 +259,73 @@ TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
   }
   EXPECT_THAT(text, ::testing::HasSubstr(absl::StrCat("session ", s.id(), " recovered: snapshot at step")));
   EXPECT_THAT(text, ::testing::HasSubstr("dropped 6 bytes of unacknowledged tail"));
+}
+
+// Loads of other clients go ahead of a paint being built (they do not
+// wait for its build), and the journal keeps the order they were applied
+// in: a server killed afterwards replays it, paint included, to the same
+// bits. Nothing is snapshotted after the start, so all of it is replayed.
+TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
+  TempDir dir;
+  const std::string log = dir.path() + "/server.log";
+  const std::string data = dir.path() + "/data";
+  Session s;
+  InspectReply live;
+  {
+    ServerProcess server(data, log, /*snapshot_every_steps=*/1000000);
+    ASSERT_FALSE(server.address().empty()) << "the server did not start; see " << log;
+    auto stub = server.Stub();
+    CreateSessionRequest r;
+    r.set_builtin_scene("block3");
+    r.set_levels_override(2);  // a paint of the whole block builds for 0.1 s and more
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    ASSERT_TRUE(stub->CreateSession(&context, r, &s).ok());
+    CommandStream painter(*stub, s, "painter"), pusher(*stub, s, "pusher");
+    InspectAt(*stub, s, 5, false, false);
+    Command paint, fix;
+    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+        "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
+        "material { young_modulus: 3e5 } strength: 1 }",
+        &paint));
+    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+        "fix_region { box { min { x: 2.9 } max { x: 3.1 y: 3 z: 3 } } }", &fix));
+    ASSERT_TRUE(painter.Write(1, paint));
+    ASSERT_TRUE(painter.Write(2, ForceCommand(1.5, 1.5, 3, 0, 0, -2e4)));
+    // A few steps later the loop has taken the paint and is building it.
+    const int64_t sent = InspectAt(*stub, s, 0, false, false).step();
+    InspectAt(*stub, s, sent + 5, false, false);
+    const CommandReply pushed = pusher.Send(1, ForceCommand(0.5, 0.5, 3, 1e4, 0, 0));
+    const CommandReply fixed = pusher.Send(2, fix);
+    CommandReply painted, forced;
+    ASSERT_TRUE(painter.Read(&painted));
+    ASSERT_TRUE(painter.Read(&forced));
+    for (const CommandReply* reply : {&pushed, &fixed, static_cast<const CommandReply*>(&painted), static_cast<const CommandReply*>(&forced)}) {
+      ASSERT_EQ(reply->code(), 0) << reply->message();
+    }
+    EXPECT_LT(pushed.applied_step(), painted.applied_step())
+        << "another client's force waited for the paint's build";
+    EXPECT_GE(forced.applied_step(), painted.applied_step())
+        << "the painter's own force went ahead of its paint";
+    EXPECT_GE(fixed.applied_step(), painted.applied_step())
+        << "a constraint (which the build reads) went ahead of the paint";
+    Command pause;
+    pause.mutable_pause();
+    const CommandReply paused = pusher.Send(3, pause);
+    ASSERT_EQ(paused.code(), 0) << paused.message();
+    live = InspectAt(*stub, s, paused.applied_step());
+    ASSERT_EQ(live.step(), paused.applied_step());
+    const int status = server.Signal(SIGKILL);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  }
+  ServerProcess server(data, log, /*snapshot_every_steps=*/1000000);
+  ASSERT_FALSE(server.address().empty()) << "the server did not restart; see " << log;
+  auto stub = server.Stub();
+  const InspectReply recovered = InspectAt(*stub, s, live.step());
+  EXPECT_EQ(recovered.step(), live.step());
+  EXPECT_TRUE(recovered.paused());
+  EXPECT_TRUE(BitIdentical(recovered.control_positions(), live.control_positions()));
+  EXPECT_TRUE(BitIdentical(recovered.surface_positions(), live.surface_positions()));
 }
 
 }  // namespace

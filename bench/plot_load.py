@@ -82,6 +82,20 @@ def main():
                 s, r["clients"], total / max(r["seconds"], 1e-9),
                 ", ".join("%s %.0f ms (%d, max %.0f)" % (k, h["total_ms"], h["count"], h["max_ms"])
                           for k, h in top)))
+    kinds = sorted({k for s in scenes for r in data[s] for k in r.get("visible_by_kind_ms", {})})
+    if kinds:
+        lines += ["", "## Command-to-visible by command kind", "",
+                  "p50 / p99 in ms (count). A paint, an edit, an unfix, an undo and a redo may "
+                  "build a solid off the loop; their own command is visible only after that "
+                  "build. Loads and drags of other clients do not wait for it.", "",
+                  "| scene | clients | " + " | ".join(kinds) + " |",
+                  "| --- | ---: | " + " | ".join("---" for _ in kinds) + " |"]
+        for s in scenes:
+            for r in data[s]:
+                by = r.get("visible_by_kind_ms", {})
+                lines.append("| %s | %d | %s |" % (s, r["clients"], " | ".join(
+                    "%.1f / %.1f (%d)" % (by[k]["p50"], by[k]["p99"], by[k]["count"]) if k in by
+                    else "" for k in kinds)))
     lines.append("")
     with open(os.path.join(directory, "README.md"), "w") as f:
         f.write("\n".join(lines))
@@ -95,6 +109,9 @@ def main():
         axes[0].plot(n, [r["ack_ms"]["p99"] for r in runs], "o-", label="%s ack p99" % s)
         axes[0].plot(n, [r["visible_ms"]["p99"] for r in runs], "s--", label="%s visible p99" % s)
         axes[0].plot(n, [r["visible_ms"]["p50"] for r in runs], "^:", label="%s visible p50" % s)
+        if all("visible_no_build_ms" in r for r in runs):
+            axes[0].plot(n, [r["visible_no_build_ms"]["p99"] for r in runs], "x-.",
+                         label="%s visible p99, commands that build nothing" % s)
         axes[1].plot(n, [r["loaded_steps_per_second"] / max(r["unloaded_steps_per_second"], 1e-9)
                          for r in runs], "o-", label=s)
         big = runs[-1]

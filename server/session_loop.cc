@@ -453,7 +453,10 @@ void SessionLoop::Run() {
     if (has_watchers) {
       const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
                          core_->fields_version() != last_published_fields_;
-      if (dirty && (publish_requested || now >= next_publish_)) Publish(now);
+      if (dirty && (publish_requested || now >= next_publish_ ||
+                    (frame_for_command_ && now >= earliest_publish_))) {
+        Publish(now);
+      }
     }
   }
   // Shutdown: a last snapshot makes the next start quick.
@@ -523,6 +526,7 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       }
     }
     if (outcome == SimCore::Outcome::kDuplicate) ++duplicates;
+    if (outcome == SimCore::Outcome::kApplied) frame_for_command_ = true;
     if (core_->TakeSaveRequest()) {
       // The Save's own record goes first; the snapshot covers it.
       batch.snapshot = MakeSnapshotBytes();
@@ -597,6 +601,12 @@ void SessionLoop::Publish(Clock::time_point now) {
   for (auto& s : sinks) s->Offer(snap);
   last_published_step_ = snap->step;
   last_published_fields_ = snap->fields_version;
+  frame_for_command_ = false;
+  const double command_interval =
+      std::max(1.0 / options_.max_watch_hz,
+               static_cast<double>(sinks.size()) / options_.command_frame_writes_per_second);
+  earliest_publish_ = now + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(command_interval));
   rate = std::clamp(rate > 0 ? rate : options_.watch_hz, 0.1, options_.max_watch_hz);
   next_publish_ = now + std::chrono::duration_cast<Clock::duration>(
                             std::chrono::duration<double>(1.0 / rate));

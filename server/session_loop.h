@@ -72,6 +72,11 @@ struct LoopOptions {
   // Default and largest watch rate, frames per second.
   double watch_hz = 60;
   double max_watch_hz = 240;
+  // Frames sent early because a command was applied (frame_for_command_):
+  // at most max_watch_hz, and at most this many frame writes per second
+  // over all of a session's watchers (64 watchers: 62 such frames a
+  // second), so that many watchers do not turn commands into a flood.
+  double command_frame_writes_per_second = 4000;
   int max_watchers = 64;
   // Per client_id: commands per second (token bucket, burst of one second).
   double commands_per_second = 1000;
@@ -246,6 +251,11 @@ class SessionLoop {
   void ReleaseDragsOf(std::deque<PendingCommand>& commands);
   std::vector<PendingInspect> waiting_inspects_;
   int64_t last_published_step_ = -1;
+  // A command was applied since the last frame: the next frame goes out
+  // after the next step, not at the watchers' rate (at most max_watch_hz:
+  // earliest_publish_), so a client sees what it did within a step or two.
+  bool frame_for_command_ = false;
+  std::chrono::steady_clock::time_point earliest_publish_;
   int64_t last_published_fields_ = -1;
   std::chrono::steady_clock::time_point next_publish_;
   uint64_t journal_submitted_ = 0;  // logical journal size incl. queued

@@ -100,6 +100,22 @@ absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
   return b;
 }
 
+// Whether a command never builds a solid on the server: not a paint, an
+// edit, an unfix, an undo or a redo (those may build for tens to hundreds
+// of ms, and their command is visible only after).
+bool BuildsNothing(const Command& c) {
+  switch (c.kind_case()) {
+    case Command::kPaintMaterial:
+    case Command::kEdit:
+    case Command::kUnfix:
+    case Command::kUndo:
+    case Command::kRedo:
+      return false;
+    default:
+      return true;
+  }
+}
+
 // One client's seeded command mix. Points are rest positions well inside
 // the solid's box (the upper half, where nothing is pinned by the scenes).
 class Mix {
@@ -600,7 +616,8 @@ absl::StatusOr<Report> LoadRun::Run() {
   if (sampler.joinable()) sampler.join();
 
   // Figures.
-  std::vector<double> ack, visible;
+  std::vector<double> ack, visible, visible_no_build;
+  std::map<std::string, std::vector<double>> visible_by_kind;
   double fps_sum = 0;
   for (int i = 0; i < o_.clients; ++i) {
     ClientResult& r = results[i];
@@ -629,7 +646,12 @@ absl::StatusOr<Report> LoadRun::Run() {
       // after the command was sent.
       for (const auto& [step, at] : r.frames) {
         if (at >= rec.sent && step >= rec.reply.applied_step()) {
-          visible.push_back(Ms(at - rec.sent));
+          const double ms = Ms(at - rec.sent);
+          visible.push_back(ms);
+          const google::protobuf::FieldDescriptor* f =
+              Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
+          visible_by_kind[f != nullptr ? f->name() : "none"].push_back(ms);
+          if (BuildsNothing(rec.command)) visible_no_build.push_back(ms);
           break;
         }
       }
@@ -651,6 +673,8 @@ absl::StatusOr<Report> LoadRun::Run() {
   rep.commands_per_second = run_seconds > 0 ? rep.acknowledged / run_seconds : 0;
   rep.ack_ms = Summarize(ack);
   rep.visible_ms = Summarize(visible);
+  rep.visible_no_build_ms = Summarize(visible_no_build);
+  for (auto& [kind, v] : visible_by_kind) rep.visible_by_kind_ms[kind] = Summarize(v);
   rep.loaded_steps_per_second =
       run_seconds > 0 ? (after.step() - before.step()) / run_seconds : 0;
   rep.step_ms_median = after.step_ms_median();
@@ -802,6 +826,10 @@ std::string ReportJson(const Report& r) {
                     absl::StrFormat("\"%s\": {\"count\": %d, \"total_ms\": %.1f, \"max_ms\": %.2f}",
                                     k, h.count, h.total_ms, h.max_ms));
   }
+  std::string by_kind;
+  for (const auto& [k, p] : r.visible_by_kind_ms) {
+    absl::StrAppend(&by_kind, by_kind.empty() ? "" : ", ", "\"", k, "\": ", pct(p));
+  }
   std::string samples;
   for (const auto& s : r.server_samples) {
     absl::StrAppend(&samples, samples.empty() ? "" : ", ", absl::StrFormat("[%.3f, %.1f, %.0f]", s[0], s[1], s[2]));
@@ -825,6 +853,8 @@ std::string ReportJson(const Report& r) {
       ",\n  \"sent\": ", r.sent, ", \"acknowledged\": ", r.acknowledged, ", \"applied\": ", r.applied,
       ", \"rejected\": ", r.rejected, ", \"commands_per_second\": ", absl::StrFormat("%.1f", r.commands_per_second),
       ",\n  \"ack_ms\": ", pct(r.ack_ms), ",\n  \"visible_ms\": ", pct(r.visible_ms),
+      ",\n  \"visible_no_build_ms\": ", pct(r.visible_no_build_ms),
+      ",\n  \"visible_by_kind_ms\": {", by_kind, "}",
       ",\n  \"codes\": {", codes, "}", ",\n  \"hold\": {", hold, "}",
       ",\n  \"frames\": ", r.frames, ", \"frames_skipped\": ", r.frames_skipped,
       ", \"frames_per_second\": ", absl::StrFormat("%.1f", r.frames_per_second),
@@ -855,19 +885,23 @@ std::string ReportMarkdown(const Report& r) {
   }
   std::string out = absl::StrFormat(
       "| scene | clients | sessions | faults | commands/s | ack p50 / p99 / p99.9 / max (ms) | "
-      "visible p50 / p99 / p99.9 / max (ms) | steps/s unloaded -> loaded (h = %g s) | step ms "
+      "visible p50 / p99 / p99.9 / max (ms) | visible p50 / p99 of commands that build nothing "
+      "(ms) | steps/s unloaded -> loaded (h = %g s) | step ms "
       "median / p99 | dropped | frames/s per watcher | skipped | server CPU %% / RSS max (MB) | "
       "lost, duplicated, reordered |\n"
-      "| --- | ---: | --- | --- | ---: | --- | --- | --- | --- | ---: | ---: | ---: | --- | --- |\n",
+      "| --- | ---: | --- | --- | ---: | --- | --- | --- | --- | --- | ---: | ---: | ---: | --- | "
+      "--- |\n",
       r.time_step);
   absl::StrAppend(
       &out,
       absl::StrFormat("| %s | %d | %s | %s | %.1f | %.2f / %.2f / %.2f / %.2f | %.2f / %.2f / %.2f / "
-                      "%.2f | %.0f -> %.0f | %.3f / %.3f | %d | %.1f | %d | %.0f / %.0f | %s |\n",
+                      "%.2f | %.2f / %.2f | %.0f -> %.0f | %.3f / %.3f | %d | %.1f | %d | %.0f / "
+                      "%.0f | %s |\n",
                       o.scene, o.clients, o.shared ? "one shared" : "one each",
                       faults.empty() ? "none" : faults, r.commands_per_second, r.ack_ms.p50,
                       r.ack_ms.p99, r.ack_ms.p999, r.ack_ms.max, r.visible_ms.p50, r.visible_ms.p99,
-                      r.visible_ms.p999, r.visible_ms.max, r.unloaded_steps_per_second,
+                      r.visible_ms.p999, r.visible_ms.max, r.visible_no_build_ms.p50,
+                      r.visible_no_build_ms.p99, r.unloaded_steps_per_second,
                       r.loaded_steps_per_second, r.step_ms_median, r.step_ms_p99, r.steps_dropped,
                       r.frames_per_second, r.frames_skipped, r.server_cpu_percent,
                       r.server_rss_max_kb / 1024.0,

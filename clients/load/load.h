@@ -59,6 +59,11 @@ struct Report {
   int64_t sent = 0, acknowledged = 0, applied = 0, rejected = 0;
   double commands_per_second = 0;
   Percentiles ack_ms, visible_ms;
+  // Command-to-visible by command kind, and over the kinds that never build
+  // a solid (BuildsNothing): what a paint's or an edit's build costs its
+  // own command, apart from what the other commands see.
+  std::map<std::string, Percentiles> visible_by_kind_ms;
+  Percentiles visible_no_build_ms;
   std::map<std::string, int64_t> codes;  // status name -> answers (and stream errors of faults)
   // Per command kind: answers, and the time they held the session's loop
   // (CommandReply.hold_ms), total ms: what the stepping thread spent on

@@ -166,6 +166,37 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
   wc.TryCancel();
 }
 
+// A watcher that asks for one frame a second still sees a command's effect
+// at once: the frame after the command's step goes out then, not a second
+// later (at most max_watch_hz; SessionLoop::frame_for_command_).
+TEST_F(LiveTest, AFrameFollowsAnAppliedCommandWithinAStepWhateverTheWatchRate) {
+  const Session s = Create("block3", 1, /*paused=*/false);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(120));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  wr.set_rate_hz(1);
+  auto reader = stub_->Watch(&wc, wr);
+  SurfaceDecoder decoder;
+  Frame first;
+  ASSERT_TRUE(reader->Read(&first));
+  ASSERT_TRUE(decoder.Apply(first).ok());
+  CommandStream commands(*stub_, s, "frames");
+  for (uint64_t seq = 1; seq <= 3; ++seq) {
+    const CommandReply r = commands.Send(seq, ForceCommand(1.5, 1.5, 3, 1e3 * seq, 0, 0));
+    ASSERT_EQ(r.code(), 0) << r.message();
+    // The first frame at or after the command's step: at most a few steps
+    // later (1 Hz frames would be about 1000 steps apart).
+    Frame f;
+    do {
+      ASSERT_TRUE(reader->Read(&f));
+      ASSERT_TRUE(decoder.Apply(f).ok());
+    } while (f.step() < r.applied_step());
+    EXPECT_LE(f.step(), r.applied_step() + 20) << "seq " << seq;
+  }
+  wc.TryCancel();
+}
+
 TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
   // The default scene at its two levels, pulled at the top corner: every
   // delta frame of a 60 Hz watcher against 12 bytes per vertex.

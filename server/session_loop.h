@@ -74,9 +74,9 @@ struct LoopOptions {
   double max_watch_hz = 240;
   // Frames sent early because a command was applied (frame_for_command_):
   // at most max_watch_hz, and at most this many frame writes per second
-  // over all of a session's watchers (64 watchers: 62 such frames a
+  // over all of a session's watchers (64 watchers: 31 such frames a
   // second), so that many watchers do not turn commands into a flood.
-  double command_frame_writes_per_second = 4000;
+  double command_frame_writes_per_second = 2000;
   int max_watchers = 64;
   // Per client_id: commands per second (token bucket, burst of one second).
   double commands_per_second = 1000;

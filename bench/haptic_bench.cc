@@ -81,48 +81,95 @@ std::string DefaultServerBinary(const char* argv0) {
   return (self.parent_path().parent_path() / "server" / "dynsolid-server").string();
 }
 
-class ServerProcess {
+// A child process running `args` (args[0] the binary), its stdout a pipe
+// to this one and, with `with_stdin`, its stdin a pipe from this one (it
+// sees end of file when CloseStdin is called); stderr to `log` if given.
+// It gets SIGTERM when this process dies, and at destruction.
+class Child {
  public:
-  ServerProcess(const std::string& binary, const std::string& log,
-                const std::vector<std::string>& extra) {
-    int out[2];
-    if (::pipe(out) != 0) return;
+  Child(std::vector<std::string> args, bool with_stdin, const std::string& log = "") {
+    int out[2], in[2] = {-1, -1};
+    if (::pipe(out) != 0 || (with_stdin && ::pipe(in) != 0)) return;
     const pid_t parent = ::getpid();
     pid_ = ::fork();
     if (pid_ == 0) {
       ::prctl(PR_SET_PDEATHSIG, SIGTERM);
       if (::getppid() != parent) ::_exit(127);
       ::dup2(out[1], 1);
-      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
-      if (err >= 0) ::dup2(err, 2);
       ::close(out[0]);
-      std::vector<std::string> args = {binary, "--listen=127.0.0.1:0"};
-      args.insert(args.end(), extra.begin(), extra.end());
+      if (with_stdin) {
+        ::dup2(in[0], 0);
+        ::close(in[1]);
+      }
+      if (!log.empty()) {
+        const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
+        if (err >= 0) ::dup2(err, 2);
+      }
       std::vector<char*> argv;
       for (std::string& a : args) argv.push_back(a.data());
       argv.push_back(nullptr);
-      ::execv(binary.c_str(), argv.data());
+      ::execv(argv[0], argv.data());
       ::_exit(127);
     }
     ::close(out[1]);
+    out_ = out[0];
+    if (with_stdin) {
+      ::close(in[0]);
+      in_ = in[1];
+    }
+  }
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+  ~Child() {
+    if (in_ >= 0) ::close(in_);
+    if (out_ >= 0) ::close(out_);
+    Wait(SIGTERM);
+  }
+  // A line of its stdout, without the newline ("" at end of file).
+  std::string ReadLine() {
     std::string line;
     char c;
-    while (::read(out[0], &c, 1) == 1 && c != '\n') line.push_back(c);
-    ::close(out[0]);
+    while (out_ >= 0 && ::read(out_, &c, 1) == 1 && c != '\n') line.push_back(c);
+    return line;
+  }
+  void CloseStdin() {
+    if (in_ >= 0) ::close(in_);
+    in_ = -1;
+  }
+  // Sends `signal` (0: none, it ends by itself) and reaps it.
+  void Wait(int signal) {
+    if (pid_ <= 0) return;
+    if (signal != 0) ::kill(pid_, signal);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int out_ = -1, in_ = -1;
+};
+
+// dynsolid-server on a free loopback port.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& binary, const std::string& log,
+                const std::vector<std::string>& extra)
+      : child_(Args(binary, extra), /*with_stdin=*/false, log) {
+    const std::string line = child_.ReadLine();
     const std::string prefix = "listening on ";
     if (line.rfind(prefix, 0) == 0) address_ = line.substr(prefix.size());
-  }
-  ~ServerProcess() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGTERM);
-      int status = 0;
-      ::waitpid(pid_, &status, 0);
-    }
   }
   const std::string& address() const { return address_; }
 
  private:
-  pid_t pid_ = -1;
+  static std::vector<std::string> Args(const std::string& binary,
+                                       const std::vector<std::string>& extra) {
+    std::vector<std::string> args = {binary, "--listen=127.0.0.1:0"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return args;
+  }
+  Child child_;
   std::string address_;
 };
 
@@ -130,55 +177,19 @@ class ServerProcess {
 // It prints its frame count on its stdout when the parent closes its stdin.
 class WatcherProcess {
  public:
-  WatcherProcess(const std::string& self, const std::string& spec, int watchers) {
-    int out[2], in[2];
-    if (::pipe(out) != 0 || ::pipe(in) != 0) return;
-    const pid_t parent = ::getpid();
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
-      if (::getppid() != parent) ::_exit(127);
-      ::dup2(out[1], 1);
-      ::dup2(in[0], 0);
-      ::close(out[0]);
-      ::close(in[1]);
-      std::vector<std::string> args = {self, "--watch_only=" + spec,
-                                       "--watchers=" + std::to_string(watchers)};
-      std::vector<char*> argv;
-      for (std::string& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      ::execv(self.c_str(), argv.data());
-      ::_exit(127);
-    }
-    ::close(out[1]);
-    ::close(in[0]);
-    out_ = out[0];
-    in_ = in[1];
-  }
+  WatcherProcess(const std::string& self, const std::string& spec, int watchers)
+      : child_({self, "--watch_only=" + spec, "--watchers=" + std::to_string(watchers)},
+               /*with_stdin=*/true) {}
   // Stops the watchers and returns the frames they decoded.
   long Finish() {
-    if (pid_ <= 0) return 0;
-    ::close(in_);
-    std::string line;
-    char c;
-    while (::read(out_, &c, 1) == 1 && c != '\n') line.push_back(c);
-    ::close(out_);
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return std::atol(line.c_str());
-  }
-  ~WatcherProcess() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGTERM);
-      int status = 0;
-      ::waitpid(pid_, &status, 0);
-    }
+    child_.CloseStdin();
+    const long frames = std::atol(child_.ReadLine().c_str());
+    child_.Wait(0);
+    return frames;
   }
 
  private:
-  pid_t pid_ = -1;
-  int out_ = -1, in_ = -1;
+  Child child_;
 };
 
 // --watch_only=ADDRESS,ID,TOKEN: watch at 60 Hz until stdin closes.

@@ -74,11 +74,27 @@ namespace {
 namespace dh = dynsolid::haptic;
 namespace dc = dynsolid::client;
 
-std::string DefaultServerBinary(const char* argv0) {
+// This binary's path.
+std::filesystem::path SelfPath(const char* argv0) {
   std::error_code ec;
   std::filesystem::path self = std::filesystem::canonical("/proc/self/exe", ec);
-  if (ec) self = argv0;
-  return (self.parent_path().parent_path() / "server" / "dynsolid-server").string();
+  return ec ? std::filesystem::path(argv0) : self;
+}
+
+std::string DefaultServerBinary(const char* argv0) {
+  return (SelfPath(argv0).parent_path().parent_path() / "server" / "dynsolid-server").string();
+}
+
+// `n` decoding watchers of the session at 60 Hz, each on its own channel.
+std::vector<std::unique_ptr<dc::Watcher>> StartWatchers(const dc::ChannelFactory& channels,
+                                                        const dynsolid::SessionRef& ref, int n) {
+  std::vector<std::unique_ptr<dc::Watcher>> watchers;
+  for (int i = 0; i < n; ++i) {
+    dc::WatcherOptions wo;
+    wo.rate_hz = 60;
+    watchers.push_back(std::make_unique<dc::Watcher>(channels, ref, wo));
+  }
+  return watchers;
 }
 
 // A child process running `args` (args[0] the binary), its stdout a pipe
@@ -206,12 +222,7 @@ int WatchOnly(const std::string& spec, int n) {
   dynsolid::SessionRef ref;
   ref.set_id(f[1]);
   ref.set_token(f[2]);
-  std::vector<std::unique_ptr<dc::Watcher>> watchers;
-  for (int i = 0; i < n; ++i) {
-    dc::WatcherOptions wo;
-    wo.rate_hz = 60;
-    watchers.push_back(std::make_unique<dc::Watcher>(channels, ref, wo));
-  }
+  std::vector<std::unique_ptr<dc::Watcher>> watchers = StartWatchers(channels, ref, n);
   char c;
   while (::read(0, &c, 1) > 0) {
   }
@@ -317,17 +328,11 @@ int main(int argc, char** argv) {
   std::unique_ptr<WatcherProcess> watcher_process;
   const int nwatch = absl::GetFlag(FLAGS_watchers);
   if (nwatch > 0 && absl::GetFlag(FLAGS_watcher_process)) {
-    std::error_code ec;
-    std::string self = std::filesystem::canonical("/proc/self/exe", ec).string();
-    if (ec) self = argv[0];
     watcher_process = std::make_unique<WatcherProcess>(
-        self, absl::StrCat(server.address(), ",", session.id(), ",", session.token()), nwatch);
+        SelfPath(argv[0]).string(),
+        absl::StrCat(server.address(), ",", session.id(), ",", session.token()), nwatch);
   } else {
-    for (int i = 0; i < nwatch; ++i) {
-      dc::WatcherOptions wo;
-      wo.rate_hz = 60;
-      watchers.push_back(std::make_unique<dc::Watcher>(channels, ref, wo));
-    }
+    watchers = StartWatchers(channels, ref, nwatch);
   }
 
   const double seconds = absl::GetFlag(FLAGS_seconds);

@@ -251,13 +251,14 @@ class SessionLoop {
   void ReleaseDragsOf(std::deque<PendingCommand>& commands);
   std::vector<PendingInspect> waiting_inspects_;
   int64_t last_published_step_ = -1;
-  // A command was applied since the last frame: the next frame goes out
-  // after the next step, not at the watchers' rate (at most max_watch_hz:
-  // earliest_publish_), so a client sees what it did within a step or two.
-  bool frame_for_command_ = false;
-  std::chrono::steady_clock::time_point earliest_publish_;
   int64_t last_published_fields_ = -1;
   std::chrono::steady_clock::time_point next_publish_;
+  // A command was applied since the last frame: the next frame goes out
+  // after the next step, not at the watchers' rate, but not before
+  // earliest_publish_ (LoopOptions::command_frame_writes_per_second), so a
+  // client sees what it did within a step or two.
+  bool frame_for_command_ = false;
+  std::chrono::steady_clock::time_point earliest_publish_;
   uint64_t journal_submitted_ = 0;  // logical journal size incl. queued
   int64_t last_snapshot_step_ = -1;
 

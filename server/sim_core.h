@@ -85,10 +85,12 @@ class SimCore {
   // when that build is a paint's, an edit's or an unfix's and `command`
   // changes nothing such a build reads or installs (loads, drags, curves,
   // gravity; not materials, topology, constraints, the history or the
-  // clock). The result is the same as applying it after the build: the
-  // build's command then lands on a solid whose loads differ, which it
-  // takes over (an edit carries them across, a paint and an unfix leave
-  // them alone). The caller keeps each client's commands in order.
+  // clock). So the build's result does not depend on whether `command`
+  // went first, and a replay in the journal's order, where the build runs
+  // in line, reaches the same bits. The build's command then finds loads
+  // it did not see built: an edit carries them across, a paint and an
+  // unfix leave them alone. The caller keeps each client's commands in
+  // order.
   static bool MayPassBuild(const Command& building, const Command& command);
 
   // The last seq applied for `client_id` (0: none).

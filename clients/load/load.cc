@@ -100,6 +100,13 @@ absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
   return b;
 }
 
+// The command's kind as its field name ("add_point_force"; "none" unset).
+std::string KindName(const Command& c) {
+  const google::protobuf::FieldDescriptor* f =
+      Command::descriptor()->FindFieldByNumber(c.kind_case());
+  return f != nullptr ? f->name() : "none";
+}
+
 // Whether a command never builds a solid on the server: not a paint, an
 // edit, an unfix, an undo or a redo (those may build for tens to hundreds
 // of ms, and their command is visible only after).
@@ -633,10 +640,9 @@ absl::StatusOr<Report> LoadRun::Run() {
       if (rec.reply.applied_step() < 0) continue;
       ++rep.acknowledged;
       (rec.reply.code() == 0 ? rep.applied : rep.rejected) += 1;
+      const std::string kind = KindName(rec.command);
       if (!rec.reply.duplicate()) {
-        const google::protobuf::FieldDescriptor* f =
-            Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
-        Report::Hold& h = rep.hold[f != nullptr ? f->name() : "none"];
+        Report::Hold& h = rep.hold[kind];
         ++h.count;
         h.total_ms += rec.reply.hold_ms();
         h.max_ms = std::max(h.max_ms, rec.reply.hold_ms());
@@ -648,9 +654,7 @@ absl::StatusOr<Report> LoadRun::Run() {
         if (at >= rec.sent && step >= rec.reply.applied_step()) {
           const double ms = Ms(at - rec.sent);
           visible.push_back(ms);
-          const google::protobuf::FieldDescriptor* f =
-              Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
-          visible_by_kind[f != nullptr ? f->name() : "none"].push_back(ms);
+          visible_by_kind[kind].push_back(ms);
           if (BuildsNothing(rec.command)) visible_no_build.push_back(ms);
           break;
         }
@@ -756,10 +760,7 @@ std::vector<std::string> CheckAgainstJournal(const std::string& client_id,
     }
     if (!rec.answered || rec.reply.applied_step() < 0) continue;  // not acknowledged
     if (seen.count(rec.seq) == 0) {
-      const google::protobuf::FieldDescriptor* f =
-          Command::descriptor()->FindFieldByNumber(rec.command.kind_case());
-      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, " (",
-                                       f != nullptr ? f->name() : "none",
+      problems->push_back(absl::StrCat(client_id, " seq ", rec.seq, " (", KindName(rec.command),
                                        "): acknowledged at step ", rec.reply.applied_step(),
                                        " but not in the journal (lost)"));
     }

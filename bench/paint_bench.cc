@@ -4,9 +4,11 @@
 // off the simulation loop, and ApplyPaint, which holds the loop. Prints
 // figures only. Then the painted solid's SaveState (what the undo history
 // copies for every undoable command).
-//   paint_bench [scene=block3] [model=the scene's: local_frame, corotational, corotational_cells]
+//   paint_bench [scene=block3] [model=the scene's: local_frame, corotational,
+//                corotational_cells, or "-"] [radius=0.8]
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
@@ -14,7 +16,7 @@
 int main(int argc, char** argv) {
   auto scene = dynsolid::scene::BuiltinScene(argc > 1 ? argv[1] : "block3");
   if (!scene.ok()) { std::printf("%s\n", std::string(scene.status().message()).c_str()); return 1; }
-  if (argc > 2) {
+  if (argc > 2 && std::string(argv[2]) != "-") {
     // The brush figures name a model: block3 with the local frame.
     const std::string model = argv[2];
     dynsolid::SolverSettings* s = scene->mutable_solver();
@@ -34,7 +36,7 @@ int main(int argc, char** argv) {
   dynsolid::MaterialPaint paint;
   auto* sp = paint.mutable_region()->mutable_sphere();
   sp->mutable_center()->set_x(1.5); sp->mutable_center()->set_y(1.5); sp->mutable_center()->set_z(2.5);
-  sp->set_radius(0.8);
+  sp->set_radius(argc > 3 ? std::atof(argv[3]) : 0.8);
   paint.mutable_material()->set_young_modulus(3e5);
   paint.set_strength(1.0);
   auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
@@ -53,6 +55,13 @@ int main(int argc, char** argv) {
     auto t2 = std::chrono::steady_clock::now();
     std::printf("; then prepare %.1f ms (off the loop) + apply %.2f ms (holds the loop)%s\n",
                 ms(t0, t1), ms(t1, t2), applied.ok() ? "" : " FAILED");
+    if (prepared.ok()) {
+      const auto ph = dynsolid::solid::Solid::PhasesOf(**prepared);
+      std::printf("  prepare: %lld samples painted; layout %.1f, model %.1f (%d cells made), "
+                  "mass %.1f, stable step %.1f ms\n",
+                  static_cast<long long>(ph.samples_painted), ph.layout, ph.model, ph.cells_made,
+                  ph.mass, ph.stable);
+    }
     paint.mutable_material()->set_young_modulus(3.05e5 + 1e4 * (i + 1));
   }
   // What every undoable command copies into the undo history once the solid

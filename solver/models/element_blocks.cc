@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -376,141 +377,203 @@ std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
   return match;
 }
 
+namespace {
+
+// Material sample arrays deduplicated by content, numbered in the order
+// they are first added (BuildElementLayout's order).
+class MaterialTable {
+ public:
+  explicit MaterialTable(ElementLayout& layout) : layout_(layout) {}
+  int32_t Add(const std::vector<MaterialPoint>& samples) {
+    key_.clear();
+    for (const MaterialPoint& m : samples) {
+      key_.insert(key_.end(), {m.young, m.poisson, m.density, m.damping});
+    }
+    auto [it, fresh] = index_.try_emplace(key_, static_cast<int32_t>(layout_.materials.size()));
+    if (fresh) layout_.materials.push_back(samples);
+    return it->second;
+  }
+
+ private:
+  ElementLayout& layout_;
+  std::map<std::vector<double>, int32_t> index_;
+  std::vector<double> key_;
+};
+
+// What a group keeps of its rest shape (groups of one shape share it).
+struct ShapeData {
+  fem::NodeMatrixX3 rest;             // the first element of the shape's rest nodes
+  fem::NodeMatrixX3 centre_gradient;  // physical gradients at the centre
+  double volume = 0;
+  bool inverted = false;
+};
+
+ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x) {
+  ShapeData sd;
+  sd.rest = x;
+  fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
+  for (int q = 0; q < table.points; ++q) {
+    const double det = fem::JacobianDeterminant(table.dN(q), x, table.nodes);
+    sd.inverted |= det <= 0;
+    sd.volume += det * table.weight[q];
+  }
+  return sd;
+}
+
+// The groups of block `kind` (its node ids and cells set) and their
+// elements' order: element e (rest nodes x) has material array
+// material_of(e, x) and, when its rest shape is new, that shape's data
+// shape_of(e, x). Adds the block's rest volume and inverted elements.
+void GroupElements(
+    ElementLayout& layout, int kind, const Points& rest,
+    const std::function<int32_t(int32_t e, const fem::NodeMatrixX3& x)>& material_of,
+    const std::function<ShapeData(int32_t e, const fem::NodeMatrixX3& x)>& shape_of) {
+  ElementBlock& block = layout.blocks[kind];
+  const int n = block.nodes;
+  const int32_t count = block.size();
+  block.group.resize(count);
+  block.groups.clear();
+  std::map<std::vector<int64_t>, int32_t> group_index;
+  // Rest shapes up to translation, each with the rest nodes of its first
+  // element: a group's matrices are integrated over its shape's first
+  // element whatever the materials, so they are a function of (shape,
+  // material samples) alone and a rebuild after a paint or a restore
+  // gives the same bits as the build before it.
+  std::map<std::vector<int64_t>, int32_t> shape_index;
+  std::vector<ShapeData> shapes;
+  std::vector<int32_t> group_shape;  // group -> shape
+  std::vector<int64_t> shape_key;
+  fem::NodeMatrixX3 x(n, 3);
+  for (int32_t e = 0; e < count; ++e) {
+    const int32_t* ids = block.element_nodes(e);
+    for (int i = 0; i < n; ++i) x.row(i) = rest.row(ids[i]);
+    const int32_t material = material_of(e, x);
+    // Rest shape up to translation, quantized to 1e-9 of its size.
+    double size = 0;
+    for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
+    const double quantum = std::max(size, 1e-300) * 1e-9;
+    shape_key.clear();
+    for (int i = 1; i < n; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        shape_key.push_back(std::llround((x(i, c) - x(0, c)) / quantum));
+      }
+    }
+    auto [sit, new_shape] = shape_index.try_emplace(shape_key, static_cast<int32_t>(shapes.size()));
+    if (new_shape) shapes.push_back(shape_of(e, x));
+    const std::vector<int64_t> group_key{material, sit->second};
+    auto [git, new_group] =
+        group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
+    block.group[e] = git->second;
+    if (new_group) {
+      const ShapeData& sd = shapes[sit->second];
+      ElementGroup grp;
+      grp.representative = e;
+      grp.material = material;
+      grp.rest = sd.rest;
+      grp.centre_gradient = sd.centre_gradient;
+      grp.shape_volume = sd.volume;
+      grp.shape_inverted = sd.inverted;
+      block.groups.push_back(std::move(grp));
+      group_shape.push_back(sit->second);
+    }
+  }
+  // Elements sorted by group, and within a group along a Z-order curve
+  // of their centres (ties by index).
+  const int32_t ng = static_cast<int32_t>(block.groups.size());
+  block.group_start.assign(ng + 1, 0);
+  for (int32_t e = 0; e < count; ++e) ++block.group_start[block.group[e] + 1];
+  for (int32_t i = 0; i < ng; ++i) block.group_start[i + 1] += block.group_start[i];
+  block.by_group.resize(count);
+  std::vector<int32_t> fill(block.group_start.begin(), block.group_start.end() - 1);
+  for (int32_t e = 0; e < count; ++e) block.by_group[fill[block.group[e]]++] = e;
+  const std::vector<uint64_t> key = ZOrderKeys(block, rest);
+  for (int32_t gi = 0; gi < ng; ++gi) {
+    std::sort(block.by_group.begin() + block.group_start[gi],
+              block.by_group.begin() + block.group_start[gi + 1],
+              [&](int32_t a, int32_t b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
+  }
+  // Rest volume and inversion, from each group's shape.
+  for (int32_t gi = 0; gi < ng; ++gi) {
+    const ElementGroup& g = block.groups[gi];
+    const int32_t members = block.group_start[gi + 1] - block.group_start[gi];
+    layout.rest_volume += g.shape_volume * members;
+    if (g.shape_inverted) layout.inverted_elements += members;
+  }
+}
+
+}  // namespace
+
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler, const ElementMaterials* whole) {
   ElementLayout layout;
-  std::map<std::vector<double>, int32_t> material_index;
+  MaterialTable table_of_materials(layout);
   // Arrays `whole` gave, by address: their material index once known.
   std::unordered_map<const void*, int32_t> whole_index;
-  std::vector<double> material_key;
   std::vector<MaterialPoint> samples;
-  fem::NodeMatrixX3 x;
-  std::vector<int64_t> shape_key;
   for (int kind = 0; kind < 3; ++kind) {
     const auto k = static_cast<fem::ElementKind>(kind);
-    fem::KindTable& table = layout.tables[kind] = fem::MakeKindTable(k);
+    const fem::KindTable& table = layout.tables[kind] = fem::MakeKindTable(k);
     ElementBlock& block = layout.blocks[kind];
     block.kind = k;
     block.nodes = table.nodes;
     block.node_ids = NodesOfKind(elements, kind);
     block.cell = CellsOfKind(elements, kind);
     AlignElementAxes(block, rest);
-    const int n = block.nodes;
-    const int32_t count = block.size();
-    block.group.resize(count);
-    std::map<std::vector<int64_t>, int32_t> group_index;
-    // Rest shapes up to translation, each with the rest nodes of its first
-    // element: a group's matrices are integrated over its shape's first
-    // element whatever the materials, so they are a function of (shape,
-    // material samples) alone and a rebuild after a paint or a restore
-    // gives the same bits as the build before it.
-    std::map<std::vector<int64_t>, int32_t> shape_index;
-    std::vector<fem::NodeMatrixX3> shape_rest;
-    struct ShapeData {
-      fem::NodeMatrixX3 centre_gradient;
-      double volume = 0;
-      bool inverted = false;
-    };
-    std::vector<ShapeData> shape_data;
-    std::vector<int32_t> group_shape;  // group -> shape
-    x.resize(n, 3);
-    for (int32_t e = 0; e < count; ++e) {
-      const int32_t* ids = block.element_nodes(e);
-      for (int i = 0; i < n; ++i) x.row(i) = rest.row(ids[i]);
+    auto material_of = [&](int32_t e, const fem::NodeMatrixX3& x) {
       // Material samples at the quadrature points' rest positions.
       const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]
                                                              : cell_control_cell[block.cell[e]];
       const std::vector<MaterialPoint>* given =
           whole != nullptr ? (*whole)(kind, x, control_cell) : nullptr;
       if (given != nullptr && static_cast<int>(given->size()) != table.points) given = nullptr;
-      int32_t material = -1;
       if (given != nullptr) {
         auto w = whole_index.find(given);
-        if (w != whole_index.end()) material = w->second;
+        if (w != whole_index.end()) return w->second;
+        const int32_t material = table_of_materials.Add(*given);
+        whole_index.emplace(given, material);
+        return material;
       }
-      if (material < 0) {
-        if (given != nullptr) {
-          samples = *given;
-        } else {
-          samples.resize(table.points);
-          for (int q = 0; q < table.points; ++q) {
-            const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q), n);
-            const Eigen::Vector3d xq = (nq * x).transpose();
-            samples[q] = sampler(xq, control_cell);
-          }
-        }
-        material_key.clear();
-        for (const MaterialPoint& m : samples) {
-          material_key.insert(material_key.end(), {m.young, m.poisson, m.density, m.damping});
-        }
-        auto [it, fresh] = material_index.try_emplace(
-            material_key, static_cast<int32_t>(layout.materials.size()));
-        if (fresh) layout.materials.push_back(samples);
-        material = it->second;
-        if (given != nullptr) whole_index.emplace(given, material);
+      samples.resize(table.points);
+      for (int q = 0; q < table.points; ++q) {
+        samples[q] = sampler(SamplePosition(table, q, x), control_cell);
       }
-      // Rest shape up to translation, quantized to 1e-9 of its size.
-      double size = 0;
-      for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
-      const double quantum = std::max(size, 1e-300) * 1e-9;
-      shape_key.clear();
-      for (int i = 1; i < n; ++i) {
-        for (int c = 0; c < 3; ++c) {
-          shape_key.push_back(std::llround((x(i, c) - x(0, c)) / quantum));
-        }
-      }
-      auto [sit, new_shape] =
-          shape_index.try_emplace(shape_key, static_cast<int32_t>(shape_rest.size()));
-      if (new_shape) {
-        // Per shape, once: the centre gradients, the rest volume and
-        // whether it is inverted (groups of one shape share them).
-        shape_rest.push_back(x);
-        ShapeData sd;
-        fem::PhysicalGradients(table.centre_dn.data(), x, n, sd.centre_gradient);
-        for (int q = 0; q < table.points; ++q) {
-          const double det = fem::JacobianDeterminant(table.dN(q), x, n);
-          sd.inverted |= det <= 0;
-          sd.volume += det * table.weight[q];
-        }
-        shape_data.push_back(std::move(sd));
-      }
-      const std::vector<int64_t> group_key{material, sit->second};
-      auto [git, new_group] =
-          group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
-      block.group[e] = git->second;
-      if (new_group) {
-        ElementGroup grp;
-        grp.representative = e;
-        grp.material = material;
-        grp.rest = shape_rest[sit->second];
-        grp.centre_gradient = shape_data[sit->second].centre_gradient;
-        block.groups.push_back(std::move(grp));
-        group_shape.push_back(sit->second);
-      }
-    }
-    // Elements sorted by group, and within a group along a Z-order curve
-    // of their centres (ties by index).
-    const int32_t ng = static_cast<int32_t>(block.groups.size());
-    block.group_start.assign(ng + 1, 0);
-    for (int32_t e = 0; e < count; ++e) ++block.group_start[block.group[e] + 1];
-    for (int32_t i = 0; i < ng; ++i) block.group_start[i + 1] += block.group_start[i];
-    block.by_group.resize(count);
-    std::vector<int32_t> fill(block.group_start.begin(), block.group_start.end() - 1);
-    for (int32_t e = 0; e < count; ++e) block.by_group[fill[block.group[e]]++] = e;
-    const std::vector<uint64_t> key = ZOrderKeys(block, rest);
-    for (int32_t gi = 0; gi < ng; ++gi) {
-      std::sort(block.by_group.begin() + block.group_start[gi],
-                block.by_group.begin() + block.group_start[gi + 1],
-                [&](int32_t a, int32_t b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
-    }
-    // Rest volume and inversion, from each group's shape.
-    for (int32_t gi = 0; gi < ng; ++gi) {
-      const ShapeData& sd = shape_data[group_shape[gi]];
-      const int32_t members = block.group_start[gi + 1] - block.group_start[gi];
-      layout.rest_volume += sd.volume * members;
-      if (sd.inverted) layout.inverted_elements += members;
-    }
+      return table_of_materials.Add(samples);
+    };
+    GroupElements(layout, kind, rest, material_of,
+                  [&table](int32_t, const fem::NodeMatrixX3& x) { return IntegrateShape(table, x); });
+  }
+  return layout;
+}
+
+ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
+                                const ElementArrays& arrays) {
+  ElementLayout layout;
+  MaterialTable table_of_materials(layout);
+  // previous's arrays (distinct by content) by their new index.
+  std::vector<int32_t> kept(previous.materials.size(), -1);
+  for (int kind = 0; kind < 3; ++kind) {
+    layout.tables[kind] = previous.tables[kind];
+    const ElementBlock& was = previous.blocks[kind];
+    ElementBlock& block = layout.blocks[kind];
+    block.kind = was.kind;
+    block.nodes = was.nodes;
+    block.node_ids = was.node_ids;
+    block.cell = was.cell;
+    auto material_of = [&](int32_t e, const fem::NodeMatrixX3&) {
+      const std::vector<MaterialPoint>* given = arrays(kind, e);
+      if (given != nullptr) return table_of_materials.Add(*given);
+      const int32_t old = was.groups[was.group[e]].material;
+      if (kept[old] < 0) kept[old] = table_of_materials.Add(previous.materials[old]);
+      return kept[old];
+    };
+    // A shape's first element is the same whatever the materials: its data
+    // is that of the element's group before.
+    auto shape_of = [&was](int32_t e, const fem::NodeMatrixX3&) {
+      const ElementGroup& g = was.groups[was.group[e]];
+      return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted};
+    };
+    GroupElements(layout, kind, rest, material_of, shape_of);
   }
   return layout;
 }

@@ -48,6 +48,8 @@ struct ElementGroup {
   int32_t material = 0;               // material array id
   fem::NodeMatrixX3 rest;             // n x 3 rest nodes of the first element of its shape
   fem::NodeMatrixX3 centre_gradient;  // n x 3 physical gradients at the centre
+  double shape_volume = 0;            // rest volume of one element of its shape
+  bool shape_inverted = false;        // det J0 <= 0 at a quadrature point of its shape
 };
 
 struct ElementBlock {
@@ -176,6 +178,14 @@ int64_t PerElementBytes(const ElementLayout& layout);
 std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
                                           const ElementLayout& previous, int kind);
 
+// The rest position of quadrature point q of an element of `table` with
+// rest nodes x (n x 3): where BuildElementLayout samples its material.
+inline Eigen::Vector3d SamplePosition(const fem::KindTable& table, int q,
+                                      const fem::NodeMatrixX3& x) {
+  const Eigen::Map<const Eigen::Matrix<double, 1, Eigen::Dynamic>> nq(table.N(q), table.nodes);
+  return (nq * x).transpose();
+}
+
 // Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
 // `cell_control_cell` maps level-L cells to control cells for the sampler.
 // `whole` (optional) is asked first for each element.
@@ -183,5 +193,17 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler,
                                  const ElementMaterials* whole = nullptr);
+
+// Element e of `kind`'s new sample array (table.points samples), or null
+// when it keeps the one it has.
+using ElementArrays = std::function<const std::vector<MaterialPoint>*(int kind, int32_t e)>;
+
+// The layout BuildElementLayout gives, bit for bit, for the elements and
+// rest nodes `previous` was built from, with each element's samples those
+// `arrays` gives it (or its samples in `previous`): materials, shapes and
+// groups numbered as BuildElementLayout numbers them, without sampling or
+// integrating anything (a paint, an undo to another material).
+ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
+                                const ElementArrays& arrays);
 
 }  // namespace dynsolid::models

@@ -345,6 +345,15 @@ class Solid {
   class PreparedPaint;
   absl::StatusOr<std::shared_ptr<PreparedPaint>> PreparePaint(const MaterialPaint& paint) const;
   absl::Status ApplyPaint(PreparedPaint& prepared);
+  // Where a prepared paint's time went, ms (for benchmarks): sampling the
+  // paint and laying out the new material; the model (with the per-cell
+  // partials it made anew); mass; the stable step; the whole prepare.
+  struct PaintPhases {
+    double layout = 0, model = 0, mass = 0, stable = 0, total = 0;
+    int32_t cells_made = -1;
+    int64_t samples_painted = 0;
+  };
+  static PaintPhases PhasesOf(const PreparedPaint& prepared);
 
   // Ids of the active point forces, pressures and fixed-region constraints,
   // ascending.

@@ -153,6 +153,11 @@ class Solid::PreparedPaint {
   double omega = 0;
   int substeps = 1;
   bool estimated = false;
+  // Where the prepare's time went (ms): sampling the paint and laying out
+  // the new material, the model (with the per-cell partials made anew:
+  // build.k_cells_made), mass, and the stable step.
+  double layout_ms = 0, stable_ms = 0, total_ms = 0;
+  int64_t samples_painted = 0;
   // build.model runs on this pool until installed (then on the solid's).
   std::unique_ptr<WorkerPool> pool;
 };

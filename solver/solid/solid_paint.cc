@@ -3,11 +3,11 @@
 // its matrices, mass and stable step on a model of its own) and installed
 // on it (ApplyPaint); PaintMaterial is the two in a row.
 #include <algorithm>
+#include <array>
 #include <memory>
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
-#include "solver/solid/ordered_sampler.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -63,6 +63,7 @@ absl::Status Solid::PaintMaterial(const MaterialPaint& paint) {
 absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     const MaterialPaint& paint) const {
   const Impl& im = *impl_;
+  const auto t_start = Clock::now();
   RETURN_IF_ERROR(scene::ValidateMaterialPaint(paint, "paint"));
   RETURN_IF_ERROR(im.CheckControlCells(paint.region(), "paint.region"));
   auto out = std::make_shared<PreparedPaint>();
@@ -82,35 +83,71 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
     return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
   };
-  OrderedSampler sampler(
-      old, im.rest_nodes,
-      [&](int kind, int32_t e, int q, const Eigen::Vector3d& x, int32_t cell) {
-        const models::ElementBlock& block = old.blocks[kind];
-        models::MaterialPoint m = old.materials[block.groups[block.group[e]].material][q];
-        const double w = PaintWeight(paint, x, cell);
-        if (w > 0) {
-          ++touched;
-          m.young = Blend(m.young, target.young_modulus(), w);
-          m.poisson = Blend(m.poisson, target.poisson_ratio(), w);
-          m.density = Blend(m.density, target.density(), w);
-          m.damping = Blend(m.damping, target.damping(), w);
-          const models::MaterialPoint& was =
-              old.materials[block.groups[block.group[e]].material][q];
-          stiffness_ratio = std::max(stiffness_ratio, stiffness_ratios(was, m));
-          mass_ratio = std::min(mass_ratio, m.density / was.density);
-        }
-        return m;
-      });
-  auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
-      d_.elements, im.rest_nodes, d_.hierarchy.control_cell,
-      [&sampler](const Eigen::Vector3d& x, int32_t cell) { return sampler(x, cell); }));
-  if (!sampler.ok()) {
-    return absl::InternalError("paint: the element layout sampled materials out of order");
+  // Only elements whose rest nodes' box meets the region (or whose control
+  // cell it lists) can hold a painted sample: every shape function is
+  // non-negative inside its element, so its samples lie in that box.
+  const Region& r = paint.region();
+  std::vector<uint8_t> listed(d_.control().num_cells(), 0);
+  for (int32_t c : r.control_cells()) listed[c] = 1;
+  Eigen::AlignedBox3d region;  // empty: no shape
+  if (r.shape_case() == Region::kSphere) {
+    const Eigen::Vector3d c = V(r.sphere().center());
+    region = Eigen::AlignedBox3d(c.array() - r.sphere().radius(), c.array() + r.sphere().radius());
+  } else if (r.shape_case() == Region::kBox) {
+    region = Eigen::AlignedBox3d(V(r.box().min()), V(r.box().max()));
   }
+  const std::vector<int32_t>& control_cell = d_.hierarchy.control_cell;
+  std::array<std::vector<int32_t>, 3> painted;  // per element: index into arrays, or -1
+  std::vector<std::vector<models::MaterialPoint>> arrays;
+  fem::NodeMatrixX3 x;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = old.blocks[kind];
+    const fem::KindTable& table = old.tables[kind];
+    const int n = block.nodes;
+    painted[kind].assign(block.size(), -1);
+    x.resize(n, 3);
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t cell = control_cell.empty() ? block.cell[e] : control_cell[block.cell[e]];
+      const int32_t* ids = block.element_nodes(e);
+      Eigen::AlignedBox3d box;
+      for (int i = 0; i < n; ++i) {
+        x.row(i) = im.rest_nodes.row(ids[i]);
+        box.extend(x.row(i).transpose());
+      }
+      if (!listed[cell] && !box.intersects(region)) continue;
+      const std::vector<models::MaterialPoint>& was = old.materials[block.groups[block.group[e]].material];
+      std::vector<models::MaterialPoint> now = was;
+      bool changed = false;
+      for (int q = 0; q < table.points; ++q) {
+        const double w = PaintWeight(paint, models::SamplePosition(table, q, x), cell);
+        if (!(w > 0)) continue;
+        ++touched;
+        models::MaterialPoint& m = now[q];
+        m.young = Blend(m.young, target.young_modulus(), w);
+        m.poisson = Blend(m.poisson, target.poisson_ratio(), w);
+        m.density = Blend(m.density, target.density(), w);
+        m.damping = Blend(m.damping, target.damping(), w);
+        stiffness_ratio = std::max(stiffness_ratio, stiffness_ratios(was[q], m));
+        mass_ratio = std::min(mass_ratio, m.density / was[q].density);
+        changed |= !(m == was[q]);
+      }
+      if (changed) {
+        painted[kind][e] = static_cast<int32_t>(arrays.size());
+        arrays.push_back(std::move(now));
+      }
+    }
+  }
+  auto layout = std::make_unique<models::ElementLayout>(models::RelayoutMaterials(
+      old, im.rest_nodes, [&](int kind, int32_t e) -> const std::vector<models::MaterialPoint>* {
+        const int32_t a = painted[kind][e];
+        return a < 0 ? nullptr : &arrays[a];
+      }));
   if (touched == 0) {
     return absl::InvalidArgumentError(
         "paint.region contains no material sample (quadrature point) of the solid");
   }
+  out->samples_painted = touched;
+  out->layout_ms = MsSince(t_start);
   // The new model's passes (the stable-step estimate below) run on a pool
   // of this thread's own: the solid's may be stepping.
   out->pool = std::make_unique<WorkerPool>(1);
@@ -119,6 +156,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   // The stable step: from the bound when it keeps the sub-step count (or
   // the step is implicit), else estimated afresh (Lanczos, the
   // costliest part of a paint). Sub-steps never drop on a paint.
+  const auto t_stable = Clock::now();
   double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
   int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
   if (!im.use_implicit && substeps > im.substeps) {
@@ -135,6 +173,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   }
   out->omega = omega;
   out->substeps = substeps;
+  out->stable_ms = MsSince(t_stable);
   if (im.use_implicit) {
     out->k0 = im.StiffnessMatrix(*out->build.layout, *out->build.corotational, *out->pool,
                                  &out->k0_cells, out->build.k_cells.get());
@@ -145,6 +184,19 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     out->implicit_setup = integrators::BackwardEuler::Prepare(
         out->build.mt, out->build.has_damping ? &out->build.dt : nullptr, h_, im.fixed, &out->k0);
   }
+  out->total_ms = MsSince(t_start);
+  return out;
+}
+
+Solid::PaintPhases Solid::PhasesOf(const PreparedPaint& prepared) {
+  PaintPhases out;
+  out.layout = prepared.layout_ms;
+  out.model = prepared.build.model_ms;
+  out.mass = prepared.build.mass_ms;
+  out.stable = prepared.stable_ms;
+  out.total = prepared.total_ms;
+  out.cells_made = prepared.build.k_cells_made;
+  out.samples_painted = prepared.samples_painted;
   return out;
 }
 

@@ -11,7 +11,6 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
-#include "solver/solid/ordered_sampler.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -530,16 +529,8 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   std::shared_ptr<const CellPartials> k0_cells;
   std::unique_ptr<WorkerPool> own_pool;
   if (!same_material) {
-    OrderedSampler sampler(cur, im.rest_nodes,
-                           [&](int kind, int32_t e, int q, const Eigen::Vector3d&, int32_t) {
-                             return arrays[element_array[kind][e]][q];
-                           });
-    auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
-        d_.elements, im.rest_nodes, d_.hierarchy.control_cell,
-        [&sampler](const Eigen::Vector3d& x, int32_t cell) { return sampler(x, cell); }));
-    if (!sampler.ok()) {
-      return absl::InternalError("solid state: the element layout sampled materials out of order");
-    }
+    auto layout = std::make_unique<models::ElementLayout>(models::RelayoutMaterials(
+        cur, im.rest_nodes, [&](int kind, int32_t e) { return &arrays[element_array[kind][e]]; }));
     own_pool = std::make_unique<WorkerPool>(1);
     ASSIGN_OR_RETURN(build, im.BuildMaterial(std::move(layout), /*reuse=*/true, own_pool.get()));
     if (im.use_implicit) {

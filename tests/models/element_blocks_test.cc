@@ -4,6 +4,7 @@
 // orientation the mesh gave their cells, and batches of a group are
 // compact clusters.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -138,6 +139,101 @@ TEST(AlignedAxes, UniformBlockIsOneGroupOfCompactBatches) {
     }
   }
 }
+
+
+// RelayoutMaterials gives the layout BuildElementLayout gives for the same
+// samples, bit for bit: material arrays, shapes and groups numbered alike,
+// the same group data, element order and rest volume. Built here from a
+// layout of two materials, with some elements given a third (a band, as a
+// brush leaves) and some given back the first (an array the layout already
+// has), on meshes with one shape (block3), many (chair) and all three kinds
+// (mixed).
+class RelayoutTest : public ::testing::TestWithParam<const char*> {};
+
+void ExpectSameLayout(const ElementLayout& a, const ElementLayout& b) {
+  ASSERT_EQ(a.materials.size(), b.materials.size());
+  for (size_t k = 0; k < a.materials.size(); ++k) EXPECT_EQ(a.materials[k], b.materials[k]) << k;
+  EXPECT_EQ(a.rest_volume, b.rest_volume);
+  EXPECT_EQ(a.inverted_elements, b.inverted_elements);
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& x = a.blocks[kind];
+    const ElementBlock& y = b.blocks[kind];
+    EXPECT_EQ(x.node_ids, y.node_ids);
+    EXPECT_EQ(x.cell, y.cell);
+    EXPECT_EQ(x.group, y.group) << "kind " << kind;
+    EXPECT_EQ(x.by_group, y.by_group);
+    EXPECT_EQ(x.group_start, y.group_start);
+    ASSERT_EQ(x.groups.size(), y.groups.size());
+    for (size_t g = 0; g < x.groups.size(); ++g) {
+      EXPECT_EQ(x.groups[g].representative, y.groups[g].representative);
+      EXPECT_EQ(x.groups[g].material, y.groups[g].material);
+      EXPECT_EQ(x.groups[g].rest, y.groups[g].rest);
+      EXPECT_EQ(x.groups[g].centre_gradient, y.groups[g].centre_gradient);
+      EXPECT_EQ(x.groups[g].shape_volume, y.groups[g].shape_volume);
+      EXPECT_EQ(x.groups[g].shape_inverted, y.groups[g].shape_inverted);
+    }
+  }
+}
+
+TEST_P(RelayoutTest, EqualsTheLayoutBuiltFromTheSameSamples) {
+  test_util::MeshFixture f;
+  test_util::BuildMesh(scene::BuiltinScene(GetParam()), 2, test_util::TwoMaterials(1e5, 0.3), f);
+  // The band: samples with 0.2 < y < 0.6 get Young's modulus 3e5 (a third
+  // material), elements of cell 0 get 1e5 everywhere (the first's samples).
+  auto painted = [](const Eigen::Vector3d& x, int32_t cell, const MaterialPoint& was) {
+    MaterialPoint m = was;
+    if (x.y() > 0.2 && x.y() < 0.6) m.young = 3e5;
+    if (cell == 0) m.young = 1e5;
+    return m;
+  };
+  const MaterialSampler two = test_util::TwoMaterials(1e5, 0.3);
+  const MaterialSampler full = [&](const Eigen::Vector3d& x, int32_t cell) {
+    return painted(x, cell, two(x, cell));
+  };
+  const ElementLayout built =
+      BuildElementLayout(f.d.elements, f.rest, f.d.hierarchy.control_cell, full);
+  std::vector<std::vector<MaterialPoint>> arrays;
+  std::array<std::vector<int32_t>, 3> index;
+  int32_t given = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const ElementBlock& block = f.layout.blocks[kind];
+    const fem::KindTable& table = f.layout.tables[kind];
+    index[kind].assign(block.size(), -1);
+    fem::NodeMatrixX3 x(block.nodes, 3);
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < block.nodes; ++i) x.row(i) = f.rest.row(ids[i]);
+      const int32_t cell = f.d.hierarchy.control_cell[block.cell[e]];
+      std::vector<MaterialPoint> now = f.layout.materials[block.groups[block.group[e]].material];
+      bool changed = false;
+      for (int q = 0; q < table.points; ++q) {
+        const MaterialPoint m = painted(SamplePosition(table, q, x), cell, now[q]);
+        changed |= !(m == now[q]);
+        now[q] = m;
+      }
+      if (changed) {
+        index[kind][e] = static_cast<int32_t>(arrays.size());
+        arrays.push_back(std::move(now));
+        ++given;
+      }
+    }
+  }
+  ASSERT_GT(given, 0);
+  const ElementLayout relaid = RelayoutMaterials(
+      f.layout, f.rest, [&](int kind, int32_t e) -> const std::vector<MaterialPoint>* {
+        return index[kind][e] < 0 ? nullptr : &arrays[index[kind][e]];
+      });
+  ExpectSameLayout(relaid, built);
+  // And back: every element given its samples in the first layout.
+  const ElementLayout back = RelayoutMaterials(
+      relaid, f.rest, [&](int kind, int32_t e) {
+        const ElementBlock& block = f.layout.blocks[kind];
+        return &f.layout.materials[block.groups[block.group[e]].material];
+      });
+  ExpectSameLayout(back, f.layout);
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, RelayoutTest, ::testing::Values("block3", "chair", "mixed"));
 
 }  // namespace
 }  // namespace dynsolid::models

@@ -19,8 +19,8 @@ struct Cell {
   Key128 key;
 };
 
-// Rows of nodes ids[0..n) on their support; mark (#control, all -1) is
-// used as scratch and left all -1.
+}  // namespace
+
 void GatherRows(const SparseMatrix& nm, const int32_t* ids, int n, std::vector<int32_t>& mark,
                 ElementRows& out) {
   out.support.clear();
@@ -42,6 +42,8 @@ void GatherRows(const SparseMatrix& nm, const int32_t* ids, int n, std::vector<i
   }
   for (int32_t c : out.support) mark[c] = -1;
 }
+
+namespace {
 
 // Per thread: scratch marks, node rows' hashes in the current cell, and the
 // blocks made for (kind, group, B).
@@ -179,6 +181,12 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
     const Cell& cell = cells[to_make[k]];
     const int side = dofs * static_cast<int>(cell.support.size());
     auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(outputs, Eigen::MatrixXd::Zero(side, side));
+    if (spec.make_cell) {
+      spec.make_cell(t, cell.support, cell.elements, *p);
+      if (spec.extra) spec.extra(cell.support, cell.elements, *p);
+      made[k] = std::move(p);
+      return;
+    }
     for (size_t a = 0; a < cell.support.size(); ++a) s.cell_mark[cell.support[a]] = static_cast<int32_t>(a);
     for (const auto& [kind, e] : cell.elements) {
       const models::ElementBlock& block = layout.blocks[kind];

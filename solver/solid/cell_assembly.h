@@ -72,7 +72,21 @@ struct CellSumSpec {
   std::function<void(int kind, int32_t e, const ElementRows& rows,
                      std::vector<Eigen::MatrixXd>& blocks)>
       make;
+  // Optional, instead of `make`: a cell's whole partial (outputs matrices
+  // of dofs S square, zero) made at once from its support and elements
+  // (kind, index in block), on pool thread `thread`; a function of the
+  // cell's key alone.
+  std::function<void(int thread, const std::vector<int32_t>& support,
+                     const std::vector<std::pair<int, int32_t>>& elements,
+                     std::vector<Eigen::MatrixXd>& partial)>
+      make_cell;
 };
+
+// Rows of nodes ids[0..n) of the node matrix on their support (out.support
+// ascending, out.b n x s). mark: #control entries, all -1 (scratch, left
+// all -1).
+void GatherRows(const subdivision::SparseMatrix& nm, const int32_t* ids, int n,
+                std::vector<int32_t>& mark, ElementRows& out);
 
 // The sums, dense (dofs #control square) or as triplets in cell order.
 struct CellSums {

@@ -576,11 +576,17 @@ namespace {
 //                                     + mu delta_cd sum_k H(k,a) H(k,b)],
 //
 // H_q = J_q^-T dN_q B the physical gradients of the control points' basis
-// at point q (3 x S). Per element: H for all points as one product
-// (3Q x n times n x S), then the Gram matrix of sqrt(dV mu) H (3S x 3S),
-// and for a lambda that is not the same multiple of mu at every point that
-// of sqrt(dV lambda) H. (The 3n x 3n element K is never formed; the same
-// points, weights and clamped dV = max(det J, 0) as the model's K.)
+// at point q (3 x S). Summed over the cell's elements and points at once:
+// the rows sqrt(dV mu) H_q(k, .) of all its elements' points stacked into
+// one matrix W (sum of Q rows, 3S columns: column k S + a), whose Gram
+// matrix G = W^T W (one symmetric rank update, lower half) holds every
+// mu sum above; the lambda sums are r G when lambda = r mu at every point
+// of the cell (one Poisson ratio), else the Gram matrix of the
+// sqrt(dV lambda) rows. Per element only H = (J^-T dN) B (3Q x n times
+// n x S). (The element K is never formed; the same points, weights and
+// clamped dV = max(det J, 0) as the model's K. One rank update over the
+// cell instead of one Gram matrix per element scattered into it: half the
+// flops of the Gram matrices, in one large product, and no scatter.)
 // Per group, once, when a cell first needs it: the points' J^-T dN and
 // weights. Each partial also keeps, as its second matrix, the cell's
 // deformation-gradient weights g_j (S x 3, cell_corotation.h), so that the
@@ -590,19 +596,27 @@ struct StiffnessBlocks {
   struct Group {
     Eigen::MatrixXd d;         // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
     Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
-    Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda) (empty: ratio * mu)
-    double ratio = 0;          // lambda / mu when the same at every point
+    Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda)
+    bool uniform = false;      // lambda = ratio mu at every point
+    double ratio = 0;
+  };
+  // Per pool thread.
+  struct Scratch {
+    std::vector<int32_t> cell_mark, element_mark;
+    ElementRows rows;
+    Eigen::MatrixXd h, w, wl, g, gl;
   };
 
   StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
-                  const SparseMatrix& nm) {
+                  const SparseMatrix& nm, int threads)
+      : scratch(threads) {
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
       groups[kind].resize(layout.blocks[kind].groups.size());
     }
     spec.dofs = 3;
     spec.outputs = 1;
-    spec.salt = 0x6b31;  // "k1": integrated at the points
+    spec.salt = 0x6b32;  // "k2": integrated at the points, summed per cell
     spec.group_key = [&layout, &corotational](int kind, int32_t gi) {
       const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
       Hash128 h;
@@ -615,44 +629,10 @@ struct StiffnessBlocks {
       }
       return h.value();
     };
-    spec.make = [this, &layout](int kind, int32_t e, const ElementRows& rows,
-                                std::vector<Eigen::MatrixXd>& blocks) {
-      const int32_t gi = layout.blocks[kind].group[e];
-      std::call_once(once[kind][gi], [&] { groups[kind][gi] = MakeGroup(layout, kind, gi); });
-      const Group& g = groups[kind][gi];
-      const Eigen::MatrixXd& b = rows.b;
-      const int s = static_cast<int>(b.cols());
-      const int q = static_cast<int>(g.root_mu.size());
-      const Eigen::MatrixXd h = g.d * b;  // 3Q x S
-      Eigen::MatrixXd w(q, 3 * s);
-      for (int k = 0; k < 3; ++k) {
-        w.middleCols(k * s, s) = g.root_mu.asDiagonal() * h.middleRows(k * q, q);
-      }
-      Eigen::MatrixXd gm(3 * s, 3 * s);
-      gm.noalias() = w.transpose() * w;
-      Eigen::MatrixXd gl;
-      if (g.root_lambda.size() > 0) {
-        for (int k = 0; k < 3; ++k) {
-          w.middleCols(k * s, s) = g.root_lambda.asDiagonal() * h.middleRows(k * q, q);
-        }
-        gl.noalias() = w.transpose() * w;
-      }
-      blocks.resize(1);
-      Eigen::MatrixXd& tk = blocks[0];
-      tk.resize(3 * s, 3 * s);
-      for (int bb = 0; bb < s; ++bb) {
-        for (int a = 0; a < s; ++a) {
-          const double trace = gm(a, bb) + gm(s + a, s + bb) + gm(2 * s + a, 2 * s + bb);
-          for (int dd = 0; dd < 3; ++dd) {
-            for (int c = 0; c < 3; ++c) {
-              const double lambda_term =
-                  gl.size() > 0 ? gl(c * s + a, dd * s + bb) : g.ratio * gm(c * s + a, dd * s + bb);
-              tk(3 * a + c, 3 * bb + dd) =
-                  lambda_term + gm(dd * s + a, c * s + bb) + (c == dd ? trace : 0.0);
-            }
-          }
-        }
-      }
+    spec.make_cell = [this, &layout, &nm](int t, const std::vector<int32_t>& support,
+                                          const std::vector<std::pair<int, int32_t>>& elements,
+                                          std::vector<Eigen::MatrixXd>& partial) {
+      MakeCell(layout, nm, scratch[t], support, elements, partial[0]);
     };
     spec.extra = [&layout, &nm](const std::vector<int32_t>& support,
                                 const std::vector<std::pair<int, int32_t>>& elements,
@@ -660,6 +640,81 @@ struct StiffnessBlocks {
       partial.emplace_back();
       Gradients(layout, nm, support, elements, partial.back());
     };
+  }
+
+  const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e) {
+    const int32_t gi = layout.blocks[kind].group[e];
+    std::call_once(once[kind][gi], [&] { groups[kind][gi] = MakeGroup(layout, kind, gi); });
+    return groups[kind][gi];
+  }
+
+  // A cell's K partial (3S square, zero) as above.
+  void MakeCell(const models::ElementLayout& layout, const SparseMatrix& nm, Scratch& sc,
+                const std::vector<int32_t>& support,
+                const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k) {
+    const int s = static_cast<int>(support.size());
+    if (s == 0) return;
+    if (sc.cell_mark.empty()) {
+      sc.cell_mark.assign(nm.cols(), -1);
+      sc.element_mark.assign(nm.cols(), -1);
+    }
+    int64_t rows = 0;
+    bool uniform = true, first = true;
+    double ratio = 0;
+    for (const auto& [kind, e] : elements) {
+      const Group& g = GroupOf(layout, kind, e);
+      rows += g.root_mu.size();
+      if (!g.uniform || (!first && g.ratio != ratio)) uniform = false;
+      ratio = g.ratio;
+      first = false;
+    }
+    sc.w.setZero(rows, 3 * s);
+    if (!uniform) sc.wl.setZero(rows, 3 * s);
+    for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    int64_t row = 0;
+    for (const auto& [kind, e] : elements) {
+      const Group& g = GroupOf(layout, kind, e);
+      const models::ElementBlock& block = layout.blocks[kind];
+      GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
+      const int q = static_cast<int>(g.root_mu.size());
+      sc.h.noalias() = g.d * sc.rows.b;  // 3Q x s_e
+      for (size_t a = 0; a < sc.rows.support.size(); ++a) {
+        const int col = sc.cell_mark[sc.rows.support[a]];
+        for (int c = 0; c < 3; ++c) {
+          const double* from = sc.h.col(static_cast<Eigen::Index>(a)).data() + c * q;
+          double* to = sc.w.col(c * s + col).data() + row;
+          for (int i = 0; i < q; ++i) to[i] = g.root_mu[i] * from[i];
+          if (!uniform) {
+            double* tol = sc.wl.col(c * s + col).data() + row;
+            for (int i = 0; i < q; ++i) tol[i] = g.root_lambda[i] * from[i];
+          }
+        }
+      }
+      row += q;
+    }
+    for (int32_t c : support) sc.cell_mark[c] = -1;
+    sc.g.setZero(3 * s, 3 * s);
+    sc.g.selfadjointView<Eigen::Lower>().rankUpdate(sc.w.transpose());
+    if (!uniform) {
+      sc.gl.setZero(3 * s, 3 * s);
+      sc.gl.selfadjointView<Eigen::Lower>().rankUpdate(sc.wl.transpose());
+    }
+    const Eigen::MatrixXd& gm = sc.g;
+    const Eigen::MatrixXd& gl = sc.gl;
+    auto at = [](const Eigen::MatrixXd& m, int i, int j) { return i >= j ? m(i, j) : m(j, i); };
+    for (int bb = 0; bb < s; ++bb) {
+      for (int a = 0; a < s; ++a) {
+        const double trace = at(gm, a, bb) + at(gm, s + a, s + bb) + at(gm, 2 * s + a, 2 * s + bb);
+        for (int dd = 0; dd < 3; ++dd) {
+          for (int c = 0; c < 3; ++c) {
+            const double lambda_term = uniform ? ratio * at(gm, c * s + a, dd * s + bb)
+                                               : at(gl, c * s + a, dd * s + bb);
+            k(3 * a + c, 3 * bb + dd) =
+                lambda_term + at(gm, dd * s + a, c * s + bb) + (c == dd ? trace : 0.0);
+          }
+        }
+      }
+    }
   }
   StiffnessBlocks(const StiffnessBlocks&) = delete;
   StiffnessBlocks& operator=(const StiffnessBlocks&) = delete;
@@ -721,26 +776,20 @@ struct StiffnessBlocks {
       mu[q] = dv * material[q].lame_mu();
       g.root_mu[q] = std::sqrt(std::max(mu[q], 0.0));
     }
-    // lambda / mu is 2 nu / (1 - 2 nu): one number when nu is one number.
-    bool same = true, first = true;
-    double ratio = 0;
-    for (int q = 0; q < points && same; ++q) {
-      if (mu[q] <= 0) continue;
-      const double r = material[q].lame_lambda() / material[q].lame_mu();
-      if (first) ratio = r;
-      first = false;
-      same = r == ratio;
-    }
-    if (same) {
-      g.ratio = ratio;
-    } else {
-      g.root_lambda.resize(points);
-      for (int q = 0; q < points; ++q) g.root_lambda[q] = std::sqrt(std::max(lambda[q], 0.0));
-    }
+    // lambda / mu is 2 nu / (1 - 2 nu): one number when nu is one number
+    // (taken from nu, so that groups of one nu and different Young's moduli
+    // have the same ratio to the bit).
+    bool same = true;
+    for (int q = 1; q < points && same; ++q) same = material[q].poisson == material[0].poisson;
+    g.uniform = same && points > 0;
+    g.ratio = g.uniform ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0;
+    g.root_lambda.resize(points);
+    for (int q = 0; q < points; ++q) g.root_lambda[q] = std::sqrt(std::max(lambda[q], 0.0));
     return g;
   }
 
   CellSumSpec spec;
+  std::vector<Scratch> scratch;
   std::array<std::vector<std::once_flag>, 3> once;
   std::array<std::vector<Group>, 3> groups;
 };
@@ -751,7 +800,7 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
     const models::ElementLayout& layout, const models::CorotationalModel& corotational,
     WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) const {
-  StiffnessBlocks blocks(layout, corotational, d->node_matrix);
+  StiffnessBlocks blocks(layout, corotational, d->node_matrix, threads.size());
   blocks.spec.per_cell = true;
   CellSums sums;
   std::shared_ptr<const CellPartials> made =
@@ -783,7 +832,7 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
     const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) {
   const SparseMatrix& nm = d.node_matrix;
-  StiffnessBlocks blocks(layout, corotational, nm);
+  StiffnessBlocks blocks(layout, corotational, nm, threads.size());
   const CellSumSpec& spec = blocks.spec;
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.

@@ -82,6 +82,9 @@ struct BuildReport {
   // made rather than took from the solid it was remeshed from
   // (cell_assembly.h), of `control_cell_partials`; -1: too large to keep.
   int32_t mass_cells_made = 0, k0_cells_made = 0, control_cell_partials = 0;
+  // Restores (undo, redo) that took back the material the solid had just
+  // before its current one instead of building it again.
+  int64_t materials_taken_back = 0;
   // Where build_ms went (milliseconds): the element layout (shapes grouped,
   // materials sampled), the force model, the mass and damping in control
   // space, the boundary surface, the stable-step estimate, backward Euler's

@@ -247,6 +247,22 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
 }
 
 void Solid::Impl::InstallMaterial(MaterialBuild b) {
+  if (layout != nullptr && model != nullptr) {
+    RetiredMaterial r;
+    r.build.layout = layout;
+    r.build.model = model;
+    r.build.corotational = corotational;
+    r.build.cell_model = cell_model;
+    r.build.k_cells = cell_model != nullptr ? k0_cells : nullptr;
+    r.build.mt = mt;
+    r.build.dt = dt;
+    r.build.mass_cells = mass_cells;
+    r.build.has_damping = has_damping;
+    r.k0 = std::move(k0);  // the caller installs the new one (implicit)
+    r.k0_cells = k0_cells;
+    std::lock_guard<std::mutex> lock(retired_mu);
+    retired = std::move(r);
+  }
   ++material_epoch;
   gravity_mass.resize(0);  // per material
   for (auto& boxes : element_boxes) boxes.clear();  // per layout (Locate)
@@ -265,6 +281,15 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   has_damping = b.has_damping;
   ++contact.epoch;  // the contact stiffness depends on the material
   ConfigureLinearized();
+}
+
+std::optional<Solid::Impl::RetiredMaterial> Solid::Impl::TakeRetired(
+    const std::function<bool(const models::ElementLayout&)>& is_it) const {
+  std::lock_guard<std::mutex> lock(retired_mu);
+  if (!retired.has_value() || !is_it(*retired->build.layout)) return std::nullopt;
+  std::optional<RetiredMaterial> out = std::move(retired);
+  retired.reset();
+  return out;
 }
 
 std::unique_ptr<models::InternalForceModel> Solid::Impl::ModelCopy(

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <utility>
@@ -110,8 +111,8 @@ struct MaterialLocation {
 // What depends on the material samples: rebuilt together by Create,
 // PaintMaterial and RestoreState (one path).
 struct MaterialBuild {
-  std::unique_ptr<models::ElementLayout> layout;
-  std::unique_ptr<models::InternalForceModel> model;
+  std::shared_ptr<models::ElementLayout> layout;
+  std::shared_ptr<models::InternalForceModel> model;
   models::CorotationalModel* corotational = nullptr;
   SparseMatrix mt, dt;
   bool has_damping = false;
@@ -501,6 +502,21 @@ struct Solid::Impl {
   bool SameMassAndDamping(const models::ElementLayout& l) const;
   bool paint_reuse = true;  // tests turn it off for a from-scratch reference
   void InstallMaterial(MaterialBuild b);
+  // The material the last InstallMaterial replaced, with its K0 (implicit):
+  // an undo after a paint, or a redo after that undo, asks for exactly it
+  // (Solid::PrepareState takes it back instead of building it again: the
+  // same bits, as a build is a function of the material alone). One kept.
+  struct RetiredMaterial {
+    MaterialBuild build;
+    Eigen::SparseMatrix<double> k0;
+    std::shared_ptr<const CellPartials> k0_cells;
+  };
+  // The retired material when `is_it` says it is the one asked for (it is
+  // then no longer kept), else none.
+  std::optional<RetiredMaterial> TakeRetired(
+      const std::function<bool(const models::ElementLayout&)>& is_it) const;
+  mutable std::mutex retired_mu;
+  mutable std::optional<RetiredMaterial> retired;  // guarded by retired_mu
   // Counts InstallMaterial calls: a prepared paint is for one material.
   uint64_t material_epoch = 0;
   PreparedFor PreparedForNow() const {
@@ -574,6 +590,7 @@ class Solid::PreparedState {
   std::vector<Impl::DragLoad> drags;
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
+  bool taken_back = false;             // build is Impl::retired's
   Eigen::SparseMatrix<double> k0;      // with build, implicit
   std::shared_ptr<const CellPartials> k0_cells;
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;

@@ -511,24 +511,39 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   if (r.ok() && !r.at_end()) r.Fail(absl::StrCat("unexpected bytes after byte ", r.pos()));
   RETURN_IF_ERROR(r.status());
 
-  // The material: rebuilt only when it differs from the current one.
-  bool same_material = static_cast<size_t>(n_arrays) == cur.materials.size();
-  for (int64_t k = 0; same_material && k < n_arrays; ++k) {
-    same_material = arrays[k].size() == cur.materials[k].size() &&
-                    std::memcmp(arrays[k].data(), cur.materials[k].data(),
-                                arrays[k].size() * sizeof(models::MaterialPoint)) == 0;
-  }
-  for (int kind = 0; kind < 3 && same_material; ++kind) {
-    const models::ElementBlock& block = cur.blocks[kind];
-    for (int32_t e = 0; e < block.size() && same_material; ++e) {
-      same_material = element_array[kind][e] == block.groups[block.group[e]].material;
+  // The material: rebuilt only when it differs from the current one, and
+  // taken back when it is the one the current one replaced.
+  auto material_is = [&](const models::ElementLayout& l) {
+    bool same = static_cast<size_t>(n_arrays) == l.materials.size();
+    for (int64_t k = 0; same && k < n_arrays; ++k) {
+      same = arrays[k].size() == l.materials[k].size() &&
+             std::memcmp(arrays[k].data(), l.materials[k].data(),
+                         arrays[k].size() * sizeof(models::MaterialPoint)) == 0;
     }
-  }
+    for (int kind = 0; kind < 3 && same; ++kind) {
+      const models::ElementBlock& block = l.blocks[kind];
+      same = static_cast<int64_t>(element_array[kind].size()) == block.size();
+      for (int32_t e = 0; e < block.size() && same; ++e) {
+        same = element_array[kind][e] == block.groups[block.group[e]].material;
+      }
+    }
+    return same;
+  };
+  const bool same_material = material_is(cur);
   std::optional<MaterialBuild> build;
   Eigen::SparseMatrix<double> k0;
   std::shared_ptr<const CellPartials> k0_cells;
   std::unique_ptr<WorkerPool> own_pool;
+  bool taken_back = false;
   if (!same_material) {
+    if (std::optional<Impl::RetiredMaterial> r = im.TakeRetired(material_is)) {
+      build = std::move(r->build);
+      k0 = std::move(r->k0);
+      k0_cells = std::move(r->k0_cells);
+      taken_back = true;
+    }
+  }
+  if (!same_material && !taken_back) {
     auto layout = std::make_unique<models::ElementLayout>(models::RelayoutMaterials(
         cur, im.rest_nodes, [&](int kind, int32_t e) { return &arrays[element_array[kind][e]]; }));
     own_pool = std::make_unique<WorkerPool>(1);
@@ -555,6 +570,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
 
   auto out = std::make_shared<PreparedState>();
   out->material_epoch = im.material_epoch;
+  out->taken_back = taken_back;
   out->time = time;
   out->steps = steps;
   out->rollbacks = rollbacks;
@@ -629,6 +645,7 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
     }
     total_mass_ = SumOfValues(im.mt);
     ReportMaterial();
+    if (s.taken_back) ++report_.materials_taken_back;
   }
   im.model->set_frames(s.frames);
   im.point_loads = std::move(s.point_loads);

@@ -367,6 +367,41 @@ TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
   }
 }
 
+// Undo after a paint and redo after that undo take back the material the
+// solid had just before (Impl::RetiredMaterial) instead of building it: the
+// same bits as restoring either state into a solid that builds it, and
+// the same bits after more steps.
+TEST(SolidRuntimeTest, UndoAndRedoOfAPaintTakeBackTheMaterialWithTheBitsOfABuild) {
+  const std::string base = kPaintBlock;
+  const MaterialPaint paint = Parse<MaterialPaint>(
+      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
+      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  for (const char* solver : kPaintSolvers) {
+    auto live = Make(base + solver);
+    ASSERT_NE(live, nullptr);
+    for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());
+    const std::string before = live->SaveState();
+    ASSERT_OK(live->PaintMaterial(paint));
+    for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());
+    const std::string after = live->SaveState();
+    for (const std::string* state : {&before, &after, &before}) {
+      const int64_t taken = live->build_report().materials_taken_back;
+      ASSERT_OK(live->RestoreState(*state));
+      EXPECT_EQ(live->build_report().materials_taken_back, taken + 1) << solver;
+      auto fresh = Make(base + solver);
+      ASSERT_NE(fresh, nullptr);
+      ASSERT_OK(fresh->RestoreState(*state));
+      EXPECT_EQ(fresh->build_report().materials_taken_back, 0) << solver;
+      for (int i = 0; i < 20; ++i) {
+        ASSERT_OK(live->Step());
+        ASSERT_OK(fresh->Step());
+      }
+      EXPECT_TRUE(live->control_positions() == fresh->control_positions()) << solver;
+      EXPECT_EQ(live->SaveState(), fresh->SaveState()) << solver;
+    }
+  }
+}
+
 // A paint prepared on another thread while the solid steps (what the server
 // does off its simulation loop), installed 15 steps later, gives the bits of
 // painting at that step; one prepared before another paint is prepared

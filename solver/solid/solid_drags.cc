@@ -2,6 +2,7 @@
 // from material points to targets a client moves. They are follower loads
 // (solid_loads.cc PressureForces adds them): evaluated at every force
 // evaluation, their work counted trapezoidally in the energy ledger.
+#include <cstring>
 #include <algorithm>
 #include <map>
 #include <string>
@@ -53,8 +54,29 @@ std::vector<Eigen::Vector3d> Points3(const google::protobuf::RepeatedPtrField<Ve
 
 }  // namespace
 
+Solid::Impl::KnownPoints::Key Solid::Impl::KnownPoints::KeyOf(const Eigen::Vector3d& x) {
+  Key k;
+  std::memcpy(k.data(), x.data(), sizeof(k));
+  return k;
+}
+
+Solid::Impl::KnownPoints Solid::Impl::CurrentPoints() const {
+  KnownPoints known;
+  for (const PointLoad& l : point_loads) known.forces.emplace(KnownPoints::KeyOf(V(l.msg.position())), l.at);
+  for (const DragLoad& d : drags) {
+    for (size_t s = 0; s < d.material.size(); ++s) {
+      known.rows.emplace(KnownPoints::KeyOf(d.material[s]), &d.rows[s]);
+    }
+  }
+  return known;
+}
+
 absl::StatusOr<std::vector<std::pair<int32_t, double>>> Solid::Impl::ControlRow(
-    const Eigen::Vector3d& x) const {
+    const Eigen::Vector3d& x, const KnownPoints* known) const {
+  if (known != nullptr) {
+    auto it = known->rows.find(KnownPoints::KeyOf(x));
+    if (it != known->rows.end()) return *it->second;
+  }
   ASSIGN_OR_RETURN(MaterialLocation at, Locate(x, rest_nodes, false));
   std::vector<double> shape;
   ShapeAt(at, shape);
@@ -68,7 +90,8 @@ absl::StatusOr<std::vector<std::pair<int32_t, double>>> Solid::Impl::ControlRow(
   return std::vector<std::pair<int32_t, double>>(w.begin(), w.end());
 }
 
-absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d) const {
+absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
+                                                            const KnownPoints* known) const {
   RETURN_IF_ERROR(scene::ValidateValues(d, "drag"));
   RETURN_IF_ERROR(CheckStiffness(d.stiffness(), "drag"));
   DragLoad load;
@@ -76,7 +99,7 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d) const
   load.stiffness = d.stiffness();
   load.material = {V(d.material_point())};
   load.targets = {V(d.target())};
-  absl::StatusOr<std::vector<std::pair<int32_t, double>>> row = ControlRow(load.material[0]);
+  absl::StatusOr<std::vector<std::pair<int32_t, double>>> row = ControlRow(load.material[0], known);
   if (!row.ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat("drag.material_point: ", row.status().message()));
@@ -85,7 +108,8 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d) const
   return load;
 }
 
-absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c) const {
+absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c,
+                                                             const KnownPoints* known) const {
   RETURN_IF_ERROR(scene::ValidateValues(c, "curve"));
   RETURN_IF_ERROR(CheckStiffness(c.stiffness(), "curve"));
   if (c.material_points_size() < 2 || c.material_points_size() > kMaxCurvePoints) {
@@ -117,7 +141,7 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c)
   load.material = Resample(line, samples);
   load.targets = Resample(Points3(c.targets()), samples);
   for (int s = 0; s < samples; ++s) {
-    absl::StatusOr<std::vector<std::pair<int32_t, double>>> row = ControlRow(load.material[s]);
+    absl::StatusOr<std::vector<std::pair<int32_t, double>>> row = ControlRow(load.material[s], known);
     if (!row.ok()) {
       return absl::InvalidArgumentError(absl::StrCat("curve.material_points: sample ", s, " of ",
                                                      samples, ": ", row.status().message()));

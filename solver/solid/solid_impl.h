@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -263,11 +264,23 @@ struct Solid::Impl {
   // The control-point weights of the material point at rest position x
   // (its element's shape values times the node matrix rows), ascending by
   // control point.
+  // Rest positions this solid's loads already located (bit for bit), so
+  // that a restore (an undo) locates again only the points it does not
+  // have: Locate and ControlRow are functions of the position alone, and
+  // a search over the elements each.
+  struct KnownPoints {
+    using Key = std::array<uint64_t, 3>;
+    static Key KeyOf(const Eigen::Vector3d& x);
+    std::map<Key, MaterialLocation> forces;  // point forces' Locate (snap setting applied)
+    std::map<Key, const std::vector<std::pair<int32_t, double>>*> rows;  // drag springs' ControlRow
+  };
+  // Those of the current loads.
+  KnownPoints CurrentPoints() const;
   absl::StatusOr<std::vector<std::pair<int32_t, double>>> ControlRow(
-      const Eigen::Vector3d& x) const;
+      const Eigen::Vector3d& x, const KnownPoints* known = nullptr) const;
   // A drag or curve from its message, located on this solid (ids unset).
-  absl::StatusOr<DragLoad> MakeDrag(const Drag& d) const;
-  absl::StatusOr<DragLoad> MakeCurve(const CurveDrag& c) const;
+  absl::StatusOr<DragLoad> MakeDrag(const Drag& d, const KnownPoints* known = nullptr) const;
+  absl::StatusOr<DragLoad> MakeCurve(const CurveDrag& c, const KnownPoints* known = nullptr) const;
   // out += the drag springs' forces at p.
   void AddDragForces(const Points& p, Points& out) const;
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();

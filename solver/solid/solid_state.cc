@@ -367,7 +367,10 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   }
   RETURN_IF_ERROR(r.status());
 
-  // Loads and constraints: parsed, validated and located again.
+  // Loads and constraints: parsed, validated and located again (points the
+  // current loads have are not searched for again).
+  const Impl::KnownPoints known = im.CurrentPoints();
+  const bool snap = im.settings.snap_forces_to_quadrature();
   int64_t last_id = 0;
   auto check_id = [&](int64_t id, const char* what) {
     if (r.ok() && (id <= last_id || id >= next_id)) {
@@ -383,8 +386,10 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     PointForce msg;
     if (!msg.ParseFromString(r.Bytes("point force")) && r.ok()) r.Fail("point force: bad message");
     if (!r.ok()) break;
+    const auto was = known.forces.find(Impl::KnownPoints::KeyOf(V(msg.position())));
     absl::StatusOr<MaterialLocation> at =
-        im.Locate(V(msg.position()), im.rest_nodes, im.settings.snap_forces_to_quadrature());
+        was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second)
+                                  : im.Locate(V(msg.position()), im.rest_nodes, snap);
     if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
       r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
       break;
@@ -445,10 +450,10 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     absl::StatusOr<Impl::DragLoad> load = absl::InvalidArgumentError("bad message");
     if (curve) {
       CurveDrag msg;
-      if (msg.ParseFromString(bytes)) load = im.MakeCurve(msg);
+      if (msg.ParseFromString(bytes)) load = im.MakeCurve(msg, &known);
     } else {
       Drag msg;
-      if (msg.ParseFromString(bytes)) load = im.MakeDrag(msg);
+      if (msg.ParseFromString(bytes)) load = im.MakeDrag(msg, &known);
     }
     if (!load.ok()) {
       r.Fail(absl::StrCat("drag ", id, " is invalid for this solid: ", load.status().message()));

@@ -368,9 +368,11 @@ TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
 }
 
 // Undo after a paint and redo after that undo take back the material the
-// solid had just before (Impl::RetiredMaterial) instead of building it: the
-// same bits as restoring either state into a solid that builds it, and
-// the same bits after more steps.
+// solid had just before (Impl::RetiredMaterial) instead of building it, and
+// the points of the loads the solid has (a force, a drag, a curve) instead
+// of locating them again: the same bits as restoring either state into a
+// solid that builds and locates everything, and the same bits after more
+// steps.
 TEST(SolidRuntimeTest, UndoAndRedoOfAPaintTakeBackTheMaterialWithTheBitsOfABuild) {
   const std::string base = kPaintBlock;
   const MaterialPaint paint = Parse<MaterialPaint>(
@@ -380,6 +382,15 @@ TEST(SolidRuntimeTest, UndoAndRedoOfAPaintTakeBackTheMaterialWithTheBitsOfABuild
     auto live = Make(base + solver);
     ASSERT_NE(live, nullptr);
     for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());
+    ASSERT_OK(live->AddPointForce(Parse<PointForce>(
+        "position { x: 2.2 y: 1.1 z: 2.9 } force { x: 300 y: 0 z: -200 }")));
+    ASSERT_OK(live->AddDrag(Parse<Drag>(
+        "material_point { x: 0.7 y: 2.1 z: 2.5 } target { x: 0.6 y: 2.1 z: 2.8 } stiffness: 4000")));
+    ASSERT_OK(live->AddCurveDrag(Parse<CurveDrag>(
+        "material_points { x: 0.5 y: 0.5 z: 2.5 } material_points { x: 2.5 y: 0.5 z: 2.5 } "
+        "targets { x: 0.5 y: 0.4 z: 2.7 } targets { x: 2.5 y: 0.4 z: 2.7 } stiffness: 2000 "
+        "samples: 5")));
+    for (int i = 0; i < 5; ++i) ASSERT_OK(live->Step());
     const std::string before = live->SaveState();
     ASSERT_OK(live->PaintMaterial(paint));
     for (int i = 0; i < 10; ++i) ASSERT_OK(live->Step());

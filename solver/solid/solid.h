@@ -418,8 +418,10 @@ class Solid {
   // Errors (the state is then unchanged): InvalidArgument for another
   // format, version or scene/discretization (fingerprint mismatch);
   // DataLoss for truncated or corrupted bytes.
-  // 3: drags and curves; 4: a word-wise checksum (version 3 still read).
-  static constexpr uint32_t kStateFormatVersion = 4;
+  // 3: drags and curves; 4: a word-wise checksum; 5: the material samples
+  // last, in a section whose checksum the saving solid keeps while its
+  // material is unchanged (versions 3 and 4 still read).
+  static constexpr uint32_t kStateFormatVersion = 5;
   std::string SaveState() const;
   absl::Status RestoreState(std::string_view bytes);
   // The same, but the clock reads `time` and `steps` afterwards (undo and

@@ -528,6 +528,12 @@ struct Solid::Impl {
   // then no longer kept), else none.
   std::optional<RetiredMaterial> TakeRetired(
       const std::function<bool(const models::ElementLayout&)>& is_it) const;
+  // SaveState's material section (format version 5) and its checksum, for
+  // material_epoch section_epoch.
+  mutable std::mutex section_mu;
+  mutable uint64_t section_epoch = 0;
+  mutable std::string section_bytes;
+  mutable uint64_t section_sum = 0;
   mutable std::mutex retired_mu;
   mutable std::optional<RetiredMaterial> retired;  // guarded by retired_mu
   // Counts InstallMaterial calls: a prepared paint is for one material.

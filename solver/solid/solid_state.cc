@@ -62,6 +62,17 @@ uint64_t Checksum(uint32_t version, std::string_view bytes) {
   return version == 3 ? ByteChecksum(bytes) : WordChecksum(bytes);
 }
 
+// Version 5 ends its payload with the material section (the sample arrays
+// and each element's array, which change only when the material does)
+// and that section's length; the checksum combines the word checksum of
+// what comes before the section with the section's own, which the writer
+// keeps from one save to the next (Impl::MaterialSection): a painted
+// block's state is about a megabyte of samples, which every undoable
+// command saved and summed again.
+uint64_t CombinedChecksum(uint64_t before, uint64_t section, uint64_t section_bytes) {
+  return Mix64(before ^ Mix64(section ^ Mix64(section_bytes)));
+}
+
 // Binary state encoding: fixed-width little-endian values (this build runs
 // on little-endian machines only), length-prefixed arrays.
 class StateWriter {
@@ -257,24 +268,40 @@ std::string Solid::SaveState() const {
     w.Put<uint8_t>(d.curve);
     w.Bytes(d.curve ? d.shape.SerializeAsString() : d.drag.SerializeAsString());
   }
-  // Material samples: the distinct arrays and each element's array.
-  w.Put<uint64_t>(l.materials.size());
-  for (const auto& array : l.materials) {
-    w.Doubles(reinterpret_cast<const double*>(array.data()), 4 * array.size());
-  }
-  for (const models::ElementBlock& block : l.blocks) {
-    w.Put<uint64_t>(block.size());
-    for (int32_t e = 0; e < block.size(); ++e) w.Put<int32_t>(block.groups[block.group[e]].material);
-  }
   // Element frames (warm starts).
   const models::InternalForceModel::Frames& frames = im.model->frames();
   for (const auto& f : frames) {
     w.Doubles(reinterpret_cast<const double*>(f.data()), 4 * f.size());
   }
+  // The material section and its length (CombinedChecksum).
+  const size_t section_at = w.out.size();
+  uint64_t section_sum = 0, section_bytes = 0;
+  {
+    std::lock_guard<std::mutex> lock(im.section_mu);
+    if (im.section_epoch != im.material_epoch || im.section_bytes.empty()) {
+      StateWriter m;
+      m.Put<uint64_t>(l.materials.size());
+      for (const auto& array : l.materials) {
+        m.Doubles(reinterpret_cast<const double*>(array.data()), 4 * array.size());
+      }
+      for (const models::ElementBlock& block : l.blocks) {
+        m.Put<uint64_t>(block.size());
+        for (int32_t e = 0; e < block.size(); ++e) m.Put<int32_t>(block.groups[block.group[e]].material);
+      }
+      im.section_bytes = std::move(m.out);
+      im.section_sum = WordChecksum(im.section_bytes);
+      im.section_epoch = im.material_epoch;
+    }
+    w.out.append(im.section_bytes);
+    section_sum = im.section_sum;
+    section_bytes = im.section_bytes.size();
+  }
+  w.Put<uint64_t>(section_bytes);
   std::string& out = w.out;
   const uint64_t payload = out.size() - kHeaderBytes;
   std::memcpy(out.data() + kHeaderBytes - 8, &payload, sizeof(payload));
-  const uint64_t sum = Checksum(kStateFormatVersion, out);
+  const uint64_t sum = CombinedChecksum(WordChecksum(std::string_view(out).substr(0, section_at)),
+                                        section_sum, section_bytes);
   out.append(reinterpret_cast<const char*>(&sum), sizeof(sum));
   return std::move(out);
 }
@@ -301,16 +328,33 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   const uint64_t fp1 = header.Get<uint64_t>("fingerprint");
   const uint64_t fp2 = header.Get<uint64_t>("fingerprint");
   const uint64_t payload_size = header.Get<uint64_t>("payload size");
-  // Version 3 differs from 4 only in its checksum: still read.
-  if (version != kStateFormatVersion && version != 3) {
+  // Version 3 differs from 4 only in its checksum, 4 from 5 in the place
+  // of the material section and the checksum: still read.
+  if (version != kStateFormatVersion && version != 3 && version != 4) {
     return absl::InvalidArgumentError(absl::StrCat("solid state: format version ", version,
-                                                   "; this build reads versions 3 and ",
+                                                   "; this build reads versions 3 to ",
                                                    kStateFormatVersion));
   }
   uint64_t stored_sum;
   std::memcpy(&stored_sum, bytes.data() + bytes.size() - 8, 8);
-  if (Checksum(version, bytes.substr(0, bytes.size() - 8)) != stored_sum ||
-      payload_size != bytes.size() - kHeaderBytes - 8) {
+  bool sum_ok = payload_size == bytes.size() - kHeaderBytes - 8;
+  size_t section_at = 0, section_bytes = 0;
+  if (sum_ok && version >= 5) {
+    uint64_t n = 0;
+    sum_ok = payload_size >= 8;
+    if (sum_ok) std::memcpy(&n, bytes.data() + bytes.size() - 16, 8);
+    sum_ok = sum_ok && n <= payload_size - 8;
+    if (sum_ok) {
+      section_bytes = n;
+      section_at = bytes.size() - 16 - section_bytes;
+      sum_ok = CombinedChecksum(WordChecksum(bytes.substr(0, section_at)),
+                                WordChecksum(bytes.substr(section_at, section_bytes)),
+                                section_bytes) == stored_sum;
+    }
+  } else if (sum_ok) {
+    sum_ok = Checksum(version, bytes.substr(0, bytes.size() - 8)) == stored_sum;
+  }
+  if (!sum_ok) {
     return absl::DataLossError(absl::StrCat("solid state: checksum mismatch over ", bytes.size(),
                                             " bytes: the state is corrupt or truncated"));
   }
@@ -467,51 +511,71 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   }
   RETURN_IF_ERROR(r.status());
 
-  // Material samples.
+  // Material samples and element frames (version 5: frames first, then
+  // the material section and its length).
   const models::ElementLayout& cur = *im.layout;
   int64_t max_arrays = 0;
   for (const models::ElementBlock& block : cur.blocks) max_arrays += block.size();
-  const int64_t n_arrays = r.Count("material arrays", max_arrays);
-  std::vector<std::vector<models::MaterialPoint>> arrays(r.ok() ? n_arrays : 0);
-  for (int64_t k = 0; k < n_arrays && r.ok(); ++k) {
-    const std::vector<double> v = r.Doubles("material array");
-    if (!r.ok()) break;
-    if (v.size() % 4 != 0) {
-      r.Fail("material array: not whole samples");
-      break;
-    }
-    arrays[k].resize(v.size() / 4);
-    if (!v.empty()) {
-      std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
-    }
-  }
+  int64_t n_arrays = 0;
+  std::vector<std::vector<models::MaterialPoint>> arrays;
   std::array<std::vector<int32_t>, 3> element_array;
-  for (int kind = 0; kind < 3 && r.ok(); ++kind) {
-    const models::ElementBlock& block = cur.blocks[kind];
-    const int64_t count = r.Count("elements", max_arrays);
-    if (r.ok() && count != block.size()) {
-      r.Fail(absl::StrCat("material of kind ", kind, ": ", count, " elements, the solid has ",
-                          block.size()));
-    }
-    element_array[kind].resize(r.ok() ? count : 0);
-    for (int64_t e = 0; e < count && r.ok(); ++e) {
-      const int32_t a = r.Get<int32_t>("element material");
-      if (r.ok() && (a < 0 || a >= n_arrays ||
-                     static_cast<int>(arrays[a].size()) != cur.tables[kind].points)) {
-        r.Fail(absl::StrCat("element ", e, " of kind ", kind, ": bad material array ", a));
+  auto read_materials = [&] {
+    n_arrays = r.Count("material arrays", max_arrays);
+    arrays.resize(r.ok() ? n_arrays : 0);
+    for (int64_t k = 0; k < n_arrays && r.ok(); ++k) {
+      const std::vector<double> v = r.Doubles("material array");
+      if (!r.ok()) break;
+      if (v.size() % 4 != 0) {
+        r.Fail("material array: not whole samples");
+        break;
       }
-      element_array[kind][e] = a;
+      arrays[k].resize(v.size() / 4);
+      if (!v.empty()) {
+        std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
+      }
     }
-  }
-  // Element frames.
+    for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+      const models::ElementBlock& block = cur.blocks[kind];
+      const int64_t count = r.Count("elements", max_arrays);
+      if (r.ok() && count != block.size()) {
+        r.Fail(absl::StrCat("material of kind ", kind, ": ", count, " elements, the solid has ",
+                            block.size()));
+      }
+      element_array[kind].resize(r.ok() ? count : 0);
+      for (int64_t e = 0; e < count && r.ok(); ++e) {
+        const int32_t a = r.Get<int32_t>("element material");
+        if (r.ok() && (a < 0 || a >= n_arrays ||
+                       static_cast<int>(arrays[a].size()) != cur.tables[kind].points)) {
+          r.Fail(absl::StrCat("element ", e, " of kind ", kind, ": bad material array ", a));
+        }
+        element_array[kind][e] = a;
+      }
+    }
+  };
   models::InternalForceModel::Frames frames;
-  for (int kind = 0; kind < 3 && r.ok(); ++kind) {
-    const std::vector<double> v = r.Doubles("frames", 4 * int64_t{cur.blocks[kind].size()});
-    if (!r.ok()) break;
-    frames[kind].resize(cur.blocks[kind].size());
-    if (!v.empty()) {
-      std::memcpy(static_cast<void*>(frames[kind].data()), v.data(), v.size() * sizeof(double));
+  auto read_frames = [&] {
+    for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+      const std::vector<double> v = r.Doubles("frames", 4 * int64_t{cur.blocks[kind].size()});
+      if (!r.ok()) break;
+      frames[kind].resize(cur.blocks[kind].size());
+      if (!v.empty()) {
+        std::memcpy(static_cast<void*>(frames[kind].data()), v.data(), v.size() * sizeof(double));
+      }
     }
+  };
+  if (version >= 5) {
+    read_frames();
+    if (r.ok() && kHeaderBytes + r.pos() != section_at) {
+      r.Fail(absl::StrCat("the material section starts at byte ", section_at - kHeaderBytes,
+                          ", the frames end at ", r.pos()));
+    }
+    read_materials();
+    if (r.ok() && r.Get<uint64_t>("material section length") != section_bytes) {
+      r.Fail("material section length");
+    }
+  } else {
+    read_materials();
+    read_frames();
   }
   if (r.ok() && !r.at_end()) r.Fail(absl::StrCat("unexpected bytes after byte ", r.pos()));
   RETURN_IF_ERROR(r.status());

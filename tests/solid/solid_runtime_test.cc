@@ -810,11 +810,37 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   EXPECT_EQ(b->SaveState(), fresh) << "failed restores change nothing";
   ASSERT_OK(b->RestoreState(saved));
   EXPECT_EQ(b->SaveState(), saved);
-  // A version 3 state (the same payload under the byte-wise FNV-1a
-  // checksum) is still read, and saved again as the current version.
+  // A version 3 state (versions 3 and 4 put the material samples before
+  // the frames, with no section length; version 3 sums bytes with FNV-1a)
+  // is still read, and saved again as the current version. Made here from
+  // the version 5 bytes: header, loads and the rest, frames (per kind a
+  // count and 4 doubles per element), the material section (arrays, then
+  // per kind a count and an int32 per element), its length, the checksum.
   ASSERT_EQ(saved[8], static_cast<char>(Solid::kStateFormatVersion));
-  std::string v3 = saved;
+  auto u64 = [&](size_t at) {
+    uint64_t v;
+    std::memcpy(&v, saved.data() + at, 8);
+    return v;
+  };
+  const size_t section_bytes = u64(saved.size() - 16);
+  const size_t section_at = saved.size() - 16 - section_bytes;
+  size_t at = section_at;
+  const uint64_t arrays = u64(at);
+  at += 8;
+  for (uint64_t k = 0; k < arrays; ++k) at += 8 + 8 * u64(at);
+  size_t frames_bytes = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const uint64_t count = u64(at);
+    at += 8 + 4 * count;
+    frames_bytes += 8 + 32 * count;
+  }
+  ASSERT_EQ(at, section_at + section_bytes);
+  const size_t frames_at = section_at - frames_bytes;
+  std::string v3 = saved.substr(0, frames_at) + saved.substr(section_at, section_bytes) +
+                   saved.substr(frames_at, frames_bytes) + std::string(8, '\0');
   v3[8] = 3;
+  const uint64_t payload = v3.size() - 36 - 8;
+  std::memcpy(v3.data() + 28, &payload, 8);
   uint64_t h = 1469598103934665603ull;
   for (size_t i = 0; i + 8 < v3.size(); ++i) h = (h ^ static_cast<unsigned char>(v3[i])) * 1099511628211ull;
   std::memcpy(v3.data() + v3.size() - 8, &h, 8);

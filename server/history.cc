@@ -1,5 +1,7 @@
 #include "server/history.h"
 
+#include "solver/solid/solid.h"
+
 #include <utility>
 
 namespace dynsolid::server {
@@ -7,7 +9,7 @@ namespace dynsolid::server {
 int64_t HistoryItem::bytes() const {
   // The scene is shared with the solid or other entries; count its state
   // and label (what a snapshot stores per entry).
-  return static_cast<int64_t>(state.size() + what.size());
+  return state.bytes() + static_cast<int64_t>(what.size());
 }
 
 void History::Add(std::deque<HistoryItem>& list, HistoryItem item) {
@@ -52,13 +54,13 @@ HistoryItem History::Redo(HistoryItem now) {
 }
 
 void History::Save(const HistoryItem& h, persist::HistoryEntry* e, int32_t scene) {
-  e->set_solid_state(h.state);
+  e->set_solid_state(solid::Solid::JoinState(h.state));
   e->set_scene(scene);
   e->set_what(h.what);
 }
 
 HistoryItem History::Load(const persist::HistoryEntry& e, std::shared_ptr<const Scene> scene) {
-  return HistoryItem{e.solid_state(), std::move(scene), e.what()};
+  return HistoryItem{solid::SavedState{e.solid_state()}, std::move(scene), e.what()};
 }
 
 }  // namespace dynsolid::server

@@ -16,11 +16,14 @@
 
 #include "dynsolid/journal.pb.h"
 #include "dynsolid/scene.pb.h"
+#include "solver/solid/saved_state.h"
 
 namespace dynsolid::server {
 
 struct HistoryItem {
-  std::string state;                   // solid::Solid::SaveState()
+  // solid::Solid::SaveStateParts(): entries saved while the material was
+  // unchanged share its samples.
+  solid::SavedState state;
   std::shared_ptr<const Scene> scene;  // the scene of that state
   std::string what;                    // "client C seq N: extrude"
   int64_t bytes() const;

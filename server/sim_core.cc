@@ -101,7 +101,7 @@ struct SimCore::Prebuilt {
   // current one, or `solid` above), for the history entry whose state is
   // `for_state`.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedState>>> state;
-  const std::string* for_state = nullptr;
+  const solid::SavedState* for_state = nullptr;
 };
 
 uint64_t SimCore::LastSeq(const std::string& client_id) const {
@@ -181,13 +181,13 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
       c.kind_case() == Command::kUndo ? history_.next_undo() : history_.next_redo();
   // The entry stays put until Process takes the result (no command applies
   // meanwhile), so its state is read where it is.
-  const std::string* state = &item.state;
+  const solid::SavedState* state = &item.state;
   if (item.scene == scene_) {
     // The same solid: its state prepared (parsed, its material built).
     return [solid = solid_, state]() {
       auto out = std::make_shared<Prebuilt>();
       out->for_state = state;
-      out->state = solid->PrepareState(*state);
+      out->state = solid->PrepareState(solid::Solid::JoinState(*state));
       return out;
     };
   }
@@ -198,7 +198,7 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
     out->solid = factory(target == original ? nullptr : target.get());
     if (out->solid->ok()) {
       out->for_state = state;
-      out->state = (**out->solid)->PrepareState(*state);
+      out->state = (**out->solid)->PrepareState(solid::Solid::JoinState(*state));
     }
     return out;
   };
@@ -355,7 +355,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
   HistoryItem before;
   const auto t0 = std::chrono::steady_clock::now();
   if (undoable) {
-    before.state = solid_->SaveState();
+    before.state = solid_->SaveStateParts();
     before.scene = scene_;
     before.what = absl::StrCat("client ", request.client_id(), " seq ", request.seq(), ": ",
                                KindName(command));
@@ -526,7 +526,7 @@ absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
   if (item.scene == scene_) {
     return prepared != nullptr
                ? solid_->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
-               : solid_->RestoreStateAtClock(item.state, solid_->time(), solid_->steps());
+               : solid_->RestoreStateAtClock(solid::Solid::JoinState(item.state), solid_->time(), solid_->steps());
   }
   if (factory_ == nullptr) {
     return absl::FailedPreconditionError("this session cannot rebuild its solid (no factory)");
@@ -538,7 +538,7 @@ absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
   if (!rebuilt.ok()) return rebuilt.status();
   RETURN_IF_ERROR(prepared != nullptr && prebuilt->for_scene == item.scene
                       ? (*rebuilt)->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
-                      : (*rebuilt)->RestoreStateAtClock(item.state, solid_->time(), solid_->steps()));
+                      : (*rebuilt)->RestoreStateAtClock(solid::Solid::JoinState(item.state), solid_->time(), solid_->steps()));
   (*rebuilt)->set_topology_version(solid_->topology_version() + 1);
   solid_ = *std::move(rebuilt);
   scene_ = item.scene;
@@ -555,7 +555,7 @@ absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuil
         history_.limit_bytes(), " bytes)"));
   }
   const HistoryItem& next = undo ? history_.next_undo() : history_.next_redo();
-  HistoryItem now{solid_->SaveState(), scene_, next.what};
+  HistoryItem now{solid_->SaveStateParts(), scene_, next.what};
   RETURN_IF_ERROR(Restore(next, prebuilt));
   const HistoryItem done = undo ? history_.Undo(std::move(now)) : history_.Redo(std::move(now));
   ++fields_version_;

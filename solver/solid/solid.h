@@ -30,6 +30,7 @@
 #include "dynsolid/scene.pb.h"
 #include "solver/mesh/points.h"
 #include "solver/scene/build.h"
+#include "solver/solid/saved_state.h"
 
 namespace dynsolid::models {
 struct MaterialPoint;
@@ -423,6 +424,11 @@ class Solid {
   // material is unchanged (versions 3 and 4 still read).
   static constexpr uint32_t kStateFormatVersion = 5;
   std::string SaveState() const;
+  // The same in two parts (saved_state.h), the material section shared
+  // with every other state saved while the material is unchanged: what
+  // an undo history keeps. JoinState(SaveStateParts()) == SaveState().
+  SavedState SaveStateParts() const;
+  static std::string JoinState(const SavedState& state);
   absl::Status RestoreState(std::string_view bytes);
   // The same, but the clock reads `time` and `steps` afterwards (undo and
   // redo: the state goes back, the session's clock goes on). The state may

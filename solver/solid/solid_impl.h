@@ -532,7 +532,7 @@ struct Solid::Impl {
   // material_epoch section_epoch.
   mutable std::mutex section_mu;
   mutable uint64_t section_epoch = 0;
-  mutable std::string section_bytes;
+  mutable std::shared_ptr<const std::string> section_bytes;
   mutable uint64_t section_sum = 0;
   mutable std::mutex retired_mu;
   mutable std::optional<RetiredMaterial> retired;  // guarded by retired_mu

@@ -196,16 +196,28 @@ constexpr char kStateMagic[8] = {'D', 'S', 'O', 'L', 'I', 'D', 'S', 'T'};
 constexpr size_t kHeaderBytes = 8 + 4 + 8 + 8 + 8;  // magic, version, fingerprint, payload size
 }  // namespace
 
-std::string Solid::SaveState() const {
+std::string Solid::SaveState() const { return JoinState(SaveStateParts()); }
+
+std::string Solid::JoinState(const SavedState& state) {
+  if (state.section == nullptr) return state.head;
+  const uint64_t n = state.section->size();
+  std::string out;
+  out.reserve(state.head.size() + n + 16);
+  out.append(state.head);
+  out.append(*state.section);
+  out.append(reinterpret_cast<const char*>(&n), sizeof(n));
+  const uint64_t sum = CombinedChecksum(state.head_sum, state.section_sum, n);
+  out.append(reinterpret_cast<const char*>(&sum), sizeof(sum));
+  return out;
+}
+
+SavedState Solid::SaveStateParts() const {
   const Impl& im = *impl_;
-  // One buffer, sized up front: the header (its payload size patched at
-  // the end), the payload, the checksum. (Appending to a growing payload
-  // and then copying it behind the header copied a painted state's MBs
-  // three times; every undoable command pays this.)
+  // The head in one buffer sized up front: the header (its payload size
+  // patched at the end), the payload up to the material section.
   const models::ElementLayout& l = *im.layout;
   size_t estimate = 64 * 1024 + 8 * static_cast<size_t>(8 * p_.size());
-  for (const auto& array : l.materials) estimate += 8 + array.size() * sizeof(models::MaterialPoint);
-  for (const models::ElementBlock& block : l.blocks) estimate += 8 + 4 * block.size() + 40 * block.size();
+  for (const models::ElementBlock& block : l.blocks) estimate += 8 + 40 * block.size();
   StateWriter w;
   w.out.reserve(estimate);
   w.out.assign(kStateMagic, 8);
@@ -273,12 +285,11 @@ std::string Solid::SaveState() const {
   for (const auto& f : frames) {
     w.Doubles(reinterpret_cast<const double*>(f.data()), 4 * f.size());
   }
-  // The material section and its length (CombinedChecksum).
-  const size_t section_at = w.out.size();
-  uint64_t section_sum = 0, section_bytes = 0;
+  // The material section (CombinedChecksum), made once per material.
+  SavedState saved;
   {
     std::lock_guard<std::mutex> lock(im.section_mu);
-    if (im.section_epoch != im.material_epoch || im.section_bytes.empty()) {
+    if (im.section_epoch != im.material_epoch || im.section_bytes == nullptr) {
       StateWriter m;
       m.Put<uint64_t>(l.materials.size());
       for (const auto& array : l.materials) {
@@ -288,22 +299,20 @@ std::string Solid::SaveState() const {
         m.Put<uint64_t>(block.size());
         for (int32_t e = 0; e < block.size(); ++e) m.Put<int32_t>(block.groups[block.group[e]].material);
       }
-      im.section_bytes = std::move(m.out);
-      im.section_sum = WordChecksum(im.section_bytes);
+      im.section_sum = WordChecksum(m.out);
+      im.section_bytes = std::make_shared<const std::string>(std::move(m.out));
       im.section_epoch = im.material_epoch;
     }
-    w.out.append(im.section_bytes);
-    section_sum = im.section_sum;
-    section_bytes = im.section_bytes.size();
+    saved.section = im.section_bytes;
+    saved.section_sum = im.section_sum;
   }
-  w.Put<uint64_t>(section_bytes);
   std::string& out = w.out;
-  const uint64_t payload = out.size() - kHeaderBytes;
+  // The payload: what is here, the section and its length.
+  const uint64_t payload = out.size() - kHeaderBytes + saved.section->size() + 8;
   std::memcpy(out.data() + kHeaderBytes - 8, &payload, sizeof(payload));
-  const uint64_t sum = CombinedChecksum(WordChecksum(std::string_view(out).substr(0, section_at)),
-                                        section_sum, section_bytes);
-  out.append(reinterpret_cast<const char*>(&sum), sizeof(sum));
-  return std::move(out);
+  saved.head_sum = WordChecksum(out);
+  saved.head = std::move(out);
+  return saved;
 }
 
 absl::Status Solid::RestoreState(std::string_view bytes) { return Restore(bytes, nullptr); }

@@ -852,6 +852,32 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   EXPECT_THAT(c->RestoreState(v3), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checksum")));
 }
 
+// SaveStateParts joins to SaveState's bytes; states saved while the
+// material is unchanged share one material section (what the undo history
+// keeps once), a paint makes a new one, and a joined state restores.
+TEST(SolidRuntimeTest, StatePartsShareTheMaterialSectionUntilTheMaterialChanges) {
+  auto s = Make(std::string(kPaintBlock) + kPaintSolvers[0]);
+  ASSERT_NE(s, nullptr);
+  const SavedState first = s->SaveStateParts();
+  EXPECT_EQ(Solid::JoinState(first), s->SaveState());
+  ASSERT_OK(s->Step());
+  const SavedState second = s->SaveStateParts();
+  ASSERT_NE(first.section, nullptr);
+  EXPECT_EQ(first.section.get(), second.section.get());
+  EXPECT_NE(first.head, second.head);
+  ASSERT_OK(s->PaintMaterial(Parse<MaterialPaint>(
+      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
+      "material { young_modulus: 4e5 } strength: 1")));
+  const SavedState painted = s->SaveStateParts();
+  EXPECT_NE(painted.section.get(), second.section.get());
+  EXPECT_NE(*painted.section, *second.section);
+  EXPECT_EQ(Solid::JoinState(painted), s->SaveState());
+  ASSERT_OK(s->RestoreState(Solid::JoinState(second)));
+  EXPECT_EQ(s->SaveState(), Solid::JoinState(second));
+  // A whole state in the head alone joins to itself.
+  EXPECT_EQ(Solid::JoinState(SavedState{s->SaveState()}), s->SaveState());
+}
+
 TEST(SolidRuntimeTest, BoundarySurfaceIsClosedWithTheRightEulerCharacteristic) {
   for (const auto& [text, euler] :
        {std::pair<std::string, int>{kFreeBlock, 2},

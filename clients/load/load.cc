@@ -75,6 +75,9 @@ grpc::Status Retrying(Fn fn, double seconds = 30) {
 // from Inspect (control mesh rest positions).
 struct Box {
   double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
+  // Material points inside the solid (rest positions), for the commands
+  // that name one (MaterialPoints); empty: points in the box.
+  std::vector<Vec3> inside;
 };
 
 absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
@@ -123,12 +126,69 @@ bool BuildsNothing(const Command& c) {
   }
 }
 
+// Rest positions inside the solid, `count` of them at most: on vertical
+// lines at random (x, y) in the upper part of the box, the material points
+// where a ray from above and a ray from below first hit the surface
+// (Pick, on the solid at rest), and a point between them. A box of a scene
+// (the chair) is mostly empty: points drawn in it fall outside the solid
+// and their commands are refused, which then says nothing about the
+// server. Lines that hit nothing, or whose two hits are further apart than
+// the solid is thick there (another part of the solid below), are skipped
+// when the point between is not kept by the ray from below's first hit.
+std::vector<Vec3> MaterialPoints(Sessions::Stub& stub, const SessionRef& ref, const Box& box,
+                                 int count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.05, 0.95), t(0.3, 0.7);
+  std::vector<Vec3> out;
+  auto pick = [&](double x, double y, double z, double dz, PickReply* reply) {
+    PickRequest r;
+    *r.mutable_session() = ref;
+    *r.mutable_origin() = V(x, y, z);
+    *r.mutable_direction() = V(0, 0, dz);
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    return stub.Pick(&c, r, reply).ok() && reply->hit();
+  };
+  const double margin = 1 + (box.hi[2] - box.lo[2]);
+  for (int tries = 0; tries < 4 * count && static_cast<int>(out.size()) < count; ++tries) {
+    const double x = box.lo[0] + u(rng) * (box.hi[0] - box.lo[0]);
+    const double y = box.lo[1] + u(rng) * (box.hi[1] - box.lo[1]);
+    PickReply down, up;
+    if (!pick(x, y, box.hi[2] + margin, -1, &down)) continue;
+    // From just below the top hit, upward: the underside of the same part.
+    const double z0 = down.point().z();
+    if (!pick(x, y, box.lo[2] - margin, 1, &up)) continue;
+    const Vec3& a = down.material_point();
+    const Vec3& b = up.material_point();
+    // The part hit from above reaches down to the first hit from below
+    // only if nothing of the solid hangs below it: accept the point
+    // between when the upward ray, cast from that point, hits the part
+    // at the top hit (within the thickness), else the top hit itself.
+    const double f = t(rng);
+    Vec3 m = V(a.x() + f * (b.x() - a.x()), a.y() + f * (b.y() - a.y()),
+               a.z() + f * (b.z() - a.z()));
+    PickReply check;
+    const double zm = up.point().z() + f * (z0 - up.point().z());
+    if (pick(x, y, zm, 1, &check) && std::abs(check.point().z() - z0) < 1e-6 * margin) {
+      out.push_back(m);
+    } else {
+      out.push_back(a);
+    }
+  }
+  return out;
+}
+
 // One client's seeded command mix. Points are rest positions well inside
 // the solid's box (the upper half, where nothing is pinned by the scenes).
 class Mix {
  public:
   Mix(uint64_t seed, const Box& box, bool edits) : rng_(seed), box_(box), edits_(edits) {}
 
+  // A material point inside the solid (Box::inside), or in the box.
+  Vec3 Material() {
+    if (box_.inside.empty()) return Inside();
+    return box_.inside[Index(box_.inside.size())];
+  }
   Vec3 Inside(double top_fraction = 0.5) {
     std::uniform_real_distribution<double> u(0.2, 0.8), t(1 - top_fraction * 0.6, 0.95);
     const double x = box_.lo[0] + u(rng_) * (box_.hi[0] - box_.lo[0]);
@@ -251,7 +311,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
   switch (mix.Pick(w)) {
     case kForce: {
       PointForce* f = c.mutable_add_point_force();
-      *f->mutable_position() = mix.Inside();
+      *f->mutable_position() = mix.Material();
       *f->mutable_force() = V(mix.Uniform(-1, 1) * 1e3, mix.Uniform(-1, 1) * 1e3, 0);
       return c;
     }
@@ -260,7 +320,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       return c;
     case kDrag: {
       Drag* d = c.mutable_drag();
-      *d->mutable_material_point() = mix.Inside();
+      *d->mutable_material_point() = mix.Material();
       Vec3 t = d->material_point();
       t.set_z(t.z() + 0.05 * size);
       *d->mutable_target() = t;
@@ -285,7 +345,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
     case kCurve: {
       CurveDrag* cd = c.mutable_curve();
       for (int k = 0; k < 2; ++k) {
-        *cd->add_material_points() = mix.Inside();
+        *cd->add_material_points() = mix.Material();
         *cd->add_targets() = mix.Inside();
       }
       cd->set_stiffness(2e3);
@@ -294,7 +354,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
     }
     case kPaint: {
       MaterialPaint* p = c.mutable_paint_material();
-      *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Inside();
+      *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Material();
       p->mutable_region()->mutable_sphere()->set_radius(0.15 * size);
       p->mutable_material()->set_young_modulus(mix.Uniform(1, 3) * 1e5);
       p->set_strength(0.5);
@@ -302,7 +362,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
     }
     case kFix: {
       Region* r = c.mutable_fix_region();
-      const Vec3 centre = mix.Inside();
+      const Vec3 centre = mix.Material();
       r->mutable_sphere()->mutable_center()->CopyFrom(centre);
       r->mutable_sphere()->set_radius(0.2 * size);
       return c;
@@ -315,7 +375,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       return c;
     case kPressure: {
       Pressure* p = c.mutable_add_pressure();
-      *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Inside();
+      *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Material();
       p->mutable_region()->mutable_sphere()->set_radius(0.3 * size);
       p->set_pascals(mix.Uniform(-1, 1) * 500);
       return c;
@@ -390,7 +450,7 @@ void LoadRun::Client(int i, const Session& session, const Box& box, ClientResult
         owned.drags.push_back(*seq);
         break;
       case Command::kCurve:
-        owned.curves.emplace_back(*seq, 4);
+        owned.curves.emplace_back(*seq, c.curve().material_points_size());
         break;
       case Command::kFixRegion:
         owned.fixes.push_back(*seq);
@@ -527,6 +587,9 @@ absl::StatusOr<Report> LoadRun::Run() {
   for (const Session& s : sessions) ++rep.sessions_per_replica[s.replica()];
   absl::StatusOr<Box> box = RestBox(*Sessions::NewStub(Factory(&sessions[0])()), RefOf(sessions[0]));
   if (!box.ok()) return box.status();
+  box->inside = MaterialPoints(*Sessions::NewStub(Factory(&sessions[0])()), RefOf(sessions[0]),
+                               *box, 256, o_.seed);
+  Log(absl::StrCat(box->inside.size(), " material points inside the solid for the commands"));
   auto stats = [&](const Session& s) {
     SessionStats st;
     auto stub = Sessions::NewStub(Factory(&s)());
@@ -641,6 +704,9 @@ absl::StatusOr<Report> LoadRun::Run() {
       ++rep.acknowledged;
       (rec.reply.code() == 0 ? rep.applied : rep.rejected) += 1;
       const std::string kind = KindName(rec.command);
+      if (rec.reply.code() != 0 && o_.verbose) {
+        Log(absl::StrCat("refused ", kind, ": ", rec.reply.message()));
+      }
       if (!rec.reply.duplicate()) {
         Report::Hold& h = rep.hold[kind];
         ++h.count;
@@ -649,7 +715,9 @@ absl::StatusOr<Report> LoadRun::Run() {
       }
       ack.push_back(rec.latency_ms);
       // Visible: the first frame at or after the applied step received
-      // after the command was sent.
+      // after the command was sent; for applied commands only (a refused
+      // one changed nothing there is to see: its ack is its answer).
+      if (rec.reply.code() != 0) continue;
       for (const auto& [step, at] : r.frames) {
         if (at >= rec.sent && step >= rec.reply.applied_step()) {
           const double ms = Ms(at - rec.sent);

@@ -78,6 +78,8 @@ struct Box {
   // Material points inside the solid (rest positions), for the commands
   // that name one (MaterialPoints); empty: points in the box.
   std::vector<Vec3> inside;
+  // The control mesh's mean edge length at rest: a control cell's size.
+  double cell = 1;
 };
 
 absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
@@ -100,6 +102,17 @@ absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
       b.hi[a] = std::max(b.hi[a], p[i + a]);
     }
   }
+  const auto& e = reply.control_mesh().edge_vertices();
+  double length = 0;
+  int edges = 0;
+  for (int k = 0; k + 1 < e.size(); k += 2) {
+    const int i = 3 * e[k], j = 3 * e[k + 1];
+    if (j + 2 >= p.size() || i + 2 >= p.size()) continue;
+    length += std::sqrt((p[i] - p[j]) * (p[i] - p[j]) + (p[i + 1] - p[j + 1]) * (p[i + 1] - p[j + 1]) +
+                        (p[i + 2] - p[j + 2]) * (p[i + 2] - p[j + 2]));
+    ++edges;
+  }
+  if (edges > 0 && length > 0) b.cell = length / edges;
   return b;
 }
 
@@ -197,6 +210,8 @@ class Mix {
     return V(x, y, z);
   }
   double Size() const { return box_.hi[2] - box_.lo[2]; }
+  // A control cell's size, metres (block3's: 1).
+  double Cell() const { return box_.cell; }
   double Uniform(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng_); }
   int Pick(const std::vector<double>& weights) {
     std::discrete_distribution<int> d(weights.begin(), weights.end());
@@ -302,17 +317,29 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
   };
   enum { kForce, kRemove, kDrag, kMove, kRelease, kCurve, kPaint, kFix, kUnfix, kGravity,
          kPressure, kUndo, kRedo, kEdit };
+  // A client keeps at most kMaxLoads forces and pressures of its own at
+  // once (adding more, it removes them first): with 64 clients that is
+  // still 256 loads on the solid.
+  constexpr size_t kMaxLoads = 4;
+  const bool room = owned.loads.size() < kMaxLoads;
   const std::vector<double> w = {
-      18, owned.loads.empty() ? 0.0 : 10.0, owned.drags.size() < 2 ? 6.0 : 0.0,
+      room ? 18.0 : 0.0, owned.loads.empty() ? 0.0 : 10.0, owned.drags.size() < 2 ? 6.0 : 0.0,
       owned.drags.empty() && owned.curves.empty() ? 0.0 : 30.0,
       owned.drags.empty() ? 0.0 : 3.0, owned.curves.empty() ? 2.0 : 0.0, 1, 2,
-      owned.fixes.empty() ? 0.0 : 2.0, 3, 3, 2, 1, mix.edits() ? 0.5 : 0.0};
+      owned.fixes.empty() ? 0.0 : 2.0, 3, room ? 3.0 : 0.0, 2, 1, mix.edits() ? 0.5 : 0.0};
   const double size = mix.Size();
+  // Sizes scale with a control cell (block3's 1 m cells: a 0.45 m brush),
+  // forces with its face area (1 kN on block3, 10 N on the chair's 0.1 m
+  // cells: a hand on a half-metre chair, not the kilonewtons that move a
+  // 27 t block) and spring stiffnesses with its size.
+  const double cell = mix.Cell();
+  const double scale = cell * cell;
+  const double spring = cell;
   switch (mix.Pick(w)) {
     case kForce: {
       PointForce* f = c.mutable_add_point_force();
       *f->mutable_position() = mix.Material();
-      *f->mutable_force() = V(mix.Uniform(-1, 1) * 1e3, mix.Uniform(-1, 1) * 1e3, 0);
+      *f->mutable_force() = V(mix.Uniform(-1, 1) * 1e3 * scale, mix.Uniform(-1, 1) * 1e3 * scale, 0);
       return c;
     }
     case kRemove:
@@ -324,7 +351,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       Vec3 t = d->material_point();
       t.set_z(t.z() + 0.05 * size);
       *d->mutable_target() = t;
-      d->set_stiffness(5e3);
+      d->set_stiffness(5e3 * spring);
       return c;
     }
     case kMove: {
@@ -348,14 +375,14 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
         *cd->add_material_points() = mix.Material();
         *cd->add_targets() = mix.Inside();
       }
-      cd->set_stiffness(2e3);
+      cd->set_stiffness(2e3 * spring);
       cd->set_samples(4);
       return c;
     }
     case kPaint: {
       MaterialPaint* p = c.mutable_paint_material();
       *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Material();
-      p->mutable_region()->mutable_sphere()->set_radius(0.15 * size);
+      p->mutable_region()->mutable_sphere()->set_radius(0.45 * cell);
       p->mutable_material()->set_young_modulus(mix.Uniform(1, 3) * 1e5);
       p->set_strength(0.5);
       return c;
@@ -364,7 +391,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
       Region* r = c.mutable_fix_region();
       const Vec3 centre = mix.Material();
       r->mutable_sphere()->mutable_center()->CopyFrom(centre);
-      r->mutable_sphere()->set_radius(0.2 * size);
+      r->mutable_sphere()->set_radius(0.6 * cell);
       return c;
     }
     case kUnfix:
@@ -376,7 +403,7 @@ Command LoadRun::Next(Mix& mix, client::CommandChannel& ch, Owned& owned) {
     case kPressure: {
       Pressure* p = c.mutable_add_pressure();
       *p->mutable_region()->mutable_sphere()->mutable_center() = mix.Material();
-      p->mutable_region()->mutable_sphere()->set_radius(0.3 * size);
+      p->mutable_region()->mutable_sphere()->set_radius(0.9 * cell);
       p->set_pascals(mix.Uniform(-1, 1) * 500);
       return c;
     }

@@ -45,6 +45,11 @@ constexpr const char* kPaintSolvers[] = {
     "solver { time_step: 1e-3 }",
     "solver { model: COROTATIONAL integrator: BACKWARD_EULER time_step: 2e-3 }"};
 
+// A ball of stiffer, denser material painted at 70 % over the block's top.
+constexpr char kStifferBall[] =
+    "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
+    "material { young_modulus: 4e5 density: 1500 } strength: 0.7";
+
 // Centre of mass from the row sums of Mt.
 Eigen::Vector3d Centre(const Solid& s) {
   const Points& p = s.control_positions();
@@ -375,9 +380,7 @@ TEST(SolidRuntimeTest, PaintReusesUnchangedPartsWithTheBitsOfAFullRebuild) {
 // steps.
 TEST(SolidRuntimeTest, UndoAndRedoOfAPaintTakeBackTheMaterialWithTheBitsOfABuild) {
   const std::string base = kPaintBlock;
-  const MaterialPaint paint = Parse<MaterialPaint>(
-      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
-      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  const MaterialPaint paint = Parse<MaterialPaint>(kStifferBall);
   for (const char* solver : kPaintSolvers) {
     auto live = Make(base + solver);
     ASSERT_NE(live, nullptr);
@@ -419,9 +422,7 @@ TEST(SolidRuntimeTest, UndoAndRedoOfAPaintTakeBackTheMaterialWithTheBitsOfABuild
 // again for the new material; a failing one changes nothing.
 TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenApplied) {
   const std::string base = kPaintBlock;
-  const MaterialPaint stiffer = Parse<MaterialPaint>(
-      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
-      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  const MaterialPaint stiffer = Parse<MaterialPaint>(kStifferBall);
   const MaterialPaint softer = Parse<MaterialPaint>(
       "region { sphere { center { x: 1 y: 1.5 z: 1.5 } radius: 0.9 } } "
       "material { young_modulus: 5e4 } strength: 1");
@@ -494,9 +495,7 @@ TEST(SolidRuntimeTest, PaintPreparedWhileSteppingGivesTheBitsOfPaintingWhenAppli
 // (prepared again from its bytes).
 TEST(SolidRuntimeTest, StatePreparedWhileSteppingRestoresTheBitsOfRestoringThen) {
   const std::string base = kPaintBlock;
-  const MaterialPaint paint = Parse<MaterialPaint>(
-      "region { sphere { center { x: 1.5 y: 1.5 z: 2 } radius: 0.8 } } "
-      "material { young_modulus: 4e5 density: 1500 } strength: 0.7");
+  const MaterialPaint paint = Parse<MaterialPaint>(kStifferBall);
   for (const char* solver : kPaintSolvers) {
     auto reference = Make(base + solver);
     auto live = Make(base + solver);

@@ -261,9 +261,6 @@ struct Solid::Impl {
   std::vector<PressureLoad> pressures;
   std::vector<FixConstraint> fixes;
   std::vector<DragLoad> drags;
-  // The control-point weights of the material point at rest position x
-  // (its element's shape values times the node matrix rows), ascending by
-  // control point.
   // Rest positions this solid's loads already located (bit for bit), so
   // that a restore (an undo) locates again only the points it does not
   // have: Locate and ControlRow are functions of the position alone, and
@@ -276,6 +273,9 @@ struct Solid::Impl {
   };
   // Those of the current loads.
   KnownPoints CurrentPoints() const;
+  // The control-point weights of the material point at rest position x
+  // (its element's shape values times the node matrix rows), ascending by
+  // control point; taken from `known` when it has x.
   absl::StatusOr<std::vector<std::pair<int32_t, double>>> ControlRow(
       const Eigen::Vector3d& x, const KnownPoints* known = nullptr) const;
   // A drag or curve from its message, located on this solid (ids unset).

@@ -66,7 +66,7 @@ uint64_t Checksum(uint32_t version, std::string_view bytes) {
 // and each element's array, which change only when the material does)
 // and that section's length; the checksum combines the word checksum of
 // what comes before the section with the section's own, which the writer
-// keeps from one save to the next (Impl::MaterialSection): a painted
+// keeps from one save to the next (Impl::section_*): a painted
 // block's state is about a megabyte of samples, which every undoable
 // command saved and summed again.
 uint64_t CombinedChecksum(uint64_t before, uint64_t section, uint64_t section_bytes) {

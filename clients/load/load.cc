@@ -17,6 +17,7 @@
 #include "clients/lib/channel.h"
 #include "clients/lib/command_channel.h"
 #include "clients/lib/watcher.h"
+#include "clients/load/mix.h"
 #include "clients/load/server_process.h"
 #include "dynsolid/service.grpc.pb.h"
 
@@ -52,70 +53,6 @@ Percentiles Summarize(std::vector<double> v) {
   return p;
 }
 
-Vec3 V(double x, double y, double z) {
-  Vec3 v;
-  v.set_x(x);
-  v.set_y(y);
-  v.set_z(z);
-  return v;
-}
-
-// A call with retries while the server is away (a restart fault).
-template <typename Fn>
-grpc::Status Retrying(Fn fn, double seconds = 30) {
-  const auto deadline = Clock::now() + std::chrono::duration<double>(seconds);
-  for (;;) {
-    const grpc::Status s = fn();
-    if (s.error_code() != grpc::StatusCode::UNAVAILABLE || Clock::now() > deadline) return s;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-}
-
-// The bounding box of the scene's solid at rest, for the commands' points:
-// from Inspect (control mesh rest positions).
-struct Box {
-  double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
-  // Material points inside the solid (rest positions), for the commands
-  // that name one (MaterialPoints); empty: points in the box.
-  std::vector<Vec3> inside;
-  // The control mesh's mean edge length at rest: a control cell's size.
-  double cell = 1;
-};
-
-absl::StatusOr<Box> RestBox(Sessions::Stub& stub, const SessionRef& ref) {
-  InspectRequest r;
-  *r.mutable_session() = ref;
-  r.set_control_mesh(true);
-  InspectReply reply;
-  const grpc::Status s = Retrying([&] {
-    grpc::ClientContext c;
-    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-    return stub.Inspect(&c, r, &reply);
-  });
-  if (!s.ok()) return client::ToAbslStatus(s, "Inspect");
-  Box b;
-  const auto& p = reply.control_mesh().rest_positions();
-  for (int a = 0; a < 3; ++a) b.lo[a] = INFINITY, b.hi[a] = -INFINITY;
-  for (int i = 0; i + 2 < p.size(); i += 3) {
-    for (int a = 0; a < 3; ++a) {
-      b.lo[a] = std::min(b.lo[a], p[i + a]);
-      b.hi[a] = std::max(b.hi[a], p[i + a]);
-    }
-  }
-  const auto& e = reply.control_mesh().edge_vertices();
-  double length = 0;
-  int edges = 0;
-  for (int k = 0; k + 1 < e.size(); k += 2) {
-    const int i = 3 * e[k], j = 3 * e[k + 1];
-    if (j + 2 >= p.size() || i + 2 >= p.size()) continue;
-    length += std::sqrt((p[i] - p[j]) * (p[i] - p[j]) + (p[i + 1] - p[j + 1]) * (p[i + 1] - p[j + 1]) +
-                        (p[i + 2] - p[j + 2]) * (p[i + 2] - p[j + 2]));
-    ++edges;
-  }
-  if (edges > 0 && length > 0) b.cell = length / edges;
-  return b;
-}
-
 // The command's kind as its field name ("add_point_force"; "none" unset).
 std::string KindName(const Command& c) {
   const google::protobuf::FieldDescriptor* f =
@@ -138,93 +75,6 @@ bool BuildsNothing(const Command& c) {
       return true;
   }
 }
-
-// Rest positions inside the solid, `count` of them at most: on vertical
-// lines at random (x, y) in the upper part of the box, the material points
-// where a ray from above and a ray from below first hit the surface
-// (Pick, on the solid at rest), and a point between them. A box of a scene
-// (the chair) is mostly empty: points drawn in it fall outside the solid
-// and their commands are refused, which then says nothing about the
-// server. Lines that hit nothing, or whose two hits are further apart than
-// the solid is thick there (another part of the solid below), are skipped
-// when the point between is not kept by the ray from below's first hit.
-std::vector<Vec3> MaterialPoints(Sessions::Stub& stub, const SessionRef& ref, const Box& box,
-                                 int count, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.05, 0.95), t(0.3, 0.7);
-  std::vector<Vec3> out;
-  auto pick = [&](double x, double y, double z, double dz, PickReply* reply) {
-    PickRequest r;
-    *r.mutable_session() = ref;
-    *r.mutable_origin() = V(x, y, z);
-    *r.mutable_direction() = V(0, 0, dz);
-    grpc::ClientContext c;
-    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-    return stub.Pick(&c, r, reply).ok() && reply->hit();
-  };
-  const double margin = 1 + (box.hi[2] - box.lo[2]);
-  for (int tries = 0; tries < 4 * count && static_cast<int>(out.size()) < count; ++tries) {
-    const double x = box.lo[0] + u(rng) * (box.hi[0] - box.lo[0]);
-    const double y = box.lo[1] + u(rng) * (box.hi[1] - box.lo[1]);
-    PickReply down, up;
-    if (!pick(x, y, box.hi[2] + margin, -1, &down)) continue;
-    // From just below the top hit, upward: the underside of the same part.
-    const double z0 = down.point().z();
-    if (!pick(x, y, box.lo[2] - margin, 1, &up)) continue;
-    const Vec3& a = down.material_point();
-    const Vec3& b = up.material_point();
-    // The part hit from above reaches down to the first hit from below
-    // only if nothing of the solid hangs below it: accept the point
-    // between when the upward ray, cast from that point, hits the part
-    // at the top hit (within the thickness), else the top hit itself.
-    const double f = t(rng);
-    Vec3 m = V(a.x() + f * (b.x() - a.x()), a.y() + f * (b.y() - a.y()),
-               a.z() + f * (b.z() - a.z()));
-    PickReply check;
-    const double zm = up.point().z() + f * (z0 - up.point().z());
-    if (pick(x, y, zm, 1, &check) && std::abs(check.point().z() - z0) < 1e-6 * margin) {
-      out.push_back(m);
-    } else {
-      out.push_back(a);
-    }
-  }
-  return out;
-}
-
-// One client's seeded command mix. Points are rest positions well inside
-// the solid's box (the upper half, where nothing is pinned by the scenes).
-class Mix {
- public:
-  Mix(uint64_t seed, const Box& box, bool edits) : rng_(seed), box_(box), edits_(edits) {}
-
-  // A material point inside the solid (Box::inside), or in the box.
-  Vec3 Material() {
-    if (box_.inside.empty()) return Inside();
-    return box_.inside[Index(box_.inside.size())];
-  }
-  Vec3 Inside(double top_fraction = 0.5) {
-    std::uniform_real_distribution<double> u(0.2, 0.8), t(1 - top_fraction * 0.6, 0.95);
-    const double x = box_.lo[0] + u(rng_) * (box_.hi[0] - box_.lo[0]);
-    const double y = box_.lo[1] + u(rng_) * (box_.hi[1] - box_.lo[1]);
-    const double z = box_.lo[2] + t(rng_) * (box_.hi[2] - box_.lo[2]);
-    return V(x, y, z);
-  }
-  double Size() const { return box_.hi[2] - box_.lo[2]; }
-  // A control cell's size, metres (block3's: 1).
-  double Cell() const { return box_.cell; }
-  double Uniform(double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng_); }
-  int Pick(const std::vector<double>& weights) {
-    std::discrete_distribution<int> d(weights.begin(), weights.end());
-    return d(rng_);
-  }
-  size_t Index(size_t n) { return std::uniform_int_distribution<size_t>(0, n - 1)(rng_); }
-  bool edits() const { return edits_; }
-
- private:
-  std::mt19937_64 rng_;
-  Box box_;
-  bool edits_;
-};
 
 struct ClientResult {
   std::vector<client::CommandRecord> records;

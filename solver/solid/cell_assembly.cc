@@ -107,56 +107,82 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
     s.node_stamp.assign(nm.rows(), -1);
     s.node_key.resize(nm.rows());
   }
-  // Each cell's support and key.
-  Parts(pool, control_cells, [&](int t, int c) {
-    Scratch& s = scratch[t];
-    Cell& cell = cells[c];
-    cell.support.clear();
-    for (const auto& [kind, e] : cell.elements) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      const int32_t* ids = block.element_nodes(e);
-      for (int i = 0; i < block.nodes; ++i) {
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          const int32_t col = static_cast<int32_t>(it.col());
-          if (s.cell_mark[col] < 0) {
-            s.cell_mark[col] = 0;
-            cell.support.push_back(col);
+  // Each cell's support and geometry key (its elements' kinds and node
+  // rows, the columns numbered within the cell), or those `geometry` has.
+  CellGeometry* geometry = spec.geometry;
+  const bool have = geometry != nullptr &&
+                    static_cast<int32_t>(geometry->keys.size()) == control_cells;
+  if (have) {
+    for (int32_t c = 0; c < control_cells; ++c) cells[c].support = geometry->supports[c];
+  } else {
+    Parts(pool, control_cells, [&](int t, int c) {
+      Scratch& s = scratch[t];
+      Cell& cell = cells[c];
+      cell.support.clear();
+      for (const auto& [kind, e] : cell.elements) {
+        const models::ElementBlock& block = layout.blocks[kind];
+        const int32_t* ids = block.element_nodes(e);
+        for (int i = 0; i < block.nodes; ++i) {
+          for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+            const int32_t col = static_cast<int32_t>(it.col());
+            if (s.cell_mark[col] < 0) {
+              s.cell_mark[col] = 0;
+              cell.support.push_back(col);
+            }
           }
         }
       }
+      std::sort(cell.support.begin(), cell.support.end());
+      for (size_t a = 0; a < cell.support.size(); ++a) s.cell_mark[cell.support[a]] = static_cast<int32_t>(a);
+      Hash128 h;
+      h.Mix(cell.support.size());
+      h.Mix(cell.elements.size());
+      for (const auto& [kind, e] : cell.elements) {
+        const models::ElementBlock& block = layout.blocks[kind];
+        h.Mix(static_cast<uint64_t>(kind));
+        const int32_t* ids = block.element_nodes(e);
+        for (int i = 0; i < block.nodes; ++i) {
+          // The node's row, its columns numbered within the cell: hashed
+          // once per cell (elements of a cell share most of their nodes).
+          if (s.node_stamp[ids[i]] != c) {
+            Hash128 row;
+            row.Mix(static_cast<uint64_t>(nm.outerIndexPtr()[ids[i] + 1] - nm.outerIndexPtr()[ids[i]]));
+            for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+              row.Mix(static_cast<uint64_t>(s.cell_mark[it.col()]));
+              row.Double(it.value());
+            }
+            s.node_key[ids[i]] = row.value();
+            s.node_stamp[ids[i]] = c;
+          }
+          h.Key(s.node_key[ids[i]]);
+        }
+      }
+      cell.key = h.value();
+      for (int32_t col : cell.support) s.cell_mark[col] = -1;
+    });
+    if (geometry != nullptr) {
+      geometry->supports.resize(control_cells);
+      geometry->keys.resize(control_cells);
+      for (int32_t c = 0; c < control_cells; ++c) {
+        geometry->supports[c] = cells[c].support;
+        geometry->keys[c] = cells[c].key;
+      }
     }
-    std::sort(cell.support.begin(), cell.support.end());
-    for (size_t a = 0; a < cell.support.size(); ++a) s.cell_mark[cell.support[a]] = static_cast<int32_t>(a);
+  }
+  // The cell's key: what the spec sums, its geometry, and its elements'
+  // group keys.
+  for (int32_t c = 0; c < control_cells; ++c) {
+    Cell& cell = cells[c];
     Hash128 h;
     h.Mix(spec.salt);
     h.Mix(static_cast<uint64_t>(dofs));
     h.Mix(static_cast<uint64_t>(outputs));
-    h.Mix(cell.support.size());
-    h.Mix(cell.elements.size());
+    h.Key(have ? geometry->keys[c] : cell.key);
     for (const auto& [kind, e] : cell.elements) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      h.Mix(static_cast<uint64_t>(kind));
-      h.Key(group_keys[kind][block.group[e]]);
-      const int32_t* ids = block.element_nodes(e);
-      for (int i = 0; i < block.nodes; ++i) {
-        // The node's row, its columns numbered within the cell: hashed once
-        // per cell (elements of a cell share most of their nodes).
-        if (s.node_stamp[ids[i]] != c) {
-          Hash128 row;
-          row.Mix(static_cast<uint64_t>(nm.outerIndexPtr()[ids[i] + 1] - nm.outerIndexPtr()[ids[i]]));
-          for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-            row.Mix(static_cast<uint64_t>(s.cell_mark[it.col()]));
-            row.Double(it.value());
-          }
-          s.node_key[ids[i]] = row.value();
-          s.node_stamp[ids[i]] = c;
-        }
-        h.Key(s.node_key[ids[i]]);
-      }
+      h.Key(group_keys[kind][layout.blocks[kind].group[e]]);
     }
     cell.key = h.value();
-    for (int32_t col : cell.support) s.cell_mark[col] = -1;
-  });
+  }
 
   // Partials: carried, shared with an earlier cell of this build, or made.
   auto next = std::make_shared<CellPartials>();

@@ -49,10 +49,21 @@ struct CellPartials {
   double bytes = 0;
 };
 
+// The cells' supports and geometry keys (their elements' kinds and node
+// rows), the same for every sum over one node matrix and layout: made by
+// the first SumByCell given it, taken by the next (a build's mass and
+// stiffness sums).
+struct CellGeometry {
+  std::vector<std::vector<int32_t>> supports;
+  std::vector<Key128> keys;
+};
+
 struct CellSumSpec {
   int dofs = 1;     // rows per control point (1: mass; 3: stiffness, node-major 3 i + c)
   int outputs = 1;  // matrices summed side by side (mass and damping: 2)
   uint64_t salt = 0;  // what else the blocks depend on (settings)
+  // Optional: shared between the sums of one node matrix and layout.
+  CellGeometry* geometry = nullptr;
   // Hand each cell's support and partial out (CellSums::supports,
   // partials) instead of summing them.
   bool per_cell = false;

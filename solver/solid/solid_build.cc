@@ -50,7 +50,7 @@ namespace dynsolid::solid {
 // again. M_e = N^T diag(rho dV) N per group, made when a cell needs it.
 std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
-    WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt) const {
+    WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt, CellGeometry* geometry) const {
   const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
   // Per group, when first needed: consistent mass and damping (n x n).
@@ -88,6 +88,7 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
   spec.dofs = 1;
   spec.outputs = has_damping ? 2 : 1;
   spec.salt = 0x6d617373;  // "mass"
+  spec.geometry = geometry;
   spec.group_key = [&](int kind, int32_t gi) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     Hash128 h;
@@ -225,9 +226,12 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
+  // The cells' supports and keys, for both the stiffness and mass sums.
+  CellGeometry geometry;
   if (corot && settings.corotation() == SolverSettings::CONTROL_CELL) {
     std::shared_ptr<const CellPartials> made;
-    b.cell_model = BuildCellCorotation(*l, *b.corotational, threads, k0_cells.get(), &made);
+    b.cell_model =
+        BuildCellCorotation(*l, *b.corotational, threads, k0_cells.get(), &made, &geometry);
     b.k_cells_made = made->made;
     b.k_cells = made->bytes <= kMaxCarriedBytes ? made : nullptr;
   }
@@ -239,7 +243,8 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.dt = dt;
     b.mass_cells = mass_cells;
   } else {
-    b.mass_cells = AssembleControlMatrices(*l, b.has_damping, mass_cells.get(), threads, b.mt, b.dt);
+    b.mass_cells = AssembleControlMatrices(*l, b.has_damping, mass_cells.get(), threads, b.mt,
+                                           b.dt, &geometry);
   }
   b.mass_ms = MsSince(t_mass);
   b.layout = std::move(l);
@@ -824,9 +829,10 @@ struct StiffnessBlocks {
 std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
     const models::ElementLayout& layout, const models::CorotationalModel& corotational,
     WorkerPool& threads, const CellPartials* previous,
-    std::shared_ptr<const CellPartials>* next) const {
+    std::shared_ptr<const CellPartials>* next, CellGeometry* geometry) const {
   StiffnessBlocks blocks(layout, corotational, d->node_matrix, threads.size());
   blocks.spec.per_cell = true;
+  blocks.spec.geometry = geometry;
   CellSums sums;
   std::shared_ptr<const CellPartials> made =
       SumByCell(d->node_matrix, layout, d->hierarchy.control_cell, d->control().num_cells(),

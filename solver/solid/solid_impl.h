@@ -42,6 +42,7 @@
 namespace dynsolid::solid {
 
 struct CellPartials;  // cell_assembly.h
+struct CellGeometry;  // cell_assembly.h
 
 using SparseMatrix = subdivision::SparseMatrix;
 using Clock = std::chrono::steady_clock;
@@ -421,7 +422,8 @@ struct Solid::Impl {
   // to carry unless above kMaxCarriedBytes).
   std::unique_ptr<models::CellCorotation> BuildCellCorotation(
       const models::ElementLayout& l, const models::CorotationalModel& m, WorkerPool& threads,
-      const CellPartials* previous, std::shared_ptr<const CellPartials>* next) const;
+      const CellPartials* previous, std::shared_ptr<const CellPartials>* next,
+      CellGeometry* geometry = nullptr) const;
   // The same as a 3 #control square sparse matrix (K0 of the implicit
   // preconditioner) for layout `l` and its model `m`, on `threads`.
   // `made` (optional): partials of l made already (a build's per-cell
@@ -451,11 +453,12 @@ struct Solid::Impl {
                                           bool snap) const;
   // Mt and Dt of `layout` on `threads`; returns their cells' partials
   // (cell_assembly.h), those of `previous` taken over where keys match.
-  std::shared_ptr<const CellPartials> AssembleControlMatrices(const models::ElementLayout& layout,
-                                                              bool has_damping,
-                                                              const CellPartials* previous,
-                                                              WorkerPool& threads, SparseMatrix& mt,
-                                                              SparseMatrix& dt) const;
+  // `geometry` (optional): the cells' supports and keys, shared with the
+  // build's other sums over `layout`.
+  std::shared_ptr<const CellPartials> AssembleControlMatrices(
+      const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
+      WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt,
+      CellGeometry* geometry = nullptr) const;
   // *passes (optional): the element passes it took. With `cells` (the
   // per-control-cell corotation of m's layout) Kt is applied in control
   // space (CellCorotation::ApplyRest on cell_pool) instead of through m.

@@ -283,31 +283,43 @@ TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
     ASSERT_TRUE(stub->CreateSession(&context, r, &s).ok());
     CommandStream painter(*stub, s, "painter"), pusher(*stub, s, "pusher");
     InspectAt(*stub, s, 5, false, false);
-    Command paint, fix;
+    // Two paints of the whole block in a row: the loop builds one after
+    // the other (0.1 s and more each), so that the other client's force
+    // surely lands while one of them builds.
+    Command paint, paint2, fix;
     ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
         "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
         "material { young_modulus: 3e5 } strength: 1 }",
         &paint));
     ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
+        "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
+        "material { young_modulus: 2e5 } strength: 1 }",
+        &paint2));
+    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
         "fix_region { box { min { x: 2.9 } max { x: 3.1 y: 3 z: 3 } } }", &fix));
     ASSERT_TRUE(painter.Write(1, paint));
-    ASSERT_TRUE(painter.Write(2, ForceCommand(1.5, 1.5, 3, 0, 0, -2e4)));
-    // A few steps later the loop has taken the paint and is building it.
+    ASSERT_TRUE(painter.Write(2, paint2));
+    ASSERT_TRUE(painter.Write(3, ForceCommand(1.5, 1.5, 3, 0, 0, -2e4)));
+    // A few steps later the loop has taken the first paint and is building it.
     const int64_t sent = InspectAt(*stub, s, 0, false, false).step();
     InspectAt(*stub, s, sent + 5, false, false);
     const CommandReply pushed = pusher.Send(1, ForceCommand(0.5, 0.5, 3, 1e4, 0, 0));
     const CommandReply fixed = pusher.Send(2, fix);
-    CommandReply painted, forced;
+    CommandReply painted, painted2, forced;
     ASSERT_TRUE(painter.Read(&painted));
+    ASSERT_TRUE(painter.Read(&painted2));
     ASSERT_TRUE(painter.Read(&forced));
-    for (const CommandReply* reply : {&pushed, &fixed, static_cast<const CommandReply*>(&painted), static_cast<const CommandReply*>(&forced)}) {
+    for (const CommandReply* reply : {&pushed, &fixed, static_cast<const CommandReply*>(&painted),
+                                      static_cast<const CommandReply*>(&painted2),
+                                      static_cast<const CommandReply*>(&forced)}) {
       ASSERT_EQ(reply->code(), 0) << reply->message();
     }
-    EXPECT_LT(pushed.applied_step(), painted.applied_step())
-        << "another client's force waited for the paint's build";
-    EXPECT_GE(forced.applied_step(), painted.applied_step())
+    EXPECT_LT(pushed.applied_step(), painted2.applied_step())
+        << "another client's force waited for the paints' builds";
+    EXPECT_GE(painted2.applied_step(), painted.applied_step());
+    EXPECT_GE(forced.applied_step(), painted2.applied_step())
         << "the painter's own force went ahead of its paint";
-    EXPECT_GE(fixed.applied_step(), painted.applied_step())
+    EXPECT_GE(fixed.applied_step(), painted2.applied_step())
         << "a constraint (which the build reads) went ahead of the paint";
     Command pause;
     pause.mutable_pause();

@@ -60,7 +60,9 @@ void History::Save(const HistoryItem& h, persist::HistoryEntry* e, int32_t scene
 }
 
 HistoryItem History::Load(const persist::HistoryEntry& e, std::shared_ptr<const Scene> scene) {
-  return HistoryItem{solid::SavedState{e.solid_state()}, std::move(scene), e.what()};
+  solid::SavedState state;
+  state.head = e.solid_state();  // a whole state: no shared section
+  return HistoryItem{std::move(state), std::move(scene), e.what()};
 }
 
 }  // namespace dynsolid::server

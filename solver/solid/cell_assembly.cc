@@ -104,21 +104,23 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
   for (Scratch& s : scratch) {
     s.cell_mark.assign(nc, -1);
     s.element_mark.assign(nc, -1);
-    s.node_stamp.assign(nm.rows(), -1);
-    s.node_key.resize(nm.rows());
   }
   // Each cell's support and geometry key (its elements' kinds and node
-  // rows, the columns numbered within the cell), or those `geometry` has.
-  CellGeometry* geometry = spec.geometry;
-  const bool have = geometry != nullptr &&
-                    static_cast<int32_t>(geometry->keys.size()) == control_cells;
-  if (have) {
-    for (int32_t c = 0; c < control_cells; ++c) cells[c].support = geometry->supports[c];
-  } else {
+  // rows, the columns numbered within the cell): made here unless
+  // spec.geometry has them from another sum of this build.
+  CellGeometry own;
+  CellGeometry& geometry = spec.geometry != nullptr ? *spec.geometry : own;
+  if (static_cast<int32_t>(geometry.keys.size()) != control_cells) {
+    geometry.supports.assign(control_cells, {});
+    geometry.keys.assign(control_cells, {});
+    for (Scratch& s : scratch) {
+      s.node_stamp.assign(nm.rows(), -1);
+      s.node_key.resize(nm.rows());
+    }
     Parts(pool, control_cells, [&](int t, int c) {
       Scratch& s = scratch[t];
-      Cell& cell = cells[c];
-      cell.support.clear();
+      const Cell& cell = cells[c];
+      std::vector<int32_t>& support = geometry.supports[c];
       for (const auto& [kind, e] : cell.elements) {
         const models::ElementBlock& block = layout.blocks[kind];
         const int32_t* ids = block.element_nodes(e);
@@ -127,15 +129,15 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
             const int32_t col = static_cast<int32_t>(it.col());
             if (s.cell_mark[col] < 0) {
               s.cell_mark[col] = 0;
-              cell.support.push_back(col);
+              support.push_back(col);
             }
           }
         }
       }
-      std::sort(cell.support.begin(), cell.support.end());
-      for (size_t a = 0; a < cell.support.size(); ++a) s.cell_mark[cell.support[a]] = static_cast<int32_t>(a);
+      std::sort(support.begin(), support.end());
+      for (size_t a = 0; a < support.size(); ++a) s.cell_mark[support[a]] = static_cast<int32_t>(a);
       Hash128 h;
-      h.Mix(cell.support.size());
+      h.Mix(support.size());
       h.Mix(cell.elements.size());
       for (const auto& [kind, e] : cell.elements) {
         const models::ElementBlock& block = layout.blocks[kind];
@@ -157,27 +159,20 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
           h.Key(s.node_key[ids[i]]);
         }
       }
-      cell.key = h.value();
-      for (int32_t col : cell.support) s.cell_mark[col] = -1;
+      geometry.keys[c] = h.value();
+      for (int32_t col : support) s.cell_mark[col] = -1;
     });
-    if (geometry != nullptr) {
-      geometry->supports.resize(control_cells);
-      geometry->keys.resize(control_cells);
-      for (int32_t c = 0; c < control_cells; ++c) {
-        geometry->supports[c] = cells[c].support;
-        geometry->keys[c] = cells[c].key;
-      }
-    }
   }
   // The cell's key: what the spec sums, its geometry, and its elements'
   // group keys.
   for (int32_t c = 0; c < control_cells; ++c) {
     Cell& cell = cells[c];
+    cell.support = geometry.supports[c];
     Hash128 h;
     h.Mix(spec.salt);
     h.Mix(static_cast<uint64_t>(dofs));
     h.Mix(static_cast<uint64_t>(outputs));
-    h.Key(have ? geometry->keys[c] : cell.key);
+    h.Key(geometry.keys[c]);
     for (const auto& [kind, e] : cell.elements) {
       h.Key(group_keys[kind][layout.blocks[kind].group[e]]);
     }

@@ -31,29 +31,25 @@
 
 namespace dynsolid::solid {
 
-absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, const Points& rest,
-                                                     bool snap) const {
-  // The elements' rest bounding boxes, once per layout (InstallMaterial
-  // clears them) and rest nodes.
-  if (boxes_rest != &rest || element_boxes[0].size() != layout->blocks[0].cell.size() ||
-      element_boxes[1].size() != layout->blocks[1].cell.size() ||
-      element_boxes[2].size() != layout->blocks[2].cell.size()) {
-    for (int kind = 0; kind < 3; ++kind) {
-      const models::ElementBlock& block = layout->blocks[kind];
-      std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
-      boxes.resize(block.size());
-      for (int32_t e = 0; e < block.size(); ++e) {
-        const int32_t* ids = block.element_nodes(e);
-        Eigen::Vector3d lo = rest.row(ids[0]), hi = lo;
-        for (int i = 1; i < block.nodes; ++i) {
-          lo = lo.cwiseMin(rest.row(ids[i]).transpose());
-          hi = hi.cwiseMax(rest.row(ids[i]).transpose());
-        }
-        boxes[e] = Eigen::AlignedBox3d(lo, hi);
+void Solid::Impl::MakeElementBoxes() {
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout->blocks[kind];
+    std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
+    boxes.resize(block.size());
+    for (int32_t e = 0; e < block.size(); ++e) {
+      const int32_t* ids = block.element_nodes(e);
+      Eigen::Vector3d lo = rest_nodes.row(ids[0]), hi = lo;
+      for (int i = 1; i < block.nodes; ++i) {
+        lo = lo.cwiseMin(rest_nodes.row(ids[i]).transpose());
+        hi = hi.cwiseMax(rest_nodes.row(ids[i]).transpose());
       }
+      boxes[e] = Eigen::AlignedBox3d(lo, hi);
     }
-    boxes_rest = &rest;
   }
+}
+
+absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, bool snap) const {
+  const Points& rest = rest_nodes;
   std::vector<double> n, dn;
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = layout->blocks[kind];

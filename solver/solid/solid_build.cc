@@ -270,7 +270,6 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   }
   ++material_epoch;
   gravity_mass.resize(0);  // per material
-  for (auto& boxes : element_boxes) boxes.clear();  // per layout (Locate)
   // The old model references the old layout: replace the model first.
   model = std::move(b.model);
   corotational = b.corotational;
@@ -416,6 +415,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   rep.mass_cells_made = material.mass_cells != nullptr ? material.mass_cells->made : -1;
   if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
+  im.MakeElementBoxes();
   s->total_mass_ = SumOfValues(im.mt);
   t_phase = Clock::now();
   s->BuildSurface();
@@ -444,7 +444,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   const bool snap = im.settings.snap_forces_to_quadrature();
   for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
     const PointForce& pf = scene.loads().point_forces(i);
-    absl::StatusOr<MaterialLocation> at = im.Locate(V(pf.position()), rest, snap);
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(pf.position()), snap);
     if (!at.ok()) {
       return absl::InvalidArgumentError(
           absl::StrCat("loads.point_forces[", i, "].position: ", at.status().message()));
@@ -478,7 +478,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
 
   // Traced points.
   for (int i = 0; i < static_cast<int>(scene.traced_size()); ++i) {
-    absl::StatusOr<MaterialLocation> at = im.Locate(V(scene.traced(i).position()), rest, false);
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(scene.traced(i).position()), false);
     if (!at.ok()) {
       return absl::InvalidArgumentError(
           absl::StrCat("traced[", i, "] (", scene.traced(i).name(), "): ", at.status().message()));

@@ -77,7 +77,7 @@ absl::StatusOr<std::vector<std::pair<int32_t, double>>> Solid::Impl::ControlRow(
     auto it = known->rows.find(KnownPoints::KeyOf(x));
     if (it != known->rows.end()) return *it->second;
   }
-  ASSIGN_OR_RETURN(MaterialLocation at, Locate(x, rest_nodes, false));
+  ASSIGN_OR_RETURN(MaterialLocation at, Locate(x, false));
   std::vector<double> shape;
   ShapeAt(at, shape);
   const int32_t* ids = layout->blocks[at.kind].element_nodes(at.element);

@@ -445,12 +445,14 @@ struct Solid::Impl {
   // for the next build of this solid or of one remeshed from it.
   std::shared_ptr<const CellPartials> mass_cells, k0_cells;
 
-  // Locate's cache: each element's rest bounding box, for the current
-  // layout (cleared by InstallMaterial) and the rest nodes they came from.
-  mutable std::array<std::vector<Eigen::AlignedBox3d>, 3> element_boxes;
-  mutable const Points* boxes_rest = nullptr;
-  absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, const Points& rest,
-                                          bool snap) const;
+  // Each element's rest bounding box, by kind and element index (Locate;
+  // a paint's reach). Made once, when the solid is created: its elements
+  // and rest nodes never change (a topology edit makes another solid),
+  // whatever material is laid out over them.
+  std::array<std::vector<Eigen::AlignedBox3d>, 3> element_boxes;
+  void MakeElementBoxes();
+  // The material point at rest position x (rest_nodes).
+  absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, bool snap) const;
   // Mt and Dt of `layout` on `threads`; returns their cells' partials
   // (cell_assembly.h), those of `previous` taken over where keys match.
   // `geometry` (optional): the cells' supports and keys, shared with the

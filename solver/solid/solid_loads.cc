@@ -164,7 +164,7 @@ absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
   Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidatePointForce(f, "point_force"));
   absl::StatusOr<MaterialLocation> at =
-      im.Locate(V(f.position()), im.rest_nodes, im.settings.snap_forces_to_quadrature());
+      im.Locate(V(f.position()), im.settings.snap_forces_to_quadrature());
   if (!at.ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat("point_force.position: ", at.status().message()));

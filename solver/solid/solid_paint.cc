@@ -83,9 +83,10 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     const double la = a.lame_lambda(), ma = a.lame_mu(), lb = b.lame_lambda(), mb = b.lame_mu();
     return std::max({(3 * lb + 2 * mb) / (3 * la + 2 * ma), (lb + 2 * mb) / (la + 2 * ma), mb / ma});
   };
-  // Only elements whose rest nodes' box meets the region (or whose control
-  // cell it lists) can hold a painted sample: every shape function is
-  // non-negative inside its element, so its samples lie in that box.
+  // Only elements whose rest box (Impl::element_boxes) meets the region,
+  // or whose control cell it lists, can hold a painted sample: every shape
+  // function is non-negative inside its element, so its samples lie in
+  // that box.
   const Region& r = paint.region();
   std::vector<uint8_t> listed(d_.control().num_cells(), 0);
   for (int32_t c : r.control_cells()) listed[c] = 1;
@@ -108,13 +109,9 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     x.resize(n, 3);
     for (int32_t e = 0; e < block.size(); ++e) {
       const int32_t cell = control_cell.empty() ? block.cell[e] : control_cell[block.cell[e]];
+      if (!listed[cell] && !im.element_boxes[kind][e].intersects(region)) continue;
       const int32_t* ids = block.element_nodes(e);
-      Eigen::AlignedBox3d box;
-      for (int i = 0; i < n; ++i) {
-        x.row(i) = im.rest_nodes.row(ids[i]);
-        box.extend(x.row(i).transpose());
-      }
-      if (!listed[cell] && !box.intersects(region)) continue;
+      for (int i = 0; i < n; ++i) x.row(i) = im.rest_nodes.row(ids[i]);
       const std::vector<models::MaterialPoint>& was = old.materials[block.groups[block.group[e]].material];
       std::vector<models::MaterialPoint> now = was;
       bool changed = false;

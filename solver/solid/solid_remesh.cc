@@ -259,7 +259,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   im.gravity = old.gravity;
   const bool snap = im.settings.snap_forces_to_quadrature();
   for (const Impl::PointLoad& l : old.point_loads) {
-    absl::StatusOr<MaterialLocation> at = im.Locate(V(l.msg.position()), im.rest_nodes, snap);
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(l.msg.position()), snap);
     if (at.ok()) {
       im.point_loads.push_back({l.id, l.msg, *at});
     } else {
@@ -303,7 +303,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   }
   for (int i = 0; i < scene.traced_size(); ++i) {
     absl::StatusOr<MaterialLocation> at =
-        im.Locate(V(scene.traced(i).position()), im.rest_nodes, false);
+        im.Locate(V(scene.traced(i).position()), false);
     if (at.ok()) {
       im.traced.push_back(*at);
       s.traced_names_.push_back(scene.traced(i).name());

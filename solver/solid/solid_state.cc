@@ -442,7 +442,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     const auto was = known.forces.find(Impl::KnownPoints::KeyOf(V(msg.position())));
     absl::StatusOr<MaterialLocation> at =
         was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second)
-                                  : im.Locate(V(msg.position()), im.rest_nodes, snap);
+                                  : im.Locate(V(msg.position()), snap);
     if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
       r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
       break;

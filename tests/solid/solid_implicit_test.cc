@@ -17,6 +17,7 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
+#include "tests/testing/make_solid.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::solid {
@@ -235,9 +236,7 @@ TEST(SolidImplicitTest, FoldedRhsGivesTheSameBitsForAnyThreadCount) {
   const std::string text = BlockScene(1e-4);
   std::vector<std::string> states;
   for (const char* threads : {"1", "2", "3"}) {
-    setenv("DYNSOLID_THREADS", threads, 1);
-    auto s = Make(text);
-    unsetenv("DYNSOLID_THREADS");
+    auto s = testing::WithThreadsEnv(threads, [&] { return Make(text); });
     ASSERT_NE(s, nullptr);
     Advance(*s, 25);
     states.push_back(s->SaveState());

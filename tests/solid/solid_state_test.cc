@@ -105,9 +105,7 @@ TEST(SolidRuntimeTest, EditsGiveTheSameBitsForAnyThreadCount) {
   const std::string text = EditScene("LOCAL_FRAME", "CENTRAL_DIFFERENCE");
   std::vector<std::string> states;
   for (const char* threads : {"1", "2", "3"}) {
-    setenv("DYNSOLID_THREADS", threads, 1);
-    auto s = Make(text);
-    unsetenv("DYNSOLID_THREADS");
+    auto s = testing::WithThreadsEnv(threads, [&] { return Make(text); });
     ASSERT_NE(s, nullptr);
     RunScript(*s, 0, 25);
     states.push_back(s->SaveState());

@@ -11,6 +11,7 @@
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/testing/make_solid.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::solid {
@@ -19,15 +20,7 @@ namespace {
 using ::dynsolid::testing::StatusIs;
 using ::testing::HasSubstr;
 
-std::unique_ptr<Solid> Make(const std::string& text) {
-  auto scene = scene::ParseScene(text, "test");
-  EXPECT_OK(scene);
-  auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), std::nullopt);
-  EXPECT_OK(d);
-  auto s = Solid::Create(*scene, *std::move(d));
-  EXPECT_OK(s);
-  return s.ok() ? *std::move(s) : nullptr;
-}
+std::unique_ptr<Solid> Make(const std::string& text) { return testing::MakeSolid(text); }
 
 const char* kBlock = R"pb(
   name: "block"
@@ -197,9 +190,7 @@ TEST(SolidTest, LoadedCantileverStaysBoundedAndResultsDoNotDependOnThreads) {
   )pb";
   std::vector<Eigen::Vector3d> tips;
   for (const char* threads : {"1", "2", "3"}) {
-    setenv("DYNSOLID_THREADS", threads, 1);
-    auto s = Make(beam);
-    unsetenv("DYNSOLID_THREADS");
+    auto s = testing::WithThreadsEnv(threads, [&] { return Make(beam); });
     ASSERT_NE(s, nullptr);
     double peak = 0;
     for (int i = 0; i < 1500; ++i) {

@@ -2,6 +2,7 @@
 // null, with the failure recorded, when any step fails.
 #pragma once
 
+#include <cstdlib>
 #include <memory>
 #include <optional>
 #include <string>
@@ -26,6 +27,17 @@ inline std::unique_ptr<solid::Solid> MakeSolid(const std::string& text, int thre
   auto made = solid::Solid::Create(*scene, *std::move(d), threads);
   EXPECT_OK(made);
   return made.ok() ? *std::move(made) : nullptr;
+}
+
+// make() with DYNSOLID_THREADS set to `threads` (how a solid's pool size
+// comes from the environment), unset again afterwards: for the tests that
+// check the same bits for any thread count.
+template <typename Make>
+auto WithThreadsEnv(const char* threads, Make make) {
+  setenv("DYNSOLID_THREADS", threads, 1);
+  auto made = make();
+  unsetenv("DYNSOLID_THREADS");
+  return made;
 }
 
 }  // namespace dynsolid::testing

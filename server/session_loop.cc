@@ -1,6 +1,7 @@
 #include "server/session_loop.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <utility>
 
@@ -451,11 +452,16 @@ void SessionLoop::Run() {
       rate_steps = 0;
     }
     if (has_watchers) {
+      // Every watcher at the rate asked for; the commanding clients' after
+      // the next step (frame_for_command_).
       const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
                          core_->fields_version() != last_published_fields_;
-      if (dirty && (publish_requested || now >= next_publish_ ||
-                    (frame_for_command_ && now >= earliest_publish_))) {
-        Publish(now);
+      const bool early_dirty = core_->steps() != last_early_step_ ||
+                               core_->fields_version() != last_early_fields_;
+      if (dirty && (publish_requested || now >= next_publish_)) {
+        Publish(now, /*early=*/false);
+      } else if (frame_for_command_ && early_dirty && now >= earliest_publish_) {
+        Publish(now, /*early=*/true);
       }
     }
   }
@@ -487,7 +493,18 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       commands.resize(k);
       builder_ = std::thread([this, job = std::move(job)]() {
         NameThisThread("build");
+        const auto start = std::chrono::steady_clock::now();
+        const ThreadCpu cpu0 = ThisThreadCpu();
         std::shared_ptr<SimCore::Prebuilt> result = job();
+        const ThreadCpu cpu1 = ThisThreadCpu();
+        {
+          absl::MutexLock stats(&stats_mu_);
+          ++counters_.builds;
+          counters_.build_ms += std::chrono::duration<double, std::milli>(
+                                    std::chrono::steady_clock::now() - start).count();
+          counters_.build_cpu_ms += cpu1.cpu_ms - cpu0.cpu_ms;
+          counters_.build_wait_ms += cpu1.wait_ms - cpu0.wait_ms;
+        }
         absl::MutexLock lock(&mu_);
         built_ = std::move(result);
         build_done_ = true;
@@ -526,7 +543,10 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       }
     }
     if (outcome == SimCore::Outcome::kDuplicate) ++duplicates;
-    if (outcome == SimCore::Outcome::kApplied) frame_for_command_ = true;
+    if (outcome == SimCore::Outcome::kApplied) {
+      frame_for_command_ = true;
+      commanded_clients_.insert(c.request.client_id());
+    }
     if (core_->TakeSaveRequest()) {
       // The Save's own record goes first; the snapshot covers it.
       batch.snapshot = MakeSnapshotBytes();
@@ -583,33 +603,42 @@ void SessionLoop::Deliver(PersistBatch batch) {
   persist_queue_.push_back(std::move(batch));
 }
 
-void SessionLoop::Publish(Clock::time_point now) {
+void SessionLoop::Publish(Clock::time_point now, bool early) {
   std::vector<std::shared_ptr<WatchSink>> sinks;
   bool fields = false;
   double rate = 0;
   {
     absl::MutexLock lock(&mu_);
     for (auto& [ptr, entry] : watchers_) {
+      rate = std::max(rate, entry.sink->rate_hz());
+      const std::string& client = entry.sink->client_id();
+      if (early && !client.empty() && !commanded_clients_.contains(client)) continue;
       sinks.push_back(entry.sink);
       fields = fields || entry.sink->fields().any();
-      rate = std::max(rate, entry.sink->rate_hz());
     }
-    publish_requested_ = false;
+    if (!early) publish_requested_ = false;
   }
+  frame_for_command_ = false;
+  commanded_clients_.clear();
   if (sinks.empty()) return;
   std::shared_ptr<const SurfaceSnapshot> snap = core_->MakeSnapshot(fields);
   for (auto& s : sinks) s->Offer(snap);
-  last_published_step_ = snap->step;
-  last_published_fields_ = snap->fields_version;
-  frame_for_command_ = false;
-  const double command_interval =
-      std::max(1.0 / options_.max_watch_hz,
-               static_cast<double>(sinks.size()) / options_.command_frame_writes_per_second);
-  earliest_publish_ = now + std::chrono::duration_cast<Clock::duration>(
-                                std::chrono::duration<double>(command_interval));
-  rate = std::clamp(rate > 0 ? rate : options_.watch_hz, 0.1, options_.max_watch_hz);
-  next_publish_ = now + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double>(1.0 / rate));
+  last_early_step_ = snap->step;
+  last_early_fields_ = snap->fields_version;
+  if (early) {
+    // The early frames' budget counts their writes.
+    const double interval =
+        std::max(1.0 / options_.max_watch_hz,
+                 static_cast<double>(sinks.size()) / options_.command_frame_writes_per_second);
+    earliest_publish_ = now + std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(interval));
+  } else {
+    last_published_step_ = snap->step;
+    last_published_fields_ = snap->fields_version;
+    rate = std::clamp(rate > 0 ? rate : options_.watch_hz, 0.1, options_.max_watch_hz);
+    next_publish_ = now + std::chrono::duration_cast<Clock::duration>(
+                              std::chrono::duration<double>(1.0 / rate));
+  }
   absl::MutexLock lock(&stats_mu_);
   ++counters_.frames_published;
 }
@@ -842,6 +871,10 @@ SessionStats SessionLoop::Stats() const {
   s.set_last_command_hold_ms(c.hold_ms);
   s.set_control_cells(c.control_cells);
   s.set_control_vertices(c.control_vertices);
+  s.set_builds(c.builds);
+  s.set_build_ms_total(c.build_ms);
+  s.set_build_cpu_ms_total(c.build_cpu_ms);
+  s.set_build_wait_ms_total(c.build_wait_ms);
   probes_.FillStats(&s);
   return s;
 }

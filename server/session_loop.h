@@ -62,6 +62,9 @@ class WatchSink {
   virtual void set_watcher_id(int64_t id) = 0;
   virtual const FieldChoice& fields() const = 0;
   virtual double rate_hz() const = 0;
+  // WatchRequest.client_id: the client whose commands it is shown at once
+  // (empty: every client's).
+  virtual const std::string& client_id() const = 0;
 };
 
 // Real-time debt the loop catches up by stepping back to back; beyond it,
@@ -72,10 +75,11 @@ struct LoopOptions {
   // Default and largest watch rate, frames per second.
   double watch_hz = 60;
   double max_watch_hz = 240;
-  // Frames sent early because a command was applied (frame_for_command_):
-  // at most max_watch_hz, and at most this many frame writes per second
-  // over all of a session's watchers (64 watchers: 31 such frames a
-  // second), so that many watchers do not turn commands into a flood.
+  // Frames sent early because a command was applied (frame_for_command_),
+  // to the watchers of the clients whose commands were applied and to those
+  // with no client_id: at most max_watch_hz, and at most this many such
+  // frame writes per second (64 watchers with no client_id: 31 early frames
+  // a second), so that many watchers do not turn commands into a flood.
   double command_frame_writes_per_second = 2000;
   int max_watchers = 64;
   // Per client_id: commands per second (token bucket, burst of one second).
@@ -187,7 +191,9 @@ class SessionLoop {
   // (SimCore::MayPassBuild, from a client with nothing held or building).
   void HoldBehindBuild(std::deque<PendingCommand>& commands);
   std::string MakeSnapshotBytes();
-  void Publish(std::chrono::steady_clock::time_point now);
+  // A frame to every watcher, or (early) to the watchers of the clients in
+  // commanded_clients_ and those with no client_id.
+  void Publish(std::chrono::steady_clock::time_point now, bool early);
   void AnswerInspects(bool all_unavailable);
   void RecordStep(double ms);
   // The probes' work at a step boundary (probe.h); with a data directory a
@@ -253,11 +259,17 @@ class SessionLoop {
   int64_t last_published_step_ = -1;
   int64_t last_published_fields_ = -1;
   std::chrono::steady_clock::time_point next_publish_;
-  // A command was applied since the last frame: the next frame goes out
-  // after the next step, not at the watchers' rate, but not before
-  // earliest_publish_ (LoopOptions::command_frame_writes_per_second), so a
-  // client sees what it did within a step or two.
+  // A command was applied since the last frame: the next frame of the
+  // watchers of the clients that sent one (commanded_clients_) and of those
+  // with no client_id goes out after the next step, not at the watchers'
+  // rate, but not before earliest_publish_
+  // (LoopOptions::command_frame_writes_per_second), so a client sees what
+  // it did within a step or two.
   bool frame_for_command_ = false;
+  absl::flat_hash_set<std::string> commanded_clients_;
+  // The step and fields of the last frame to any watcher (early or not).
+  int64_t last_early_step_ = -1;
+  int64_t last_early_fields_ = -1;
   std::chrono::steady_clock::time_point earliest_publish_;
   uint64_t journal_submitted_ = 0;  // logical journal size incl. queued
   int64_t last_snapshot_step_ = -1;
@@ -291,6 +303,8 @@ class SessionLoop {
     int64_t history_bytes = 0, history_limit = 0, topology_version = 0;
     double hold_ms = 0;
     int32_t control_cells = 0, control_vertices = 0;
+    int64_t builds = 0;
+    double build_ms = 0, build_cpu_ms = 0, build_wait_ms = 0;
     std::deque<double> step_ms;  // last 1000
     std::vector<std::pair<std::string, std::deque<double>>> phases;
   } counters_ ABSL_GUARDED_BY(stats_mu_);

@@ -204,17 +204,26 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
   };
 }
 
-absl::Status CheckCommandEnvelope(const CommandRequest& request) {
-  const std::string& id = request.client_id();
-  if (id.empty() || id.size() > 64) {
+absl::Status CheckClientIdCharacters(const std::string& id) {
+  if (id.size() > 64) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "client_id: must have 1 to 64 characters, got ", id.size()));
+        "client_id: must have at most 64 characters, got ", id.size()));
   }
   for (const char c : id) {
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
       return absl::InvalidArgumentError("client_id: must not contain control characters");
     }
   }
+  return absl::OkStatus();
+}
+
+absl::Status CheckCommandEnvelope(const CommandRequest& request) {
+  const std::string& id = request.client_id();
+  if (id.empty() || id.size() > 64) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "client_id: must have 1 to 64 characters, got ", id.size()));
+  }
+  if (absl::Status s = CheckClientIdCharacters(id); !s.ok()) return s;
   if (absl::StartsWith(id, "server:")) {
     return absl::InvalidArgumentError(absl::StrCat(
         "client_id: \"", id, "\" starts with \"server:\", which the server keeps for its own "

@@ -202,5 +202,8 @@ inline constexpr char kReleaseClient[] = "server:release";
 // with "server:", seq >= 1.
 // InvalidArgument naming the field.
 absl::Status CheckCommandEnvelope(const CommandRequest& request);
+// A client_id's characters (also WatchRequest.client_id, which may be
+// empty): at most 64, no control characters. InvalidArgument naming it.
+absl::Status CheckClientIdCharacters(const std::string& id);
 
 }  // namespace dynsolid::server

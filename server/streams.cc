@@ -27,8 +27,10 @@ void ReleaseBytes(void* holder) {
 class WatchState final : public WatchSink, public std::enable_shared_from_this<WatchState> {
  public:
   WatchState(grpc::ServerWriteReactor<grpc::ByteBuffer>* reactor, WorkQueue& encoders,
-             FieldChoice fields, double rate_hz, std::shared_ptr<EncodeCache> cache)
+             FieldChoice fields, double rate_hz, std::string client_id,
+             std::shared_ptr<EncodeCache> cache)
       : reactor_(reactor), encoders_(encoders), fields_(fields), rate_hz_(rate_hz),
+        client_id_(std::move(client_id)),
         encoder_(fields, std::move(cache)) {}
 
   void set_watcher_id(int64_t id) override {
@@ -99,6 +101,7 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
   }
   const FieldChoice& fields() const override { return fields_; }
   double rate_hz() const override { return rate_hz_; }
+  const std::string& client_id() const override { return client_id_; }
 
  private:
   void Post() {
@@ -178,6 +181,7 @@ class WatchState final : public WatchSink, public std::enable_shared_from_this<W
   WorkQueue& encoders_;
   const FieldChoice fields_;
   const double rate_hz_;
+  const std::string client_id_;
   SurfaceEncoder encoder_;
   grpc::ByteBuffer buffer_;  // the write in flight
 
@@ -216,6 +220,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       s = absl::InvalidArgumentError(absl::StrCat("rate_hz: must be in (0, ", options.max_watch_hz,
                                                   "] or 0 for the default, got ", rate));
     }
+    if (s.ok()) s = CheckClientIdCharacters(request.client_id());
     if (rate == 0) rate = options.watch_hz;
     absl::StatusOr<std::shared_ptr<const SolidSession>> session =
         s.ok() ? registry.Get(request.session().id(), request.session().token())
@@ -227,7 +232,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     session_ = *std::move(session);
     FieldChoice fields{request.displacement(), request.strain(), request.stiffness(),
                        request.mass()};
-    state_ = std::make_shared<WatchState>(this, encoders, fields, rate,
+    state_ = std::make_shared<WatchState>(this, encoders, fields, rate, request.client_id(),
                                           session_->loop().encode_cache());
     absl::StatusOr<int64_t> id = session_->loop().AddWatcher(state_);
     if (!id.ok()) {

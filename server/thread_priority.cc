@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <fstream>
 
 #include "absl/strings/str_cat.h"
 
@@ -58,6 +59,18 @@ void NameThisThread(const char* name) {
   char shortened[16] = {};
   std::strncpy(shortened, name, sizeof(shortened) - 1);
   ::pthread_setname_np(::pthread_self(), shortened);
+}
+
+ThreadCpu ThisThreadCpu() {
+  // "on-CPU ns, run-queue wait ns, timeslices".
+  std::ifstream f("/proc/thread-self/schedstat");
+  double run_ns = 0, wait_ns = 0;
+  ThreadCpu t;
+  if (f >> run_ns >> wait_ns) {
+    t.cpu_ms = run_ns * 1e-6;
+    t.wait_ms = wait_ns * 1e-6;
+  }
+  return t;
 }
 
 }  // namespace dynsolid::server

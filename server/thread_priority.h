@@ -35,4 +35,12 @@ int ThisThreadNice();
 // building, carry "build" too); gRPC names its own.
 void NameThisThread(const char* name);
 
+// The calling thread's time so far, ms: on a CPU, and ready to run but
+// waiting for one (Linux /proc/thread-self/schedstat; both 0 where it
+// cannot be read).
+struct ThreadCpu {
+  double cpu_ms = 0, wait_ms = 0;
+};
+ThreadCpu ThisThreadCpu();
+
 }  // namespace dynsolid::server

@@ -36,6 +36,7 @@ void Watcher::Loop() {
   request.set_strain(options_.strain);
   request.set_stiffness(options_.stiffness);
   request.set_mass(options_.mass);
+  request.set_client_id(options_.client_id);
   Clock::time_point broken_since{};
   bool broken = false;
   int backoff_ms = 50;

@@ -30,6 +30,10 @@ struct WatcherOptions {
   bool strain = false;
   bool stiffness = false;
   bool mass = false;
+  // The client_id of this client's command channel (WatchRequest.client_id):
+  // a frame follows each of its own commands at once; empty: every
+  // client's commands.
+  std::string client_id;
   // Record every n-th frame received (0: none) into frames_dir as
   // frame_<step>.obj / .vtu.
   int record_every = 0;

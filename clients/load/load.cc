@@ -11,6 +11,8 @@
 #include <random>
 #include <thread>
 
+#include <unistd.h>
+
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
@@ -284,6 +286,7 @@ void LoadRun::Client(int i, const Session& session, const Box& box, ClientResult
   std::mutex frames_mu;
   client::WatcherOptions wo;
   wo.rate_hz = o_.watch_hz;
+  wo.client_id = id;  // its own commands' frames at once
   wo.reconnect_timeout = absl::Seconds(60);
   wo.on_frame = [&](int64_t step, Clock::time_point at) {
     std::lock_guard<std::mutex> l(frames_mu);
@@ -512,6 +515,10 @@ absl::StatusOr<Report> LoadRun::Run() {
     });
   }
 
+  const pid_t server_pid = server_ != nullptr ? server_->pid() : 0;
+  const CpuSnapshot server_cpu0 = TakeCpuSnapshot(server_pid);
+  const CpuSnapshot tool_cpu0 = TakeCpuSnapshot(getpid());
+
   std::vector<ClientResult> results(o_.clients);
   std::vector<std::thread> threads;
   for (int i = 0; i < o_.clients; ++i) {
@@ -554,6 +561,13 @@ absl::StatusOr<Report> LoadRun::Run() {
       Log(absl::StrCat("restarted on ", server_->address()));
     }
   }
+  // Where the CPU went: the threads' times just before the clients end
+  // (a thread that has ended takes its run-queue time with it).
+  std::this_thread::sleep_until(start_ + std::chrono::duration<double>(o_.seconds) -
+                                std::chrono::milliseconds(100));
+  const double cpu_seconds = std::chrono::duration<double>(Clock::now() - start_).count();
+  const CpuSnapshot server_cpu1 = TakeCpuSnapshot(restarts_ > 0 ? 0 : server_pid);
+  const CpuSnapshot tool_cpu1 = TakeCpuSnapshot(getpid());
   for (std::thread& t : threads) t.join();
   stop_faults = true;
   for (std::thread& t : fault_threads) t.join();
@@ -636,6 +650,32 @@ absl::StatusOr<Report> LoadRun::Run() {
   for (const auto& s : rep.server_samples) cpu += s[1];
   rep.server_cpu_percent = rep.server_samples.empty() ? 0 : cpu / rep.server_samples.size();
   if (!rep.server_samples.empty()) rep.server_rss_end_kb = static_cast<int64_t>(rep.server_samples.back()[2]);
+  rep.busy_cores = BusyCoresBetween(tool_cpu0, tool_cpu1);
+  rep.cores = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
+  for (const auto& [name, use] : CpuBetween(tool_cpu0, tool_cpu1, cpu_seconds)) {
+    rep.load_tool.threads += use.threads;
+    rep.load_tool.cpu_ms_per_s += use.cpu_ms_per_s;
+    rep.load_tool.wait_ms_per_s += use.wait_ms_per_s;
+    rep.load_tool.runs_per_s += use.runs_per_s;
+  }
+  if (restarts_ == 0 && run_seconds > 0) {
+    rep.build_busy_ms_per_s = (after.build_ms_total() - before.build_ms_total()) / run_seconds;
+    rep.builds.cpu_ms_per_s = (after.build_cpu_ms_total() - before.build_cpu_ms_total()) / run_seconds;
+    rep.builds.wait_ms_per_s =
+        (after.build_wait_ms_total() - before.build_wait_ms_total()) / run_seconds;
+    rep.builds.runs_per_s = (after.builds() - before.builds()) / run_seconds;
+    rep.builds.threads = 1;
+  }
+  if (server_pid > 0 && restarts_ == 0) {
+    for (const auto& [name, use] : CpuBetween(server_cpu0, server_cpu1, cpu_seconds)) {
+      const bool own = name == "sim" || name == "encode" || name == "journal";
+      CpuUse& to = rep.server_threads[own ? name : "gRPC and other"];
+      to.threads += use.threads;
+      to.cpu_ms_per_s += use.cpu_ms_per_s;
+      to.wait_ms_per_s += use.wait_ms_per_s;
+      to.runs_per_s += use.runs_per_s;
+    }
+  }
 
   // Nothing lost: every client against the journal.
   if (server_ != nullptr || !o_.server.empty()) {
@@ -780,6 +820,15 @@ std::string ReportJson(const Report& r) {
   for (const auto& s : r.server_samples) {
     absl::StrAppend(&samples, samples.empty() ? "" : ", ", absl::StrFormat("[%.3f, %.1f, %.0f]", s[0], s[1], s[2]));
   }
+  auto use = [](const CpuUse& u) {
+    return absl::StrFormat(
+        "{\"threads\": %d, \"cpu_ms_per_s\": %.1f, \"wait_ms_per_s\": %.1f, \"runs_per_s\": %.0f}",
+        u.threads, u.cpu_ms_per_s, u.wait_ms_per_s, u.runs_per_s);
+  };
+  std::string threads;
+  for (const auto& [name, u] : r.server_threads) {
+    absl::StrAppend(&threads, threads.empty() ? "" : ", ", "\"", name, "\": ", use(u));
+  }
   std::string problems;
   for (const std::string& p : r.problems) {
     std::string q = p;
@@ -815,6 +864,10 @@ std::string ReportJson(const Report& r) {
       ", \"server_rss_max_kb\": ", r.server_rss_max_kb, ", \"server_rss_end_kb\": ", r.server_rss_end_kb,
       ", \"restarts\": ", r.restarts, ", \"sessions_per_replica\": {", placed, "}",
       ",\n  \"server_samples\": [", samples, "]",
+      ",\n  \"server_threads\": {", threads, "}, \"load_tool\": ", use(r.load_tool),
+      ", \"busy_cores\": ", absl::StrFormat("%.2f", r.busy_cores), ", \"cores\": ", r.cores,
+      ",\n  \"builds\": ", use(r.builds),
+      ", \"build_busy_ms_per_s\": ", absl::StrFormat("%.1f", r.build_busy_ms_per_s),
       ",\n  \"verified\": ", r.verified ? "true" : "false", ", \"problems\": [", problems, "]",
       ",\n  \"wall_seconds\": ", absl::StrFormat("%.1f", r.wall_seconds), "\n}\n");
 }
@@ -852,6 +905,28 @@ std::string ReportMarkdown(const Report& r) {
                       r.frames_per_second, r.frames_skipped, r.server_cpu_percent,
                       r.server_rss_max_kb / 1024.0,
                       !r.verified ? "not checked" : r.problems.empty() ? "none" : "**see problems**"));
+  if (r.cores > 0) {
+    // Where the CPU went: a second table, after a blank line.
+    auto cell = [](const CpuUse& u) {
+      const double mean_us = u.runs_per_s > 0 ? 1e3 * u.wait_ms_per_s / u.runs_per_s : 0;
+      return absl::StrFormat("%.0f / %.0f, %.0f us (%d)", u.cpu_ms_per_s, u.wait_ms_per_s, mean_us,
+                             u.threads);
+    };
+    std::string head = "| busy cores | dynsolid-load (clients) | server builds: busy / CPU / wait (builds/s) |",
+                rule = "| ---: | --- | --- |";
+    std::string row = absl::StrFormat("| %.2f of %d | %s | %.0f / %.0f / %.0f (%.1f) |", r.busy_cores,
+                                      r.cores, cell(r.load_tool), r.build_busy_ms_per_s,
+                                      r.builds.cpu_ms_per_s, r.builds.wait_ms_per_s,
+                                      r.builds.runs_per_s);
+    for (const auto& [name, u] : r.server_threads) {
+      absl::StrAppend(&head, " server ", name, " |");
+      absl::StrAppend(&rule, " --- |");
+      absl::StrAppend(&row, " ", cell(u), " |");
+    }
+    absl::StrAppend(&out, "\nCPU per second of the run: ms on a CPU / ms ready but waiting for one, "
+                          "the mean wait each time it was woken (threads):\n\n", head, "\n", rule,
+                    "\n", row, "\n");
+  }
   return out;
 }
 

@@ -11,6 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "clients/lib/command_channel.h"
+#include "clients/load/proc_stats.h"
 #include "dynsolid/service.pb.h"
 
 namespace dynsolid::load {
@@ -84,6 +85,19 @@ struct Report {
   double server_cpu_percent = 0;  // mean over the run, of one core
   int64_t server_rss_max_kb = 0, server_rss_end_kb = 0;
   std::vector<std::array<double, 3>> server_samples;  // seconds, cpu %, rss kB
+  // Where the CPU went over the run (proc_stats.h), when the server is
+  // local and was not restarted: its threads by role (sim, encode, journal;
+  // "gRPC and other" for the rest: the builds are below), this tool's own
+  // threads (the clients), and the cores the machine kept busy of `cores`.
+  std::map<std::string, CpuUse> server_threads;
+  CpuUse load_tool;
+  // The session's builds off the loop (SessionStats.builds...), per second
+  // of the run: wall ms the build thread was busy, its CPU and run-queue
+  // wait ms (CpuUse; runs_per_s: builds a second).
+  double build_busy_ms_per_s = 0;
+  CpuUse builds;
+  double busy_cores = 0;
+  int cores = 0;
   int restarts = 0;
   // Where the sessions were placed: replica name (Session.replica; "" for
   // a server running alone) -> sessions.

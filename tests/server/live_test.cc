@@ -197,6 +197,79 @@ TEST_F(LiveTest, AFrameFollowsAnAppliedCommandWithinAStepWhateverTheWatchRate) {
   wc.TryCancel();
 }
 
+// With many clients on one session, each watcher that names its client
+// (WatchRequest.client_id) gets the early frame of its own client's
+// commands only; a watcher that names none gets every client's. All three
+// watch at 0.1 Hz (10 s between the frames every watcher gets).
+TEST_F(LiveTest, AnEarlyFrameGoesToTheCommandingClientsWatchersAndToThoseThatNameNone) {
+  const Session s = Create("block3", 1, /*paused=*/false);
+  struct Watch {
+    grpc::ClientContext context;
+    std::unique_ptr<grpc::ClientReader<Frame>> reader;
+    SurfaceDecoder decoder;
+    int64_t id = -1;
+  };
+  auto open = [&](Watch& w, const std::string& client) {
+    w.context.set_deadline(Deadline(120));
+    WatchRequest wr;
+    *wr.mutable_session() = RefOf(s);
+    wr.set_rate_hz(0.1);
+    wr.set_client_id(client);
+    w.reader = stub_->Watch(&w.context, wr);
+    Frame first;
+    ASSERT_TRUE(w.reader->Read(&first));
+    ASSERT_TRUE(w.decoder.Apply(first).ok());
+    w.id = first.watcher_id();
+  };
+  Watch mine, theirs, everyone;
+  open(mine, "sculptor-a");
+  open(theirs, "sculptor-b");
+  open(everyone, "");
+  CommandStream commands(*stub_, s, "sculptor-a");
+  for (uint64_t seq = 1; seq <= 3; ++seq) {
+    const CommandReply r = commands.Send(seq, ForceCommand(1.5, 1.5, 3, 1e3 * seq, 0, 0));
+    ASSERT_EQ(r.code(), 0) << r.message();
+    for (Watch* w : {&mine, &everyone}) {
+      Frame f;
+      do {
+        ASSERT_TRUE(w->reader->Read(&f));
+        ASSERT_TRUE(w->decoder.Apply(f).ok());
+      } while (f.step() < r.applied_step());
+      EXPECT_LE(f.step(), r.applied_step() + 20) << "seq " << seq << ", watcher " << w->id;
+    }
+  }
+  // The other client's watcher had none of them early: fewer frames than
+  // the commanding client's (frames every watcher gets count in both).
+  const SessionStats st = StatsOf(*stub_, s);
+  int64_t sent_mine = -1, sent_theirs = -1, sent_everyone = -1;
+  for (const WatcherStats& w : st.watcher_details()) {
+    if (w.watcher_id() == mine.id) sent_mine = w.frames_sent();
+    if (w.watcher_id() == theirs.id) sent_theirs = w.frames_sent();
+    if (w.watcher_id() == everyone.id) sent_everyone = w.frames_sent();
+  }
+  EXPECT_GE(sent_mine, 2);
+  EXPECT_GE(sent_everyone, 2);
+  EXPECT_GE(sent_theirs, 1);
+  EXPECT_LT(sent_theirs, sent_mine);
+  EXPECT_LT(sent_theirs, sent_everyone);
+  for (Watch* w : {&mine, &theirs, &everyone}) w->context.TryCancel();
+}
+
+TEST_F(LiveTest, AWatchRequestsClientIdOfMoreThan64CharactersIsRefused) {
+  const Session s = Create("block3", 1, /*paused=*/true);
+  grpc::ClientContext wc;
+  wc.set_deadline(Deadline(60));
+  WatchRequest wr;
+  *wr.mutable_session() = RefOf(s);
+  wr.set_client_id(std::string(65, 'x'));
+  auto reader = stub_->Watch(&wc, wr);
+  Frame f;
+  EXPECT_FALSE(reader->Read(&f));
+  const grpc::Status st = reader->Finish();
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message(), "client_id: must have at most 64 characters, got 65");
+}
+
 TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
   // The default scene at its two levels, pulled at the top corner: every
   // delta frame of a 60 Hz watcher against 12 bytes per vertex.

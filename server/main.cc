@@ -8,6 +8,7 @@
 //                   [--max_watch_hz 240] [--answer_cache 256] [--undo_bytes N]
 //                   [--snapshot_every_steps 20000] [--build_threads 1]
 //                   [--encode_threads 2] [--stream_nice 10] [--stream_idle=true]
+//                   [--build_nice 0]
 //                   [--replica NAME --advertise HOST:PORT --peers NAME=HOST:PORT,...]
 //
 // (Abseil flags: --data-dir is spelled --data_dir, --tls-cert --tls_cert,
@@ -52,6 +53,11 @@ ABSL_FLAG(int, stream_nice, 10,
 ABSL_FLAG(bool, stream_idle, true,
           "Run the streaming threads under SCHED_IDLE as well: only CPU the simulation does not "
           "want, and a waking simulation thread preempts them at once");
+ABSL_FLAG(int, build_nice, 0,
+          "Added to the nice value of the thread that builds a session's solid off its loop (a "
+          "paint, a topology edit, an undo across one), 0..19: on busy cores a build takes "
+          "longer rather than the simulation losing steps (bench/reports/load/ANALYSIS.md "
+          "measures it). 0: the simulation's priority");
 ABSL_FLAG(std::string, data_dir, "",
           "Directory for session journals and snapshots; sessions found there are restored "
           "on start. Empty: sessions live in memory only");
@@ -127,6 +133,7 @@ int main(int argc, char** argv) {
   options.loop.core.answer_cache = absl::GetFlag(FLAGS_answer_cache);
   options.loop.core.undo_bytes = absl::GetFlag(FLAGS_undo_bytes);
   options.loop.snapshot_every_steps = absl::GetFlag(FLAGS_snapshot_every_steps);
+  options.loop.build_nice = absl::GetFlag(FLAGS_build_nice);
   options.replicas.replica = absl::GetFlag(FLAGS_replica);
   options.replicas.advertise = absl::GetFlag(FLAGS_advertise);
   options.replicas.peers = absl::GetFlag(FLAGS_peers);

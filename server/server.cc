@@ -68,6 +68,10 @@ absl::Status CheckOptions(const ServerOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("stream_nice must be in 0..19, got ", o.stream_nice));
   }
+  if (o.loop.build_nice < 0 || o.loop.build_nice > 19) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("build_nice must be in 0..19, got ", o.loop.build_nice));
+  }
   if (o.build_threads < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("build_threads must be >= 1, got ", o.build_threads));
@@ -184,11 +188,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   }
   ServerLog().info(
       "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {} stepping "
-      "threads per session; streaming threads at nice +{}{}; {})",
+      "threads per session; streaming threads at nice +{}{}; builds at nice +{}; {})",
       server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
       options.max_sessions, options.max_cells, options.max_message_bytes,
       SimThreads(options.sim_threads), options.stream_nice,
-      options.stream_idle ? ", SCHED_IDLE" : "",
+      options.stream_idle ? ", SCHED_IDLE" : "", options.loop.build_nice,
       options.data_dir.empty() ? std::string("in memory")
                                : absl::StrCat("data in ", options.data_dir, ", ",
                                               server->recovered_, " sessions recovered"));

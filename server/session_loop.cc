@@ -493,6 +493,7 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       commands.resize(k);
       builder_ = std::thread([this, job = std::move(job)]() {
         NameThisThread("build");
+        (void)LowerThisThreadPriority(options_.build_nice);
         const auto start = std::chrono::steady_clock::now();
         const ThreadCpu cpu0 = ThisThreadCpu();
         std::shared_ptr<SimCore::Prebuilt> result = job();

@@ -82,6 +82,10 @@ struct LoopOptions {
   // a second), so that many watchers do not turn commands into a flood.
   double command_frame_writes_per_second = 2000;
   int max_watchers = 64;
+  // Added to the nice value of the thread that builds a solid off the loop
+  // (a paint, an edit, an undo across one), 0..19: on busy cores a build
+  // takes longer rather than the simulation losing steps. 0: the loop's.
+  int build_nice = 0;
   // Per client_id: commands per second (token bucket, burst of one second).
   double commands_per_second = 1000;
   // Write a snapshot every this many steps (with a data directory).

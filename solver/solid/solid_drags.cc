@@ -62,7 +62,9 @@ Solid::Impl::KnownPoints::Key Solid::Impl::KnownPoints::KeyOf(const Eigen::Vecto
 
 Solid::Impl::KnownPoints Solid::Impl::CurrentPoints() const {
   KnownPoints known;
-  for (const PointLoad& l : point_loads) known.forces.emplace(KnownPoints::KeyOf(V(l.msg.position())), l.at);
+  for (const PointLoad& l : point_loads) {
+    known.forces.emplace(KnownPoints::KeyOf(V(l.msg.position())), std::pair(l.at, l.row));
+  }
   for (const DragLoad& d : drags) {
     for (size_t s = 0; s < d.material.size(); ++s) {
       known.rows.emplace(KnownPoints::KeyOf(d.material[s]), &d.rows[s]);
@@ -78,6 +80,10 @@ absl::StatusOr<std::vector<std::pair<int32_t, double>>> Solid::Impl::ControlRow(
     if (it != known->rows.end()) return *it->second;
   }
   ASSIGN_OR_RETURN(MaterialLocation at, Locate(x, false));
+  return ControlRowAt(at);
+}
+
+Solid::Impl::ControlWeights Solid::Impl::ControlRowAt(const MaterialLocation& at) const {
   std::vector<double> shape;
   ShapeAt(at, shape);
   const int32_t* ids = layout->blocks[at.kind].element_nodes(at.element);

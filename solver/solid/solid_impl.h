@@ -230,10 +230,16 @@ struct Solid::Impl {
   std::pair<uint64_t, uint64_t> fingerprint;
 
   // ---- Runtime loads and constraints (ids from one counter, ascending).
+  // A control point's weight in a material point (ControlRowAt), ascending
+  // by control point.
+  using ControlWeights = std::vector<std::pair<int32_t, double>>;
   struct PointLoad {
     int64_t id;
     PointForce msg;
     MaterialLocation at;
+    // ControlRowAt(at), made when first needed (RebuildConstantLoads) and
+    // carried by a restore that keeps the point (KnownPoints).
+    std::shared_ptr<const ControlWeights> row = nullptr;
   };
   struct PressureLoad {
     int64_t id;
@@ -269,7 +275,8 @@ struct Solid::Impl {
   struct KnownPoints {
     using Key = std::array<uint64_t, 3>;
     static Key KeyOf(const Eigen::Vector3d& x);
-    std::map<Key, MaterialLocation> forces;  // point forces' Locate (snap setting applied)
+    // Point forces' Locate (snap setting applied) and control row.
+    std::map<Key, std::pair<MaterialLocation, std::shared_ptr<const ControlWeights>>> forces;
     std::map<Key, const std::vector<std::pair<int32_t, double>>*> rows;  // drag springs' ControlRow
   };
   // Those of the current loads.
@@ -279,6 +286,8 @@ struct Solid::Impl {
   // control point; taken from `known` when it has x.
   absl::StatusOr<std::vector<std::pair<int32_t, double>>> ControlRow(
       const Eigen::Vector3d& x, const KnownPoints* known = nullptr) const;
+  // The same weights at a located material point.
+  ControlWeights ControlRowAt(const MaterialLocation& at) const;
   // A drag or curve from its message, located on this solid (ids unset).
   absl::StatusOr<DragLoad> MakeDrag(const Drag& d, const KnownPoints* known = nullptr) const;
   absl::StatusOr<DragLoad> MakeCurve(const CurveDrag& c, const KnownPoints* known = nullptr) const;
@@ -343,10 +352,15 @@ struct Solid::Impl {
   std::vector<int32_t> quad_cell;             // level-L cell of each quad
   std::vector<Eigen::Vector3d> quad_centroid; // rest centroid of the quad's face
   Points surface_rest;                        // #surface vertices x 3
-  // Pressure: total pascals per quad, the quads with a non-zero one, and the
-  // control forces at p and at the next state (for the ledger's work).
+  // Pressure: total pascals per quad, the quads with a non-zero one (their
+  // corners numbered among the pressed quads' vertices, whose rows of
+  // surface_rows are pressed_rows), the pressed vertices' positions and
+  // forces, and the control forces at p and at the next state (for the
+  // ledger's work).
   std::vector<double> quad_pascals;
   std::vector<int32_t> pressed;
+  std::vector<std::array<int32_t, 4>> pressed_corners;
+  SparseMatrix pressed_rows;
   bool has_pressure = false;
   Points surf_x, surf_f, f_press, f_press_next;
 
@@ -398,10 +412,23 @@ struct Solid::Impl {
     } else if (use_implicit) {
       implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
       if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
-    } else {
+    } else if (!(setup_valid && setup_epoch == material_epoch && setup_h == h_sub &&
+                 setup_fixed == fixed)) {
+      // (A restore that keeps the material, the sub-step and the fixed set,
+      // as an undo of a load does, keeps the integrator's matrices and
+      // preconditioner: the same bits, without refactoring them.)
       integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+      setup_valid = true;
+      setup_epoch = material_epoch;
+      setup_h = h_sub;
+      setup_fixed = fixed;
     }
   }
+  // What the explicit integrator was last set up for (SetSubsteps).
+  bool setup_valid = false;
+  uint64_t setup_epoch = 0;
+  double setup_h = 0;
+  std::vector<uint8_t> setup_fixed;
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);

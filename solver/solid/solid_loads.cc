@@ -18,16 +18,16 @@ void Solid::Impl::RebuildConstantLoads() {
     f_const.resize(0, 3);
     return;
   }
-  Points fd = Points::Zero(d->node_matrix.rows(), 3);
-  std::vector<double> shape;
-  for (const PointLoad& load : point_loads) {
-    ShapeAt(load.at, shape);
-    const int32_t* ids = layout->blocks[load.at.kind].element_nodes(load.at.element);
-    for (size_t k = 0; k < shape.size(); ++k) {
-      fd.row(ids[k]) += shape[k] * V(load.msg.force()).transpose();
-    }
+  // f = sum over the loads, in order, of their control rows times their
+  // forces (A^T N F, N the shape values at the load's material point): a
+  // function of the load list alone, made without touching the solid's
+  // other nodes (a point force added or removed holds the loop for this).
+  f_const = Points::Zero(rest_control.rows(), 3);
+  for (PointLoad& load : point_loads) {
+    if (load.row == nullptr) load.row = std::make_shared<const ControlWeights>(ControlRowAt(load.at));
+    const Eigen::RowVector3d force = V(load.msg.force()).transpose();
+    for (const auto& [c, w] : *load.row) f_const.row(c) += w * force;
   }
-  f_const = d->node_matrix.transpose() * fd;
   if (gravity.squaredNorm() > 0) {
     // Body force mu g: f = A^T w g^T with w_i = int mu N_i dV, kept per
     // material (GravityMass), so that a new force or gravity costs no
@@ -59,7 +59,33 @@ void Solid::Impl::RebuildPressure() {
   for (size_t q = 0; q < quad_pascals.size(); ++q) {
     if (quad_pascals[q] != 0) pressed.push_back(static_cast<int32_t>(q));
   }
-  const int64_t nc = rest_control.rows(), ns = surface_rows.rows();
+  // The pressed quads' vertices (ascending) and their rows of S: the step
+  // evaluates the pressure there, not over the whole surface.
+  std::vector<int32_t> vertices;
+  for (int32_t q : pressed) {
+    for (int32_t v : surface->quads[q]) vertices.push_back(v);
+  }
+  std::sort(vertices.begin(), vertices.end());
+  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+  pressed_corners.clear();
+  for (int32_t q : pressed) {
+    std::array<int32_t, 4> local;
+    for (int k = 0; k < 4; ++k) {
+      local[k] = static_cast<int32_t>(
+          std::lower_bound(vertices.begin(), vertices.end(), surface->quads[q][k]) - vertices.begin());
+    }
+    pressed_corners.push_back(local);
+  }
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  for (size_t i = 0; i < vertices.size(); ++i) {
+    for (SparseMatrix::InnerIterator it(surface_rows, vertices[i]); it; ++it) {
+      t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(it.col()), it.value());
+    }
+  }
+  pressed_rows.resize(static_cast<Eigen::Index>(vertices.size()), surface_rows.cols());
+  pressed_rows.setFromTriplets(t.begin(), t.end());
+  pressed_rows.makeCompressed();
+  const int64_t nc = rest_control.rows(), ns = static_cast<int64_t>(vertices.size());
   if (has_pressure) {
     surf_x.setZero(ns, 3);
     surf_f.setZero(ns, 3);
@@ -82,13 +108,13 @@ void Solid::Impl::PressureForces(const Points& p, Points& out) {
     AddDragForces(p, out);
     return;
   }
-  surf_x.noalias() = surface_rows * p;
+  surf_x.noalias() = pressed_rows * p;
   surf_f.setZero();
   const double g0 = 0.5 - 0.5 / std::sqrt(3.0), g1 = 0.5 + 0.5 / std::sqrt(3.0);
   const double gp[2] = {g0, g1};
-  const std::vector<std::array<int32_t, 4>>& quads = surface->quads;
-  for (int32_t q : pressed) {
-    const std::array<int32_t, 4>& v = quads[q];
+  for (size_t j = 0; j < pressed.size(); ++j) {
+    const int32_t q = pressed[j];
+    const std::array<int32_t, 4>& v = pressed_corners[j];
     const Eigen::Vector3d x0 = surf_x.row(v[0]).transpose(), x1 = surf_x.row(v[1]).transpose(),
                           x2 = surf_x.row(v[2]).transpose(), x3 = surf_x.row(v[3]).transpose();
     Eigen::Vector3d fn[4] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
@@ -108,7 +134,7 @@ void Solid::Impl::PressureForces(const Points& p, Points& out) {
     const double pa = quad_pascals[q];
     for (int k = 0; k < 4; ++k) surf_f.row(v[k]) += (pa * fn[k]).transpose();
   }
-  out.noalias() = surface_rows.transpose() * surf_f;
+  out.noalias() = pressed_rows.transpose() * surf_f;
   AddDragForces(p, out);
 }
 

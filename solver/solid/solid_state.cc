@@ -441,13 +441,18 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     if (!r.ok()) break;
     const auto was = known.forces.find(Impl::KnownPoints::KeyOf(V(msg.position())));
     absl::StatusOr<MaterialLocation> at =
-        was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second)
+        was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second.first)
                                   : im.Locate(V(msg.position()), snap);
     if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
       r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
       break;
     }
-    point_loads.push_back({id, std::move(msg), *at});
+    // The control row here, off the loop, unless the solid has it.
+    std::shared_ptr<const Impl::ControlWeights> row =
+        was != known.forces.end() && was->second.second != nullptr
+            ? was->second.second
+            : std::make_shared<const Impl::ControlWeights>(im.ControlRowAt(*at));
+    point_loads.push_back({id, std::move(msg), *at, std::move(row)});
   }
   last_id = 0;
   std::vector<Impl::PressureLoad> pressures;

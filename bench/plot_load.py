@@ -57,7 +57,8 @@ def main():
     for s in scenes:
         for r in data[s]:
             with open(os.path.join(directory, "%s_%d.md" % (s, r["clients"]))) as f:
-                rows = f.read().strip().split("\n")
+                # The first table (the second says where the CPU went).
+                rows = f.read().strip().split("\n\n")[0].split("\n")
             if header is None:
                 header = rows[:2]
                 lines += header
@@ -82,6 +83,34 @@ def main():
                 s, r["clients"], total / max(r["seconds"], 1e-9),
                 ", ".join("%s %.0f ms (%d, max %.0f)" % (k, h["total_ms"], h["count"], h["max_ms"])
                           for k, h in top)))
+    roles = ["sim", "encode", "gRPC and other", "journal"]
+    lines += ["", "## Where the CPU went", "",
+              "Per second of the run, from /proc (`schedstat` of each thread): ms on a CPU / ms "
+              "ready to run but waiting for a core, and the mean wait each time the thread was "
+              "woken. A thread that waits long had work and no core. `busy cores` is the "
+              "machine's (of its %d): the server, the load tool's clients and anything else. "
+              "The builds (paints, edits, unfixes, undos and redos across them) are timed by the "
+              "server itself (SessionStats.build_*): ms the build thread was busy, of which on "
+              "a CPU / waiting for one, and builds a second." % os.cpu_count(), "",
+              "| scene | clients | busy cores | dynsolid-load (clients) | server builds: busy (CPU / "
+              "wait), builds/s | " + " | ".join("server %s" % k for k in roles) + " |",
+              "| --- | ---: | ---: | --- | --- | " + " | ".join("---" for _ in roles) + " |"]
+
+    def use(u):
+        if not u:
+            return ""
+        mean_us = 1e3 * u["wait_ms_per_s"] / u["runs_per_s"] if u.get("runs_per_s") else 0
+        return "%.0f / %.0f, %.0f us" % (u["cpu_ms_per_s"], u["wait_ms_per_s"], mean_us)
+
+    for s in scenes:
+        for r in data[s]:
+            if "busy_cores" not in r:
+                continue
+            b = r["builds"]
+            lines.append("| %s | %d | %.2f | %s | %.0f (%.0f / %.0f), %.1f | %s |" % (
+                s, r["clients"], r["busy_cores"], use(r["load_tool"]), r["build_busy_ms_per_s"],
+                b["cpu_ms_per_s"], b["wait_ms_per_s"], b["runs_per_s"],
+                " | ".join(use(r["server_threads"].get(k)) for k in roles)))
     kinds = sorted({k for s in scenes for r in data[s] for k in r.get("visible_by_kind_ms", {})})
     if kinds:
         lines += ["", "## Command-to-visible by command kind", "",
@@ -100,7 +129,8 @@ def main():
     with open(os.path.join(directory, "README.md"), "w") as f:
         f.write("\n".join(lines))
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), dpi=100)
+    fig, grid = plt.subplots(2, 2, figsize=(14, 9), dpi=100)
+    axes = [grid[0][0], grid[0][1], grid[1][0], grid[1][1]]
     for s in scenes:
         runs = data[s]
         if not runs:
@@ -138,6 +168,38 @@ def main():
     axes[2].set_title("server over the largest run")
     axes[2].legend(fontsize=7, loc="upper left")
     ax2.legend(fontsize=7, loc="lower right")
+    # Where the CPU went: stacked CPU ms per second by thread role, one bar
+    # per scene at each client count, and the simulation thread's wait.
+    parts = [("sim", lambda r: r["server_threads"].get("sim", {}).get("cpu_ms_per_s", 0)),
+             ("builds", lambda r: r["builds"]["cpu_ms_per_s"]),
+             ("encode", lambda r: r["server_threads"].get("encode", {}).get("cpu_ms_per_s", 0)),
+             ("gRPC and other", lambda r: r["server_threads"].get("gRPC and other", {}).get("cpu_ms_per_s", 0)
+              + r["server_threads"].get("journal", {}).get("cpu_ms_per_s", 0)),
+             ("dynsolid-load (clients)", lambda r: r["load_tool"]["cpu_ms_per_s"])]
+    colours = ["tab:blue", "tab:orange", "tab:green", "tab:grey", "tab:purple"]
+    width = 0.38
+    counts = sorted({r["clients"] for s in scenes for r in data[s]})
+    ax = axes[3]
+    for si, s in enumerate(scenes):
+        runs = [r for r in data[s] if "busy_cores" in r]
+        for r in runs:
+            x = counts.index(r["clients"]) + (si - 0.5) * width
+            bottom = 0
+            for (name, get), colour in zip(parts, colours):
+                v = get(r)
+                ax.bar(x, v, width * 0.95, bottom=bottom, color=colour,
+                       label=name if (si == 0 and r is runs[0]) else None,
+                       hatch="//" if si else None, edgecolor="white")
+                bottom += v
+            wait = r["server_threads"].get("sim", {}).get("wait_ms_per_s", 0)
+            ax.plot([x], [wait], "kv", label="sim thread waiting for a core" if (si == 0 and r is runs[0]) else None)
+    ax.axhline(1000 * os.cpu_count(), color="grey", lw=0.8, ls="--")
+    ax.set_xticks(range(len(counts)))
+    ax.set_xticklabels([str(c) for c in counts])
+    ax.set_xlabel("clients (left bar %s, right bar %s, hatched)" % (scenes[0], scenes[-1]))
+    ax.set_ylabel("CPU ms per second (dashed: all cores)")
+    ax.set_title("where the CPU went")
+    ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(os.path.join(directory, "load.png"))
     print("wrote %s/README.md and load.png" % directory)

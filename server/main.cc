@@ -8,7 +8,7 @@
 //                   [--max_watch_hz 240] [--answer_cache 256] [--undo_bytes N]
 //                   [--snapshot_every_steps 20000] [--build_threads 1]
 //                   [--encode_threads 2] [--stream_nice 10] [--stream_idle=true]
-//                   [--build_nice 0]
+//                   [--build_nice 10]
 //                   [--replica NAME --advertise HOST:PORT --peers NAME=HOST:PORT,...]
 //
 // (Abseil flags: --data-dir is spelled --data_dir, --tls-cert --tls_cert,
@@ -53,7 +53,7 @@ ABSL_FLAG(int, stream_nice, 10,
 ABSL_FLAG(bool, stream_idle, true,
           "Run the streaming threads under SCHED_IDLE as well: only CPU the simulation does not "
           "want, and a waking simulation thread preempts them at once");
-ABSL_FLAG(int, build_nice, 0,
+ABSL_FLAG(int, build_nice, 10,
           "Added to the nice value of the thread that builds a session's solid off its loop (a "
           "paint, a topology edit, an undo across one), 0..19: on busy cores a build takes "
           "longer rather than the simulation losing steps (bench/reports/load/ANALYSIS.md "

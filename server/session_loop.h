@@ -85,7 +85,7 @@ struct LoopOptions {
   // Added to the nice value of the thread that builds a solid off the loop
   // (a paint, an edit, an undo across one), 0..19: on busy cores a build
   // takes longer rather than the simulation losing steps. 0: the loop's.
-  int build_nice = 0;
+  int build_nice = 10;
   // Per client_id: commands per second (token bucket, burst of one second).
   double commands_per_second = 1000;
   // Write a snapshot every this many steps (with a data directory).

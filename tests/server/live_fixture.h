@@ -1,0 +1,100 @@
+// The fixture of the live-session tests (live_test.cc, watch_live_test.cc):
+// an in-process server on a loopback port, sessions made from built-in
+// scenes or scene text, and the frame helpers the Watch tests share.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "absl/status/statusor.h"
+#include "dynsolid/service.grpc.pb.h"
+#include "live_client.h"
+#include "server/server.h"
+#include "server/surface_codec.h"
+
+namespace dynsolid::server {
+
+using ::dynsolid::testing::Deadline;
+
+class LiveTest : public ::testing::Test {
+ protected:
+  void SetUp() override { Start(Options()); }
+
+  static ServerOptions Options() {
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    o.max_sessions = 8;
+    return o;
+  }
+
+  void Start(const ServerOptions& options) {
+    stub_.reset();
+    server_.reset();
+    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = *std::move(server);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    stub_ = Sessions::NewStub(channel_);
+  }
+
+  Session Create(const std::string& builtin, int levels, bool paused) {
+    CreateSessionRequest r;
+    r.set_builtin_scene(builtin);
+    r.set_levels_override(levels);
+    r.set_start_paused(paused);
+    return CreateFrom(r);
+  }
+  Session CreateText(const std::string& text, bool paused) {
+    CreateSessionRequest r;
+    r.set_scene_text(text);
+    r.set_start_paused(paused);
+    return CreateFrom(r);
+  }
+  Session CreateFrom(const CreateSessionRequest& r) {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    Session s;
+    const grpc::Status status = stub_->CreateSession(&context, r, &s);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return s;
+  }
+
+  std::unique_ptr<Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<Sessions::Stub> stub_;
+};
+
+// Reads frames into a decoder until one at `step` arrives.
+inline ::testing::AssertionResult ReadUntilStep(grpc::ClientReader<Frame>& reader,
+                                         SurfaceDecoder& decoder, int64_t step,
+                                         std::vector<Frame>* frames = nullptr) {
+  Frame f;
+  while (decoder.step() != step || !decoder.has_keyframe()) {
+    if (!reader.Read(&f)) return ::testing::AssertionFailure() << "stream ended before step " << step;
+    const absl::Status s = decoder.Apply(f);
+    if (!s.ok()) return ::testing::AssertionFailure() << "frame at step " << f.step() << ": " << s;
+    if (frames != nullptr) frames->push_back(f);
+    if (f.step() > step) return ::testing::AssertionFailure() << "passed step " << step;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// Largest |decoded - server| / bound over every coordinate.
+inline double WorstRatio(const SurfaceDecoder& d, const InspectReply& server) {
+  const std::vector<double> p = d.Positions();
+  EXPECT_EQ(static_cast<int>(p.size()), server.surface_positions_size());
+  const double bound[3] = {d.error_bound().x(), d.error_bound().y(), d.error_bound().z()};
+  double worst = 0;
+  for (int i = 0; i < server.surface_positions_size() && i < static_cast<int>(p.size()); ++i) {
+    worst = std::max(worst, std::abs(p[i] - server.surface_positions(i)) / bound[i % 3]);
+  }
+  return worst;
+}
+
+}  // namespace dynsolid::server

@@ -226,8 +226,10 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
-  // The cells' supports and keys, for both the stiffness and mass sums.
+  // The cells' supports and keys, for both the stiffness and mass sums
+  // (those of this solid's discretization, when it has them).
   CellGeometry geometry;
+  if (reuse && cell_geometry != nullptr) geometry = *cell_geometry;
   if (corot && settings.corotation() == SolverSettings::CONTROL_CELL) {
     std::shared_ptr<const CellPartials> made;
     b.cell_model =
@@ -247,6 +249,9 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
                                            b.dt, &geometry);
   }
   b.mass_ms = MsSince(t_mass);
+  if (static_cast<int32_t>(geometry.keys.size()) == d->control().num_cells()) {
+    b.geometry = std::make_shared<const CellGeometry>(std::move(geometry));
+  }
   b.layout = std::move(l);
   return b;
 }
@@ -282,6 +287,7 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   mt = std::move(b.mt);
   dt = std::move(b.dt);
   mass_cells = std::move(b.mass_cells);
+  if (b.geometry != nullptr) cell_geometry = std::move(b.geometry);
   has_damping = b.has_damping;
   ++contact.epoch;  // the contact stiffness depends on the material
   ConfigureLinearized();

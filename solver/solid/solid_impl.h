@@ -127,6 +127,8 @@ struct MaterialBuild {
   std::shared_ptr<models::CellCorotation> cell_model;
   std::shared_ptr<const CellPartials> k_cells;
   int32_t k_cells_made = -1;
+  // The cells' supports and geometry keys the sums used (null: none made).
+  std::shared_ptr<const CellGeometry> geometry;
 };
 
 // What a change prepared off the loop (a paint, an unfix) was made for:
@@ -471,6 +473,11 @@ struct Solid::Impl {
   // The cells' partial sums of Mt (and Dt) and of K0 (cell_assembly.h),
   // for the next build of this solid or of one remeshed from it.
   std::shared_ptr<const CellPartials> mass_cells, k0_cells;
+  // The control cells' supports and geometry keys (cell_assembly.h
+  // CellGeometry): functions of the node matrix and the elements' nodes,
+  // which a material build (a paint, a restore) does not change, so made
+  // by the first build and taken by the next.
+  std::shared_ptr<const CellGeometry> cell_geometry;
 
   // Each element's rest bounding box, by kind and element index (Locate;
   // a paint's reach). Made once, when the solid is created: its elements

@@ -22,7 +22,27 @@ namespace dynsolid::server {
 
 using ::dynsolid::testing::Deadline;
 
-class LiveTest : public ::testing::Test {
+// An in-process server on a loopback port (127.0.0.1:0) and a stub to it;
+// Start again with other options replaces both.
+class LoopbackServerTest : public ::testing::Test {
+ protected:
+  void Start(const ServerOptions& options) {
+    stub_.reset();
+    server_.reset();
+    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = *std::move(server);
+    ASSERT_GT(server_->port(), 0);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    stub_ = Sessions::NewStub(channel_);
+  }
+
+  std::unique_ptr<Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<Sessions::Stub> stub_;
+};
+
+class LiveTest : public LoopbackServerTest {
  protected:
   void SetUp() override { Start(Options()); }
 
@@ -31,16 +51,6 @@ class LiveTest : public ::testing::Test {
     o.listen = "127.0.0.1:0";
     o.max_sessions = 8;
     return o;
-  }
-
-  void Start(const ServerOptions& options) {
-    stub_.reset();
-    server_.reset();
-    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = *std::move(server);
-    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
-    stub_ = Sessions::NewStub(channel_);
   }
 
   Session Create(const std::string& builtin, int levels, bool paused) {
@@ -64,10 +74,6 @@ class LiveTest : public ::testing::Test {
     EXPECT_TRUE(status.ok()) << status.error_message();
     return s;
   }
-
-  std::unique_ptr<Server> server_;
-  std::shared_ptr<grpc::Channel> channel_;
-  std::unique_ptr<Sessions::Stub> stub_;
 };
 
 // Reads frames into a decoder until one at `step` arrives.

@@ -38,7 +38,6 @@ using ::dynsolid::testing::Deadline;
 using ::dynsolid::testing::ForceCommand;
 using ::dynsolid::testing::InspectAt;
 using ::dynsolid::testing::RefOf;
-using ::dynsolid::testing::SpinningSceneText;
 using ::dynsolid::testing::StatsOf;
 using ::dynsolid::testing::StepCommand;
 using ::testing::HasSubstr;

@@ -12,6 +12,7 @@
 
 #include "dynsolid/service.grpc.pb.h"
 #include "health.grpc.pb.h"
+#include "live_fixture.h"
 #include "server/server.h"
 #include "server/solid_builder.h"
 
@@ -41,7 +42,7 @@ MATCHER(GrpcOk, "is OK") {
   return arg.ok();
 }
 
-class SessionsServiceTest : public ::testing::Test {
+class SessionsServiceTest : public LoopbackServerTest {
  protected:
   void SetUp() override { Start(DefaultOptions()); }
 
@@ -50,17 +51,6 @@ class SessionsServiceTest : public ::testing::Test {
     o.listen = "127.0.0.1:0";
     o.max_sessions = 4;
     return o;
-  }
-
-  void Start(const ServerOptions& options) {
-    stub_.reset();
-    server_.reset();
-    absl::StatusOr<std::unique_ptr<Server>> server = Server::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = *std::move(server);
-    ASSERT_GT(server_->port(), 0);
-    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
-    stub_ = Sessions::NewStub(channel_);
   }
 
   grpc::Status Create(const CreateSessionRequest& request, Session* reply) {
@@ -103,10 +93,6 @@ class SessionsServiceTest : public ::testing::Test {
     for (const auto& e : reply.sessions()) ids.push_back(e.id());
     return ids;
   }
-
-  std::unique_ptr<Server> server_;
-  std::shared_ptr<grpc::Channel> channel_;
-  std::unique_ptr<Sessions::Stub> stub_;
 };
 
 // block3: 27 unit hexahedra, two MacCracken-Joy levels: 27 * 8^2 = 1728

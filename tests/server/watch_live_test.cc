@@ -24,7 +24,6 @@
 namespace dynsolid::server {
 namespace {
 
-using ::dynsolid::testing::BitIdentical;
 using ::dynsolid::testing::CommandStream;
 using ::dynsolid::testing::Deadline;
 using ::dynsolid::testing::ForceCommand;
@@ -34,7 +33,6 @@ using ::dynsolid::testing::SpinningSceneText;
 using ::dynsolid::testing::StatsOf;
 using ::dynsolid::testing::StepCommand;
 using ::testing::HasSubstr;
-using ::testing::StartsWith;
 
 TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBound) {
   const Session s = Create("block3", 1, /*paused=*/true);

@@ -595,7 +595,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   im.ledger.started = true;
   im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
   im.ledger.peak = im.ledger.h_min;
-  im.fingerprint = s->Fingerprint(scene);
+  // (A remeshed solid, built here for CarryOver, gets its fingerprint
+  // there, from the scene it keeps: a hash of the whole node matrix, made
+  // once.)
+  if (carried == nullptr) im.fingerprint = s->Fingerprint(scene);
   rep.build_ms = MsSince(t_build);
   return s;
 }

@@ -245,23 +245,37 @@ void CubicQuadratureElements::Build(const ElementLayout& layout, const ElementSc
   const int64_t chunks = (size_ + L - 1) / L;
   factors_.assign(chunks * kChunkValues, 0.0);
   // Elements of one group have the same factors (shape up to translation,
-  // material): made once per group, copied into each element's lane.
-  std::vector<int64_t> made(cubic.groups.size(), -1);  // a pooled place holding them
+  // material): made once per group (in lane 0 of a scratch chunk, kept
+  // contiguous), then written chunk by chunk, all lanes of a factor
+  // together (one element's lane at a time strides a cache line a value).
+  constexpr int64_t kValues = int64_t{64} * kFactorsPerPoint;
+  std::vector<int32_t> slot(cubic.groups.size(), -1);
+  std::vector<double> made;  // slot s: made[s kValues ..]
+  std::vector<double> scratch(kChunkValues);
+  std::vector<int32_t> source(size_);
   for (int64_t k = 0; k < size_; ++k) {
-    const int32_t e = schedule.order[0][first_ + k];
-    const int32_t gi = cubic.group[e];
-    double* chunk = factors_.data() + (k / L) * kChunkValues;
-    const int lane = static_cast<int>(k % L);
-    if (made[gi] < 0) {
+    const int32_t gi = cubic.group[schedule.order[0][first_ + k]];
+    if (slot[gi] < 0) {
       const ElementGroup& grp = cubic.groups[gi];
+      for (int64_t r = 0; r < kValues; ++r) scratch[r * L] = 0.0;
       SetCubicQuadratureFactors(layout.tables[0], grp.rest, layout.materials[grp.material], scale,
-                                chunk, lane);
-      made[gi] = k;
-      continue;
+                                scratch.data(), 0);
+      slot[gi] = static_cast<int32_t>(made.size() / kValues);
+      for (int64_t r = 0; r < kValues; ++r) made.push_back(scratch[r * L]);
     }
-    const double* from = factors_.data() + (made[gi] / L) * kChunkValues;
-    const int from_lane = static_cast<int>(made[gi] % L);
-    for (int64_t r = 0; r < 64 * kFactorsPerPoint; ++r) chunk[r * L + lane] = from[r * L + from_lane];
+    source[k] = slot[gi];
+  }
+  for (int64_t c = 0; c < chunks; ++c) {
+    double* chunk = factors_.data() + c * kChunkValues;
+    const double* from[L] = {};
+    for (int lane = 0; lane < L && c * L + lane < size_; ++lane) {
+      from[lane] = made.data() + static_cast<int64_t>(source[c * L + lane]) * kValues;
+    }
+    for (int64_t r = 0; r < kValues; ++r) {
+      for (int lane = 0; lane < L; ++lane) {
+        if (from[lane] != nullptr) chunk[r * L + lane] = from[lane][r];
+      }
+    }
   }
   if (!factors_f_.empty()) SetFloat(true);
 }

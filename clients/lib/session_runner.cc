@@ -421,6 +421,7 @@ absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script
     w.frames_dir = options.frames_dir;
     w.write_obj = options.write_obj;
     w.write_vtu = options.write_vtu;
+    w.client_id = report.client_id;  // a frame right after each of its own commands
     watcher = std::make_unique<Watcher>(channels, ref, w);
   }
   CommandChannelOptions command_options = options.commands;

@@ -653,10 +653,7 @@ absl::StatusOr<Report> LoadRun::Run() {
   rep.busy_cores = BusyCoresBetween(tool_cpu0, tool_cpu1);
   rep.cores = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
   for (const auto& [name, use] : CpuBetween(tool_cpu0, tool_cpu1, cpu_seconds)) {
-    rep.load_tool.threads += use.threads;
-    rep.load_tool.cpu_ms_per_s += use.cpu_ms_per_s;
-    rep.load_tool.wait_ms_per_s += use.wait_ms_per_s;
-    rep.load_tool.runs_per_s += use.runs_per_s;
+    rep.load_tool.Add(use);
   }
   if (restarts_ == 0 && run_seconds > 0) {
     rep.build_busy_ms_per_s = (after.build_ms_total() - before.build_ms_total()) / run_seconds;
@@ -669,11 +666,7 @@ absl::StatusOr<Report> LoadRun::Run() {
   if (server_pid > 0 && restarts_ == 0) {
     for (const auto& [name, use] : CpuBetween(server_cpu0, server_cpu1, cpu_seconds)) {
       const bool own = name == "sim" || name == "encode" || name == "journal";
-      CpuUse& to = rep.server_threads[own ? name : "gRPC and other"];
-      to.threads += use.threads;
-      to.cpu_ms_per_s += use.cpu_ms_per_s;
-      to.wait_ms_per_s += use.wait_ms_per_s;
-      to.runs_per_s += use.runs_per_s;
+      rep.server_threads[own ? name : "gRPC and other"].Add(use);
     }
   }
 

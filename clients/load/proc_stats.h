@@ -36,6 +36,13 @@ struct CpuUse {
   int threads = 0;
   double cpu_ms_per_s = 0, wait_ms_per_s = 0;
   double runs_per_s = 0;  // wait / runs: the mean wait for a CPU each time
+  // Sums another's threads and times into this one (a group of names).
+  void Add(const CpuUse& u) {
+    threads += u.threads;
+    cpu_ms_per_s += u.cpu_ms_per_s;
+    wait_ms_per_s += u.wait_ms_per_s;
+    runs_per_s += u.runs_per_s;
+  }
 };
 std::map<std::string, CpuUse> CpuBetween(const CpuSnapshot& a, const CpuSnapshot& b,
                                          double seconds);

@@ -414,23 +414,22 @@ struct Solid::Impl {
     } else if (use_implicit) {
       implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
       if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
-    } else if (!(setup_valid && setup_epoch == material_epoch && setup_h == h_sub &&
-                 setup_fixed == fixed)) {
+    } else if (SetupFor now{material_epoch, h_sub, fixed}; explicit_setup != now) {
       // (A restore that keeps the material, the sub-step and the fixed set,
       // as an undo of a load does, keeps the integrator's matrices and
       // preconditioner: the same bits, without refactoring them.)
       integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
-      setup_valid = true;
-      setup_epoch = material_epoch;
-      setup_h = h_sub;
-      setup_fixed = fixed;
+      explicit_setup = std::move(now);
     }
   }
   // What the explicit integrator was last set up for (SetSubsteps).
-  bool setup_valid = false;
-  uint64_t setup_epoch = 0;
-  double setup_h = 0;
-  std::vector<uint8_t> setup_fixed;
+  struct SetupFor {
+    uint64_t material_epoch = 0;
+    double h_sub = 0;
+    std::vector<uint8_t> fixed;
+    bool operator==(const SetupFor&) const = default;
+  };
+  std::optional<SetupFor> explicit_setup;
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);

@@ -27,6 +27,9 @@ struct KindTable {
   std::vector<Eigen::Vector3d> uvw;
   // Values and derivatives at the element centre (0.5, 0.5, 0.5).
   std::vector<double> centre_n, centre_dn;
+  // The derivatives again, point-minor: dn_by_node[(3 i + c) Q + q] is
+  // dN_i / du_c at point q (RestJacobians' vector loop reads them so).
+  std::vector<double> dn_by_node;
 
   const double* N(int q) const { return n.data() + static_cast<size_t>(q) * nodes; }
   const double* dN(int q) const { return dn.data() + static_cast<size_t>(q) * nodes * 3; }
@@ -44,6 +47,23 @@ struct PointGeometry {
   double det = 0;             // det(J0)
   Eigen::Vector3d x;          // rest position of the point
 };
+
+// The rest Jacobian J0 = sum_i x_i dN_i^T (3 x 3: rows physical, columns
+// parametric) at the parametric point with derivatives `dn` (n x 3) for
+// rest nodes `x` (n x 3). Every function here forms J0 this way, so their
+// determinants agree to the bit.
+Eigen::Matrix3d RestJacobian(const double* dn, const NodeMatrixX3& x, int nodes);
+
+// The rest Jacobians of rest nodes `x` at every point of `table`:
+// j[(3 r + c) Q + q] = J0_q(r, c), the same bits as RestJacobian(dN(q))
+// (each sum in node order), four points at a time.
+void RestJacobians(const KindTable& table, const NodeMatrixX3& x, std::vector<double>& j);
+// J0_q of RestJacobians' output.
+inline Eigen::Matrix3d JacobianAt(const std::vector<double>& j, int points, int q) {
+  Eigen::Matrix3d m;
+  for (int e = 0; e < 9; ++e) m(e / 3, e % 3) = j[static_cast<size_t>(e) * points + q];
+  return m;
+}
 
 // Physical gradients G = dN J0^-1 (n x 3, 1/m) of the shape functions at
 // parametric point with derivatives `dn` (n x 3) for rest nodes `x` (n x 3).

@@ -104,11 +104,11 @@ bool CubicQuadratureBasis::Make(const fem::KindTable& table, CubicQuadratureBasi
 void SetCubicQuadratureFactors(const fem::KindTable& table, const fem::NodeMatrixX3& rest,
                                const std::vector<MaterialPoint>& material, double scale,
                                double* chunk, int lane) {
+  // J(c, k) = d x_c / d u_k = sum_i rest(i, c) dN_i / du_k.
+  thread_local std::vector<double> js;
+  fem::RestJacobians(table, rest, js);
   for (int q = 0; q < table.points; ++q) {
-    // J(c, k) = d x_c / d u_k = sum_i rest(i, c) dN_i / du_k.
-    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dn(
-        table.dN(q), table.nodes, 3);
-    const Eigen::Matrix3d j = rest.transpose() * dn;
+    const Eigen::Matrix3d j = fem::JacobianAt(js, table.points, q);
     const double det = j.determinant();
     // As the dense path: a point of an inverted element adds nothing.
     const double dv = std::max(det, 0.0) * table.weight[q] * scale;

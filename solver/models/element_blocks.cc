@@ -8,6 +8,8 @@
 #include <numeric>
 #include <unordered_map>
 
+#include <Eigen/LU>
+
 namespace dynsolid::models {
 namespace {
 
@@ -412,8 +414,10 @@ ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x
   ShapeData sd;
   sd.rest = x;
   fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
+  thread_local std::vector<double> j;
+  fem::RestJacobians(table, x, j);
   for (int q = 0; q < table.points; ++q) {
-    const double det = fem::JacobianDeterminant(table.dN(q), x, table.nodes);
+    const double det = fem::JacobianAt(j, table.points, q).determinant();
     sd.inverted |= det <= 0;
     sd.volume += det * table.weight[q];
   }

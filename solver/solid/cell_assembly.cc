@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <map>
 
 #include <Eigen/Dense>
 
@@ -45,16 +44,11 @@ void GatherRows(const SparseMatrix& nm, const int32_t* ids, int n, std::vector<i
 
 namespace {
 
-// Per thread: scratch marks, node rows' hashes in the current cell, and the
-// blocks made for (kind, group, B).
+// Per thread: scratch marks and node rows' hashes in the current cell.
 struct Scratch {
-  std::vector<int32_t> cell_mark, element_mark;
+  std::vector<int32_t> cell_mark;
   std::vector<int32_t> node_stamp;  // the cell whose numbering node_key[i] is in
   std::vector<Key128> node_key;
-  ElementRows rows;
-  std::map<Key128, std::vector<Eigen::MatrixXd>> blocks;
-  std::vector<Eigen::MatrixXd> made;
-  std::vector<int32_t> place;
 };
 
 // job(thread, part) once for every part in [0, parts), each thread taking
@@ -101,10 +95,7 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
     }
   });
   std::vector<Scratch> scratch(threads);
-  for (Scratch& s : scratch) {
-    s.cell_mark.assign(nc, -1);
-    s.element_mark.assign(nc, -1);
-  }
+  for (Scratch& s : scratch) s.cell_mark.assign(nc, -1);
   // Each cell's support and geometry key (its elements' kinds and node
   // rows, the columns numbered within the cell): made here unless
   // spec.geometry has them from another sum of this build.
@@ -198,47 +189,10 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
   }
   std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>> made(to_make.size());
   Parts(pool, static_cast<int>(to_make.size()), [&](int t, int k) {
-    Scratch& s = scratch[t];
     const Cell& cell = cells[to_make[k]];
     const int side = dofs * static_cast<int>(cell.support.size());
     auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(outputs, Eigen::MatrixXd::Zero(side, side));
-    if (spec.make_cell) {
-      spec.make_cell(t, cell.support, cell.elements, *p);
-      if (spec.extra) spec.extra(cell.support, cell.elements, *p);
-      made[k] = std::move(p);
-      return;
-    }
-    for (size_t a = 0; a < cell.support.size(); ++a) s.cell_mark[cell.support[a]] = static_cast<int32_t>(a);
-    for (const auto& [kind, e] : cell.elements) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      GatherRows(nm, block.element_nodes(e), block.nodes, s.element_mark, s.rows);
-      const Eigen::MatrixXd& b = s.rows.b;
-      Hash128 h;
-      h.Mix(static_cast<uint64_t>(kind));
-      h.Mix(static_cast<uint64_t>(block.group[e]));
-      h.Mix(static_cast<uint64_t>(b.cols()));
-      h.Doubles(b.data(), b.size());
-      auto [bit, fresh] = s.blocks.try_emplace(h.value());
-      if (fresh) spec.make(kind, e, s.rows, bit->second);
-      const std::vector<Eigen::MatrixXd>& blocks = bit->second;
-      const int se = static_cast<int>(s.rows.support.size());
-      // Each element row's place in the cell's partial.
-      s.place.resize(static_cast<size_t>(dofs) * se);
-      for (int i = 0; i < se; ++i) {
-        for (int c = 0; c < dofs; ++c) s.place[dofs * i + c] = dofs * s.cell_mark[s.rows.support[i]] + c;
-      }
-      const int side_e = dofs * se;
-      for (int o = 0; o < outputs; ++o) {
-        Eigen::MatrixXd& dst = (*p)[o];
-        const Eigen::MatrixXd& src = blocks[o];
-        for (int j = 0; j < side_e; ++j) {
-          double* to = dst.col(s.place[j]).data();
-          const double* from = src.col(j).data();
-          for (int i = 0; i < side_e; ++i) to[s.place[i]] += from[i];
-        }
-      }
-    }
-    for (int32_t col : cell.support) s.cell_mark[col] = -1;
+    spec.make_cell(t, cell.support, cell.elements, *p);
     if (spec.extra) spec.extra(cell.support, cell.elements, *p);
     made[k] = std::move(p);
   });

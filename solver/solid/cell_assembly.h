@@ -5,9 +5,11 @@
 //
 // Every such matrix is a sum of element blocks E_e^T X_e E_e, E_e the
 // element's rows of the node matrix on its control support. Here it is
-// summed in a fixed order: per control cell, its elements (kind order, then
-// block order) into a partial over the cell's support; then the partials in
-// cell order. A cell's partial is a function of its key alone: its
+// summed in a fixed order: per control cell, a partial over the cell's
+// support that the caller makes from its elements (kind order, then block
+// order) at once (one rank update of their points' rows, for the mass and
+// K0); then the partials in cell order. A cell's partial is a function of
+// its key alone: its
 // elements' group contents (the caller's GroupKey: rest shape, material,
 // anything the element's X depends on) and node rows, the control points
 // numbered within the cell's support. A renumbering that keeps their order
@@ -77,16 +79,9 @@ struct CellSumSpec {
   // A key of everything the blocks of a group's elements depend on besides
   // their node rows.
   std::function<Key128(int kind, int32_t group)> group_key;
-  // The blocks of element e (kind) over its support: outputs matrices of
-  // dofs s square. Elements of one group with equal B get the same blocks
-  // (made once per thread in a build).
-  std::function<void(int kind, int32_t e, const ElementRows& rows,
-                     std::vector<Eigen::MatrixXd>& blocks)>
-      make;
-  // Optional, instead of `make`: a cell's whole partial (outputs matrices
-  // of dofs S square, zero) made at once from its support and elements
-  // (kind, index in block), on pool thread `thread`; a function of the
-  // cell's key alone.
+  // A cell's whole partial (outputs matrices of dofs S square, given zero)
+  // made at once from its support and elements (kind, index in block), on
+  // pool thread `thread`; a function of the cell's key alone.
   std::function<void(int thread, const std::vector<int32_t>& support,
                      const std::vector<std::pair<int, int32_t>>& elements,
                      std::vector<Eigen::MatrixXd>& partial)>

@@ -44,49 +44,59 @@
 
 namespace dynsolid::solid {
 
-// Mt = sum_e B_e^T M_e B_e with B_e the element's rows of the node matrix
-// restricted to its control support (and Dt alike), summed cell by cell
-// (cell_assembly.h): cells whose partial `previous` holds are not made
-// again. M_e = N^T diag(rho dV) N per group, made when a cell needs it.
+// Mt = sum_e B_e^T N^T diag(rho dV) N B_e, B_e the element's rows of the
+// node matrix on its control support (and Dt alike, with the damping),
+// summed cell by cell (cell_assembly.h): cells whose partial `previous`
+// holds are not made again. A cell's partial is W^T W, W stacking the
+// rows sqrt(rho_q dV_q) N_q B_e of all its elements' points: one symmetric
+// rank update, and no element matrix. (Forming N^T diag(rho dV) N per
+// group and B^T M_e B per element took three times the flops where every
+// element has its own shape, after a local subdivision.)
 std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
     WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt, CellGeometry* geometry) const {
   const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
-  // Per group, when first needed: consistent mass and damping (n x n).
+  const int outputs = has_damping ? 2 : 1;
+  // Per group, when first needed: sqrt(rho dV) and sqrt(damping dV) at its
+  // points.
+  using Roots = std::array<std::vector<double>, 2>;
   std::array<std::vector<std::once_flag>, 3> once;
-  std::array<std::vector<std::array<Eigen::MatrixXd, 2>>, 3> group_md;
+  std::array<std::vector<Roots>, 3> group_roots;
   for (int kind = 0; kind < 3; ++kind) {
     once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
-    group_md[kind].resize(layout.blocks[kind].groups.size());
+    group_roots[kind].resize(layout.blocks[kind].groups.size());
   }
-  auto group_matrices = [&](int kind, int32_t gi) -> const std::array<Eigen::MatrixXd, 2>& {
+  auto roots_of = [&](int kind, int32_t gi) -> const Roots& {
     std::call_once(once[kind][gi], [&] {
-      const models::ElementBlock& block = layout.blocks[kind];
       const fem::KindTable& table = layout.tables[kind];
-      const models::ElementGroup& grp = block.groups[gi];
+      const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
       const auto& material = layout.materials[grp.material];
-      const int n = block.nodes, points = table.points;
-      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
-          shape(table.n.data(), points, n);
-      Eigen::VectorXd dv(points);
+      const int points = table.points;
+      std::vector<double> j;
+      fem::RestJacobians(table, grp.rest, j);
+      Roots& out = group_roots[kind][gi];
+      for (int o = 0; o < outputs; ++o) out[o].resize(points);
       for (int q = 0; q < points; ++q) {
-        dv[q] = std::max(fem::JacobianDeterminant(table.dN(q), grp.rest, n), 0.0) * table.weight[q];
-      }
-      Eigen::VectorXd w(points);
-      for (int q = 0; q < points; ++q) w[q] = material[q].density * dv[q];
-      auto& out = group_md[kind][gi];
-      out[0].noalias() = shape.transpose() * (w.asDiagonal() * shape);
-      if (has_damping) {
-        for (int q = 0; q < points; ++q) w[q] = material[q].damping * dv[q];
-        out[1].noalias() = shape.transpose() * (w.asDiagonal() * shape);
+        const double dv =
+            std::max(fem::JacobianAt(j, points, q).determinant(), 0.0) * table.weight[q];
+        out[0][q] = std::sqrt(std::max(material[q].density * dv, 0.0));
+        if (has_damping) out[1][q] = std::sqrt(std::max(material[q].damping * dv, 0.0));
       }
     });
-    return group_md[kind][gi];
+    return group_roots[kind][gi];
   };
+  // Per pool thread.
+  struct Scratch {
+    std::vector<int32_t> cell_mark, element_mark;
+    ElementRows rows;
+    Eigen::MatrixXd nb;                   // N B_e (Q x s_e)
+    std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
+  };
+  std::vector<Scratch> scratch(threads.size());
   CellSumSpec spec;
   spec.dofs = 1;
-  spec.outputs = has_damping ? 2 : 1;
+  spec.outputs = outputs;
   spec.salt = 0x6d617373;  // "mass"
   spec.geometry = geometry;
   spec.group_key = [&](int kind, int32_t gi) {
@@ -100,10 +110,46 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     }
     return h.value();
   };
-  spec.make = [&](int kind, int32_t e, const ElementRows& rows, std::vector<Eigen::MatrixXd>& blocks) {
-    const auto& md = group_matrices(kind, layout.blocks[kind].group[e]);
-    blocks.resize(has_damping ? 2 : 1);
-    for (size_t o = 0; o < blocks.size(); ++o) blocks[o] = rows.b.transpose() * md[o] * rows.b;
+  spec.make_cell = [&](int t, const std::vector<int32_t>& support,
+                       const std::vector<std::pair<int, int32_t>>& elements,
+                       std::vector<Eigen::MatrixXd>& partial) {
+    Scratch& sc = scratch[t];
+    if (sc.cell_mark.empty()) {
+      sc.cell_mark.assign(nc, -1);
+      sc.element_mark.assign(nc, -1);
+    }
+    const int s = static_cast<int>(support.size());
+    int64_t rows = 0;
+    for (const auto& [kind, e] : elements) rows += layout.tables[kind].points;
+    // W (rows x s, column major) per output.
+    for (int o = 0; o < outputs; ++o) sc.w[o].assign(static_cast<size_t>(rows) * s, 0.0);
+    for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    int64_t row = 0;
+    for (const auto& [kind, e] : elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const fem::KindTable& table = layout.tables[kind];
+      const Roots& roots = roots_of(kind, block.group[e]);
+      GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
+          shape(table.n.data(), table.points, block.nodes);
+      sc.nb.noalias() = shape * sc.rows.b;
+      for (size_t a = 0; a < sc.rows.support.size(); ++a) {
+        const int col = sc.cell_mark[sc.rows.support[a]];
+        const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
+        for (int o = 0; o < outputs; ++o) {
+          double* to = sc.w[o].data() + static_cast<int64_t>(col) * rows + row;
+          for (int q = 0; q < table.points; ++q) to[q] = roots[o][q] * from[q];
+        }
+      }
+      row += table.points;
+    }
+    for (int32_t c : support) sc.cell_mark[c] = -1;
+    for (int o = 0; o < outputs; ++o) {
+      Eigen::MatrixXd& p = partial[o];
+      p.selfadjointView<Eigen::Lower>().rankUpdate(
+          Eigen::Map<const Eigen::MatrixXd>(sc.w[o].data(), rows, s).transpose());
+      p.triangularView<Eigen::StrictlyUpper>() = p.transpose();
+    }
   };
   // Small control meshes accumulate densely; large ones through triplets.
   const bool dense = nc <= 6000;
@@ -633,17 +679,19 @@ namespace {
 // Not movable: the spec's functions point into it.
 struct StiffnessBlocks {
   struct Group {
-    Eigen::MatrixXd d;         // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>
+        d;                     // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
     Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
     Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda)
-    bool uniform = false;      // lambda = ratio mu at every point
-    double ratio = 0;
+    std::vector<double> j;        // (scratch: the rest Jacobians)
   };
   // Per pool thread.
   struct Scratch {
     std::vector<int32_t> cell_mark, element_mark;
     ElementRows rows;
-    Eigen::MatrixXd h, w, wl, g, gl;
+    Eigen::MatrixXd h;
+    std::vector<double> w, wl, g, gl;
+    Group single;  // the group of one element (GroupOf)
   };
 
   StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
@@ -681,10 +729,28 @@ struct StiffnessBlocks {
     };
   }
 
-  const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e) {
-    const int32_t gi = layout.blocks[kind].group[e];
-    std::call_once(once[kind][gi], [&] { groups[kind][gi] = MakeGroup(layout, kind, gi); });
+  // Element e's group: made once and kept when the group has more than one
+  // element, else made in the thread's scratch (an irregular region has a
+  // group per element: keeping each one's 3Q x n gradients took more time
+  // in fresh pages than making them).
+  const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e, Scratch& sc) {
+    const models::ElementBlock& block = layout.blocks[kind];
+    const int32_t gi = block.group[e];
+    if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
+      MakeGroup(layout, kind, gi, sc.single);
+      return sc.single;
+    }
+    std::call_once(once[kind][gi], [&] { MakeGroup(layout, kind, gi, groups[kind][gi]); });
     return groups[kind][gi];
+  }
+
+  // Whether every point of e's material has one Poisson ratio, and
+  // lambda / mu then (2 nu / (1 - 2 nu), from nu, so that groups of one nu
+  // and different Young's moduli have the same ratio to the bit).
+  static std::pair<bool, double> UniformRatio(const std::vector<models::MaterialPoint>& material) {
+    bool same = !material.empty();
+    for (size_t q = 1; q < material.size() && same; ++q) same = material[q].poisson == material[0].poisson;
+    return {same, same ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0};
   }
 
   // A cell's K partial (3S square, zero) as above.
@@ -701,18 +767,25 @@ struct StiffnessBlocks {
     bool uniform = true, first = true;
     double ratio = 0;
     for (const auto& [kind, e] : elements) {
-      const Group& g = GroupOf(layout, kind, e);
-      rows += g.root_mu.size();
-      if (!g.uniform || (!first && g.ratio != ratio)) uniform = false;
-      ratio = g.ratio;
+      const models::ElementBlock& block = layout.blocks[kind];
+      rows += layout.tables[kind].points;
+      const auto [same, r] = UniformRatio(layout.materials[block.groups[block.group[e]].material]);
+      if (!same || (!first && r != ratio)) uniform = false;
+      ratio = r;
       first = false;
     }
-    sc.w.setZero(rows, 3 * s);
-    if (!uniform) sc.wl.setZero(rows, 3 * s);
+    // Scratch that keeps its pages from cell to cell (a matrix resized to
+    // each cell's size is new memory each time, every page a fault).
+    auto zeroed = [](std::vector<double>& buffer, int64_t r, int64_t c) {
+      buffer.assign(static_cast<size_t>(r * c), 0.0);
+      return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
+    };
+    Eigen::Map<Eigen::MatrixXd> w = zeroed(sc.w, rows, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> wl = zeroed(sc.wl, uniform ? 0 : rows, 3 * s);
     for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
     int64_t row = 0;
     for (const auto& [kind, e] : elements) {
-      const Group& g = GroupOf(layout, kind, e);
+      const Group& g = GroupOf(layout, kind, e, sc);
       const models::ElementBlock& block = layout.blocks[kind];
       GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
       const int q = static_cast<int>(g.root_mu.size());
@@ -721,10 +794,10 @@ struct StiffnessBlocks {
         const int col = sc.cell_mark[sc.rows.support[a]];
         for (int c = 0; c < 3; ++c) {
           const double* from = sc.h.col(static_cast<Eigen::Index>(a)).data() + c * q;
-          double* to = sc.w.col(c * s + col).data() + row;
+          double* to = w.col(c * s + col).data() + row;
           for (int i = 0; i < q; ++i) to[i] = g.root_mu[i] * from[i];
           if (!uniform) {
-            double* tol = sc.wl.col(c * s + col).data() + row;
+            double* tol = wl.col(c * s + col).data() + row;
             for (int i = 0; i < q; ++i) tol[i] = g.root_lambda[i] * from[i];
           }
         }
@@ -732,15 +805,13 @@ struct StiffnessBlocks {
       row += q;
     }
     for (int32_t c : support) sc.cell_mark[c] = -1;
-    sc.g.setZero(3 * s, 3 * s);
-    sc.g.selfadjointView<Eigen::Lower>().rankUpdate(sc.w.transpose());
+    Eigen::Map<Eigen::MatrixXd> gm = zeroed(sc.g, 3 * s, 3 * s);
+    gm.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
     if (!uniform) {
-      sc.gl.setZero(3 * s, 3 * s);
-      sc.gl.selfadjointView<Eigen::Lower>().rankUpdate(sc.wl.transpose());
+      zeroed(sc.gl, 3 * s, 3 * s).selfadjointView<Eigen::Lower>().rankUpdate(wl.transpose());
     }
-    const Eigen::MatrixXd& gm = sc.g;
-    const Eigen::MatrixXd& gl = sc.gl;
-    auto at = [](const Eigen::MatrixXd& m, int i, int j) { return i >= j ? m(i, j) : m(j, i); };
+    const Eigen::Map<const Eigen::MatrixXd> gl(sc.gl.data(), uniform ? 0 : 3 * s, 3 * s);
+    auto at = [](const auto& m, int i, int j) { return i >= j ? m(i, j) : m(j, i); };
     for (int bb = 0; bb < s; ++bb) {
       for (int a = 0; a < s; ++a) {
         const double trace = at(gm, a, bb) + at(gm, s + a, s + bb) + at(gm, 2 * s + a, 2 * s + bb);
@@ -791,40 +862,32 @@ struct StiffnessBlocks {
     if (volume > 0) g /= volume;
   }
 
-  static Group MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi) {
+  static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, Group& g) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     const fem::KindTable& table = layout.tables[kind];
     const std::vector<models::MaterialPoint>& material = layout.materials[grp.material];
     const int n = table.nodes, points = table.points;
-    Group g;
     g.d.resize(3 * points, n);
     g.root_mu.resize(points);
     Eigen::VectorXd lambda(points), mu(points);
+    fem::RestJacobians(table, grp.rest, g.j);
     for (int q = 0; q < points; ++q) {
-      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dn(
-          table.dN(q), n, 3);
-      const Eigen::Matrix3d j = grp.rest.transpose() * dn;
+      const double* dn = table.dN(q);
+      const Eigen::Matrix3d j = fem::JacobianAt(g.j, points, q);
       const double dv = std::max(j.determinant(), 0.0) * table.weight[q];
       const Eigen::Matrix3d jit =
           dv > 0 ? Eigen::Matrix3d(j.inverse().transpose()) : Eigen::Matrix3d::Zero();
-      for (int i = 0; i < n; ++i) {
-        const Eigen::Vector3d grad = jit * dn.row(i).transpose();
-        for (int k = 0; k < 3; ++k) g.d(k * points + q, i) = grad[k];
+      for (int k = 0; k < 3; ++k) {
+        const double a = jit(k, 0), b = jit(k, 1), c = jit(k, 2);
+        double* row = g.d.row(k * points + q).data();  // contiguous: d is row major
+        for (int i = 0; i < n; ++i) row[i] = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];
       }
       lambda[q] = dv * material[q].lame_lambda();
       mu[q] = dv * material[q].lame_mu();
       g.root_mu[q] = std::sqrt(std::max(mu[q], 0.0));
     }
-    // lambda / mu is 2 nu / (1 - 2 nu): one number when nu is one number
-    // (taken from nu, so that groups of one nu and different Young's moduli
-    // have the same ratio to the bit).
-    bool same = true;
-    for (int q = 1; q < points && same; ++q) same = material[q].poisson == material[0].poisson;
-    g.uniform = same && points > 0;
-    g.ratio = g.uniform ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0;
     g.root_lambda.resize(points);
     for (int q = 0; q < points; ++q) g.root_lambda[q] = std::sqrt(std::max(lambda[q], 0.0));
-    return g;
   }
 
   CellSumSpec spec;

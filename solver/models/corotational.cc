@@ -159,13 +159,30 @@ Eigen::MatrixXd IntegrateGroup(const fem::KindTable& table, const ElementGroup& 
 
 CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
                                      WorkerPool& pool, const CorotationalModel* previous,
-                                     int32_t quadrature_group_size)
+                                     int32_t quadrature_group_size, Products products)
     : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
   pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
   for (int kind = 1; kind < 3; ++kind) {
     pooled_[kind] =
         SmallGroups(layout.blocks[kind], std::min(quadrature_group_size, kQuadratureGroupSize));
   }
+  for (int kind = 0; kind < 3; ++kind) {
+    frames_[kind].assign(layout.blocks[kind].size(), Eigen::Quaterniond::Identity());
+  }
+  if (products == Products::kNow) {
+    std::call_once(products_once_, [&] { BuildProducts(previous); });
+  }
+}
+
+void CorotationalModel::EnsureProducts() const {
+  // Lazy initialization of a model made with Products::kWhenUsed (the
+  // object itself is not const: only the methods that call this are).
+  std::call_once(products_once_,
+                 [this] { const_cast<CorotationalModel*>(this)->BuildProducts(nullptr); });
+}
+
+void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
+  const ElementLayout& layout = layout_;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const std::vector<int32_t> reuse = previous != nullptr
@@ -176,7 +193,8 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
         packed_[kind].emplace_back();  // applied at the quadrature points
         continue;
       }
-      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]])) {
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]]) &&
+          previous->products_) {
         packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         continue;
       }
@@ -199,7 +217,6 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
           for (int j = 0; j < m; ++j) out[static_cast<size_t>(i) * m + j] = k(i, j);
       }
     }
-    frames_[kind].assign(block.size(), Eigen::Quaterniond::Identity());
   }
   work_.resize(kForceParts);
   schedule_ = ScheduleElements(layout, kBatch, kForceParts, num_nodes_, &pooled_);
@@ -218,9 +235,18 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
     w.y.setZero(rows, kBatch);
     part_buffers_.push_back(&w.g);
   }
+  products_ = true;
+  if (single_) {
+    single_ = false;
+    SetSinglePrecisionLinearized(true);
+  }
 }
 
 void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
+  if (!products_) {
+    single_ = on;  // made with the products
+    return;
+  }
   // The float copies depend only on the (fixed) double matrices: once made,
   // they stay right (a paint prepared off the loop makes them there).
   if (on == single_ && (!on || packed_f_[0].size() == packed_[0].size())) return;
@@ -366,6 +392,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
 }
 
 double CorotationalModel::Forces(const Points& d, Points& g) {
+  EnsureProducts();
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
   // Each part into its own buffer (whichever thread takes it), summed in
@@ -405,6 +432,7 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
 }
 
 void CorotationalModel::UpdateFrames(const Points& d) {
+  EnsureProducts();
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
   pool_->RunParts(parts, [&](int k) { FrameBatches(k, d); });
@@ -413,6 +441,7 @@ void CorotationalModel::UpdateFrames(const Points& d) {
 }
 
 double CorotationalModel::AffineForces(const Points& x, Points& g) {
+  EnsureProducts();
   const auto t0 = std::chrono::steady_clock::now();
   const int parts = static_cast<int>(work_.size());
   pool_->RunParts(parts, [&](int k) { RunBatches(k, x, nullptr, work_[k], true); });
@@ -425,6 +454,7 @@ double CorotationalModel::AffineForces(const Points& x, Points& g) {
 }
 
 void CorotationalModel::ApplyLinearized(const Points& v, Points& out) const {
+  EnsureProducts();
   const int parts = static_cast<int>(work_.size());
   pool_->RunParts(parts, [&](int k) { RunBatches(k, v, nullptr, work_[k]); });
   SumParts(out);
@@ -456,6 +486,7 @@ int64_t CorotationalModel::per_element_bytes() const {
 }
 
 Eigen::MatrixXd CorotationalModel::K(int kind, int32_t group) const {
+  EnsureProducts();
   if (kind == 0 && pooled_[0][group]) {
     return quadrature_.Matrix(CubicPointLaw::kIsotropic, layout_, group, 1.0);
   }

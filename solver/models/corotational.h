@@ -37,6 +37,7 @@
 #pragma once
 
 #include <array>
+#include <mutex>
 #include <vector>
 
 #include <Eigen/Core>
@@ -57,9 +58,18 @@ class CorotationalModel final : public InternalForceModel {
   // With `previous` (a model of the same mesh, e.g. before a paint), groups
   // whose rest shape and stiffness samples it already had take its matrices
   // (see MatchStiffnessGroups).
+  //
+  // The element products (the groups' matrices, the cubic elements'
+  // quadrature factors, the batches' schedule and scratch) are made here,
+  // or with Products::kWhenUsed on the first call that needs them (Forces,
+  // UpdateFrames, AffineForces, ApplyLinearized, K), without `previous`: a
+  // solid corotated per control cell (cell_corotation.h) keeps this model
+  // for its frames and group choices only, and never calls them.
+  enum class Products { kNow, kWhenUsed };
   CorotationalModel(const ElementLayout& layout, const Points& rest, WorkerPool& pool,
                     const CorotationalModel* previous = nullptr,
-                    int32_t quadrature_group_size = kEveryGroup);
+                    int32_t quadrature_group_size = kEveryGroup,
+                    Products products = Products::kNow);
   CorotationalModel(const CorotationalModel&) = delete;
   CorotationalModel& operator=(const CorotationalModel&) = delete;
 
@@ -107,6 +117,8 @@ class CorotationalModel final : public InternalForceModel {
   // A group applied at its quadrature points has it made here from them
   // (CubicQuadratureElements::Matrix).
   Eigen::MatrixXd K(int kind, int32_t group) const;
+  // Whether the element products are made (always, with Products::kNow).
+  bool has_products() const { return products_; }
   // Whether K(kind, group) is made from the group's quadrature points.
   bool at_quadrature_points(int kind, int32_t group) const { return kind == 0 && pooled_[0][group]; }
   // Cubic elements applied at their quadrature points.
@@ -135,6 +147,12 @@ class CorotationalModel final : public InternalForceModel {
                   bool subtract_rest = false) const;
   void FrameBatches(int part, const Points& d);  // UpdateFrames' part
   void SumParts(Points& out) const;  // out = sum of the parts' buffers
+  // The element products (the constructor's, or EnsureProducts' on first
+  // use); `previous` as the constructor's.
+  void BuildProducts(const CorotationalModel* previous);
+  void EnsureProducts() const;
+  mutable std::once_flag products_once_;
+  bool products_ = false;
 
   const ElementLayout& layout_;
   WorkerPool* pool_;

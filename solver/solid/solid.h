@@ -58,7 +58,8 @@ struct BuildReport {
   // Cubic elements whose products run sum-factorized (local-frame model
   // with float products; models/kron_product.h).
   int64_t factorized_elements = 0;
-  // Cubic elements applied at their quadrature points (models/cubic_quadrature.h).
+  // Cubic elements applied at their quadrature points (models/cubic_quadrature.h;
+  // 0 when corotated per control cell: no element products are made).
   int64_t quadrature_elements = 0;
   // solver.corotation CONTROL_CELL (models/cell_corotation.h): the control
   // cells it steps, their distinct stiffness matrices and those matrices'

@@ -225,9 +225,11 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
   // matrices would take: curved meshes share few of them. Cubic elements
   // applied at their quadrature points (every one in the corotational
   // model, those of small groups in the local-frame one) keep 11 numbers
-  // per point instead (models/cubic_quadrature.h).
+  // per point instead (models/cubic_quadrature.h). A solid corotated per
+  // control cell makes no element matrices (CorotationalModel::Products).
   const auto t_model = Clock::now();
   const bool corot = settings.model() == SolverSettings::COROTATIONAL;
+  const bool per_cell = corot && settings.corotation() == SolverSettings::CONTROL_CELL;
   double bytes = 0;
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = l->blocks[kind];
@@ -242,7 +244,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     }
   }
   const double limit = g_max_element_bytes.load();
-  if (bytes > limit) {
+  if (!per_cell && bytes > limit) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "the ", corot ? "corotational" : "local-frame", " element data of this scene would take ",
         static_cast<int64_t>(bytes / 1048576.0), " MiB (", l->blocks[0].groups.size(),
@@ -251,8 +253,12 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
         " MiB; use fewer subdivision levels or a more regular control mesh"));
   }
   if (corot) {
-    auto m = std::make_unique<models::CorotationalModel>(*l, rest_nodes, threads,
-                                                         reuse ? corotational : nullptr);
+    // Corotated per control cell, the solid steps in control space and
+    // never asks this model for its element products.
+    auto m = std::make_unique<models::CorotationalModel>(
+        *l, rest_nodes, threads, reuse ? corotational : nullptr, models::kEveryGroup,
+        per_cell ? models::CorotationalModel::Products::kWhenUsed
+                 : models::CorotationalModel::Products::kNow);
     b.corotational = m.get();
     b.shared_matrix_bytes = m->shared_matrix_bytes();
     b.element_bytes = m->per_element_bytes();
@@ -276,7 +282,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
   // (those of this solid's discretization, when it has them).
   CellGeometry geometry;
   if (reuse && cell_geometry != nullptr) geometry = *cell_geometry;
-  if (corot && settings.corotation() == SolverSettings::CONTROL_CELL) {
+  if (per_cell) {
     std::shared_ptr<const CellPartials> made;
     b.cell_model =
         BuildCellCorotation(*l, *b.corotational, threads, k0_cells.get(), &made, &geometry);
@@ -352,7 +358,10 @@ std::unique_ptr<models::InternalForceModel> Solid::Impl::ModelCopy(
     const models::ElementLayout& l, const models::InternalForceModel& live,
     WorkerPool& threads) const {
   if (const auto* corot = dynamic_cast<const models::CorotationalModel*>(&live)) {
-    return std::make_unique<models::CorotationalModel>(l, rest_nodes, threads, corot);
+    return std::make_unique<models::CorotationalModel>(
+        l, rest_nodes, threads, corot, models::kEveryGroup,
+        corot->has_products() ? models::CorotationalModel::Products::kNow
+                              : models::CorotationalModel::Products::kWhenUsed);
   }
   const auto& lf = static_cast<const models::LocalFrameModel&>(live);
   return std::make_unique<models::LocalFrameModel>(
@@ -835,6 +844,10 @@ struct StiffnessBlocks {
                         const std::vector<int32_t>& support,
                         const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& g) {
     g.setZero(static_cast<Eigen::Index>(support.size()), 3);
+    // A control point's column in g (support is ascending).
+    thread_local std::vector<int32_t> place;
+    if (static_cast<Eigen::Index>(place.size()) < nm.cols()) place.assign(nm.cols(), -1);
+    for (size_t a = 0; a < support.size(); ++a) place[support[a]] = static_cast<int32_t>(a);
     double volume = 0;
     for (const auto& [kind, e] : elements) {
       const models::ElementBlock& block = layout.blocks[kind];
@@ -842,10 +855,7 @@ struct StiffnessBlocks {
       const double* dn = layout.tables[kind].centre_dn.data();
       const int32_t* ids = block.element_nodes(e);
       const int n = block.nodes;
-      Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < n; ++i) {
-        j += rest.row(i).transpose() * Eigen::RowVector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2]);
-      }
+      const Eigen::Matrix3d j = fem::RestJacobian(dn, rest, n);
       const double det = j.determinant();
       if (!(det > 0)) continue;
       const Eigen::Matrix3d jit = j.inverse().transpose();
@@ -853,12 +863,12 @@ struct StiffnessBlocks {
         const Eigen::RowVector3d gi =
             det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2])).transpose();
         for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          const auto at = std::lower_bound(support.begin(), support.end(), static_cast<int32_t>(it.col()));
-          g.row(at - support.begin()) += it.value() * gi;
+          g.row(place[it.col()]) += it.value() * gi;
         }
       }
       volume += det;
     }
+    for (int32_t c : support) place[c] = -1;
     if (volume > 0) g /= volume;
   }
 

@@ -406,6 +406,35 @@ TEST(CorotationalTest, ResultsAreBitIdenticalForAnyPoolSize) {
   }
 }
 
+TEST(CorotationalTest, AModelWithProductsWhenUsedMakesThemOnFirstUseWithTheSameBits) {
+  auto f = Build("mixed", 2, 2);
+  CorotationalModel lazy(f->layout, f->rest, *f->pool, nullptr, kEveryGroup,
+                         CorotationalModel::Products::kWhenUsed);
+  EXPECT_FALSE(lazy.has_products());
+  EXPECT_TRUE(f->model->has_products());
+  EXPECT_EQ(lazy.shared_matrix_bytes(), 0);
+  EXPECT_EQ(lazy.quadrature_elements(), 0);
+  // Its group choices are there before: what a cell corotation keys on.
+  for (int kind = 0; kind < 3; ++kind) {
+    for (size_t g = 0; g < f->layout.blocks[kind].groups.size(); ++g) {
+      EXPECT_EQ(lazy.at_quadrature_points(kind, static_cast<int32_t>(g)),
+                f->model->at_quadrature_points(kind, static_cast<int32_t>(g)));
+    }
+  }
+  const Points p = Deformed(f->rest, 0.02, Rotation(0.4, Eigen::Vector3d(1, 1, 0)));
+  const Points v = RandomPoints(f->nodes(), 3);
+  // ApplyLinearized first (a const call), then Forces, as the eager model.
+  Points k_lazy, k_now, g_lazy, g_now;
+  lazy.ApplyLinearized(v, k_lazy);
+  f->model->ApplyLinearized(v, k_now);
+  EXPECT_TRUE(lazy.has_products());
+  EXPECT_TRUE(k_lazy == k_now);
+  EXPECT_EQ(lazy.Forces(p, g_lazy), f->model->Forces(p, g_now));
+  EXPECT_TRUE(g_lazy == g_now);
+  EXPECT_EQ(lazy.shared_matrix_bytes(), f->model->shared_matrix_bytes());
+  EXPECT_EQ(lazy.quadrature_elements(), f->model->quadrature_elements());
+}
+
 TEST(CorotationalTest, ForcesAndApplyLinearizedDoNotAllocate) {
 #if DYNSOLID_COUNT_MALLOCS
   auto f = Build("mixed", 2, 2);

@@ -363,9 +363,12 @@ TEST(SolidTest, RefusesScenesWhoseElementDataWouldNotFit) {
   // linear ones keep a 24 x 24 K each: at two levels about 32 MiB in all
   // (the dense corotational matrices took 898 MB). Under a 10 MiB limit
   // the scene is refused, saying why; under the default one it builds.
+  // (Corotated per element: per control cell, as the scene has it, no
+  // element matrix is made, and none is counted.)
   auto scene = scene::BuiltinScene("nozzle");
   ASSERT_OK(scene);
   scene->mutable_solver()->set_model(SolverSettings::COROTATIONAL);
+  scene->mutable_solver()->set_corotation(SolverSettings::ELEMENT);
   auto d = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), 2);
   ASSERT_OK(d);
   Solid::SetMaxElementBytesForTesting(10.0 * 1024 * 1024);
@@ -379,6 +382,18 @@ TEST(SolidTest, RefusesScenesWhoseElementDataWouldNotFit) {
   ASSERT_OK(built);
   EXPECT_EQ((*built)->build_report().quadrature_elements,
             (*built)->discretization().elements.num_cubic());
+  // Per control cell, under the same 10 MiB limit, it builds and holds no
+  // element data.
+  scene->mutable_solver()->set_corotation(SolverSettings::CONTROL_CELL);
+  auto d2 = scene::BuildDiscretization(*scene, scene::BuiltinSceneDir(), 2);
+  ASSERT_OK(d2);
+  Solid::SetMaxElementBytesForTesting(10.0 * 1024 * 1024);
+  auto per_cell = Solid::Create(*scene, *std::move(d2));
+  Solid::SetMaxElementBytesForTesting(0);
+  ASSERT_OK(per_cell);
+  EXPECT_EQ((*per_cell)->build_report().quadrature_elements, 0);
+  EXPECT_EQ((*per_cell)->build_report().shared_matrix_bytes, 0);
+  EXPECT_GT((*per_cell)->build_report().corotated_cells, 0);
 }
 
 TEST(SolidTest, SceneWithoutDampingLoadsOrConstraintsBuildsNoneOfThem) {

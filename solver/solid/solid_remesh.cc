@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -174,6 +175,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   std::vector<uint8_t> binned;
   std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
   models::ElementMaterials whole;
+  std::vector<int8_t> cell_uniform;  // per old cell: -1 not known, 0 no, 1 yes
+  std::unordered_map<int32_t, models::MaterialPoint> uniform_material;
+  std::map<std::pair<int32_t, int>, std::vector<models::MaterialPoint>> uniform_arrays;
   if (!uniform) {
     for (int kind = 0; kind < 3; ++kind) {
       const models::ElementBlock& block = layout.blocks[kind];
@@ -208,8 +212,35 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       }
       return by_cell[src].Nearest(x);
     };
+    // A source cell of one material throughout gives every element of its
+    // new cells that material at every point: the array sampling would
+    // give, without sampling (made once per cell and kind).
+    cell_uniform.assign(old_cells, -1);
     whole = [&](int kind, const fem::NodeMatrixX3& x,
                 int32_t cell) -> const std::vector<models::MaterialPoint>* {
+      const int32_t src = cell_source[cell];
+      if (src >= 0 && !old_elements[src].empty()) {
+        if (cell_uniform[src] < 0) {
+          const models::MaterialPoint* first = nullptr;
+          bool same = true;
+          for (const auto& [k, e] : old_elements[src]) {
+            const models::ElementBlock& block = layout.blocks[k];
+            for (const models::MaterialPoint& m : layout.materials[block.groups[block.group[e]].material]) {
+              if (first == nullptr) first = &m;
+              same = same && m == *first;
+            }
+            if (!same) break;
+          }
+          cell_uniform[src] = same && first != nullptr ? 1 : 0;
+          if (cell_uniform[src] == 1) uniform_material[src] = *first;
+        }
+        if (cell_uniform[src] == 1) {
+          const int points = layout.tables[kind].points;
+          std::vector<models::MaterialPoint>& array = uniform_arrays[{src, kind}];
+          if (array.empty()) array.assign(points, uniform_material[src]);
+          return &array;
+        }
+      }
       auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
                                         [&](int i) { return x.row(i).data(); }));
       if (it == by_nodes.end()) return nullptr;

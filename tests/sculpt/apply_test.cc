@@ -104,6 +104,32 @@ TEST_P(ApplyEditTest, EditsReuseUnchangedCellsAndEqualASolidBuiltFromTheirScene)
   }
 }
 
+// A cell painted one material throughout passes it to every point of the
+// cells made from it: here the whole solid is painted three times denser,
+// so after a local subdivision (whose smoothing moves the neighbours'
+// points too) the mass is still that density times the rest volume.
+TEST(ApplyEditMaterialTest, CellsOfOnePaintedMaterialPassItToEveryPointOfTheirNewCells) {
+  Scene scene = *scene::ParseScene(R"pb(
+    name: "painted"
+    mesh { block { nx: 2 ny: 2 nz: 2 } }
+    subdivision { levels: 1 }
+    materials { base { young_modulus: 2e4 density: 100 } }
+    solver { time_step: 1e-3 }
+  )pb", "test");
+  ASSERT_OK_AND_ASSIGN(scene::Discretization d, scene::BuildDiscretization(scene, "", std::nullopt));
+  ASSERT_OK_AND_ASSIGN(std::unique_ptr<solid::Solid> s, solid::Solid::Create(scene, std::move(d), 2));
+  ASSERT_OK(s->PaintMaterial(Parse<MaterialPaint>(
+      "region { box { min { x: -5 y: -5 z: -5 } max { x: 7 y: 7 z: 7 } } } material { "
+      "young_modulus: 2e4 density: 300 } strength: 1")));
+  EXPECT_NEAR(s->total_mass(), 300 * s->rest_volume(), 1e-12 * s->total_mass());
+  ASSERT_OK_AND_ASSIGN(AppliedEdit a,
+                       ApplyEdit(scene, *s, Parse<TopologyEdit>("subdivide_cells { cells: 0 }")));
+  EXPECT_GT(a.solid->discretization().control().num_cells(), 8);
+  EXPECT_NE(a.solid->rest_volume(), s->rest_volume());  // the smoothing moved points
+  EXPECT_NEAR(a.solid->total_mass(), 300 * a.solid->rest_volume(), 1e-12 * a.solid->total_mass());
+  EXPECT_EQ(a.solid->build_report().material_arrays, 2);  // cubic and linear arrays of one material
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Models, ApplyEditTest,
     ::testing::Values(Case{"local_frame", "solver { time_step: 1e-3 }"},

@@ -29,6 +29,7 @@
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
 #include "solver/solid/cell_assembly.h"
+#include "solver/fem/cubic_tensor.h"
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
@@ -94,6 +95,8 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
   };
   std::vector<Scratch> scratch(threads.size());
+  std::optional<fem::CubicTensorProducts> cubic;  // N B sum-factorized (cubic_tensor.h)
+  if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
   CellSumSpec spec;
   spec.dofs = 1;
   spec.outputs = outputs;
@@ -130,9 +133,14 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
       const fem::KindTable& table = layout.tables[kind];
       const Roots& roots = roots_of(kind, block.group[e]);
       GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
-      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
-          shape(table.n.data(), table.points, block.nodes);
-      sc.nb.noalias() = shape * sc.rows.b;
+      if (kind == 0 && cubic.has_value()) {
+        sc.nb.resize(64, sc.rows.b.cols());
+        cubic->Values(sc.rows.b.data(), 64, static_cast<int>(sc.rows.b.cols()), sc.nb.data(), 64);
+      } else {
+        const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
+            shape(table.n.data(), table.points, block.nodes);
+        sc.nb.noalias() = shape * sc.rows.b;
+      }
       for (size_t a = 0; a < sc.rows.support.size(); ++a) {
         const int col = sc.cell_mark[sc.rows.support[a]];
         const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
@@ -688,8 +696,13 @@ namespace {
 // Not movable: the spec's functions point into it.
 struct StiffnessBlocks {
   struct Group {
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>
-        d;                     // 3Q x n, row k Q + q: (J_q^-T dN_q)_k
+    // 3Q x n, row k Q + q: (J_q^-T dN_q)_k. Cubic elements on the 4-point
+    // rule have none: their parametric gradients are sum-factorized
+    // (fem::CubicTensorProducts) and mu_jit, lambda_jit hold the points'
+    // J_q^-T (entry (k, c) at [(3 k + c) Q + q]) times sqrt(dV mu) and
+    // sqrt(dV lambda).
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> d;
+    std::vector<double> mu_jit, lambda_jit;
     Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
     Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda)
     std::vector<double> j;        // (scratch: the rest Jacobians)
@@ -699,6 +712,7 @@ struct StiffnessBlocks {
     std::vector<int32_t> cell_mark, element_mark;
     ElementRows rows;
     Eigen::MatrixXd h;
+    std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> w, wl, g, gl;
     Group single;  // the group of one element (GroupOf)
   };
@@ -706,6 +720,7 @@ struct StiffnessBlocks {
   StiffnessBlocks(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
                   const SparseMatrix& nm, int threads)
       : scratch(threads) {
+    if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
       groups[kind].resize(layout.blocks[kind].groups.size());
@@ -745,11 +760,13 @@ struct StiffnessBlocks {
   const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e, Scratch& sc) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int32_t gi = block.group[e];
+    const bool factorized = kind == 0 && cubic.has_value();
     if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
-      MakeGroup(layout, kind, gi, sc.single);
+      MakeGroup(layout, kind, gi, factorized, sc.single);
       return sc.single;
     }
-    std::call_once(once[kind][gi], [&] { MakeGroup(layout, kind, gi, groups[kind][gi]); });
+    std::call_once(once[kind][gi],
+                   [&] { MakeGroup(layout, kind, gi, factorized, groups[kind][gi]); });
     return groups[kind][gi];
   }
 
@@ -798,6 +815,35 @@ struct StiffnessBlocks {
       const models::ElementBlock& block = layout.blocks[kind];
       GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
       const int q = static_cast<int>(g.root_mu.size());
+      const int se = static_cast<int>(sc.rows.support.size());
+      if (kind == 0 && cubic.has_value()) {
+        // W's rows: sqrt(dV mu) J^-T (dN/du, dN/dv, dN/dw) B, the
+        // parametric gradients of B's columns sum-factorized.
+        sc.p.resize(static_cast<size_t>(3) * 64 * se);
+        double* pu = sc.p.data();
+        double* pv = pu + 64 * se;
+        double* pw = pv + 64 * se;
+        cubic->Derivatives(sc.rows.b.data(), 64, se, pu, pv, pw, 64);
+        for (int a = 0; a < se; ++a) {
+          const int col = sc.cell_mark[sc.rows.support[a]];
+          const double* du = pu + 64 * a;
+          const double* dv = pv + 64 * a;
+          const double* dw = pw + 64 * a;
+          for (int pass = 0; pass < (uniform ? 1 : 2); ++pass) {
+            const double* f = pass == 0 ? g.mu_jit.data() : g.lambda_jit.data();
+            Eigen::Map<Eigen::MatrixXd>& into = pass == 0 ? w : wl;
+            for (int k = 0; k < 3; ++k) {
+              const double* f0 = f + (3 * k) * 64;
+              const double* f1 = f0 + 64;
+              const double* f2 = f1 + 64;
+              double* to = into.col(k * s + col).data() + row;
+              for (int i = 0; i < 64; ++i) to[i] = f0[i] * du[i] + f1[i] * dv[i] + f2[i] * dw[i];
+            }
+          }
+        }
+        row += q;
+        continue;
+      }
       sc.h.noalias() = g.d * sc.rows.b;  // 3Q x s_e
       for (size_t a = 0; a < sc.rows.support.size(); ++a) {
         const int col = sc.cell_mark[sc.rows.support[a]];
@@ -872,14 +918,21 @@ struct StiffnessBlocks {
     if (volume > 0) g /= volume;
   }
 
-  static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, Group& g) {
+  static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, bool factorized,
+                        Group& g) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     const fem::KindTable& table = layout.tables[kind];
     const std::vector<models::MaterialPoint>& material = layout.materials[grp.material];
     const int n = table.nodes, points = table.points;
-    g.d.resize(3 * points, n);
+    if (factorized) {
+      g.d.resize(0, 0);
+      g.mu_jit.resize(static_cast<size_t>(9) * points);
+      g.lambda_jit.resize(static_cast<size_t>(9) * points);
+    } else {
+      g.d.resize(3 * points, n);
+    }
     g.root_mu.resize(points);
-    Eigen::VectorXd lambda(points), mu(points);
+    g.root_lambda.resize(points);
     fem::RestJacobians(table, grp.rest, g.j);
     for (int q = 0; q < points; ++q) {
       const double* dn = table.dN(q);
@@ -887,20 +940,25 @@ struct StiffnessBlocks {
       const double dv = std::max(j.determinant(), 0.0) * table.weight[q];
       const Eigen::Matrix3d jit =
           dv > 0 ? Eigen::Matrix3d(j.inverse().transpose()) : Eigen::Matrix3d::Zero();
+      g.root_mu[q] = std::sqrt(std::max(dv * material[q].lame_mu(), 0.0));
+      g.root_lambda[q] = std::sqrt(std::max(dv * material[q].lame_lambda(), 0.0));
       for (int k = 0; k < 3; ++k) {
         const double a = jit(k, 0), b = jit(k, 1), c = jit(k, 2);
+        if (factorized) {
+          for (int cc = 0; cc < 3; ++cc) {
+            g.mu_jit[(3 * k + cc) * points + q] = g.root_mu[q] * jit(k, cc);
+            g.lambda_jit[(3 * k + cc) * points + q] = g.root_lambda[q] * jit(k, cc);
+          }
+          continue;
+        }
         double* row = g.d.row(k * points + q).data();  // contiguous: d is row major
         for (int i = 0; i < n; ++i) row[i] = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];
       }
-      lambda[q] = dv * material[q].lame_lambda();
-      mu[q] = dv * material[q].lame_mu();
-      g.root_mu[q] = std::sqrt(std::max(mu[q], 0.0));
     }
-    g.root_lambda.resize(points);
-    for (int q = 0; q < points; ++q) g.root_lambda[q] = std::sqrt(std::max(lambda[q], 0.0));
   }
 
   CellSumSpec spec;
+  std::optional<fem::CubicTensorProducts> cubic;  // when the cubic table is on the 4-point rule
   std::vector<Scratch> scratch;
   std::array<std::vector<std::once_flag>, 3> once;
   std::array<std::vector<Group>, 3> groups;

@@ -1,0 +1,53 @@
+// The cubic element's sum-factorized products against the dense tables.
+#include "solver/fem/cubic_tensor.h"
+
+#include <random>
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+namespace dynsolid::fem {
+namespace {
+
+TEST(CubicTensorProductsTest, EqualTheDenseTablesTimesTheNodeValues) {
+  const KindTable table = MakeKindTable(ElementKind::kCubic);
+  ASSERT_TRUE(CubicTensorProducts::Applies(table));
+  EXPECT_FALSE(CubicTensorProducts::Applies(MakeKindTable(ElementKind::kLinear)));
+  EXPECT_FALSE(CubicTensorProducts::Applies(MakeKindTable(ElementKind::kCubic, 3)));
+  const CubicTensorProducts products(table);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const int cols = 7, ld = 70;  // a leading dimension above 64 on both sides
+  Eigen::MatrixXd x(ld, cols);
+  for (int c = 0; c < cols; ++c)
+    for (int r = 0; r < ld; ++r) x(r, c) = u(rng);
+  Eigen::MatrixXd values = Eigen::MatrixXd::Zero(ld, cols);
+  std::array<Eigen::MatrixXd, 3> d;
+  for (auto& m : d) m = Eigen::MatrixXd::Zero(ld, cols);
+  products.Values(x.data(), ld, cols, values.data(), ld);
+  products.Derivatives(x.data(), ld, cols, d[0].data(), d[1].data(), d[2].data(), ld);
+  double largest = 0, worst = 0;
+  for (int c = 0; c < cols; ++c) {
+    for (int q = 0; q < 64; ++q) {
+      double n = 0;
+      double g[3] = {0, 0, 0};
+      for (int m = 0; m < 64; ++m) {
+        n += table.N(q)[m] * x(m, c);
+        for (int k = 0; k < 3; ++k) g[k] += table.dN(q)[3 * m + k] * x(m, c);
+      }
+      largest = std::max({largest, std::abs(n), std::abs(g[0]), std::abs(g[1]), std::abs(g[2])});
+      worst = std::max(worst, std::abs(values(q, c) - n));
+      for (int k = 0; k < 3; ++k) worst = std::max(worst, std::abs(d[k](q, c) - g[k]));
+    }
+    // Rows past the 64 points are left alone.
+    for (int r = 64; r < ld; ++r) {
+      EXPECT_EQ(values(r, c), 0);
+      for (const auto& m : d) EXPECT_EQ(m(r, c), 0);
+    }
+  }
+  EXPECT_GT(largest, 0.1);
+  EXPECT_LT(worst, 1e-14 * 64 * largest) << "largest " << largest;
+}
+
+}  // namespace
+}  // namespace dynsolid::fem

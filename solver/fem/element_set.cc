@@ -217,7 +217,7 @@ ElementSet ClassifyElements(const CellComplex& m) {
   // Cells in contiguous chunks on a few threads, joined in chunk order: the
   // result does not depend on the number of threads.
   std::vector<ElementSet> parts(BuildThreads());
-  const int chunks = ParallelChunks(nc, static_cast<int>(parts.size()), 4096,
+  const int chunks = ParallelChunks(nc, static_cast<int>(parts.size()), 1024,
                                     [&](int k, int64_t b, int64_t e) {
                                       ClassifyRange(m, is_hex, regular, static_cast<int32_t>(b),
                                                     static_cast<int32_t>(e), parts[k]);

@@ -78,7 +78,7 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
   std::vector<Part> parts(BuildThreads());
   // Rows in contiguous chunks, each with its own dense accumulator; joined
   // in order, so the result does not depend on the thread count.
-  const int chunks = ParallelChunks(rows, static_cast<int>(parts.size()), 8192,
+  const int chunks = ParallelChunks(rows, static_cast<int>(parts.size()), 2048,
                                     [&](int k, int64_t begin, int64_t end) {
     Part& p = parts[k];
     std::vector<double> acc(cols, 0.0);

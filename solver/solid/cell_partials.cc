@@ -228,7 +228,7 @@ struct StiffnessPartials::Maker {
     return {same, same ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0};
   }
 
-  // A cell's K partial (3S square, zero) as above.
+  // A cell's K partial (3S square, given zero): cell_partials.h.
   void MakeCell(const models::ElementLayout& layout, const SparseMatrix& nm, Scratch& sc,
                 const std::vector<int32_t>& support,
                 const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k) {

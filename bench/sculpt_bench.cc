@@ -2,18 +2,22 @@
 // scene, the new solid with its state carried over) and a restore (what undo
 // does within one topology) hold a session's loop. Prints figures only.
 //   sculpt_bench [scene=block3] [levels=-1: the scene's] [edit: all, or
-//                extrude, delete or subdivide alone] [repetitions=3]
+//                extrude, delete, subdivide, sharp or merge alone]
+//                [repetitions=3]
 // Each edit is applied to the scene's solid after 20 steps, timed over the
 // repetitions (median and best printed, and the best against the issue's
 // 50 ms target for an edit of the chair at two levels), with where the
 // last one's time went. The first line names the CPU: figures differ
 // between machines (and a shared VM's vary from run to run: compare bests).
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <vector>
+
+#include <Eigen/Geometry>
 
 #include "absl/strings/str_format.h"
 #include "google/protobuf/text_format.h"
@@ -96,11 +100,59 @@ int main(int argc, char** argv) {
     if ((c.CellCentroid(k) - mid).norm() < (c.CellCentroid(mid_cell) - mid).norm()) mid_cell = k;
   }
   const double size = (hi - lo).maxCoeff();
+  // A merge bridges two boundary faces that face each other across a gap:
+  // the nearest such pair of one vertex count sharing no vertex, each in
+  // front of the other and about opposite it (boundary loops run outward).
+  auto normal = [&](int32_t f) {
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    const auto loop = c.face_vertices(f);
+    for (size_t i = 0; i < loop.size(); ++i) {
+      n += c.positions().row(loop[i]).transpose().cross(
+          c.positions().row(loop[(i + 1) % loop.size()]).transpose());
+    }
+    return Eigen::Vector3d(n.normalized());
+  };
+  int32_t merge_a = -1, merge_b = -1;
+  double nearest = INFINITY;
+  for (int32_t a = 0; a < c.num_faces(); ++a) {
+    if (!c.face_is_boundary(a)) continue;
+    const Eigen::Vector3d na = normal(a), ca = c.FaceCentroid(a);
+    const auto la = c.face_vertices(a);
+    for (int32_t b = a + 1; b < c.num_faces(); ++b) {
+      const auto lb = c.face_vertices(b);
+      if (!c.face_is_boundary(b) || lb.size() != la.size()) continue;
+      if (std::any_of(la.begin(), la.end(),
+                      [&](int32_t v) { return std::find(lb.begin(), lb.end(), v) != lb.end(); })) {
+        continue;
+      }
+      const Eigen::Vector3d nb = normal(b), d = c.FaceCentroid(b) - ca;
+      const double gap = d.dot(na);
+      if (na.dot(nb) > -0.95 || gap <= 0 || -d.dot(nb) <= 0) continue;
+      if ((d - gap * na).norm() > 0.25 * gap) continue;  // across, not aside
+      if (d.norm() < nearest) {
+        nearest = d.norm();
+        merge_a = a;
+        merge_b = b;
+      }
+    }
+  }
+  // The top face's first edge, tagged sharp, or untagged if it is (the
+  // chair's crease angle tags its box edges already: tagging one again
+  // changes nothing).
+  const auto top_loop = c.face_vertices(top_face);
+  const int32_t top_edge = c.FindEdge(top_loop[0], top_loop[1]);
+  const std::vector<uint8_t>& tags = solid.discretization().control_sharp;
+  const bool untag = top_edge >= 0 && top_edge < static_cast<int32_t>(tags.size()) && tags[top_edge] != 0;
   const std::vector<std::pair<std::string, std::string>> edits = {
       {"extrude", "extrude_faces { faces: " + std::to_string(top_face) +
                       " distance: " + std::to_string(0.2 * size / 3) + " }"},
       {"delete", "delete_cells { cells: " + std::to_string(top_cell) + " }"},
       {"subdivide", "subdivide_cells { cells: " + std::to_string(mid_cell) + " }"},
+      {"sharp", std::string("sharp_edges { sharp: ") + (untag ? "false" : "true") +
+                    " edges { v0: " + std::to_string(top_loop[0]) +
+                    " v1: " + std::to_string(top_loop[1]) + " } }"},
+      {"merge", "merge_faces { face_a: " + std::to_string(merge_a) +
+                    " face_b: " + std::to_string(merge_b) + " }"},
   };
   std::printf("sculpt_bench: %s at %d levels: %d control cells, %lld elements, %d threads, %s\n",
               name.c_str(), solid.discretization().hierarchy.levels, c.num_cells(),

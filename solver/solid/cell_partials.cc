@@ -26,6 +26,7 @@ struct MassPartials::Maker {
     ElementRows rows;
     Eigen::MatrixXd nb;                   // N B_e (Q x s_e)
     std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
+    std::vector<uint8_t> covered;         // per cell column: in the element's support
   };
 
   Maker(const models::ElementLayout& layout, const SparseMatrix& nm, bool has_damping, int threads)
@@ -90,15 +91,25 @@ struct MassPartials::Maker {
     const int s = static_cast<int>(support.size());
     int64_t rows = 0;
     for (const auto& [kind, e] : elements) rows += layout.tables[kind].points;
-    // W (rows x s, column major) per output.
-    for (int o = 0; o < outputs; ++o) sc.w[o].assign(static_cast<size_t>(rows) * s, 0.0);
+    // W (rows x s, column major) per output; each element's rows written
+    // in its support's columns and zeroed in the others.
+    for (int o = 0; o < outputs; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
     for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    sc.covered.resize(s);
     int64_t row = 0;
     for (const auto& [kind, e] : elements) {
       const models::ElementBlock& block = layout.blocks[kind];
       const fem::KindTable& table = layout.tables[kind];
       const Roots& roots = RootsOf(kind, block.group[e]);
       GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
+      std::fill(sc.covered.begin(), sc.covered.end(), 0);
+      for (int32_t c : sc.rows.support) sc.covered[sc.cell_mark[c]] = 1;
+      for (int col = 0; col < s; ++col) {
+        if (sc.covered[col]) continue;
+        for (int o = 0; o < outputs; ++o) {
+          std::fill_n(sc.w[o].data() + static_cast<int64_t>(col) * rows + row, table.points, 0.0);
+        }
+      }
       if (kind == 0 && cubic.has_value()) {
         sc.nb.resize(64, sc.rows.b.cols());
         cubic->Values(sc.rows.b.data(), 64, static_cast<int>(sc.rows.b.cols()), sc.nb.data(), 64);
@@ -163,6 +174,7 @@ struct StiffnessPartials::Maker {
     Eigen::MatrixXd h;
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> w, wl, g, gl;
+    std::vector<uint8_t> covered;  // per cell column: in the element's support
     Group single;  // the group of one element (GroupOf)
   };
 
@@ -255,9 +267,16 @@ struct StiffnessPartials::Maker {
       buffer.assign(static_cast<size_t>(r * c), 0.0);
       return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
     };
-    Eigen::Map<Eigen::MatrixXd> w = zeroed(sc.w, rows, 3 * s);
-    Eigen::Map<Eigen::MatrixXd> wl = zeroed(sc.wl, uniform ? 0 : rows, 3 * s);
+    // W is not cleared whole: each element's rows are written in its
+    // support's columns and zeroed in the others (most of W is written).
+    auto sized = [](std::vector<double>& buffer, int64_t r, int64_t c) {
+      buffer.resize(static_cast<size_t>(r * c));
+      return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
+    };
+    Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, rows, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : rows, 3 * s);
     for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    sc.covered.resize(s);
     int64_t row = 0;
     for (const auto& [kind, e] : elements) {
       const Group& g = GroupOf(layout, kind, e, sc);
@@ -265,6 +284,15 @@ struct StiffnessPartials::Maker {
       GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
       const int q = static_cast<int>(g.root_mu.size());
       const int se = static_cast<int>(sc.rows.support.size());
+      std::fill(sc.covered.begin(), sc.covered.end(), 0);
+      for (int32_t c : sc.rows.support) sc.covered[sc.cell_mark[c]] = 1;
+      for (int col = 0; col < s; ++col) {
+        if (sc.covered[col]) continue;
+        for (int k = 0; k < 3; ++k) {
+          std::fill_n(w.col(k * s + col).data() + row, q, 0.0);
+          if (!uniform) std::fill_n(wl.col(k * s + col).data() + row, q, 0.0);
+        }
+      }
       if (kind == 0 && cubic.has_value()) {
         // W's rows: sqrt(dV mu) J^-T (dN/du, dN/dv, dN/dw) B, the
         // parametric gradients of B's columns sum-factorized.

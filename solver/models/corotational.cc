@@ -194,7 +194,7 @@ void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
         continue;
       }
       if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]]) &&
-          previous->products_) {
+          previous->has_products()) {
         packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         continue;
       }
@@ -235,7 +235,7 @@ void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
     w.y.setZero(rows, kBatch);
     part_buffers_.push_back(&w.g);
   }
-  products_ = true;
+  products_.store(true, std::memory_order_release);
   if (single_) {
     single_ = false;
     SetSinglePrecisionLinearized(true);
@@ -243,7 +243,7 @@ void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
 }
 
 void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
-  if (!products_) {
+  if (!has_products()) {
     single_ = on;  // made with the products
     return;
   }

@@ -37,6 +37,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <mutex>
 #include <vector>
 
@@ -118,7 +119,7 @@ class CorotationalModel final : public InternalForceModel {
   // (CubicQuadratureElements::Matrix).
   Eigen::MatrixXd K(int kind, int32_t group) const;
   // Whether the element products are made (always, with Products::kNow).
-  bool has_products() const { return products_; }
+  bool has_products() const { return products_.load(std::memory_order_acquire); }
   // Whether K(kind, group) is made from the group's quadrature points.
   bool at_quadrature_points(int kind, int32_t group) const { return kind == 0 && pooled_[0][group]; }
   // Cubic elements applied at their quadrature points.
@@ -152,7 +153,7 @@ class CorotationalModel final : public InternalForceModel {
   void BuildProducts(const CorotationalModel* previous);
   void EnsureProducts() const;
   mutable std::once_flag products_once_;
-  bool products_ = false;
+  std::atomic<bool> products_{false};  // read by ModelCopy's thread (has_products)
 
   const ElementLayout& layout_;
   WorkerPool* pool_;

@@ -66,6 +66,15 @@ class LiveTest : public LoopbackServerTest {
     r.set_start_paused(paused);
     return CreateFrom(r);
   }
+  // The status of a Watch the server refuses: it ends before any frame.
+  grpc::Status RefusedWatch(const WatchRequest& r) {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    auto reader = stub_->Watch(&context, r);
+    Frame f;
+    EXPECT_FALSE(reader->Read(&f)) << "a refused watch sent a frame";
+    return reader->Finish();
+  }
   Session CreateFrom(const CreateSessionRequest& r) {
     grpc::ClientContext context;
     context.set_deadline(Deadline());

@@ -284,14 +284,9 @@ TEST_F(LiveTest, WrongOrMissingTokensAreRefusedOnEveryCall) {
       EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
     }
     {
-      grpc::ClientContext context;
-      context.set_deadline(Deadline());
       WatchRequest r;
       *r.mutable_session() = RefOf(bad);
-      auto reader = stub_->Watch(&context, r);
-      Frame f;
-      EXPECT_FALSE(reader->Read(&f));
-      const grpc::Status status = reader->Finish();
+      const grpc::Status status = RefusedWatch(r);
       EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
       EXPECT_THAT(status.error_message(), HasSubstr("token"));
     }

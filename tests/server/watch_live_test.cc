@@ -173,15 +173,10 @@ TEST_F(LiveTest, AnEarlyFrameGoesToTheCommandingClientsWatchersAndToThoseThatNam
 
 TEST_F(LiveTest, AWatchRequestsClientIdOfMoreThan64CharactersIsRefused) {
   const Session s = Create("block3", 1, /*paused=*/true);
-  grpc::ClientContext wc;
-  wc.set_deadline(Deadline(60));
   WatchRequest wr;
   *wr.mutable_session() = RefOf(s);
   wr.set_client_id(std::string(65, 'x'));
-  auto reader = stub_->Watch(&wc, wr);
-  Frame f;
-  EXPECT_FALSE(reader->Read(&f));
-  const grpc::Status st = reader->Finish();
+  const grpc::Status st = RefusedWatch(wr);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(st.error_message(), "client_id: must have at most 64 characters, got 65");
 }
@@ -370,15 +365,10 @@ TEST_F(LiveTest, NonFiniteWatchRatesAndTooManyWatchersAreRefused) {
   Start(o);
   const Session s = Create("block3", 1, true);
   {
-    grpc::ClientContext context;
-    context.set_deadline(Deadline());
     WatchRequest r;
     *r.mutable_session() = RefOf(s);
     r.set_rate_hz(std::numeric_limits<double>::quiet_NaN());
-    auto reader = stub_->Watch(&context, r);
-    Frame f;
-    EXPECT_FALSE(reader->Read(&f));
-    const grpc::Status st = reader->Finish();
+    const grpc::Status st = RefusedWatch(r);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_EQ(st.error_message(), "rate_hz: must be finite, got nan");
   }

@@ -185,7 +185,8 @@ void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
   const ElementLayout& layout = layout_;
   for (int kind = 0; kind < 3; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
-    const std::vector<int32_t> reuse = previous != nullptr
+    // (A model made without products has no matrices to give.)
+    const std::vector<int32_t> reuse = previous != nullptr && previous->has_products()
                                            ? MatchStiffnessGroups(layout, previous->layout_, kind)
                                            : std::vector<int32_t>(block.groups.size(), -1);
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
@@ -193,8 +194,7 @@ void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
         packed_[kind].emplace_back();  // applied at the quadrature points
         continue;
       }
-      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]]) &&
-          previous->has_products()) {
+      if (reuse[gi] >= 0 && !(kind == 0 && previous->pooled_[0][reuse[gi]])) {
         packed_[kind].push_back(previous->packed_[kind][reuse[gi]]);
         continue;
       }

@@ -372,17 +372,15 @@ struct StiffnessPartials::Maker {
     double volume = 0;
     for (const auto& [kind, e] : elements) {
       const models::ElementBlock& block = layout.blocks[kind];
-      const fem::NodeMatrixX3& rest = block.groups[block.group[e]].rest;
-      const double* dn = layout.tables[kind].centre_dn.data();
+      const models::ElementGroup& grp = block.groups[block.group[e]];
       const int32_t* ids = block.element_nodes(e);
       const int n = block.nodes;
-      const Eigen::Matrix3d j = fem::RestJacobian(dn, rest, n);
-      const double det = j.determinant();
+      const double det =
+          fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, n).determinant();
       if (!(det > 0)) continue;
-      const Eigen::Matrix3d jit = j.inverse().transpose();
       for (int i = 0; i < n; ++i) {
-        const Eigen::RowVector3d gi =
-            det * (jit * Eigen::Vector3d(dn[3 * i], dn[3 * i + 1], dn[3 * i + 2])).transpose();
+        // The group's physical gradients at the centre (dN_i^T J^-1), by det J.
+        const Eigen::RowVector3d gi = det * grp.centre_gradient.row(i);
         for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
           g.row(place[it.col()]) += it.value() * gi;
         }

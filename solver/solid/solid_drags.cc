@@ -73,7 +73,7 @@ Solid::Impl::KnownPoints Solid::Impl::CurrentPoints() const {
   return known;
 }
 
-absl::StatusOr<std::vector<std::pair<int32_t, double>>> Solid::Impl::ControlRow(
+absl::StatusOr<Solid::Impl::ControlWeights> Solid::Impl::ControlRow(
     const Eigen::Vector3d& x, const KnownPoints* known) const {
   if (known != nullptr) {
     auto it = known->rows.find(KnownPoints::KeyOf(x));
@@ -93,7 +93,7 @@ Solid::Impl::ControlWeights Solid::Impl::ControlRowAt(const MaterialLocation& at
       w[static_cast<int32_t>(it.col())] += shape[k] * it.value();
     }
   }
-  return std::vector<std::pair<int32_t, double>>(w.begin(), w.end());
+  return ControlWeights(w.begin(), w.end());
 }
 
 absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
@@ -105,7 +105,7 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
   load.stiffness = d.stiffness();
   load.material = {V(d.material_point())};
   load.targets = {V(d.target())};
-  absl::StatusOr<std::vector<std::pair<int32_t, double>>> row = ControlRow(load.material[0], known);
+  absl::StatusOr<ControlWeights> row = ControlRow(load.material[0], known);
   if (!row.ok()) {
     return absl::InvalidArgumentError(
         absl::StrCat("drag.material_point: ", row.status().message()));

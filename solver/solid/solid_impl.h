@@ -264,7 +264,7 @@ struct Solid::Impl {
     double stiffness = 0;
     std::vector<Eigen::Vector3d> material;  // rest positions of the springs' points
     std::vector<Eigen::Vector3d> targets;
-    std::vector<std::vector<std::pair<int32_t, double>>> rows;
+    std::vector<ControlWeights> rows;
   };
   std::vector<PointLoad> point_loads;
   std::vector<PressureLoad> pressures;
@@ -279,14 +279,14 @@ struct Solid::Impl {
     static Key KeyOf(const Eigen::Vector3d& x);
     // Point forces' Locate (snap setting applied) and control row.
     std::map<Key, std::pair<MaterialLocation, std::shared_ptr<const ControlWeights>>> forces;
-    std::map<Key, const std::vector<std::pair<int32_t, double>>*> rows;  // drag springs' ControlRow
+    std::map<Key, const ControlWeights*> rows;  // drag springs' ControlRow
   };
   // Those of the current loads.
   KnownPoints CurrentPoints() const;
   // The control-point weights of the material point at rest position x
   // (its element's shape values times the node matrix rows), ascending by
   // control point; taken from `known` when it has x.
-  absl::StatusOr<std::vector<std::pair<int32_t, double>>> ControlRow(
+  absl::StatusOr<ControlWeights> ControlRow(
       const Eigen::Vector3d& x, const KnownPoints* known = nullptr) const;
   // The same weights at a located material point.
   ControlWeights ControlRowAt(const MaterialLocation& at) const;

@@ -29,9 +29,6 @@ class CellSamples {
   }
   void Index() {
     if (xs_.empty()) return;
-    uniform_ = std::all_of(ms_.begin(), ms_.end(),
-                           [&](const models::MaterialPoint& m) { return m == ms_[0]; });
-    if (uniform_) return;  // every query's answer is ms_[0]
     lo_ = hi_ = xs_[0];
     for (const Eigen::Vector3d& x : xs_) {
       lo_ = lo_.cwiseMin(x);
@@ -45,7 +42,6 @@ class CellSamples {
   }
   // The material of the sample nearest x (ties: the lowest index).
   const models::MaterialPoint& Nearest(const Eigen::Vector3d& x) const {
-    if (uniform_) return ms_[0];
     const Eigen::Vector3i c = Cell(x);
     double best = std::numeric_limits<double>::infinity();
     int32_t best_k = 0;
@@ -88,7 +84,6 @@ class CellSamples {
   Eigen::Vector3d lo_, hi_;
   int n_ = 1;
   double bin_ = 1;
-  bool uniform_ = false;  // one material at every sample
   std::vector<std::vector<int32_t>> bins_;
 };
 

@@ -8,6 +8,7 @@
 
 namespace dynsolid::solid {
 
+
 namespace {
 
 using SparseMatrix = subdivision::SparseMatrix;
@@ -20,26 +21,32 @@ struct Cell {
 
 }  // namespace
 
-void GatherRows(const SparseMatrix& nm, const int32_t* ids, int n, std::vector<int32_t>& mark,
-                ElementRows& out) {
-  out.support.clear();
+void GatherCellRows(const SparseMatrix& nm, const int32_t* ids, int n,
+                    const std::vector<int32_t>& column, std::vector<int32_t>& mark,
+                    ElementRows& out) {
+  // The cell columns touched, in ascending order (a scan of the cell's few
+  // columns, no sort), then each one's place among them.
+  int32_t end = 0;
   for (int i = 0; i < n; ++i) {
     for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-      const int32_t c = static_cast<int32_t>(it.col());
-      if (mark[c] < 0) {
-        mark[c] = 0;
-        out.support.push_back(c);
-      }
+      const int32_t col = column[it.col()];
+      mark[col] = 0;
+      end = std::max(end, col + 1);
     }
   }
-  std::sort(out.support.begin(), out.support.end());
-  const int s = static_cast<int>(out.support.size());
-  for (int a = 0; a < s; ++a) mark[out.support[a]] = a;
-  out.b.setZero(n, s);
-  for (int i = 0; i < n; ++i) {
-    for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) out.b(i, mark[it.col()]) = it.value();
+  out.support.clear();
+  for (int32_t col = 0; col < end; ++col) {
+    if (mark[col] < 0) continue;
+    mark[col] = static_cast<int32_t>(out.support.size());
+    out.support.push_back(col);
   }
-  for (int32_t c : out.support) mark[c] = -1;
+  out.b.setZero(n, static_cast<Eigen::Index>(out.support.size()));
+  for (int i = 0; i < n; ++i) {
+    for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+      out.b(i, mark[column[it.col()]]) = it.value();
+    }
+  }
+  for (int32_t col : out.support) mark[col] = -1;
 }
 
 namespace {
@@ -193,7 +200,6 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
     const int side = dofs * static_cast<int>(cell.support.size());
     auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(outputs, Eigen::MatrixXd::Zero(side, side));
     spec.make_cell(t, cell.support, cell.elements, *p);
-    if (spec.extra) spec.extra(cell.support, cell.elements, *p);
     made[k] = std::move(p);
   });
   for (size_t k = 0; k < to_make.size(); ++k) next->by_key[cells[to_make[k]].key] = made[k];

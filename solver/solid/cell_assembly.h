@@ -35,8 +35,9 @@
 
 namespace dynsolid::solid {
 
-// An element's rows of the node matrix restricted to its control support:
-// B (n x s), support[a] the control point of column a (ascending).
+// An element's rows of the node matrix on the columns of its control
+// cell's support: B (n x s_e), support[a] the cell column of column a
+// (ascending).
 struct ElementRows {
   std::vector<int32_t> support;
   Eigen::MatrixXd b;
@@ -69,30 +70,26 @@ struct CellSumSpec {
   // Hand each cell's support and partial out (CellSums::supports,
   // partials) instead of summing them.
   bool per_cell = false;
-  // Optional: more a partial keeps, appended to its `outputs` matrices when
-  // it is made (so carried with it): a function of the cell's key alone,
-  // given its support and its elements (kind, index in block).
-  std::function<void(const std::vector<int32_t>& support,
-                     const std::vector<std::pair<int, int32_t>>& elements,
-                     std::vector<Eigen::MatrixXd>& partial)>
-      extra;
   // A key of everything the blocks of a group's elements depend on besides
   // their node rows.
   std::function<Key128(int kind, int32_t group)> group_key;
   // A cell's whole partial (outputs matrices of dofs S square, given zero)
   // made at once from its support and elements (kind, index in block), on
-  // pool thread `thread`; a function of the cell's key alone.
+  // pool thread `thread`; a function of the cell's key alone. It may
+  // append more matrices, which the partial keeps (carried with it).
   std::function<void(int thread, const std::vector<int32_t>& support,
                      const std::vector<std::pair<int, int32_t>>& elements,
                      std::vector<Eigen::MatrixXd>& partial)>
       make_cell;
 };
 
-// Rows of nodes ids[0..n) of the node matrix on their support (out.support
-// ascending, out.b n x s). mark: #control entries, all -1 (scratch, left
-// all -1).
-void GatherRows(const subdivision::SparseMatrix& nm, const int32_t* ids, int n,
-                std::vector<int32_t>& mark, ElementRows& out);
+// Rows of nodes ids[0..n) of the node matrix on the columns of a cell's
+// support they touch (out as above). column[c]: control point c's column
+// in the cell, for every c in these rows; mark: one entry per cell column,
+// all -1 (scratch, left all -1).
+void GatherCellRows(const subdivision::SparseMatrix& nm, const int32_t* ids, int n,
+                    const std::vector<int32_t>& column, std::vector<int32_t>& mark,
+                    ElementRows& out);
 
 // The sums, dense (dofs #control square) or as triplets in cell order.
 struct CellSums {

@@ -22,7 +22,7 @@ struct MassPartials::Maker {
   using Roots = std::array<std::vector<double>, 2>;  // sqrt(rho dV), sqrt(damping dV) per point
   // Per pool thread.
   struct Scratch {
-    std::vector<int32_t> cell_mark, element_mark;
+    std::vector<int32_t> column, mark;  // control point -> cell column; GatherCellRows' marks
     ElementRows rows;
     Eigen::MatrixXd nb;                   // N B_e (Q x s_e)
     std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
@@ -84,26 +84,24 @@ struct MassPartials::Maker {
   void MakeCell(Scratch& sc, const std::vector<int32_t>& support,
                 const std::vector<std::pair<int, int32_t>>& elements,
                 std::vector<Eigen::MatrixXd>& partial) {
-    if (sc.cell_mark.empty()) {
-      sc.cell_mark.assign(nm.cols(), -1);
-      sc.element_mark.assign(nm.cols(), -1);
-    }
+    if (sc.column.empty()) sc.column.assign(nm.cols(), -1);
     const int s = static_cast<int>(support.size());
     int64_t rows = 0;
     for (const auto& [kind, e] : elements) rows += layout.tables[kind].points;
     // W (rows x s, column major) per output; each element's rows written
     // in its support's columns and zeroed in the others.
     for (int o = 0; o < outputs; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
-    for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    for (int a = 0; a < s; ++a) sc.column[support[a]] = a;
+    sc.mark.assign(s, -1);
     sc.covered.resize(s);
     int64_t row = 0;
     for (const auto& [kind, e] : elements) {
       const models::ElementBlock& block = layout.blocks[kind];
       const fem::KindTable& table = layout.tables[kind];
       const Roots& roots = RootsOf(kind, block.group[e]);
-      GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
+      GatherCellRows(nm, block.element_nodes(e), block.nodes, sc.column, sc.mark, sc.rows);
       std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t c : sc.rows.support) sc.covered[sc.cell_mark[c]] = 1;
+      for (int32_t col : sc.rows.support) sc.covered[col] = 1;
       for (int col = 0; col < s; ++col) {
         if (sc.covered[col]) continue;
         for (int o = 0; o < outputs; ++o) {
@@ -119,7 +117,7 @@ struct MassPartials::Maker {
         sc.nb.noalias() = shape * sc.rows.b;
       }
       for (size_t a = 0; a < sc.rows.support.size(); ++a) {
-        const int col = sc.cell_mark[sc.rows.support[a]];
+        const int col = sc.rows.support[a];
         const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
         for (int o = 0; o < outputs; ++o) {
           double* to = sc.w[o].data() + static_cast<int64_t>(col) * rows + row;
@@ -128,7 +126,7 @@ struct MassPartials::Maker {
       }
       row += table.points;
     }
-    for (int32_t c : support) sc.cell_mark[c] = -1;
+    for (int32_t c : support) sc.column[c] = -1;
     for (int o = 0; o < outputs; ++o) {
       Eigen::MatrixXd& p = partial[o];
       p.selfadjointView<Eigen::Lower>().rankUpdate(
@@ -169,9 +167,10 @@ struct StiffnessPartials::Maker {
   };
   // Per pool thread.
   struct Scratch {
-    std::vector<int32_t> cell_mark, element_mark;
+    std::vector<int32_t> column, mark;  // control point -> cell column; GatherCellRows' marks
     ElementRows rows;
     Eigen::MatrixXd h;
+    Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> w, wl, g, gl;
     std::vector<uint8_t> covered;  // per cell column: in the element's support
@@ -204,13 +203,8 @@ struct StiffnessPartials::Maker {
     spec.make_cell = [this, &layout, &nm](int t, const std::vector<int32_t>& support,
                                           const std::vector<std::pair<int, int32_t>>& elements,
                                           std::vector<Eigen::MatrixXd>& partial) {
-      MakeCell(layout, nm, scratch[t], support, elements, partial[0]);
-    };
-    spec.extra = [&layout, &nm](const std::vector<int32_t>& support,
-                                const std::vector<std::pair<int, int32_t>>& elements,
-                                std::vector<Eigen::MatrixXd>& partial) {
       partial.emplace_back();
-      Gradients(layout, nm, support, elements, partial.back());
+      MakeCell(layout, nm, scratch[t], support, elements, partial[0], partial[1]);
     };
   }
 
@@ -240,16 +234,16 @@ struct StiffnessPartials::Maker {
     return {same, same ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0};
   }
 
-  // A cell's K partial (3S square, given zero): cell_partials.h.
+  // A cell's K partial (3S square, given zero) and its gradient weights
+  // g_j (S x 3): cell_partials.h.
   void MakeCell(const models::ElementLayout& layout, const SparseMatrix& nm, Scratch& sc,
                 const std::vector<int32_t>& support,
-                const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k) {
+                const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k,
+                Eigen::MatrixXd& gradient) {
     const int s = static_cast<int>(support.size());
+    gradient.setZero(s, 3);
     if (s == 0) return;
-    if (sc.cell_mark.empty()) {
-      sc.cell_mark.assign(nm.cols(), -1);
-      sc.element_mark.assign(nm.cols(), -1);
-    }
+    if (sc.column.empty()) sc.column.assign(nm.cols(), -1);
     int64_t rows = 0;
     bool uniform = true, first = true;
     double ratio = 0;
@@ -275,17 +269,29 @@ struct StiffnessPartials::Maker {
     };
     Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, rows, 3 * s);
     Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : rows, 3 * s);
-    for (int a = 0; a < s; ++a) sc.cell_mark[support[a]] = a;
+    for (int a = 0; a < s; ++a) sc.column[support[a]] = a;
+    sc.mark.assign(s, -1);
     sc.covered.resize(s);
     int64_t row = 0;
+    double volume = 0;
     for (const auto& [kind, e] : elements) {
       const Group& g = GroupOf(layout, kind, e, sc);
       const models::ElementBlock& block = layout.blocks[kind];
-      GatherRows(nm, block.element_nodes(e), block.nodes, sc.element_mark, sc.rows);
+      GatherCellRows(nm, block.element_nodes(e), block.nodes, sc.column, sc.mark, sc.rows);
       const int q = static_cast<int>(g.root_mu.size());
       const int se = static_cast<int>(sc.rows.support.size());
+      // g_j: the element's physical gradients at its centre (the group's
+      // rest shape) by det J there, summed and divided by the cell's volume.
+      const models::ElementGroup& grp = block.groups[block.group[e]];
+      const double det =
+          fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, block.nodes).determinant();
+      if (det > 0) {
+        sc.ge.noalias() = sc.rows.b.transpose() * grp.centre_gradient;
+        for (int a = 0; a < se; ++a) gradient.row(sc.rows.support[a]) += det * sc.ge.row(a);
+        volume += det;
+      }
       std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t c : sc.rows.support) sc.covered[sc.cell_mark[c]] = 1;
+      for (int32_t col : sc.rows.support) sc.covered[col] = 1;
       for (int col = 0; col < s; ++col) {
         if (sc.covered[col]) continue;
         for (int k = 0; k < 3; ++k) {
@@ -302,7 +308,7 @@ struct StiffnessPartials::Maker {
         double* pw = pv + 64 * se;
         cubic->Derivatives(sc.rows.b.data(), 64, se, pu, pv, pw, 64);
         for (int a = 0; a < se; ++a) {
-          const int col = sc.cell_mark[sc.rows.support[a]];
+          const int col = sc.rows.support[a];
           const double* du = pu + 64 * a;
           const double* dv = pv + 64 * a;
           const double* dw = pw + 64 * a;
@@ -323,7 +329,7 @@ struct StiffnessPartials::Maker {
       }
       sc.h.noalias() = g.d * sc.rows.b;  // 3Q x s_e
       for (size_t a = 0; a < sc.rows.support.size(); ++a) {
-        const int col = sc.cell_mark[sc.rows.support[a]];
+        const int col = sc.rows.support[a];
         for (int c = 0; c < 3; ++c) {
           const double* from = sc.h.col(static_cast<Eigen::Index>(a)).data() + c * q;
           double* to = w.col(c * s + col).data() + row;
@@ -336,7 +342,8 @@ struct StiffnessPartials::Maker {
       }
       row += q;
     }
-    for (int32_t c : support) sc.cell_mark[c] = -1;
+    for (int32_t c : support) sc.column[c] = -1;
+    if (volume > 0) gradient /= volume;
     Eigen::Map<Eigen::MatrixXd> gm = zeroed(sc.g, 3 * s, 3 * s);
     gm.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
     if (!uniform) {
@@ -357,38 +364,6 @@ struct StiffnessPartials::Maker {
         }
       }
     }
-  }
-
-  // A cell's g_j: its elements' gradients at their centres (from the
-  // group's rest shape), by rest volume, on its support (of its key alone).
-  static void Gradients(const models::ElementLayout& layout, const SparseMatrix& nm,
-                        const std::vector<int32_t>& support,
-                        const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& g) {
-    g.setZero(static_cast<Eigen::Index>(support.size()), 3);
-    // A control point's column in g (support is ascending).
-    thread_local std::vector<int32_t> place;
-    if (static_cast<Eigen::Index>(place.size()) < nm.cols()) place.assign(nm.cols(), -1);
-    for (size_t a = 0; a < support.size(); ++a) place[support[a]] = static_cast<int32_t>(a);
-    double volume = 0;
-    for (const auto& [kind, e] : elements) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      const models::ElementGroup& grp = block.groups[block.group[e]];
-      const int32_t* ids = block.element_nodes(e);
-      const int n = block.nodes;
-      const double det =
-          fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, n).determinant();
-      if (!(det > 0)) continue;
-      for (int i = 0; i < n; ++i) {
-        // The group's physical gradients at the centre (dN_i^T J^-1), by det J.
-        const Eigen::RowVector3d gi = det * grp.centre_gradient.row(i);
-        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-          g.row(place[it.col()]) += it.value() * gi;
-        }
-      }
-      volume += det;
-    }
-    for (int32_t c : support) place[c] = -1;
-    if (volume > 0) g /= volume;
   }
 
   static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, bool factorized,

@@ -51,7 +51,6 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt, CellGeometry* geometry) const {
   const SparseMatrix& nm = d->node_matrix;
   const int32_t nc = static_cast<int32_t>(nm.cols());
-  const int outputs = has_damping ? 2 : 1;
   MassPartials partials(layout, nm, has_damping, threads.size());
   CellSumSpec& spec = partials.spec();
   spec.geometry = geometry;

@@ -78,8 +78,19 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
                                         int32_t control_cells, const CellSumSpec& spec,
                                         const CellPartials* previous, WorkerPool& pool, bool dense,
                                         CellSums& out) {
+  std::vector<CellSumJob> jobs(1);
+  jobs[0].spec = &spec;
+  jobs[0].previous = previous;
+  jobs[0].dense = dense;
+  jobs[0].out = &out;
+  SumByCells(nm, layout, control_cell, control_cells, jobs, pool);
+  return std::move(jobs[0].made);
+}
+
+void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
+                const std::vector<int32_t>& control_cell, int32_t control_cells,
+                std::vector<CellSumJob>& jobs, WorkerPool& pool) {
   const int32_t nc = static_cast<int32_t>(nm.cols());
-  const int dofs = spec.dofs, outputs = spec.outputs;
   std::vector<Cell> cells(control_cells);
   for (int kind = 0; kind < 3; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
@@ -89,25 +100,18 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
       cells[c].elements.push_back({kind, e});
     }
   }
-  // Group keys, once per group.
-  std::array<std::vector<Key128>, 3> group_keys;
-  for (int kind = 0; kind < 3; ++kind) {
-    group_keys[kind].resize(layout.blocks[kind].groups.size());
-  }
   const int threads = pool.size();
-  pool.Run([&](int t) {
-    for (int kind = 0; kind < 3; ++kind) {
-      std::vector<Key128>& keys = group_keys[kind];
-      for (size_t g = t; g < keys.size(); g += threads) keys[g] = spec.group_key(kind, static_cast<int32_t>(g));
-    }
-  });
   std::vector<Scratch> scratch(threads);
   for (Scratch& s : scratch) s.cell_mark.assign(nc, -1);
   // Each cell's support and geometry key (its elements' kinds and node
-  // rows, the columns numbered within the cell): made here unless
+  // rows, the columns numbered within the cell): made here unless a job's
   // spec.geometry has them from another sum of this build.
   CellGeometry own;
-  CellGeometry& geometry = spec.geometry != nullptr ? *spec.geometry : own;
+  CellGeometry* shared = nullptr;
+  for (const CellSumJob& job : jobs) {
+    if (job.spec->geometry != nullptr) shared = job.spec->geometry;
+  }
+  CellGeometry& geometry = shared != nullptr ? *shared : own;
   if (static_cast<int32_t>(geometry.keys.size()) != control_cells) {
     geometry.supports.assign(control_cells, {});
     geometry.keys.assign(control_cells, {});
@@ -161,86 +165,124 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
       for (int32_t col : support) s.cell_mark[col] = -1;
     });
   }
-  // The cell's key: what the spec sums, its geometry, and its elements'
-  // group keys.
-  for (int32_t c = 0; c < control_cells; ++c) {
-    Cell& cell = cells[c];
-    cell.support = geometry.supports[c];
-    Hash128 h;
-    h.Mix(spec.salt);
-    h.Mix(static_cast<uint64_t>(dofs));
-    h.Mix(static_cast<uint64_t>(outputs));
-    h.Key(geometry.keys[c]);
-    for (const auto& [kind, e] : cell.elements) {
-      h.Key(group_keys[kind][layout.blocks[kind].group[e]]);
-    }
-    cell.key = h.value();
-  }
+  for (int32_t c = 0; c < control_cells; ++c) cells[c].support = geometry.supports[c];
 
-  // Partials: carried, shared with an earlier cell of this build, or made.
-  auto next = std::make_shared<CellPartials>();
-  std::vector<std::shared_ptr<const std::vector<Eigen::MatrixXd>>> partial(control_cells);
-  std::vector<int32_t> to_make;
-  double bytes = 0;
-  for (int32_t c = 0; c < control_cells; ++c) {
-    auto [it, fresh] = next->by_key.try_emplace(cells[c].key);
-    if (fresh) {
-      if (previous != nullptr) {
-        auto p = previous->by_key.find(cells[c].key);
-        if (p != previous->by_key.end()) it->second = p->second;
+  // Per job: its cells' keys (what the spec sums, the cell's geometry and
+  // its elements' group keys) and the partials it must make (neither
+  // carried nor shared with an earlier cell of this build).
+  const int nj = static_cast<int>(jobs.size());
+  std::vector<std::vector<Key128>> keys(nj, std::vector<Key128>(control_cells));
+  std::vector<std::vector<uint8_t>> makes(nj, std::vector<uint8_t>(control_cells, 0));
+  for (int j = 0; j < nj; ++j) {
+    CellSumJob& job = jobs[j];
+    const CellSumSpec& spec = *job.spec;
+    std::array<std::vector<Key128>, 3> group_keys;
+    for (int kind = 0; kind < 3; ++kind) group_keys[kind].resize(layout.blocks[kind].groups.size());
+    pool.Run([&](int t) {
+      for (int kind = 0; kind < 3; ++kind) {
+        std::vector<Key128>& gk = group_keys[kind];
+        for (size_t g = t; g < gk.size(); g += threads) gk[g] = spec.group_key(kind, static_cast<int32_t>(g));
       }
-      if (it->second == nullptr) to_make.push_back(c);
-      const double side = static_cast<double>(dofs) * cells[c].support.size();
-      bytes += outputs * side * side * 8.0;
+    });
+    job.made = std::make_shared<CellPartials>();
+    CellPartials& next = *job.made;
+    double bytes = 0;
+    for (int32_t c = 0; c < control_cells; ++c) {
+      const Cell& cell = cells[c];
+      Hash128 h;
+      h.Mix(spec.salt);
+      h.Mix(static_cast<uint64_t>(spec.dofs));
+      h.Mix(static_cast<uint64_t>(spec.outputs));
+      h.Key(geometry.keys[c]);
+      for (const auto& [kind, e] : cell.elements) h.Key(group_keys[kind][layout.blocks[kind].group[e]]);
+      keys[j][c] = h.value();
+      auto [it, fresh] = next.by_key.try_emplace(keys[j][c]);
+      if (!fresh) continue;
+      if (job.previous != nullptr) {
+        auto p = job.previous->by_key.find(keys[j][c]);
+        if (p != job.previous->by_key.end()) it->second = p->second;
+      }
+      if (it->second == nullptr) makes[j][c] = 1;
+      const double side = static_cast<double>(spec.dofs) * cell.support.size();
+      bytes += spec.outputs * side * side * 8.0;
+    }
+    next.bytes = bytes;
+  }
+  // The new partials, in one pass over the cells: a cell's partials of
+  // every job one after another on one thread.
+  std::vector<int32_t> to_make;
+  for (int32_t c = 0; c < control_cells; ++c) {
+    for (int j = 0; j < nj; ++j) {
+      if (makes[j][c]) {
+        to_make.push_back(c);
+        break;
+      }
     }
   }
-  std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>> made(to_make.size());
+  std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> made(
+      nj, std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>(control_cells));
   Parts(pool, static_cast<int>(to_make.size()), [&](int t, int k) {
-    const Cell& cell = cells[to_make[k]];
-    const int side = dofs * static_cast<int>(cell.support.size());
-    auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(outputs, Eigen::MatrixXd::Zero(side, side));
-    spec.make_cell(t, cell.support, cell.elements, *p);
-    made[k] = std::move(p);
+    const int32_t c = to_make[k];
+    const Cell& cell = cells[c];
+    for (int j = 0; j < nj; ++j) {
+      if (!makes[j][c]) continue;
+      const CellSumSpec& spec = *jobs[j].spec;
+      const int side = spec.dofs * static_cast<int>(cell.support.size());
+      auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(spec.outputs,
+                                                              Eigen::MatrixXd::Zero(side, side));
+      spec.make_cell(t, cell.support, cell.elements, *p);
+      made[j][c] = std::move(p);
+    }
   });
-  for (size_t k = 0; k < to_make.size(); ++k) next->by_key[cells[to_make[k]].key] = made[k];
-  for (int32_t c = 0; c < control_cells; ++c) partial[c] = next->by_key[cells[c].key];
-
-  next->made = static_cast<int32_t>(to_make.size());
-  next->bytes = bytes;
-  out.supports.clear();
-  out.partials.clear();
-  if (spec.per_cell) {
+  for (int j = 0; j < nj; ++j) {
+    CellSumJob& job = jobs[j];
+    const CellSumSpec& spec = *job.spec;
+    CellPartials& next = *job.made;
+    int32_t count = 0;
+    for (int32_t c = 0; c < control_cells; ++c) {
+      if (!makes[j][c]) continue;
+      next.by_key[keys[j][c]] = std::move(made[j][c]);
+      ++count;
+    }
+    next.made = count;
+    std::vector<std::shared_ptr<const std::vector<Eigen::MatrixXd>>> partial(control_cells);
+    for (int32_t c = 0; c < control_cells; ++c) partial[c] = next.by_key[keys[j][c]];
+    CellSums& out = *job.out;
+    out.supports.clear();
+    out.partials.clear();
+    if (spec.per_cell) {
+      out.matrices.clear();
+      out.triplets.clear();
+      out.supports.reserve(control_cells);
+      for (int32_t c = 0; c < control_cells; ++c) out.supports.push_back(cells[c].support);
+      out.partials = std::move(partial);
+      continue;
+    }
+    // The sums, in cell order.
+    const int dofs = spec.dofs, outputs = spec.outputs;
+    const int64_t n = static_cast<int64_t>(dofs) * nc;
     out.matrices.clear();
-    out.triplets.clear();
-    out.supports.reserve(control_cells);
-    for (int32_t c = 0; c < control_cells; ++c) out.supports.push_back(std::move(cells[c].support));
-    out.partials = std::move(partial);
-    return next;
-  }
-  // The sums, in cell order.
-  const int64_t n = static_cast<int64_t>(dofs) * nc;
-  out.matrices.clear();
-  out.triplets.assign(outputs, {});
-  if (dense) out.matrices.assign(outputs, Eigen::MatrixXd::Zero(n, n));
-  for (int32_t c = 0; c < control_cells; ++c) {
-    const std::vector<int32_t>& support = cells[c].support;
-    const int side = dofs * static_cast<int>(support.size());
-    for (int o = 0; o < outputs; ++o) {
-      const Eigen::MatrixXd& p = (*partial[c])[o];
-      for (int j = 0; j < side; ++j) {
-        const int64_t col = static_cast<int64_t>(dofs) * support[j / dofs] + j % dofs;
-        for (int i = 0; i < side; ++i) {
-          const int64_t row = static_cast<int64_t>(dofs) * support[i / dofs] + i % dofs;
-          if (dense) {
-            out.matrices[o](row, col) += p(i, j);
-          } else if (p(i, j) != 0) {
-            out.triplets[o].emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), p(i, j));
+    out.triplets.assign(outputs, {});
+    if (job.dense) out.matrices.assign(outputs, Eigen::MatrixXd::Zero(n, n));
+    for (int32_t c = 0; c < control_cells; ++c) {
+      const std::vector<int32_t>& support = cells[c].support;
+      const int side = dofs * static_cast<int>(support.size());
+      for (int o = 0; o < outputs; ++o) {
+        const Eigen::MatrixXd& p = (*partial[c])[o];
+        for (int jj = 0; jj < side; ++jj) {
+          const int64_t col = static_cast<int64_t>(dofs) * support[jj / dofs] + jj % dofs;
+          for (int i = 0; i < side; ++i) {
+            const int64_t row = static_cast<int64_t>(dofs) * support[i / dofs] + i % dofs;
+            if (job.dense) {
+              out.matrices[o](row, col) += p(i, jj);
+            } else if (p(i, jj) != 0) {
+              out.triplets[o].emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), p(i, jj));
+            }
           }
         }
       }
     }
   }
-  return next;
 }
 
 }  // namespace dynsolid::solid

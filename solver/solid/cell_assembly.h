@@ -112,6 +112,26 @@ std::shared_ptr<CellPartials> SumByCell(const subdivision::SparseMatrix& nm,
                                         const CellPartials* previous, WorkerPool& pool, bool dense,
                                         CellSums& out);
 
+// One family of matrices summed by cell (SumByCells): what it sums, the
+// partials of an earlier build (null: none), and where the sums go.
+struct CellSumJob {
+  const CellSumSpec* spec = nullptr;
+  const CellPartials* previous = nullptr;
+  bool dense = false;
+  CellSums* out = nullptr;
+  // Set by SumByCells: this build's partials (to carry to the next unless
+  // bytes is above kMaxCarriedBytes).
+  std::shared_ptr<CellPartials> made;
+};
+
+// Several sums over one node matrix and layout, as SumByCell each, with
+// their new partials made in one pass over the cells: a cell's partials of
+// every job one after another, in job order, on one pool thread (so that
+// makers sharing what they read of a cell, CellPoints, read it once).
+void SumByCells(const subdivision::SparseMatrix& nm, const models::ElementLayout& layout,
+                const std::vector<int32_t>& control_cell, int32_t control_cells,
+                std::vector<CellSumJob>& jobs, WorkerPool& pool);
+
 // Partials above this many bytes are not carried to the next build.
 inline constexpr double kMaxCarriedBytes = 64.0 * 1048576.0;
 

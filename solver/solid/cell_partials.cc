@@ -18,33 +18,124 @@ namespace dynsolid::solid {
 
 using SparseMatrix = subdivision::SparseMatrix;
 
-struct MassPartials::Maker {
-  using Roots = std::array<std::vector<double>, 2>;  // sqrt(rho dV), sqrt(damping dV) per point
-  // Per pool thread.
-  struct Scratch {
+struct CellPoints::Impl {
+  // A shape's points: dV and J^-T (CellPoints::Element).
+  struct Rest {
+    std::vector<double> dv, jit;
+  };
+  // Per pool thread: the cell last asked for.
+  struct Thread {
+    std::vector<std::pair<int, int32_t>> elements;  // its elements (empty: none yet)
+    std::vector<int32_t> support;
+    std::vector<ElementRows> rows;
+    std::vector<Rest> own;  // per element of the cell whose group has one element
+    std::vector<Element> out;
     std::vector<int32_t> column, mark;  // control point -> cell column; GatherCellRows' marks
-    ElementRows rows;
-    Eigen::MatrixXd nb;                   // N B_e (Q x s_e)
-    std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
-    std::vector<uint8_t> covered;         // per cell column: in the element's support
+    std::vector<double> j;              // rest Jacobians (scratch)
   };
 
-  Maker(const models::ElementLayout& layout, const SparseMatrix& nm, bool has_damping, int threads)
-      : layout(layout), nm(nm), has_damping(has_damping), outputs(has_damping ? 2 : 1),
-        scratch(threads) {
-    if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
+  Impl(const models::ElementLayout& layout, const SparseMatrix& nm, int threads)
+      : layout(layout), nm(nm), thread(threads) {
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
-      group_roots[kind].resize(layout.blocks[kind].groups.size());
+      shared[kind].resize(layout.blocks[kind].groups.size());
     }
+  }
+
+  // dV = max(det J, 0) w and J^-T (zero where dV is 0) at the points of
+  // group gi's rest shape.
+  void MakeRest(int kind, int32_t gi, std::vector<double>& j, Rest& r) const {
+    const fem::KindTable& table = layout.tables[kind];
+    const int points = table.points;
+    fem::RestJacobians(table, layout.blocks[kind].groups[gi].rest, j);
+    r.dv.resize(points);
+    r.jit.resize(static_cast<size_t>(9) * points);
+    for (int q = 0; q < points; ++q) {
+      const Eigen::Matrix3d jq = fem::JacobianAt(j, points, q);
+      const double dv = std::max(jq.determinant(), 0.0) * table.weight[q];
+      const Eigen::Matrix3d jit =
+          dv > 0 ? Eigen::Matrix3d(jq.inverse().transpose()) : Eigen::Matrix3d::Zero();
+      r.dv[q] = dv;
+      for (int k = 0; k < 3; ++k) {
+        for (int c = 0; c < 3; ++c) r.jit[(3 * k + c) * points + q] = jit(k, c);
+      }
+    }
+  }
+
+  const std::vector<Element>& Of(int t, const std::vector<int32_t>& support,
+                                 const std::vector<std::pair<int, int32_t>>& elements) {
+    Thread& th = thread[t];
+    if (!th.elements.empty() && th.elements == elements && th.support == support) return th.out;
+    th.elements = elements;
+    th.support = support;
+    if (th.column.empty()) th.column.assign(nm.cols(), -1);
+    const int s = static_cast<int>(support.size());
+    for (int a = 0; a < s; ++a) th.column[support[a]] = a;
+    th.mark.assign(s, -1);
+    const size_t n = elements.size();
+    if (th.rows.size() < n) th.rows.resize(n);
+    if (th.own.size() < n) th.own.resize(n);
+    th.out.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      const auto [kind, e] = elements[i];
+      const models::ElementBlock& block = layout.blocks[kind];
+      GatherCellRows(nm, block.element_nodes(e), block.nodes, th.column, th.mark, th.rows[i]);
+      // Groups of several elements keep their points' data for the build;
+      // an irregular region's groups of one are made in the thread's
+      // scratch (keeping each one's took more time in fresh pages).
+      const int32_t gi = block.group[e];
+      const Rest* rest = &th.own[i];
+      if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
+        MakeRest(kind, gi, th.j, th.own[i]);
+      } else {
+        std::call_once(once[kind][gi], [&] {
+          std::vector<double> j;
+          MakeRest(kind, gi, j, shared[kind][gi]);
+        });
+        rest = &shared[kind][gi];
+      }
+      th.out[i] = Element{&th.rows[i], rest->dv.data(), rest->jit.data()};
+    }
+    for (int32_t c : support) th.column[c] = -1;
+    return th.out;
+  }
+
+  const models::ElementLayout& layout;
+  const SparseMatrix& nm;
+  std::vector<Thread> thread;
+  std::array<std::vector<std::once_flag>, 3> once;
+  std::array<std::vector<Rest>, 3> shared;
+};
+
+CellPoints::CellPoints(const models::ElementLayout& layout, const SparseMatrix& nm, int threads)
+    : impl_(std::make_unique<Impl>(layout, nm, threads)) {}
+CellPoints::~CellPoints() = default;
+const std::vector<CellPoints::Element>& CellPoints::Of(
+    int thread, const std::vector<int32_t>& support,
+    const std::vector<std::pair<int, int32_t>>& elements) {
+  return impl_->Of(thread, support, elements);
+}
+
+struct MassPartials::Maker {
+  // Per pool thread.
+  struct Scratch {
+    Eigen::MatrixXd nb;                    // N B_e (Q x s_e)
+    std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
+    std::vector<double> root;              // sqrt(rho dV) per point
+    std::vector<uint8_t> covered;          // per cell column: in the element's support
+  };
+
+  Maker(const models::ElementLayout& layout, bool has_damping, CellPoints& points, int threads)
+      : layout(layout), points(points), has_damping(has_damping), scratch(threads) {
+    if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
     spec.dofs = 1;
-    spec.outputs = outputs;
+    spec.outputs = has_damping ? 2 : 1;
     spec.salt = 0x6d617373;  // "mass"
     spec.group_key = [this](int kind, int32_t gi) { return GroupKey(kind, gi); };
     spec.make_cell = [this](int t, const std::vector<int32_t>& support,
                             const std::vector<std::pair<int, int32_t>>& elements,
                             std::vector<Eigen::MatrixXd>& partial) {
-      MakeCell(scratch[t], support, elements, partial);
+      MakeCell(t, support, elements, partial);
     };
   }
 
@@ -60,95 +151,96 @@ struct MassPartials::Maker {
     return h.value();
   }
 
-  // A group's roots, made when a cell first needs them.
-  const Roots& RootsOf(int kind, int32_t gi) {
-    std::call_once(once[kind][gi], [&] {
-      const fem::KindTable& table = layout.tables[kind];
-      const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
-      const auto& material = layout.materials[grp.material];
-      const int points = table.points;
-      std::vector<double> j;
-      fem::RestJacobians(table, grp.rest, j);
-      Roots& out = group_roots[kind][gi];
-      for (int o = 0; o < outputs; ++o) out[o].resize(points);
-      for (int q = 0; q < points; ++q) {
-        const double dv =
-            std::max(fem::JacobianAt(j, points, q).determinant(), 0.0) * table.weight[q];
-        out[0][q] = std::sqrt(std::max(material[q].density * dv, 0.0));
-        if (has_damping) out[1][q] = std::sqrt(std::max(material[q].damping * dv, 0.0));
+  // Whether every point of the cell has one damping / density ratio (then
+  // Dt's partial is that ratio times Mt's: one rank update, not two).
+  std::pair<bool, double> DampingRatio(const std::vector<std::pair<int, int32_t>>& elements) const {
+    bool first = true;
+    double ratio = 0;
+    for (const auto& [kind, e] : elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      for (const models::MaterialPoint& m : layout.materials[block.groups[block.group[e]].material]) {
+        if (!(m.density > 0)) return {false, 0};
+        const double r = m.damping / m.density;
+        if (!first && r != ratio) return {false, 0};
+        ratio = r;
+        first = false;
       }
-    });
-    return group_roots[kind][gi];
+    }
+    return {true, ratio};
   }
 
-  void MakeCell(Scratch& sc, const std::vector<int32_t>& support,
+  void MakeCell(int t, const std::vector<int32_t>& support,
                 const std::vector<std::pair<int, int32_t>>& elements,
                 std::vector<Eigen::MatrixXd>& partial) {
-    if (sc.column.empty()) sc.column.assign(nm.cols(), -1);
+    Scratch& sc = scratch[t];
+    const std::vector<CellPoints::Element>& cell = points.Of(t, support, elements);
     const int s = static_cast<int>(support.size());
     int64_t rows = 0;
     for (const auto& [kind, e] : elements) rows += layout.tables[kind].points;
+    const auto [proportional, ratio] =
+        has_damping ? DampingRatio(elements) : std::pair<bool, double>{true, 0.0};
+    const int ws = has_damping && !proportional ? 2 : 1;
     // W (rows x s, column major) per output; each element's rows written
     // in its support's columns and zeroed in the others.
-    for (int o = 0; o < outputs; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
-    for (int a = 0; a < s; ++a) sc.column[support[a]] = a;
-    sc.mark.assign(s, -1);
+    for (int o = 0; o < ws; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
     sc.covered.resize(s);
     int64_t row = 0;
-    for (const auto& [kind, e] : elements) {
+    for (size_t i = 0; i < elements.size(); ++i) {
+      const auto [kind, e] = elements[i];
       const models::ElementBlock& block = layout.blocks[kind];
       const fem::KindTable& table = layout.tables[kind];
-      const Roots& roots = RootsOf(kind, block.group[e]);
-      GatherCellRows(nm, block.element_nodes(e), block.nodes, sc.column, sc.mark, sc.rows);
+      const ElementRows& er = *cell[i].rows;
+      const auto& material = layout.materials[block.groups[block.group[e]].material];
       std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t col : sc.rows.support) sc.covered[col] = 1;
+      for (int32_t col : er.support) sc.covered[col] = 1;
       for (int col = 0; col < s; ++col) {
         if (sc.covered[col]) continue;
-        for (int o = 0; o < outputs; ++o) {
+        for (int o = 0; o < ws; ++o) {
           std::fill_n(sc.w[o].data() + static_cast<int64_t>(col) * rows + row, table.points, 0.0);
         }
       }
       if (kind == 0 && cubic.has_value()) {
-        sc.nb.resize(64, sc.rows.b.cols());
-        cubic->Values(sc.rows.b.data(), 64, static_cast<int>(sc.rows.b.cols()), sc.nb.data(), 64);
+        sc.nb.resize(64, er.b.cols());
+        cubic->Values(er.b.data(), 64, static_cast<int>(er.b.cols()), sc.nb.data(), 64);
       } else {
         const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
             shape(table.n.data(), table.points, block.nodes);
-        sc.nb.noalias() = shape * sc.rows.b;
+        sc.nb.noalias() = shape * er.b;
       }
-      for (size_t a = 0; a < sc.rows.support.size(); ++a) {
-        const int col = sc.rows.support[a];
-        const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
-        for (int o = 0; o < outputs; ++o) {
-          double* to = sc.w[o].data() + static_cast<int64_t>(col) * rows + row;
-          for (int q = 0; q < table.points; ++q) to[q] = roots[o][q] * from[q];
+      sc.root.resize(table.points);
+      for (int o = 0; o < ws; ++o) {
+        for (int q = 0; q < table.points; ++q) {
+          const double value = o == 0 ? material[q].density : material[q].damping;
+          sc.root[q] = std::sqrt(std::max(value * cell[i].dv[q], 0.0));
+        }
+        for (size_t a = 0; a < er.support.size(); ++a) {
+          const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
+          double* to = sc.w[o].data() + static_cast<int64_t>(er.support[a]) * rows + row;
+          for (int q = 0; q < table.points; ++q) to[q] = sc.root[q] * from[q];
         }
       }
       row += table.points;
     }
-    for (int32_t c : support) sc.column[c] = -1;
-    for (int o = 0; o < outputs; ++o) {
+    for (int o = 0; o < ws; ++o) {
       Eigen::MatrixXd& p = partial[o];
       p.selfadjointView<Eigen::Lower>().rankUpdate(
           Eigen::Map<const Eigen::MatrixXd>(sc.w[o].data(), rows, s).transpose());
       p.triangularView<Eigen::StrictlyUpper>() = p.transpose();
     }
+    if (has_damping && proportional) partial[1] = ratio * partial[0];
   }
 
   const models::ElementLayout& layout;
-  const SparseMatrix& nm;
+  CellPoints& points;
   const bool has_damping;
-  const int outputs;
   CellSumSpec spec;
   std::optional<fem::CubicTensorProducts> cubic;  // N B sum-factorized (cubic_tensor.h)
-  std::array<std::vector<std::once_flag>, 3> once;
-  std::array<std::vector<Roots>, 3> group_roots;
   std::vector<Scratch> scratch;
 };
 
-MassPartials::MassPartials(const models::ElementLayout& layout, const SparseMatrix& nm,
-                           bool has_damping, int threads)
-    : maker_(std::make_unique<Maker>(layout, nm, has_damping, threads)) {}
+MassPartials::MassPartials(const models::ElementLayout& layout, bool has_damping,
+                           CellPoints& points, int threads)
+    : maker_(std::make_unique<Maker>(layout, has_damping, points, threads)) {}
 MassPartials::~MassPartials() = default;
 CellSumSpec& MassPartials::spec() { return maker_->spec; }
 
@@ -163,12 +255,9 @@ struct StiffnessPartials::Maker {
     std::vector<double> mu_jit, lambda_jit;
     Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
     Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda)
-    std::vector<double> j;        // (scratch: the rest Jacobians)
   };
   // Per pool thread.
   struct Scratch {
-    std::vector<int32_t> column, mark;  // control point -> cell column; GatherCellRows' marks
-    ElementRows rows;
     Eigen::MatrixXd h;
     Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
@@ -178,8 +267,8 @@ struct StiffnessPartials::Maker {
   };
 
   Maker(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
-        const SparseMatrix& nm, int threads)
-      : scratch(threads) {
+        CellPoints& points, int threads)
+      : points(points), scratch(threads) {
     if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
@@ -200,28 +289,29 @@ struct StiffnessPartials::Maker {
       }
       return h.value();
     };
-    spec.make_cell = [this, &layout, &nm](int t, const std::vector<int32_t>& support,
-                                          const std::vector<std::pair<int, int32_t>>& elements,
-                                          std::vector<Eigen::MatrixXd>& partial) {
+    spec.make_cell = [this, &layout](int t, const std::vector<int32_t>& support,
+                                     const std::vector<std::pair<int, int32_t>>& elements,
+                                     std::vector<Eigen::MatrixXd>& partial) {
       partial.emplace_back();
-      MakeCell(layout, nm, scratch[t], support, elements, partial[0], partial[1]);
+      MakeCell(layout, t, support, elements, partial[0], partial[1]);
     };
   }
 
-  // Element e's group: made once and kept when the group has more than one
-  // element, else made in the thread's scratch (an irregular region has a
-  // group per element: keeping each one's 3Q x n gradients took more time
-  // in fresh pages than making them).
-  const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e, Scratch& sc) {
+  // Element e's group (its points' data `at`): made once and kept when the
+  // group has more than one element, else made in the thread's scratch (an
+  // irregular region has a group per element: keeping each one's 3Q x n
+  // gradients took more time in fresh pages than making them).
+  const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e,
+                       const CellPoints::Element& at, Scratch& sc) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int32_t gi = block.group[e];
     const bool factorized = kind == 0 && cubic.has_value();
     if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
-      MakeGroup(layout, kind, gi, factorized, sc.single);
+      MakeGroup(layout, kind, gi, factorized, at, sc.single);
       return sc.single;
     }
     std::call_once(once[kind][gi],
-                   [&] { MakeGroup(layout, kind, gi, factorized, groups[kind][gi]); });
+                   [&] { MakeGroup(layout, kind, gi, factorized, at, groups[kind][gi]); });
     return groups[kind][gi];
   }
 
@@ -236,14 +326,14 @@ struct StiffnessPartials::Maker {
 
   // A cell's K partial (3S square, given zero) and its gradient weights
   // g_j (S x 3): cell_partials.h.
-  void MakeCell(const models::ElementLayout& layout, const SparseMatrix& nm, Scratch& sc,
-                const std::vector<int32_t>& support,
+  void MakeCell(const models::ElementLayout& layout, int t, const std::vector<int32_t>& support,
                 const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k,
                 Eigen::MatrixXd& gradient) {
     const int s = static_cast<int>(support.size());
     gradient.setZero(s, 3);
     if (s == 0) return;
-    if (sc.column.empty()) sc.column.assign(nm.cols(), -1);
+    Scratch& sc = scratch[t];
+    const std::vector<CellPoints::Element>& cell = points.Of(t, support, elements);
     int64_t rows = 0;
     bool uniform = true, first = true;
     double ratio = 0;
@@ -269,29 +359,28 @@ struct StiffnessPartials::Maker {
     };
     Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, rows, 3 * s);
     Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : rows, 3 * s);
-    for (int a = 0; a < s; ++a) sc.column[support[a]] = a;
-    sc.mark.assign(s, -1);
     sc.covered.resize(s);
     int64_t row = 0;
     double volume = 0;
-    for (const auto& [kind, e] : elements) {
-      const Group& g = GroupOf(layout, kind, e, sc);
+    for (size_t i = 0; i < elements.size(); ++i) {
+      const auto [kind, e] = elements[i];
+      const Group& g = GroupOf(layout, kind, e, cell[i], sc);
       const models::ElementBlock& block = layout.blocks[kind];
-      GatherCellRows(nm, block.element_nodes(e), block.nodes, sc.column, sc.mark, sc.rows);
+      const ElementRows& er = *cell[i].rows;
       const int q = static_cast<int>(g.root_mu.size());
-      const int se = static_cast<int>(sc.rows.support.size());
+      const int se = static_cast<int>(er.support.size());
       // g_j: the element's physical gradients at its centre (the group's
       // rest shape) by det J there, summed and divided by the cell's volume.
       const models::ElementGroup& grp = block.groups[block.group[e]];
       const double det =
           fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, block.nodes).determinant();
       if (det > 0) {
-        sc.ge.noalias() = sc.rows.b.transpose() * grp.centre_gradient;
-        for (int a = 0; a < se; ++a) gradient.row(sc.rows.support[a]) += det * sc.ge.row(a);
+        sc.ge.noalias() = er.b.transpose() * grp.centre_gradient;
+        for (int a = 0; a < se; ++a) gradient.row(er.support[a]) += det * sc.ge.row(a);
         volume += det;
       }
       std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t col : sc.rows.support) sc.covered[col] = 1;
+      for (int32_t col : er.support) sc.covered[col] = 1;
       for (int col = 0; col < s; ++col) {
         if (sc.covered[col]) continue;
         for (int k = 0; k < 3; ++k) {
@@ -306,9 +395,9 @@ struct StiffnessPartials::Maker {
         double* pu = sc.p.data();
         double* pv = pu + 64 * se;
         double* pw = pv + 64 * se;
-        cubic->Derivatives(sc.rows.b.data(), 64, se, pu, pv, pw, 64);
+        cubic->Derivatives(er.b.data(), 64, se, pu, pv, pw, 64);
         for (int a = 0; a < se; ++a) {
-          const int col = sc.rows.support[a];
+          const int col = er.support[a];
           const double* du = pu + 64 * a;
           const double* dv = pv + 64 * a;
           const double* dw = pw + 64 * a;
@@ -327,9 +416,9 @@ struct StiffnessPartials::Maker {
         row += q;
         continue;
       }
-      sc.h.noalias() = g.d * sc.rows.b;  // 3Q x s_e
-      for (size_t a = 0; a < sc.rows.support.size(); ++a) {
-        const int col = sc.rows.support[a];
+      sc.h.noalias() = g.d * er.b;  // 3Q x s_e
+      for (size_t a = 0; a < er.support.size(); ++a) {
+        const int col = er.support[a];
         for (int c = 0; c < 3; ++c) {
           const double* from = sc.h.col(static_cast<Eigen::Index>(a)).data() + c * q;
           double* to = w.col(c * s + col).data() + row;
@@ -342,7 +431,6 @@ struct StiffnessPartials::Maker {
       }
       row += q;
     }
-    for (int32_t c : support) sc.column[c] = -1;
     if (volume > 0) gradient /= volume;
     Eigen::Map<Eigen::MatrixXd> gm = zeroed(sc.g, 3 * s, 3 * s);
     gm.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
@@ -366,8 +454,9 @@ struct StiffnessPartials::Maker {
     }
   }
 
+  // Group gi's data from its points' dV and J^-T (`at`, cell_partials.h).
   static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, bool factorized,
-                        Group& g) {
+                        const CellPoints::Element& at, Group& g) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     const fem::KindTable& table = layout.tables[kind];
     const std::vector<models::MaterialPoint>& material = layout.materials[grp.material];
@@ -381,30 +470,28 @@ struct StiffnessPartials::Maker {
     }
     g.root_mu.resize(points);
     g.root_lambda.resize(points);
-    fem::RestJacobians(table, grp.rest, g.j);
     for (int q = 0; q < points; ++q) {
       const double* dn = table.dN(q);
-      const Eigen::Matrix3d j = fem::JacobianAt(g.j, points, q);
-      const double dv = std::max(j.determinant(), 0.0) * table.weight[q];
-      const Eigen::Matrix3d jit =
-          dv > 0 ? Eigen::Matrix3d(j.inverse().transpose()) : Eigen::Matrix3d::Zero();
+      const double dv = at.dv[q];
       g.root_mu[q] = std::sqrt(std::max(dv * material[q].lame_mu(), 0.0));
       g.root_lambda[q] = std::sqrt(std::max(dv * material[q].lame_lambda(), 0.0));
       for (int k = 0; k < 3; ++k) {
-        const double a = jit(k, 0), b = jit(k, 1), c = jit(k, 2);
+        const double* jit_k = at.jit + static_cast<size_t>(3 * k) * points + q;  // (k, c) at c * points
         if (factorized) {
           for (int cc = 0; cc < 3; ++cc) {
-            g.mu_jit[(3 * k + cc) * points + q] = g.root_mu[q] * jit(k, cc);
-            g.lambda_jit[(3 * k + cc) * points + q] = g.root_lambda[q] * jit(k, cc);
+            g.mu_jit[(3 * k + cc) * points + q] = g.root_mu[q] * jit_k[cc * points];
+            g.lambda_jit[(3 * k + cc) * points + q] = g.root_lambda[q] * jit_k[cc * points];
           }
           continue;
         }
+        const double a = jit_k[0], b = jit_k[points], c = jit_k[2 * points];
         double* row = g.d.row(k * points + q).data();  // contiguous: d is row major
         for (int i = 0; i < n; ++i) row[i] = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];
       }
     }
   }
 
+  CellPoints& points;
   CellSumSpec spec;
   std::optional<fem::CubicTensorProducts> cubic;  // when the cubic table is on the 4-point rule
   std::vector<Scratch> scratch;
@@ -414,8 +501,8 @@ struct StiffnessPartials::Maker {
 
 StiffnessPartials::StiffnessPartials(const models::ElementLayout& layout,
                                      const models::CorotationalModel& corotational,
-                                     const SparseMatrix& nm, int threads)
-    : maker_(std::make_unique<Maker>(layout, corotational, nm, threads)) {}
+                                     CellPoints& points, int threads)
+    : maker_(std::make_unique<Maker>(layout, corotational, points, threads)) {}
 StiffnessPartials::~StiffnessPartials() = default;
 CellSumSpec& StiffnessPartials::spec() { return maker_->spec; }
 

@@ -10,6 +10,8 @@
 #pragma once
 
 #include <memory>
+#include <utility>
+#include <vector>
 
 #include "solver/models/corotational.h"
 #include "solver/models/element_blocks.h"
@@ -17,16 +19,48 @@
 
 namespace dynsolid::solid {
 
+// What the mass and stiffness partials of a cell both read of its
+// elements, made once per cell on the pool thread that makes them
+// (SumByCells makes a cell's partials of every job on one thread): each
+// element's node rows on the cell's support (GatherCellRows) and, at its
+// quadrature points, the rest volume dV = max(det J, 0) w and J^-T (zero
+// where dV is 0), both computed as the model computes them. Groups of
+// several elements keep their points' data for the life of this object.
+// `layout` and `nm` must outlive it; `threads`: the pool's size.
+class CellPoints {
+ public:
+  struct Element {
+    const ElementRows* rows;
+    const double* dv;   // Q
+    const double* jit;  // 9 Q: entry (k, c) of J_q^-T at [(3 k + c) Q + q]
+  };
+  CellPoints(const models::ElementLayout& layout, const subdivision::SparseMatrix& nm, int threads);
+  ~CellPoints();
+  CellPoints(const CellPoints&) = delete;
+  CellPoints& operator=(const CellPoints&) = delete;
+  // A cell's elements (its support and elements as CellSumSpec::make_cell
+  // gets them), in order, on pool thread `thread`: made unless that
+  // thread's last cell was this one. Valid until the thread's next call.
+  const std::vector<Element>& Of(int thread, const std::vector<int32_t>& support,
+                                 const std::vector<std::pair<int, int32_t>>& elements);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 // Mt = sum_e B_e^T N^T diag(rho dV) N B_e (Dt alike, with the damping), B_e
 // the element's rows of the node matrix on its control support: a cell's
 // partial is W^T W, W stacking the rows sqrt(rho_q dV_q) N_q B_e of its
-// elements' points (and a second W of sqrt(damping dV) rows with damping).
-// `layout` and `nm` must outlive this; the spec's functions point into it
-// (not movable). `threads`: the pool SumByCell will run on.
+// elements' points. With damping, Dt's partial is r times Mt's where every
+// point of the cell has one ratio r = damping / density, else the Gram
+// matrix of the sqrt(damping dV) rows. `layout` and `points` must outlive
+// this; the spec's functions point into it (not movable). `threads`: the
+// pool SumByCell will run on.
 class MassPartials {
  public:
-  MassPartials(const models::ElementLayout& layout, const subdivision::SparseMatrix& nm,
-               bool has_damping, int threads);
+  MassPartials(const models::ElementLayout& layout, bool has_damping, CellPoints& points,
+               int threads);
   ~MassPartials();
   MassPartials(const MassPartials&) = delete;
   MassPartials& operator=(const MassPartials&) = delete;
@@ -57,8 +91,8 @@ class MassPartials {
 class StiffnessPartials {
  public:
   StiffnessPartials(const models::ElementLayout& layout,
-                    const models::CorotationalModel& corotational,
-                    const subdivision::SparseMatrix& nm, int threads);
+                    const models::CorotationalModel& corotational, CellPoints& points,
+                    int threads);
   ~StiffnessPartials();
   StiffnessPartials(const StiffnessPartials&) = delete;
   StiffnessPartials& operator=(const StiffnessPartials&) = delete;

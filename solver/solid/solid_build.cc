@@ -44,23 +44,10 @@
 
 namespace dynsolid::solid {
 
-// Mt and Dt summed cell by cell (cell_assembly.h, cell_partials.h): cells
-// whose partial `previous` holds are not made again.
-std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
-    const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
-    WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt, CellGeometry* geometry) const {
-  const SparseMatrix& nm = d->node_matrix;
-  const int32_t nc = static_cast<int32_t>(nm.cols());
-  MassPartials partials(layout, nm, has_damping, threads.size());
-  CellSumSpec& spec = partials.spec();
-  spec.geometry = geometry;
-  // Small control meshes accumulate densely; large ones through triplets.
-  const bool dense = nc <= 6000;
-  CellSums sums;
-  std::shared_ptr<const CellPartials> next =
-      SumByCell(nm, layout, d->hierarchy.control_cell, d->control().num_cells(), spec, previous,
-                threads, dense, sums);
-  const std::shared_ptr<const CellPartials> kept = next->bytes <= kMaxCarriedBytes ? next : nullptr;
+// Mt and Dt from their cell sums (cell_assembly.h, cell_partials.h).
+void Solid::Impl::ControlMatricesFrom(const CellSums& sums, bool dense, bool has_damping,
+                                      SparseMatrix& mt, SparseMatrix& dt) const {
+  const int32_t nc = static_cast<int32_t>(d->node_matrix.cols());
   if (dense) {
     mt = sums.matrices[0].sparseView(0.0, 0.0);
     if (has_damping) dt = sums.matrices[1].sparseView(0.0, 0.0);
@@ -88,7 +75,6 @@ std::shared_ptr<const CellPartials> Solid::Impl::AssembleControlMatrices(
     lump(mt);
     if (has_damping) lump(dt);
   }
-  return kept;
 }
 
 bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
@@ -181,27 +167,52 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     b.element_bytes = m->per_element_bytes();
     b.model = std::move(m);
   }
-  // The cells' supports and keys, for both the stiffness and mass sums
-  // (those of this solid's discretization, when it has them).
+  // The cells' partials of the per-cell corotation (K0) and of the mass
+  // (cell_assembly.h, cell_partials.h), made in one pass over the cells
+  // that share what they read of each cell (CellPoints); a cell whose key
+  // the previous build has is taken from it. The cells' supports and keys
+  // are those of this solid's discretization when it has them.
   CellGeometry geometry;
   if (reuse && cell_geometry != nullptr) geometry = *cell_geometry;
+  const SparseMatrix& nm = d->node_matrix;
+  const bool make_mass = !(reuse && SameMassAndDamping(*l));
+  const bool dense_mass = nm.cols() <= 6000;  // small control meshes sum densely
+  CellPoints points(*l, nm, threads.size());
+  std::optional<StiffnessPartials> stiffness;
+  std::optional<MassPartials> mass;
+  CellSums k_sums, m_sums;
+  std::vector<CellSumJob> jobs;
   if (per_cell) {
-    std::shared_ptr<const CellPartials> made;
-    b.cell_model =
-        BuildCellCorotation(*l, *b.corotational, threads, k0_cells.get(), &made, &geometry);
+    stiffness.emplace(*l, *b.corotational, points, threads.size());
+    stiffness->spec().per_cell = true;
+    stiffness->spec().geometry = &geometry;
+    jobs.push_back({&stiffness->spec(), k0_cells.get(), false, &k_sums, nullptr});
+  }
+  if (make_mass) {
+    mass.emplace(*l, b.has_damping, points, threads.size());
+    mass->spec().geometry = &geometry;
+    jobs.push_back({&mass->spec(), mass_cells.get(), dense_mass, &m_sums, nullptr});
+  }
+  if (!jobs.empty()) {
+    SumByCells(nm, *l, d->hierarchy.control_cell, d->control().num_cells(), jobs, threads);
+  }
+  if (per_cell) {
+    const std::shared_ptr<const CellPartials> made = jobs[0].made;
+    b.cell_model = CellCorotationFrom(k_sums, threads);
     b.k_cells_made = made->made;
     b.k_cells = made->bytes <= kMaxCarriedBytes ? made : nullptr;
   }
   b.model_ms = MsSince(t_model);
   // Mass (and damping) in control-point space.
   const auto t_mass = Clock::now();
-  if (reuse && SameMassAndDamping(*l)) {
+  if (!make_mass) {
     b.mt = mt;
     b.dt = dt;
     b.mass_cells = mass_cells;
   } else {
-    b.mass_cells = AssembleControlMatrices(*l, b.has_damping, mass_cells.get(), threads, b.mt,
-                                           b.dt, &geometry);
+    ControlMatricesFrom(m_sums, dense_mass, b.has_damping, b.mt, b.dt);
+    const std::shared_ptr<const CellPartials> made = jobs.back().made;
+    b.mass_cells = made->bytes <= kMaxCarriedBytes ? made : nullptr;
   }
   b.mass_ms = MsSince(t_mass);
   if (static_cast<int32_t>(geometry.keys.size()) == d->control().num_cells()) {
@@ -561,18 +572,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   return s;
 }
 
-std::unique_ptr<models::CellCorotation> Solid::Impl::BuildCellCorotation(
-    const models::ElementLayout& layout, const models::CorotationalModel& corotational,
-    WorkerPool& threads, const CellPartials* previous,
-    std::shared_ptr<const CellPartials>* next, CellGeometry* geometry) const {
-  StiffnessPartials blocks(layout, corotational, d->node_matrix, threads.size());
-  blocks.spec().per_cell = true;
-  blocks.spec().geometry = geometry;
-  CellSums sums;
-  std::shared_ptr<const CellPartials> made =
-      SumByCell(d->node_matrix, layout, d->hierarchy.control_cell, d->control().num_cells(),
-                blocks.spec(), previous, threads, /*dense=*/false, sums);
-  *next = made;
+std::unique_ptr<models::CellCorotation> Solid::Impl::CellCorotationFrom(CellSums& sums,
+                                                                       WorkerPool& threads) const {
   std::vector<models::CellCorotation::Cell> cells(sums.supports.size());
   // One matrix per distinct partial (cells of one key share it).
   std::map<const std::vector<Eigen::MatrixXd>*, std::shared_ptr<const Eigen::MatrixXd>> matrix;
@@ -598,7 +599,8 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
     const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
     std::shared_ptr<const CellPartials>* next) {
   const SparseMatrix& nm = d.node_matrix;
-  StiffnessPartials blocks(layout, corotational, nm, threads.size());
+  CellPoints points(layout, nm, threads.size());
+  StiffnessPartials blocks(layout, corotational, points, threads.size());
   const CellSumSpec& spec = blocks.spec();
   // Control meshes are small: sum into a dense matrix (no triplet per
   // element entry) unless it would pass 32 MiB.

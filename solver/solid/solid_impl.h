@@ -43,6 +43,7 @@ namespace dynsolid::solid {
 
 struct CellPartials;  // cell_assembly.h
 struct CellGeometry;  // cell_assembly.h
+struct CellSums;     // cell_assembly.h
 
 using SparseMatrix = subdivision::SparseMatrix;
 using Clock = std::chrono::steady_clock;
@@ -445,13 +446,10 @@ struct Solid::Impl {
     return StiffnessTriplets(*d, *layout, *corotational, spring_point, spring_k, *pool,
                              k0_cells.get());
   }
-  // The per-control-cell corotational model of layout `l` (its K0
-  // partials from `previous` where their keys match; this build's in *next,
-  // to carry unless above kMaxCarriedBytes).
-  std::unique_ptr<models::CellCorotation> BuildCellCorotation(
-      const models::ElementLayout& l, const models::CorotationalModel& m, WorkerPool& threads,
-      const CellPartials* previous, std::shared_ptr<const CellPartials>* next,
-      CellGeometry* geometry = nullptr) const;
+  // The per-control-cell corotational model from its cells' partials (a
+  // per-cell sum of StiffnessPartials).
+  std::unique_ptr<models::CellCorotation> CellCorotationFrom(CellSums& sums,
+                                                             WorkerPool& threads) const;
   // The same as a 3 #control square sparse matrix (K0 of the implicit
   // preconditioner) for layout `l` and its model `m`, on `threads`.
   // `made` (optional): partials of l made already (a build's per-cell
@@ -486,14 +484,10 @@ struct Solid::Impl {
   void MakeElementBoxes();
   // The material point at rest position x (rest_nodes).
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, bool snap) const;
-  // Mt and Dt of `layout` on `threads`; returns their cells' partials
-  // (cell_assembly.h), those of `previous` taken over where keys match.
-  // `geometry` (optional): the cells' supports and keys, shared with the
-  // build's other sums over `layout`.
-  std::shared_ptr<const CellPartials> AssembleControlMatrices(
-      const models::ElementLayout& layout, bool has_damping, const CellPartials* previous,
-      WorkerPool& threads, SparseMatrix& mt, SparseMatrix& dt,
-      CellGeometry* geometry = nullptr) const;
+  // Mt and Dt from the sums of MassPartials (dense or as triplets), lumped
+  // when the settings say so.
+  void ControlMatricesFrom(const CellSums& sums, bool dense, bool has_damping, SparseMatrix& mt,
+                           SparseMatrix& dt) const;
   // *passes (optional): the element passes it took. With `cells` (the
   // per-control-cell corotation of m's layout) Kt is applied in control
   // space (CellCorotation::ApplyRest on cell_pool) instead of through m.

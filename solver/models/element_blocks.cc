@@ -10,6 +10,9 @@
 
 #include <Eigen/LU>
 
+#include "solver/common/hash128.h"
+#include "solver/common/worker_pool.h"
+
 namespace dynsolid::models {
 namespace {
 
@@ -424,62 +427,98 @@ ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x
   return sd;
 }
 
+// Calls fn(begin, end) over [0, n) in pool-size contiguous ranges on
+// `pool` (null: at once on this thread).
+template <typename Fn>
+void Ranges(WorkerPool* pool, int64_t n, Fn&& fn) {
+  if (pool == nullptr || pool->size() == 1 || n < 64) {
+    fn(int64_t{0}, n);
+    return;
+  }
+  const int parts = pool->size();
+  pool->Run([&](int k) { fn(n * k / parts, n * (k + 1) / parts); });
+}
+
 // The groups of block `kind` (its node ids and cells set) and their
 // elements' order: element e (rest nodes x) has material array
 // material_of(e, x) and, when its rest shape is new, that shape's data
-// shape_of(e, x). Adds the block's rest volume and inverted elements.
+// shape_of(e, x) (called on pool threads: it must be safe to call
+// concurrently). Adds the block's rest volume and inverted elements.
 void GroupElements(
     ElementLayout& layout, int kind, const Points& rest,
     const std::function<int32_t(int32_t e, const fem::NodeMatrixX3& x)>& material_of,
-    const std::function<ShapeData(int32_t e, const fem::NodeMatrixX3& x)>& shape_of) {
+    const std::function<ShapeData(int32_t e, const fem::NodeMatrixX3& x)>& shape_of,
+    WorkerPool* pool) {
   ElementBlock& block = layout.blocks[kind];
   const int n = block.nodes;
   const int32_t count = block.size();
   block.group.resize(count);
   block.groups.clear();
-  std::map<std::vector<int64_t>, int32_t> group_index;
-  // Rest shapes up to translation, each with the rest nodes of its first
-  // element: a group's matrices are integrated over its shape's first
-  // element whatever the materials, so they are a function of (shape,
-  // material samples) alone and a rebuild after a paint or a restore
-  // gives the same bits as the build before it.
-  std::map<std::vector<int64_t>, int32_t> shape_index;
-  std::vector<ShapeData> shapes;
-  std::vector<int32_t> group_shape;  // group -> shape
-  std::vector<int64_t> shape_key;
-  fem::NodeMatrixX3 x(n, 3);
-  for (int32_t e = 0; e < count; ++e) {
+  auto gather = [&](int32_t e, fem::NodeMatrixX3& x) {
     const int32_t* ids = block.element_nodes(e);
     for (int i = 0; i < n; ++i) x.row(i) = rest.row(ids[i]);
-    const int32_t material = material_of(e, x);
-    // Rest shape up to translation, quantized to 1e-9 of its size.
-    double size = 0;
-    for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
-    const double quantum = std::max(size, 1e-300) * 1e-9;
-    shape_key.clear();
-    for (int i = 1; i < n; ++i) {
-      for (int c = 0; c < 3; ++c) {
-        shape_key.push_back(std::llround((x(i, c) - x(0, c)) / quantum));
+  };
+  // Each element's rest shape up to translation, quantized to 1e-9 of its
+  // size, as a 128-bit key (made in parallel). A group's matrices are
+  // integrated over its shape's first element whatever the materials, so
+  // they are a function of (shape, material samples) alone and a rebuild
+  // after a paint or a restore gives the same bits as the build before it.
+  std::vector<Key128> shape_key(count);
+  Ranges(pool, count, [&](int64_t begin, int64_t end) {
+    fem::NodeMatrixX3 x(n, 3);
+    for (int64_t e = begin; e < end; ++e) {
+      gather(static_cast<int32_t>(e), x);
+      double size = 0;
+      for (int i = 1; i < n; ++i) size = std::max(size, (x.row(i) - x.row(0)).cwiseAbs().maxCoeff());
+      const double quantum = std::max(size, 1e-300) * 1e-9;
+      Hash128 h;
+      for (int i = 1; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) h.Mix(static_cast<uint64_t>(std::llround((x(i, c) - x(0, c)) / quantum)));
       }
+      shape_key[e] = h.value();
     }
-    auto [sit, new_shape] = shape_index.try_emplace(shape_key, static_cast<int32_t>(shapes.size()));
-    if (new_shape) shapes.push_back(shape_of(e, x));
-    const std::vector<int64_t> group_key{material, sit->second};
+  });
+  // Materials, shapes and groups numbered in element order.
+  std::unordered_map<Key128, int32_t, Key128Hash> shape_index;
+  std::unordered_map<int64_t, int32_t> group_index;  // material << 32 | shape
+  std::vector<int32_t> shape_first;                   // shape -> its first element
+  std::vector<int32_t> group_shape;                   // group -> shape
+  fem::NodeMatrixX3 x(n, 3);
+  for (int32_t e = 0; e < count; ++e) {
+    gather(e, x);
+    const int32_t material = material_of(e, x);
+    auto [sit, new_shape] =
+        shape_index.try_emplace(shape_key[e], static_cast<int32_t>(shape_first.size()));
+    if (new_shape) shape_first.push_back(e);
+    const int64_t group_key = static_cast<int64_t>(material) << 32 | sit->second;
     auto [git, new_group] =
         group_index.try_emplace(group_key, static_cast<int32_t>(block.groups.size()));
     block.group[e] = git->second;
     if (new_group) {
-      const ShapeData& sd = shapes[sit->second];
       ElementGroup grp;
       grp.representative = e;
       grp.material = material;
-      grp.rest = sd.rest;
-      grp.centre_gradient = sd.centre_gradient;
-      grp.shape_volume = sd.volume;
-      grp.shape_inverted = sd.inverted;
       block.groups.push_back(std::move(grp));
       group_shape.push_back(sit->second);
     }
+  }
+  // Each new shape's data, from its first element's rest nodes (in
+  // parallel), then handed to its groups.
+  std::vector<ShapeData> shapes(shape_first.size());
+  Ranges(pool, static_cast<int64_t>(shapes.size()), [&](int64_t begin, int64_t end) {
+    fem::NodeMatrixX3 xs(n, 3);
+    for (int64_t k = begin; k < end; ++k) {
+      gather(shape_first[k], xs);
+      shapes[k] = shape_of(shape_first[k], xs);
+    }
+  });
+  for (size_t gi = 0; gi < block.groups.size(); ++gi) {
+    const ShapeData& sd = shapes[group_shape[gi]];
+    ElementGroup& grp = block.groups[gi];
+    grp.rest = sd.rest;
+    grp.centre_gradient = sd.centre_gradient;
+    grp.shape_volume = sd.volume;
+    grp.shape_inverted = sd.inverted;
   }
   // Elements sorted by group, and within a group along a Z-order curve
   // of their centres (ties by index).
@@ -509,7 +548,8 @@ void GroupElements(
 
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
-                                 const MaterialSampler& sampler, const ElementMaterials* whole) {
+                                 const MaterialSampler& sampler, const ElementMaterials* whole,
+                                 const ElementLayout* previous, WorkerPool* pool) {
   ElementLayout layout;
   MaterialTable table_of_materials(layout);
   // Arrays `whole` gave, by address: their material index once known.
@@ -544,14 +584,37 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
       }
       return table_of_materials.Add(samples);
     };
-    GroupElements(layout, kind, rest, material_of,
-                  [&table](int32_t, const fem::NodeMatrixX3& x) { return IntegrateShape(table, x); });
+    // A shape `previous` has a group of (the same rest nodes, to the bit)
+    // takes that group's data: the same as integrating it again.
+    std::unordered_map<Key128, int32_t, Key128Hash> known;
+    const ElementBlock* was = previous != nullptr ? &previous->blocks[kind] : nullptr;
+    if (was != nullptr && was->nodes == block.nodes) {
+      for (size_t g = 0; g < was->groups.size(); ++g) {
+        const fem::NodeMatrixX3& r = was->groups[g].rest;
+        Hash128 h;
+        h.Doubles(r.data(), r.size());
+        known.try_emplace(h.value(), static_cast<int32_t>(g));
+      }
+    }
+    auto shape_of = [&](int32_t, const fem::NodeMatrixX3& x) {
+      if (!known.empty()) {
+        Hash128 h;
+        h.Doubles(x.data(), x.size());
+        const auto it = known.find(h.value());
+        if (it != known.end()) {
+          const ElementGroup& g = was->groups[it->second];
+          if (g.rest == x) return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted};
+        }
+      }
+      return IntegrateShape(table, x);
+    };
+    GroupElements(layout, kind, rest, material_of, shape_of, pool);
   }
   return layout;
 }
 
 ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
-                                const ElementArrays& arrays) {
+                                const ElementArrays& arrays, WorkerPool* pool) {
   ElementLayout layout;
   MaterialTable table_of_materials(layout);
   // previous's arrays (distinct by content) by their new index.
@@ -577,7 +640,7 @@ ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& res
       const ElementGroup& g = was.groups[was.group[e]];
       return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted};
     };
-    GroupElements(layout, kind, rest, material_of, shape_of);
+    GroupElements(layout, kind, rest, material_of, shape_of, pool);
   }
   return layout;
 }

@@ -17,6 +17,10 @@
 #include "solver/fem/element_set.h"
 #include "solver/mesh/points.h"
 
+namespace dynsolid {
+class WorkerPool;
+}  // namespace dynsolid
+
 namespace dynsolid::models {
 
 // Material at one quadrature point (SI units).
@@ -188,11 +192,18 @@ inline Eigen::Vector3d SamplePosition(const fem::KindTable& table, int q,
 
 // Builds the layout. `rest` holds the rest FEM node positions (#nodes by 3),
 // `cell_control_cell` maps level-L cells to control cells for the sampler.
-// `whole` (optional) is asked first for each element.
+// `whole` (optional) is asked first for each element. `previous`
+// (optional): a layout built before, whose groups' shape data (a function
+// of their rest nodes alone) a shape with the same rest nodes takes
+// instead of integrating them again (a topology edit). `pool` (optional):
+// threads for the shapes' keys and integrals; the sampler and `whole` are
+// called on the calling thread only. The result does not depend on either.
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler,
-                                 const ElementMaterials* whole = nullptr);
+                                 const ElementMaterials* whole = nullptr,
+                                 const ElementLayout* previous = nullptr,
+                                 WorkerPool* pool = nullptr);
 
 // Element e of `kind`'s new sample array (table.points samples), or null
 // when it keeps the one it has.
@@ -204,6 +215,6 @@ using ElementArrays = std::function<const std::vector<MaterialPoint>*(int kind, 
 // groups numbered as BuildElementLayout numbers them, without sampling or
 // integrating anything (a paint, an undo to another material).
 ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
-                                const ElementArrays& arrays);
+                                const ElementArrays& arrays, WorkerPool* pool = nullptr);
 
 }  // namespace dynsolid::models

@@ -371,7 +371,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   auto t_phase = Clock::now();
   auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
       s->d_.elements, rest, s->d_.hierarchy.control_cell,
-      materials != nullptr ? *materials : sampler, whole));
+      materials != nullptr ? *materials : sampler, whole,
+      carried != nullptr ? carried->impl_->layout.get() : nullptr, im.pool.get()));
   if (layout->inverted_elements > 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         layout->inverted_elements, " elements are inverted at rest (det J <= 0 at a quadrature "

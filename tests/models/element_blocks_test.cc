@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "solver/common/worker_pool.h"
 #include "solver/fem/element_data.h"
 #include "tests/models/model_fixture.h"
 
@@ -234,6 +235,25 @@ TEST_P(RelayoutTest, EqualsTheLayoutBuiltFromTheSameSamples) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, RelayoutTest, ::testing::Values("block3", "chair", "mixed"));
+
+// A layout built with threads and with an earlier layout's shapes to take
+// (one of other materials over the same rest nodes: every shape known, the
+// groups different) is the layout built alone, bit for bit.
+TEST_P(RelayoutTest, ThreadsAndAnEarlierLayoutsShapesChangeNothing) {
+  test_util::MeshFixture f;
+  test_util::BuildMesh(scene::BuiltinScene(GetParam()), 2, test_util::TwoMaterials(1e5, 0.3), f);
+  const MaterialSampler one = [](const Eigen::Vector3d&, int32_t) {
+    return MaterialPoint{2e5, 0.25, 900, 0};
+  };
+  const ElementLayout earlier =
+      BuildElementLayout(f.d.elements, f.rest, f.d.hierarchy.control_cell, one);
+  ASSERT_NE(earlier.materials[0], f.layout.materials[0]);
+  WorkerPool pool(2);
+  const ElementLayout built =
+      BuildElementLayout(f.d.elements, f.rest, f.d.hierarchy.control_cell,
+                         test_util::TwoMaterials(1e5, 0.3), nullptr, &earlier, &pool);
+  ExpectSameLayout(built, f.layout);
+}
 
 }  // namespace
 }  // namespace dynsolid::models

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <thread>
 
 #include <Eigen/Geometry>
 
@@ -230,7 +231,6 @@ absl::StatusOr<CellComplex> CellComplex::FromFaces(Points vertices, Csr face_loo
     return absl::InternalError("cell_face_flipped does not match cell_faces");
   }
   RETURN_IF_ERROR(m.BuildAdjacency());
-  RETURN_IF_ERROR(m.CheckCellsClosed());
   if (validate_geometry) RETURN_IF_ERROR(m.CheckVolumes(""));
   return m;
 }
@@ -320,6 +320,22 @@ absl::Status CellComplex::BuildAdjacency() {
   }
   const int32_t ne = num_edges();
 
+  // The rest reads the faces' edges and writes members of its own. The
+  // cells' closedness check and their edges run beside it on a thread of
+  // their own when the complex is large (a subdivision's finest level):
+  // the same result either way.
+  absl::Status closed;
+  auto side = [this, &closed] {
+    closed = CheckCellsClosed();
+    cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
+  };
+  std::thread beside;
+  if (nc >= kCellsForAThread) {
+    beside = std::thread(side);
+  } else {
+    side();
+  }
+
   // Edge -> faces (unordered first), then radial order with cells.
   Csr edge_faces = Invert(face_edges_, ne);
   edge_faces_.offsets = edge_faces.offsets;
@@ -385,9 +401,8 @@ absl::Status CellComplex::BuildAdjacency() {
     edge_cells_.offsets[e + 1] = static_cast<int32_t>(edge_cells_.items.size());
   }
 
-  // Cells -> vertices and edges (sorted, unique).
+  // Cells -> vertices (and edges, above), sorted, unique.
   cell_vertices_ = ComposeUnique(cell_faces_, face_vertices_);
-  cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
 
   // Vertex -> edges, faces, cells.
   Csr edge_rows;
@@ -406,7 +421,8 @@ absl::Status CellComplex::BuildAdjacency() {
     if (face_cells_[f][1] >= 0) continue;
     for (int32_t v : face_vertices_.row(f)) vertex_boundary_[v] = 1;
   }
-  return absl::OkStatus();
+  if (beside.joinable()) beside.join();
+  return closed;
 }
 
 absl::Status CellComplex::CheckCellsClosed() const {

@@ -146,8 +146,12 @@ class CellComplex {
   void set_positions(Points p) { positions_ = std::move(p); }
 
  private:
+  // The relations from cells' faces and face loops, then the cells'
+  // closedness (CheckCellsClosed): the first error found.
   absl::Status BuildAdjacency();
   absl::Status CheckCellsClosed() const;
+  // Complexes of this many cells check closedness on a second thread.
+  static constexpr int32_t kCellsForAThread = 2048;
   absl::Status CheckVolumes(const std::string& origin) const;
 
   Points positions_;

@@ -661,7 +661,9 @@ class Solid {
   // Create with materials from `whole` (whole elements' arrays, when it has
   // them) and `sampler` instead of the scene's, and the
   // cell partials of `carried`'s matrices (cell_assembly.h) where their
-  // cells are unchanged (Remeshed; null: none).
+  // cells are unchanged (Remeshed; null: none). A solid built with
+  // `carried` is for CarryOver, which sets its integrators up: it must
+  // not step before.
   static absl::StatusOr<std::unique_ptr<Solid>> CreateWith(
       const Scene& scene, scene::Discretization discretization, int threads,
       const std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)>* sampler,

@@ -538,7 +538,13 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
         im.settings.max_substeps(), "; lower the time step or the stiffness"));
   }
   rep.substeps = im.substeps;
-  im.SetSubsteps(im.substeps, s->h_);
+  if (carried == nullptr) {
+    im.SetSubsteps(im.substeps, s->h_);
+  } else {
+    // Built for CarryOver, which sets the integrators up once, for the
+    // fixed set the carried pins give (not this scene's, then that one).
+    im.h_sub = s->h_ / im.substeps;
+  }
 
   // State: rest positions, initial rigid velocity.
   s->p_ = im.rest_control;

@@ -103,15 +103,16 @@ absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, b
 namespace {
 
 // Mt^-1 on the free control points (the fixed rows of the answer are zero),
-// for the stable-step estimate's Lanczos passes: a sparse LDL^T of Mt with
-// its fixed rows and columns made the identity, factored once per
-// estimate, up to kDirectPoints control points (a control mesh's mass
-// matrix couples a point with its cells' neighbours only: 224 points and
-// 13k entries on the chair at 2 levels, factored in well under a
-// millisecond); CG to 1e-10 above that.
+// for the stable-step estimate's Lanczos passes: Mt with its fixed rows
+// and columns made the identity, factored once per estimate: dense
+// Cholesky up to kDensePoints control points (224 points and 13k entries
+// on the chair at 2 levels: a quarter of the dense matrix, whose factor
+// fills in), a sparse LDL^T up to kDirectPoints (a control mesh's mass
+// matrix couples a point with its cells' neighbours only), CG to 1e-10
+// above that.
 class MassSolver {
  public:
-  static constexpr int64_t kDirectPoints = 4096;
+  static constexpr int64_t kDirectPoints = 4096, kDensePoints = 1024;
 
   MassSolver(const SparseMatrix& mass, const std::vector<uint8_t>& fixed) {
     const int64_t n = mass.rows();
@@ -133,15 +134,25 @@ class MassSolver {
     }
     Eigen::SparseMatrix<double> m(n, n);
     m.setFromTriplets(t.begin(), t.end());
-    ldlt_.emplace(m);
-    if (ldlt_->info() != Eigen::Success) {  // not positive definite: CG says how far it gets
+    if (n <= kDensePoints) {
+      // Small: dense Cholesky (a few hundred control points' mass matrix
+      // is nearly full; the sparse factor's column-by-column solves cost
+      // more than the whole dense one).
+      llt_.emplace(Eigen::MatrixXd(m));
+      if (llt_->info() == Eigen::Success) return;
+      llt_.reset();
+    } else {
+      ldlt_.emplace(m);
+      if (ldlt_->info() == Eigen::Success) return;
       ldlt_.reset();
-      cg_.Setup(&mass, fixed);
     }
+    cg_.Setup(&mass, fixed);  // not positive definite: CG says how far it gets
   }
   // x = Mt^-1 b on the free rows (b's fixed rows zero).
   void Solve(const Points& b, Points& x) {
-    if (ldlt_.has_value()) {
+    if (llt_.has_value()) {
+      x = llt_->solve(b);
+    } else if (ldlt_.has_value()) {
       x = ldlt_->solve(Eigen::MatrixXd(b));
     } else {
       x.setZero();
@@ -150,6 +161,7 @@ class MassSolver {
   }
 
  private:
+  std::optional<Eigen::LLT<Eigen::MatrixXd>> llt_;
   std::optional<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> ldlt_;
   integrators::ConjugateGradient cg_;
 };

@@ -156,9 +156,12 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   // Painted: an element whose rest nodes are, bit for bit, those of an old
   // element in its source cell keeps that element's samples (the edit left
   // it alone); any other sample takes the material of the nearest old
-  // sample in its source cell, whose samples are binned when first needed.
+  // sample in its source cell. A source cell's elements are keyed by their
+  // rest nodes, and its samples binned, when first needed (a cell of one
+  // material needs neither).
   std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
   std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
+  std::vector<uint8_t> keyed;
   // The key of an element's rest nodes: kind, then node row(i) for i < n.
   auto nodes_key = [](int kind, int n, const auto& row) {
     Hash128 h;
@@ -178,12 +181,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       const models::ElementBlock& block = layout.blocks[kind];
       for (int32_t e = 0; e < block.size(); ++e) {
         old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
-        const int32_t* ids = block.element_nodes(e);
-        by_nodes.try_emplace(
-            nodes_key(kind, block.nodes, [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
-            kind, e);
       }
     }
+    keyed.assign(old_cells, 0);
     by_cell.resize(old_cells);
     binned.assign(old_cells, 0);
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
@@ -235,6 +235,16 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
           if (array.empty()) array.assign(points, uniform_material[src]);
           return &array;
         }
+      }
+      if (src < 0) return nullptr;
+      if (!keyed[src]) {
+        for (const auto& [k, e] : old_elements[src]) {
+          const int32_t* ids = layout.blocks[k].element_nodes(e);
+          by_nodes.try_emplace(nodes_key(k, layout.blocks[k].nodes,
+                                         [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
+                               k, e);
+        }
+        keyed[src] = 1;
       }
       auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
                                         [&](int i) { return x.row(i).data(); }));

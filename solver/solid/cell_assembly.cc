@@ -51,6 +51,31 @@ void GatherCellRows(const SparseMatrix& nm, const int32_t* ids, int n,
 
 namespace {
 
+// Node row r of nm, its columns numbered by `column`: its length, then
+// entry k's column and value mixed into lane k mod 4 (four independent
+// chains of multiplies instead of one), the lanes folded at the end.
+Key128 RowKey(const SparseMatrix& nm, int32_t r, const std::vector<int32_t>& column) {
+  const int32_t begin = nm.outerIndexPtr()[r], end = nm.outerIndexPtr()[r + 1];
+  const int32_t* cols = nm.innerIndexPtr();
+  const double* values = nm.valuePtr();
+  Hash128 lane[4];
+  int32_t k = begin;
+  for (; k + 4 <= end; k += 4) {
+    for (int l = 0; l < 4; ++l) {
+      lane[l].Mix(static_cast<uint64_t>(column[cols[k + l]]));
+      lane[l].Double(values[k + l]);
+    }
+  }
+  for (; k < end; ++k) {
+    lane[(k - begin) & 3].Mix(static_cast<uint64_t>(column[cols[k]]));
+    lane[(k - begin) & 3].Double(values[k]);
+  }
+  Hash128 h;
+  h.Mix(static_cast<uint64_t>(end - begin));
+  for (const Hash128& l : lane) h.Key(l.value());
+  return h.value();
+}
+
 // Per thread: scratch marks and node rows' hashes in the current cell.
 struct Scratch {
   std::vector<int32_t> cell_mark;
@@ -149,13 +174,7 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
           // The node's row, its columns numbered within the cell: hashed
           // once per cell (elements of a cell share most of their nodes).
           if (s.node_stamp[ids[i]] != c) {
-            Hash128 row;
-            row.Mix(static_cast<uint64_t>(nm.outerIndexPtr()[ids[i] + 1] - nm.outerIndexPtr()[ids[i]]));
-            for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-              row.Mix(static_cast<uint64_t>(s.cell_mark[it.col()]));
-              row.Double(it.value());
-            }
-            s.node_key[ids[i]] = row.value();
+            s.node_key[ids[i]] = RowKey(nm, ids[i], s.cell_mark);
             s.node_stamp[ids[i]] = c;
           }
           h.Key(s.node_key[ids[i]]);

@@ -261,7 +261,7 @@ struct StiffnessPartials::Maker {
     Eigen::MatrixXd h;
     Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
-    std::vector<double> w, wl, g, gl;
+    std::vector<double> w, wl, g, gl, trace;
     std::vector<uint8_t> covered;  // per cell column: in the element's support
     Group single;  // the group of one element (GroupOf)
   };
@@ -437,17 +437,26 @@ struct StiffnessPartials::Maker {
     if (!uniform) {
       zeroed(sc.gl, 3 * s, 3 * s).selfadjointView<Eigen::Lower>().rankUpdate(wl.transpose());
     }
-    const Eigen::Map<const Eigen::MatrixXd> gl(sc.gl.data(), uniform ? 0 : 3 * s, 3 * s);
-    auto at = [](const auto& m, int i, int j) { return i >= j ? m(i, j) : m(j, i); };
+    // Both triangles of G (and G_lambda), then K column by column.
+    gm.triangularView<Eigen::StrictlyUpper>() = gm.transpose();
+    Eigen::Map<Eigen::MatrixXd> gl(sc.gl.data(), uniform ? 0 : 3 * s, 3 * s);
+    if (!uniform) gl.triangularView<Eigen::StrictlyUpper>() = gl.transpose();
+    sc.trace.resize(s);
     for (int bb = 0; bb < s; ++bb) {
-      for (int a = 0; a < s; ++a) {
-        const double trace = at(gm, a, bb) + at(gm, s + a, s + bb) + at(gm, 2 * s + a, 2 * s + bb);
-        for (int dd = 0; dd < 3; ++dd) {
-          for (int c = 0; c < 3; ++c) {
-            const double lambda_term = uniform ? ratio * at(gm, c * s + a, dd * s + bb)
-                                               : at(gl, c * s + a, dd * s + bb);
-            k(3 * a + c, 3 * bb + dd) =
-                lambda_term + at(gm, dd * s + a, c * s + bb) + (c == dd ? trace : 0.0);
+      const double* g0 = gm.col(bb).data();
+      const double* g1 = gm.col(s + bb).data() + s;
+      const double* g2 = gm.col(2 * s + bb).data() + 2 * s;
+      for (int a = 0; a < s; ++a) sc.trace[a] = g0[a] + g1[a] + g2[a];
+      for (int dd = 0; dd < 3; ++dd) {
+        double* out = k.col(3 * bb + dd).data();
+        for (int c = 0; c < 3; ++c) {
+          // Column dd s + bb of G (or G_lambda) at rows c s + a; column
+          // c s + bb at rows dd s + a.
+          const double* lambda_col = (uniform ? gm : gl).col(dd * s + bb).data() + c * s;
+          const double* mu_col = gm.col(c * s + bb).data() + dd * s;
+          for (int a = 0; a < s; ++a) {
+            const double lambda_term = uniform ? ratio * lambda_col[a] : lambda_col[a];
+            out[3 * a + c] = lambda_term + mu_col[a] + (c == dd ? sc.trace[a] : 0.0);
           }
         }
       }

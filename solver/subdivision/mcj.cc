@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <thread>
 
 #include <Eigen/Geometry>
 
@@ -133,6 +135,10 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
   return m;
 }
 
+// Coarse complexes of this many cells make their subdivision matrix on a
+// second thread.
+constexpr int32_t kCellsForAThread = 256;
+
 absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {
   const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
                 nc = m.num_cells();
@@ -183,139 +189,157 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
     for (int32_t c : m.vertex_cells(v)) vertex_frozen[v] |= refined[c] == 0;
   }
 
-  // ---- The subdivision matrix, row by row. ----
-  std::vector<int32_t> outer{0}, inner;
-  std::vector<double> values;
-  outer.reserve(nv_fine + 1);
-  inner.reserve(static_cast<size_t>(nv_fine) * 27);
-  values.reserve(static_cast<size_t>(nv_fine) * 27);
-  RowBuilder row;
-  std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
-
-  // Old vertices -> vertex points.
-  for (int32_t v = 0; v < nv; ++v) {
-    sharp_nbrs.clear();
-    for (int32_t e : m.vertex_edges(v)) {
-      if (!sharp(e)) continue;
-      const auto& ev = m.edge_vertices(e);
-      sharp_nbrs.push_back(ev[0] == v ? ev[1] : ev[0]);
-    }
-    boundary_faces.clear();
-    boundary_edges.clear();
-    if (m.vertex_is_boundary(v)) {
-      for (int32_t f : m.vertex_faces(v)) {
-        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
-      }
-      for (int32_t e : m.vertex_edges(v)) {
-        if (m.edge_is_boundary(e)) boundary_edges.push_back(e);
-      }
-    }
-    if (vertex_frozen[v] || sharp_nbrs.size() >= 3 ||
-        (m.vertex_is_boundary(v) && sharp_nbrs.size() < 2 &&
-         boundary_faces.size() != boundary_edges.size())) {
-      // Unrefined neighbour, sharp corner, or a non-manifold boundary vertex.
-      row.Add(v, 1.0);
-    } else if (sharp_nbrs.size() == 2) {
-      // Crease: cubic B-spline curve rule (a + 6 V + b) / 8.
-      row.Add(sharp_nbrs[0], 1.0 / 8.0);
-      row.Add(v, 6.0 / 8.0);
-      row.Add(sharp_nbrs[1], 1.0 / 8.0);
-    } else if (m.vertex_is_boundary(v)) {
-      // Catmull-Clark on the boundary surface: (Fbar + 2 Rbar + (n - 3) V) / n
-      // with face points = face centroids and R = boundary edge midpoints.
-      const double n = static_cast<double>(boundary_faces.size());
-      for (int32_t f : boundary_faces) row.AddAverage(m.face_vertices(f), 1.0 / (n * n));
-      for (int32_t e : boundary_edges) {
-        const auto& ev = m.edge_vertices(e);
-        row.Add(ev[0], 1.0 / (n * n));
-        row.Add(ev[1], 1.0 / (n * n));
-      }
-      row.Add(v, (n - 3.0) / n);
-    } else {
-      // Interior: (Cbar + 3 Abar + 3 Ebar + (n - 7) V) / n, n cells around v.
-      const auto cells = m.vertex_cells(v);
-      const auto faces = m.vertex_faces(v);
-      const auto edges = m.vertex_edges(v);
-      const double n = static_cast<double>(cells.size());
-      for (int32_t c : cells) {
-        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
-      }
-      for (int32_t f : faces) {
-        row.AddAverage(m.face_vertices(f), 3.0 / (n * static_cast<double>(faces.size())));
-      }
-      for (int32_t e : edges) {
-        const auto& ev = m.edge_vertices(e);
-        const double w = 3.0 / (n * static_cast<double>(edges.size()) * 2.0);
-        row.Add(ev[0], w);
-        row.Add(ev[1], w);
-      }
-      row.Add(v, (n - 7.0) / n);
-    }
-    row.Flush(outer, inner, values);
-  }
-
-  // Edge points.
-  for (int32_t e = 0; e < ne; ++e) {
-    if (edge_point[e] < 0) continue;
-    const auto& ev = m.edge_vertices(e);
-    boundary_faces.clear();
-    if (m.edge_is_boundary(e)) {
-      for (int32_t f : m.edge_faces(e)) {
-        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
-      }
-    }
-    if (edge_frozen[e] || sharp(e) ||
-        (m.edge_is_boundary(e) && boundary_faces.size() != 2)) {
-      row.Add(ev[0], 0.5);
-      row.Add(ev[1], 0.5);
-    } else if (m.edge_is_boundary(e)) {
-      // (v0 + v1 + F0 + F1) / 4 with the boundary face points (centroids).
-      row.Add(ev[0], 0.25);
-      row.Add(ev[1], 0.25);
-      row.AddAverage(m.face_vertices(boundary_faces[0]), 0.25);
-      row.AddAverage(m.face_vertices(boundary_faces[1]), 0.25);
-    } else {
-      // (Cbar + 2 Abar + (n - 3) Mid) / n, n cells around the edge.
-      const auto cells = m.edge_cells(e);
-      const auto faces = m.edge_faces(e);
-      const double n = static_cast<double>(cells.size());
-      for (int32_t c : cells) {
-        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
-      }
-      for (int32_t f : faces) {
-        row.AddAverage(m.face_vertices(f), 2.0 / (n * static_cast<double>(faces.size())));
-      }
-      row.Add(ev[0], (n - 3.0) / (2.0 * n));
-      row.Add(ev[1], (n - 3.0) / (2.0 * n));
-    }
-    row.Flush(outer, inner, values);
-  }
-
-  // Face points.
-  for (int32_t f = 0; f < nf; ++f) {
-    if (face_point[f] < 0) continue;
-    if (face_frozen[f] || m.face_is_boundary(f)) {
-      row.AddAverage(m.face_vertices(f), 1.0);
-    } else {
-      // (C0 + 2 A + C1) / 4.
-      const auto& fc = m.face_cells(f);
-      row.AddAverage(m.cell_vertices(fc[0]), 0.25);
-      row.AddAverage(m.face_vertices(f), 0.5);
-      row.AddAverage(m.cell_vertices(fc[1]), 0.25);
-    }
-    row.Flush(outer, inner, values);
-  }
-
-  // Cell points: the centroid of the cell's vertices.
-  for (int32_t c = 0; c < nc; ++c) {
-    if (cell_point[c] < 0) continue;
-    row.AddAverage(m.cell_vertices(c), 1.0);
-    row.Flush(outer, inner, values);
-  }
-
+  // The subdivision matrix and the fine positions are made from the coarse
+  // complex alone: on a thread of their own beside the fine complex's
+  // topology when the complex is large (the same result either way).
   Level level;
-  level.a = FromCsr(nv_fine, nv, outer, inner, values);
-  Points fine_positions = level.a * m.positions();
+  Points fine_positions;
+  auto matrix = [&] {
+    // ---- The subdivision matrix, row by row. ----
+    std::vector<int32_t> outer{0}, inner;
+    std::vector<double> values;
+    outer.reserve(nv_fine + 1);
+    inner.reserve(static_cast<size_t>(nv_fine) * 27);
+    values.reserve(static_cast<size_t>(nv_fine) * 27);
+    RowBuilder row;
+    std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
+
+    // Old vertices -> vertex points.
+    for (int32_t v = 0; v < nv; ++v) {
+      sharp_nbrs.clear();
+      for (int32_t e : m.vertex_edges(v)) {
+        if (!sharp(e)) continue;
+        const auto& ev = m.edge_vertices(e);
+        sharp_nbrs.push_back(ev[0] == v ? ev[1] : ev[0]);
+      }
+      boundary_faces.clear();
+      boundary_edges.clear();
+      if (m.vertex_is_boundary(v)) {
+        for (int32_t f : m.vertex_faces(v)) {
+          if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+        }
+        for (int32_t e : m.vertex_edges(v)) {
+          if (m.edge_is_boundary(e)) boundary_edges.push_back(e);
+        }
+      }
+      if (vertex_frozen[v] || sharp_nbrs.size() >= 3 ||
+          (m.vertex_is_boundary(v) && sharp_nbrs.size() < 2 &&
+           boundary_faces.size() != boundary_edges.size())) {
+        // Unrefined neighbour, sharp corner, or a non-manifold boundary vertex.
+        row.Add(v, 1.0);
+      } else if (sharp_nbrs.size() == 2) {
+        // Crease: cubic B-spline curve rule (a + 6 V + b) / 8.
+        row.Add(sharp_nbrs[0], 1.0 / 8.0);
+        row.Add(v, 6.0 / 8.0);
+        row.Add(sharp_nbrs[1], 1.0 / 8.0);
+      } else if (m.vertex_is_boundary(v)) {
+        // Catmull-Clark on the boundary surface: (Fbar + 2 Rbar + (n - 3) V) / n
+        // with face points = face centroids and R = boundary edge midpoints.
+        const double n = static_cast<double>(boundary_faces.size());
+        for (int32_t f : boundary_faces) row.AddAverage(m.face_vertices(f), 1.0 / (n * n));
+        for (int32_t e : boundary_edges) {
+          const auto& ev = m.edge_vertices(e);
+          row.Add(ev[0], 1.0 / (n * n));
+          row.Add(ev[1], 1.0 / (n * n));
+        }
+        row.Add(v, (n - 3.0) / n);
+      } else {
+        // Interior: (Cbar + 3 Abar + 3 Ebar + (n - 7) V) / n, n cells around v.
+        const auto cells = m.vertex_cells(v);
+        const auto faces = m.vertex_faces(v);
+        const auto edges = m.vertex_edges(v);
+        const double n = static_cast<double>(cells.size());
+        for (int32_t c : cells) {
+          row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+        }
+        for (int32_t f : faces) {
+          row.AddAverage(m.face_vertices(f), 3.0 / (n * static_cast<double>(faces.size())));
+        }
+        for (int32_t e : edges) {
+          const auto& ev = m.edge_vertices(e);
+          const double w = 3.0 / (n * static_cast<double>(edges.size()) * 2.0);
+          row.Add(ev[0], w);
+          row.Add(ev[1], w);
+        }
+        row.Add(v, (n - 7.0) / n);
+      }
+      row.Flush(outer, inner, values);
+    }
+
+    // Edge points.
+    for (int32_t e = 0; e < ne; ++e) {
+      if (edge_point[e] < 0) continue;
+      const auto& ev = m.edge_vertices(e);
+      boundary_faces.clear();
+      if (m.edge_is_boundary(e)) {
+        for (int32_t f : m.edge_faces(e)) {
+          if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+        }
+      }
+      if (edge_frozen[e] || sharp(e) ||
+          (m.edge_is_boundary(e) && boundary_faces.size() != 2)) {
+        row.Add(ev[0], 0.5);
+        row.Add(ev[1], 0.5);
+      } else if (m.edge_is_boundary(e)) {
+        // (v0 + v1 + F0 + F1) / 4 with the boundary face points (centroids).
+        row.Add(ev[0], 0.25);
+        row.Add(ev[1], 0.25);
+        row.AddAverage(m.face_vertices(boundary_faces[0]), 0.25);
+        row.AddAverage(m.face_vertices(boundary_faces[1]), 0.25);
+      } else {
+        // (Cbar + 2 Abar + (n - 3) Mid) / n, n cells around the edge.
+        const auto cells = m.edge_cells(e);
+        const auto faces = m.edge_faces(e);
+        const double n = static_cast<double>(cells.size());
+        for (int32_t c : cells) {
+          row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+        }
+        for (int32_t f : faces) {
+          row.AddAverage(m.face_vertices(f), 2.0 / (n * static_cast<double>(faces.size())));
+        }
+        row.Add(ev[0], (n - 3.0) / (2.0 * n));
+        row.Add(ev[1], (n - 3.0) / (2.0 * n));
+      }
+      row.Flush(outer, inner, values);
+    }
+
+    // Face points.
+    for (int32_t f = 0; f < nf; ++f) {
+      if (face_point[f] < 0) continue;
+      if (face_frozen[f] || m.face_is_boundary(f)) {
+        row.AddAverage(m.face_vertices(f), 1.0);
+      } else {
+        // (C0 + 2 A + C1) / 4.
+        const auto& fc = m.face_cells(f);
+        row.AddAverage(m.cell_vertices(fc[0]), 0.25);
+        row.AddAverage(m.face_vertices(f), 0.5);
+        row.AddAverage(m.cell_vertices(fc[1]), 0.25);
+      }
+      row.Flush(outer, inner, values);
+    }
+
+    // Cell points: the centroid of the cell's vertices.
+    for (int32_t c = 0; c < nc; ++c) {
+      if (cell_point[c] < 0) continue;
+      row.AddAverage(m.cell_vertices(c), 1.0);
+      row.Flush(outer, inner, values);
+    }
+    level.a = FromCsr(nv_fine, nv, outer, inner, values);
+    fine_positions = level.a * m.positions();
+  };
+  std::thread beside;
+  struct Join {
+    std::thread& t;
+    ~Join() {
+      if (t.joinable()) t.join();
+    }
+  } join{beside};
+  if (nc >= kCellsForAThread && !options.validate_geometry) {
+    beside = std::thread(matrix);
+  } else {
+    matrix();
+  }
+
 
   // ---- Topology of the fine complex. ----
   // Face ids: children of split faces (one quad per corner, in the parent's
@@ -442,10 +466,19 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
     }
   }
 
-  ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(std::move(fine_positions),
-                                                      std::move(loops), std::move(cell_faces),
-                                                      std::move(cell_flip),
-                                                      options.validate_geometry));
+  if (beside.joinable()) {
+    // Adjacency needs the vertex count only: the positions follow.
+    ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(Points::Zero(nv_fine, 3), std::move(loops),
+                                                        std::move(cell_faces), std::move(cell_flip),
+                                                        /*validate_geometry=*/false));
+    beside.join();
+    level.fine.set_positions(std::move(fine_positions));
+  } else {
+    ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(std::move(fine_positions),
+                                                        std::move(loops), std::move(cell_faces),
+                                                        std::move(cell_flip),
+                                                        options.validate_geometry));
+  }
 
   // Sharp tags pass to both children of a split edge, or stay on an
   // unsplit one.
@@ -466,7 +499,8 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
 }
 
 absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const CellComplex> control, int levels,
-                                    std::vector<uint8_t> control_sharp_edges) {
+                                    std::vector<uint8_t> control_sharp_edges,
+                                    const std::function<void(const CellComplex&)>& beside_last) {
   if (levels < 0 || levels > 6) {
     return absl::InvalidArgumentError(
         absl::StrCat("subdivision levels must be in [0, 6], got ", levels));
@@ -487,12 +521,21 @@ absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const CellComplex> control, 
     SubdivisionOptions options;
     options.sharp_edges = std::move(h.sharp_edges);
     ASSIGN_OR_RETURN(Level level, SubdivideOnce(*h.fine, options));
-    h.a = (l == 0) ? std::move(level.a) : MultiplyRowMajor(level.a, h.a);
     for (int32_t& c : level.parent_cell) c = h.control_cell[c];
     h.control_cell = std::move(level.parent_cell);
     h.sharp_edges = std::move(level.sharp_edges);
     h.fine = std::make_shared<const CellComplex>(std::move(level.fine));
+    if (l == 0) {
+      h.a = std::move(level.a);
+    } else if (l == levels - 1 && beside_last) {
+      std::thread product([&] { h.a = MultiplyRowMajor(level.a, h.a); });
+      beside_last(*h.fine);
+      product.join();
+    } else {
+      h.a = MultiplyRowMajor(level.a, h.a);
+    }
   }
+  if (levels == 1 && beside_last) beside_last(*h.fine);
   return h;
 }
 

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -57,8 +58,13 @@ struct Hierarchy {
   std::vector<uint8_t> sharp_edges;     // per fine edge
 };
 
-absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const mesh::CellComplex> control,
-                                    int levels, std::vector<uint8_t> control_sharp_edges);
+// beside_last (optional): called with the finest complex, on this thread,
+// while the last level's matrix product runs on another (work of the
+// caller's that needs the complex but not A); not called for 0 levels.
+absl::StatusOr<Hierarchy> Subdivide(
+    std::shared_ptr<const mesh::CellComplex> control, int levels,
+    std::vector<uint8_t> control_sharp_edges,
+    const std::function<void(const mesh::CellComplex&)>& beside_last = nullptr);
 
 // Tags of edges given by vertex pairs; InvalidArgument names a pair that is
 // not an edge of `complex`.

@@ -21,34 +21,6 @@ struct Cell {
 
 }  // namespace
 
-void GatherCellRows(const SparseMatrix& nm, const int32_t* ids, int n,
-                    const std::vector<int32_t>& column, std::vector<int32_t>& mark,
-                    ElementRows& out) {
-  // The cell columns touched, in ascending order (a scan of the cell's few
-  // columns, no sort), then each one's place among them.
-  int32_t end = 0;
-  for (int i = 0; i < n; ++i) {
-    for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-      const int32_t col = column[it.col()];
-      mark[col] = 0;
-      end = std::max(end, col + 1);
-    }
-  }
-  out.support.clear();
-  for (int32_t col = 0; col < end; ++col) {
-    if (mark[col] < 0) continue;
-    mark[col] = static_cast<int32_t>(out.support.size());
-    out.support.push_back(col);
-  }
-  out.b.setZero(n, static_cast<Eigen::Index>(out.support.size()));
-  for (int i = 0; i < n; ++i) {
-    for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-      out.b(i, mark[column[it.col()]]) = it.value();
-    }
-  }
-  for (int32_t col : out.support) mark[col] = -1;
-}
-
 namespace {
 
 // Node row r of nm, its columns numbered by `column`: its length, then
@@ -81,6 +53,7 @@ struct Scratch {
   std::vector<int32_t> cell_mark;
   std::vector<int32_t> node_stamp;  // the cell whose numbering node_key[i] is in
   std::vector<Key128> node_key;
+  std::vector<int32_t> nodes;       // the current cell's distinct nodes
 };
 
 // job(thread, part) once for every part in [0, parts), each thread taking
@@ -148,10 +121,16 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       Scratch& s = scratch[t];
       const Cell& cell = cells[c];
       std::vector<int32_t>& support = geometry.supports[c];
+      // The cell's distinct nodes (elements of a cell share most of
+      // theirs), each row read once for the support.
+      s.nodes.clear();
       for (const auto& [kind, e] : cell.elements) {
         const models::ElementBlock& block = layout.blocks[kind];
         const int32_t* ids = block.element_nodes(e);
         for (int i = 0; i < block.nodes; ++i) {
+          if (s.node_stamp[ids[i]] == c) continue;
+          s.node_stamp[ids[i]] = c;
+          s.nodes.push_back(ids[i]);
           for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
             const int32_t col = static_cast<int32_t>(it.col());
             if (s.cell_mark[col] < 0) {
@@ -163,6 +142,8 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       }
       std::sort(support.begin(), support.end());
       for (size_t a = 0; a < support.size(); ++a) s.cell_mark[support[a]] = static_cast<int32_t>(a);
+      // Each node's row, its columns numbered within the cell.
+      for (int32_t node : s.nodes) s.node_key[node] = RowKey(nm, node, s.cell_mark);
       Hash128 h;
       h.Mix(support.size());
       h.Mix(cell.elements.size());
@@ -170,15 +151,7 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
         const models::ElementBlock& block = layout.blocks[kind];
         h.Mix(static_cast<uint64_t>(kind));
         const int32_t* ids = block.element_nodes(e);
-        for (int i = 0; i < block.nodes; ++i) {
-          // The node's row, its columns numbered within the cell: hashed
-          // once per cell (elements of a cell share most of their nodes).
-          if (s.node_stamp[ids[i]] != c) {
-            s.node_key[ids[i]] = RowKey(nm, ids[i], s.cell_mark);
-            s.node_stamp[ids[i]] = c;
-          }
-          h.Key(s.node_key[ids[i]]);
-        }
+        for (int i = 0; i < block.nodes; ++i) h.Key(s.node_key[ids[i]]);
       }
       geometry.keys[c] = h.value();
       for (int32_t col : support) s.cell_mark[col] = -1;

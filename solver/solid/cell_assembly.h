@@ -35,14 +35,6 @@
 
 namespace dynsolid::solid {
 
-// An element's rows of the node matrix on the columns of its control
-// cell's support: B (n x s_e), support[a] the cell column of column a
-// (ascending).
-struct ElementRows {
-  std::vector<int32_t> support;
-  Eigen::MatrixXd b;
-};
-
 
 // The partials of one build, by cell key, for the next.
 struct CellPartials {
@@ -83,13 +75,6 @@ struct CellSumSpec {
       make_cell;
 };
 
-// Rows of nodes ids[0..n) of the node matrix on the columns of a cell's
-// support they touch (out as above). column[c]: control point c's column
-// in the cell, for every c in these rows; mark: one entry per cell column,
-// all -1 (scratch, left all -1).
-void GatherCellRows(const subdivision::SparseMatrix& nm, const int32_t* ids, int n,
-                    const std::vector<int32_t>& column, std::vector<int32_t>& mark,
-                    ElementRows& out);
 
 // The sums, dense (dofs #control square) or as triplets in cell order.
 struct CellSums {

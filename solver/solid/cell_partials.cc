@@ -1,6 +1,7 @@
 #include "solver/solid/cell_partials.h"
 
 #include <algorithm>
+#include <bit>
 #include <array>
 #include <cmath>
 #include <mutex>
@@ -30,8 +31,14 @@ struct CellPoints::Impl {
     std::vector<ElementRows> rows;
     std::vector<Rest> own;  // per element of the cell whose group has one element
     std::vector<Element> out;
-    std::vector<int32_t> column, mark;  // control point -> cell column; GatherCellRows' marks
+    std::vector<int32_t> column;        // control point -> cell column
     std::vector<double> j;              // rest Jacobians (scratch)
+    // The cell's distinct FEM nodes: their rows dense on the cell's columns
+    // (row major) and which columns each touches (bit masks).
+    std::vector<int32_t> nodes, local, stamp;  // local[node]: its row, when stamp[node] == serial
+    int32_t serial = 0;
+    std::vector<double> table;
+    std::vector<uint64_t> masks, element_mask;
   };
 
   Impl(const models::ElementLayout& layout, const SparseMatrix& nm, int threads)
@@ -68,10 +75,37 @@ struct CellPoints::Impl {
     if (!th.elements.empty() && th.elements == elements && th.support == support) return th.out;
     th.elements = elements;
     th.support = support;
-    if (th.column.empty()) th.column.assign(nm.cols(), -1);
+    if (th.column.empty()) {
+      th.column.assign(nm.cols(), -1);
+      th.stamp.assign(nm.rows(), 0);
+      th.local.assign(nm.rows(), -1);
+    }
     const int s = static_cast<int>(support.size());
+    const int words = (s + 63) / 64;
     for (int a = 0; a < s; ++a) th.column[support[a]] = a;
-    th.mark.assign(s, -1);
+    // Each distinct node's row once, dense on the cell's columns (elements
+    // of a cell share most of their nodes).
+    ++th.serial;
+    th.nodes.clear();
+    for (const auto& [kind, e] : elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const int32_t* ids = block.element_nodes(e);
+      for (int k = 0; k < block.nodes; ++k) {
+        if (th.stamp[ids[k]] == th.serial) continue;
+        th.stamp[ids[k]] = th.serial;
+        th.local[ids[k]] = static_cast<int32_t>(th.nodes.size());
+        th.nodes.push_back(ids[k]);
+      }
+    }
+    th.table.assign(th.nodes.size() * s, 0.0);
+    th.masks.assign(th.nodes.size() * words, 0);
+    for (size_t l = 0; l < th.nodes.size(); ++l) {
+      for (SparseMatrix::InnerIterator it(nm, th.nodes[l]); it; ++it) {
+        const int32_t col = th.column[it.col()];
+        th.table[l * s + col] = it.value();
+        th.masks[l * words + col / 64] |= uint64_t{1} << (col % 64);
+      }
+    }
     const size_t n = elements.size();
     if (th.rows.size() < n) th.rows.resize(n);
     if (th.own.size() < n) th.own.resize(n);
@@ -79,7 +113,28 @@ struct CellPoints::Impl {
     for (size_t i = 0; i < n; ++i) {
       const auto [kind, e] = elements[i];
       const models::ElementBlock& block = layout.blocks[kind];
-      GatherCellRows(nm, block.element_nodes(e), block.nodes, th.column, th.mark, th.rows[i]);
+      // The element's rows on the cell columns its nodes touch, from the
+      // table.
+      const int32_t* ids = block.element_nodes(e);
+      th.element_mask.assign(words, 0);
+      for (int k = 0; k < block.nodes; ++k) {
+        const uint64_t* m = th.masks.data() + static_cast<size_t>(th.local[ids[k]]) * words;
+        for (int w = 0; w < words; ++w) th.element_mask[w] |= m[w];
+      }
+      ElementRows& er = th.rows[i];
+      er.support.clear();
+      for (int w = 0; w < words; ++w) {
+        for (uint64_t bits = th.element_mask[w]; bits != 0; bits &= bits - 1) {
+          er.support.push_back(64 * w + std::countr_zero(bits));
+        }
+      }
+      const int se = static_cast<int>(er.support.size());
+      er.b.resize(block.nodes, se);
+      for (int a = 0; a < se; ++a) {
+        const double* from = th.table.data() + er.support[a];
+        double* to = er.b.col(a).data();
+        for (int k = 0; k < block.nodes; ++k) to[k] = from[static_cast<size_t>(th.local[ids[k]]) * s];
+      }
       // Groups of several elements keep their points' data for the build;
       // an irregular region's groups of one are made in the thread's
       // scratch (keeping each one's took more time in fresh pages).

@@ -19,10 +19,18 @@
 
 namespace dynsolid::solid {
 
+// An element's rows of the node matrix on the columns of its control
+// cell's support: B (n x s_e), support[a] the cell column of column a
+// (ascending).
+struct ElementRows {
+  std::vector<int32_t> support;
+  Eigen::MatrixXd b;
+};
+
 // What the mass and stiffness partials of a cell both read of its
 // elements, made once per cell on the pool thread that makes them
 // (SumByCells makes a cell's partials of every job on one thread): each
-// element's node rows on the cell's support (GatherCellRows) and, at its
+// element's node rows on the cell columns they touch (ElementRows) and, at its
 // quadrature points, the rest volume dV = max(det J, 0) w and J^-T (zero
 // where dV is 0), both computed as the model computes them. Groups of
 // several elements keep their points' data for the life of this object.

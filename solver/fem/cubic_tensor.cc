@@ -82,4 +82,15 @@ void CubicTensorProducts::Derivatives(const double* x, int ld_x, int cols, doubl
   }
 }
 
+void CubicTensorProducts::Jacobians(const NodeMatrixX3& x, std::vector<double>& j) const {
+  double columns[3 * 64];  // x's coordinates, column major
+  for (int m = 0; m < 64; ++m) {
+    for (int r = 0; r < 3; ++r) columns[64 * r + m] = x(m, r);
+  }
+  j.resize(9 * 64);
+  // Column r's derivative along u_c lands at j[(3 r + c) 64]: ld_out 192
+  // puts column r at 192 r = (3 r) 64.
+  Derivatives(columns, 64, 3, j.data(), j.data() + 64, j.data() + 128, 192);
+}
+
 }  // namespace dynsolid::fem

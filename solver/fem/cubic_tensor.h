@@ -17,6 +17,7 @@
 #pragma once
 
 #include <array>
+#include <vector>
 
 #include "solver/fem/element_data.h"
 
@@ -38,6 +39,10 @@ class CubicTensorProducts {
   // c = u, v, w: the parametric derivatives at each point.
   void Derivatives(const double* x, int ld_x, int cols, double* out_u, double* out_v,
                    double* out_w, int ld_out) const;
+  // The rest Jacobians of rest nodes x (64 x 3) at every point, laid out
+  // as fem::RestJacobians lays them out (j[(3 r + c) 64 + q] = J_q(r, c)),
+  // from the derivatives above: equal to RestJacobians' up to rounding.
+  void Jacobians(const NodeMatrixX3& x, std::vector<double>& j) const;
 
  private:
   // a_[a][i] = A(a, i), d_[a][i] = A'(a, i).

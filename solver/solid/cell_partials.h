@@ -32,7 +32,8 @@ struct ElementRows {
 // (SumByCells makes a cell's partials of every job on one thread): each
 // element's node rows on the cell columns they touch (ElementRows) and, at its
 // quadrature points, the rest volume dV = max(det J, 0) w and J^-T (zero
-// where dV is 0), both computed as the model computes them. Groups of
+// where dV is 0), as the model computes them (a cubic element's J by sum
+// factorization: the same up to rounding). Groups of
 // several elements keep their points' data for the life of this object.
 // `layout` and `nm` must outlive it; `threads`: the pool's size.
 class CellPoints {

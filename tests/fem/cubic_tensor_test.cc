@@ -1,7 +1,10 @@
 // The cubic element's sum-factorized products against the dense tables.
 #include "solver/fem/cubic_tensor.h"
 
+#include <algorithm>
+#include <cmath>
 #include <random>
+#include <vector>
 
 #include <Eigen/Core>
 #include <gtest/gtest.h>
@@ -47,6 +50,30 @@ TEST(CubicTensorProductsTest, EqualTheDenseTablesTimesTheNodeValues) {
   }
   EXPECT_GT(largest, 0.1);
   EXPECT_LT(worst, 1e-14 * 64 * largest) << "largest " << largest;
+}
+
+// The rest Jacobians from the derivatives equal RestJacobians' (dense,
+// node by node) up to rounding, on a curved element (a cube's nodes moved
+// by a smooth map).
+TEST(CubicTensorProductsTest, JacobiansEqualTheDenseRestJacobians) {
+  const KindTable table = MakeKindTable(ElementKind::kCubic);
+  const CubicTensorProducts products(table);
+  NodeMatrixX3 x(64, 3);
+  for (int m = 0; m < 64; ++m) {
+    const double u = m / 16, v = (m / 4) % 4, w = m % 4;
+    x.row(m) << u + 0.1 * std::sin(v), v + 0.05 * u * w, 0.8 * w + 0.02 * u * u;
+  }
+  std::vector<double> dense, factorized;
+  RestJacobians(table, x, dense);
+  products.Jacobians(x, factorized);
+  ASSERT_EQ(dense.size(), factorized.size());
+  double largest = 0, worst = 0;
+  for (size_t i = 0; i < dense.size(); ++i) {
+    largest = std::max(largest, std::abs(dense[i]));
+    worst = std::max(worst, std::abs(dense[i] - factorized[i]));
+  }
+  EXPECT_GT(largest, 0.5);
+  EXPECT_LT(worst, 1e-13 * largest);
 }
 
 }  // namespace

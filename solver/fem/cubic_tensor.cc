@@ -66,7 +66,8 @@ void CubicTensorProducts::Values(const double* x, int ld_x, int cols, double* ou
 }
 
 void CubicTensorProducts::Derivatives(const double* x, int ld_x, int cols, double* out_u,
-                                      double* out_v, double* out_w, int ld_out) const {
+                                      double* out_v, double* out_w, int ld_out,
+                                      double* out_values) const {
   Tensor w0, w1, v00, v10, v01;
   for (int col = 0; col < cols; ++col) {
     const double* in = x + static_cast<int64_t>(col) * ld_x;
@@ -79,6 +80,7 @@ void CubicTensorProducts::Derivatives(const double* x, int ld_x, int cols, doubl
     PassU(d_, v00, out_u + o);
     PassU(a_, v10, out_v + o);
     PassU(a_, v01, out_w + o);
+    if (out_values != nullptr) PassU(a_, v00, out_values + o);
   }
 }
 

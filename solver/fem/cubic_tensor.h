@@ -36,9 +36,11 @@ class CubicTensorProducts {
   // interpolant at each point.
   void Values(const double* x, int ld_x, int cols, double* out, int ld_out) const;
   // out_c (64 x cols each, leading dimension ld_out) = dN/du_c x for
-  // c = u, v, w: the parametric derivatives at each point.
+  // c = u, v, w: the parametric derivatives at each point; with
+  // out_values, also Values' result there (one pass more: the values share
+  // the derivatives' passes along w and v), the same bits.
   void Derivatives(const double* x, int ld_x, int cols, double* out_u, double* out_v,
-                   double* out_w, int ld_out) const;
+                   double* out_w, int ld_out, double* out_values = nullptr) const;
   // The rest Jacobians of rest nodes x (64 x 3) at every point, laid out
   // as fem::RestJacobians lays them out (j[(3 r + c) 64 + q] = J_q(r, c)),
   // from the derivatives above: equal to RestJacobians' up to rounding.

@@ -211,6 +211,18 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       }
     }
   }
+  // Costliest first (points times support squared: the rank updates), so
+  // that no thread is left with a large cell while the others are done.
+  // Each partial is the same whichever thread makes it, and when.
+  std::vector<double> cost(control_cells, 0);
+  for (int32_t c : to_make) {
+    double points = 0;
+    for (const auto& [kind, e] : cells[c].elements) points += layout.tables[kind].points;
+    const double side = static_cast<double>(cells[c].support.size());
+    cost[c] = points * side * side;
+  }
+  std::stable_sort(to_make.begin(), to_make.end(),
+                   [&](int32_t a, int32_t b) { return cost[a] > cost[b]; });
   std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> made(
       nj, std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>(control_cells));
   Parts(pool, static_cast<int>(to_make.size()), [&](int t, int k) {

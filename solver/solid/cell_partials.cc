@@ -39,6 +39,9 @@ struct CellPoints::Impl {
     int32_t serial = 0;
     std::vector<double> table;
     std::vector<uint64_t> masks, element_mask;
+    // Per element of the cell: N B (Q x s_e), once made.
+    std::vector<std::vector<double>> values;
+    std::vector<uint8_t> has_values;
   };
 
   Impl(const models::ElementLayout& layout, const SparseMatrix& nm, int threads)
@@ -115,6 +118,8 @@ struct CellPoints::Impl {
     const size_t n = elements.size();
     if (th.rows.size() < n) th.rows.resize(n);
     if (th.own.size() < n) th.own.resize(n);
+    if (th.values.size() < n) th.values.resize(n);
+    th.has_values.assign(n, 0);
     th.out.resize(n);
     for (size_t i = 0; i < n; ++i) {
       const auto [kind, e] = elements[i];
@@ -161,6 +166,38 @@ struct CellPoints::Impl {
     return th.out;
   }
 
+  const double* Values(int t, size_t i) {
+    Thread& th = thread[t];
+    std::vector<double>& out = th.values[i];
+    if (th.has_values[i]) return out.data();
+    const auto [kind, e] = th.elements[i];
+    const fem::KindTable& table = layout.tables[kind];
+    const ElementRows& er = th.rows[i];
+    out.resize(static_cast<size_t>(table.points) * er.b.cols());
+    if (kind == 0 && cubic.has_value()) {
+      cubic->Values(er.b.data(), 64, static_cast<int>(er.b.cols()), out.data(), 64);
+    } else {
+      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
+          shape(table.n.data(), table.points, table.nodes);
+      Eigen::Map<Eigen::MatrixXd>(out.data(), table.points, er.b.cols()).noalias() = shape * er.b;
+    }
+    th.has_values[i] = 1;
+    return out.data();
+  }
+
+  void CubicDerivatives(int t, size_t i, double* out) {
+    Thread& th = thread[t];
+    const ElementRows& er = th.rows[i];
+    const int se = static_cast<int>(er.b.cols());
+    double* values = nullptr;
+    if (!th.has_values[i]) {
+      th.values[i].resize(static_cast<size_t>(64) * se);
+      values = th.values[i].data();
+      th.has_values[i] = 1;
+    }
+    cubic->Derivatives(er.b.data(), 64, se, out, out + 64 * se, out + 128 * se, 64, values);
+  }
+
   const models::ElementLayout& layout;
   const SparseMatrix& nm;
   std::optional<fem::CubicTensorProducts> cubic;  // when the cubic table is on the 4-point rule
@@ -177,11 +214,14 @@ const std::vector<CellPoints::Element>& CellPoints::Of(
     const std::vector<std::pair<int, int32_t>>& elements) {
   return impl_->Of(thread, support, elements);
 }
+const double* CellPoints::Values(int thread, size_t i) { return impl_->Values(thread, i); }
+void CellPoints::CubicDerivatives(int thread, size_t i, double* out) {
+  impl_->CubicDerivatives(thread, i, out);
+}
 
 struct MassPartials::Maker {
   // Per pool thread.
   struct Scratch {
-    Eigen::MatrixXd nb;                    // N B_e (Q x s_e)
     std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
     std::vector<double> root;              // sqrt(rho dV) per point
     std::vector<uint8_t> covered;          // per cell column: in the element's support
@@ -189,7 +229,6 @@ struct MassPartials::Maker {
 
   Maker(const models::ElementLayout& layout, bool has_damping, CellPoints& points, int threads)
       : layout(layout), points(points), has_damping(has_damping), scratch(threads) {
-    if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
     spec.dofs = 1;
     spec.outputs = has_damping ? 2 : 1;
     spec.salt = 0x6d617373;  // "mass"
@@ -261,14 +300,7 @@ struct MassPartials::Maker {
           std::fill_n(sc.w[o].data() + static_cast<int64_t>(col) * rows + row, table.points, 0.0);
         }
       }
-      if (kind == 0 && cubic.has_value()) {
-        sc.nb.resize(64, er.b.cols());
-        cubic->Values(er.b.data(), 64, static_cast<int>(er.b.cols()), sc.nb.data(), 64);
-      } else {
-        const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
-            shape(table.n.data(), table.points, block.nodes);
-        sc.nb.noalias() = shape * er.b;
-      }
+      const double* nb = points.Values(t, i);  // N B (Q x s_e)
       sc.root.resize(table.points);
       for (int o = 0; o < ws; ++o) {
         for (int q = 0; q < table.points; ++q) {
@@ -276,7 +308,7 @@ struct MassPartials::Maker {
           sc.root[q] = std::sqrt(std::max(value * cell[i].dv[q], 0.0));
         }
         for (size_t a = 0; a < er.support.size(); ++a) {
-          const double* from = sc.nb.col(static_cast<Eigen::Index>(a)).data();
+          const double* from = nb + a * table.points;
           double* to = sc.w[o].data() + static_cast<int64_t>(er.support[a]) * rows + row;
           for (int q = 0; q < table.points; ++q) to[q] = sc.root[q] * from[q];
         }
@@ -296,7 +328,6 @@ struct MassPartials::Maker {
   CellPoints& points;
   const bool has_damping;
   CellSumSpec spec;
-  std::optional<fem::CubicTensorProducts> cubic;  // N B sum-factorized (cubic_tensor.h)
   std::vector<Scratch> scratch;
 };
 
@@ -457,7 +488,7 @@ struct StiffnessPartials::Maker {
         double* pu = sc.p.data();
         double* pv = pu + 64 * se;
         double* pw = pv + 64 * se;
-        cubic->Derivatives(er.b.data(), 64, se, pu, pv, pw, 64);
+        points.CubicDerivatives(t, i, pu);  // (and N B for the mass, on the way)
         for (int a = 0; a < se; ++a) {
           const int col = er.support[a];
           const double* du = pu + 64 * a;

@@ -9,6 +9,7 @@
 // shape, as after a local subdivision.)
 #pragma once
 
+#include <cstddef>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -52,6 +53,13 @@ class CellPoints {
   // thread's last cell was this one. Valid until the thread's next call.
   const std::vector<Element>& Of(int thread, const std::vector<int32_t>& support,
                                  const std::vector<std::pair<int, int32_t>>& elements);
+  // Of element i of the thread's last cell: N B (Q x s_e, column major),
+  // made when first asked (or by CubicDerivatives) and kept for the cell.
+  const double* Values(int thread, size_t i);
+  // For a cubic element on the 4-point rule (fem::CubicTensorProducts):
+  // the parametric derivatives of B into out (du, dv, dw: 3 x 64 x s_e),
+  // making its N B on the way when not made yet (the same bits).
+  void CubicDerivatives(int thread, size_t i, double* out);
 
  private:
   struct Impl;

@@ -50,6 +50,11 @@ TEST(CubicTensorProductsTest, EqualTheDenseTablesTimesTheNodeValues) {
   }
   EXPECT_GT(largest, 0.1);
   EXPECT_LT(worst, 1e-14 * 64 * largest) << "largest " << largest;
+  // The values made beside the derivatives are Values' to the bit.
+  Eigen::MatrixXd beside = Eigen::MatrixXd::Zero(ld, cols);
+  products.Derivatives(x.data(), ld, cols, d[0].data(), d[1].data(), d[2].data(), ld,
+                       beside.data());
+  EXPECT_EQ(beside, values);
 }
 
 // The rest Jacobians from the derivatives equal RestJacobians' (dense,

@@ -253,26 +253,43 @@ ElementSet ClassifyElements(const CellComplex& m) {
 subdivision::SparseMatrix NodeMatrix(const CellComplex& m, const subdivision::SparseMatrix& a,
                                      const ElementSet& elements) {
   if (elements.num_virtual_nodes == 0) return a;
-  using Triplet = Eigen::Triplet<double, int32_t>;
-  std::vector<Triplet> t;
-  t.reserve(static_cast<size_t>(a.nonZeros()) + elements.virtual_node_cell.size() * 64);
-  for (int32_t r = 0; r < a.rows(); ++r) {
-    for (subdivision::SparseMatrix::InnerIterator it(a, r); it; ++it) {
-      t.emplace_back(r, static_cast<int32_t>(it.col()), it.value());
-    }
-  }
+  // A's rows as they are, then each virtual node's row: the mean of its
+  // cell's vertices' rows (summed in vertex order through a dense
+  // accumulator, columns ascending), written straight into the rows.
+  const int32_t cols = static_cast<int32_t>(a.cols());
+  std::vector<int32_t> outer(a.outerIndexPtr(), a.outerIndexPtr() + a.rows() + 1);
+  std::vector<int32_t> inner(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
+  std::vector<double> values(a.valuePtr(), a.valuePtr() + a.nonZeros());
+  std::vector<double> acc(cols, 0.0);
+  std::vector<int32_t> mark(cols, -1), touched;
   for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
     const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);
     const double w = 1.0 / static_cast<double>(verts.size());
+    touched.clear();
     for (int32_t v : verts) {
       for (subdivision::SparseMatrix::InnerIterator it(a, v); it; ++it) {
-        t.emplace_back(elements.num_mesh_vertices + i, static_cast<int32_t>(it.col()),
-                       w * it.value());
+        const int32_t c = static_cast<int32_t>(it.col());
+        if (mark[c] != i) {
+          mark[c] = i;
+          acc[c] = w * it.value();
+          touched.push_back(c);
+        } else {
+          acc[c] += w * it.value();
+        }
       }
     }
+    std::sort(touched.begin(), touched.end());
+    for (int32_t c : touched) {
+      inner.push_back(c);
+      values.push_back(acc[c]);
+    }
+    outer.push_back(static_cast<int32_t>(inner.size()));
   }
-  subdivision::SparseMatrix out(elements.num_nodes(), a.cols());
-  out.setFromTriplets(t.begin(), t.end());
+  subdivision::SparseMatrix out(elements.num_nodes(), cols);
+  out.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), out.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), out.innerIndexPtr());
+  std::copy(values.begin(), values.end(), out.valuePtr());
   return out;
 }
 

@@ -116,6 +116,16 @@ TEST(ElementSetTest, PyramidCellGetsVirtualNodeAndEightPyramids) {
   const Points d = n * h.control->positions();
   const Eigen::Vector3d centroid = h.fine->CellCentroid(e.virtual_node_cell[0]);
   EXPECT_NEAR((d.row(d.rows() - 1).transpose() - centroid).norm(), 0.0, 1e-12);
+  // A's rows as they are; the virtual node's row the mean of its cell's
+  // vertices' rows (against a dense sum), summing to one.
+  const Eigen::MatrixXd dense_n(n), dense_a(h.a);
+  EXPECT_EQ(dense_n.topRows(dense_a.rows()), dense_a);
+  const auto verts = h.fine->cell_vertices(e.virtual_node_cell[0]);
+  Eigen::RowVectorXd mean = Eigen::RowVectorXd::Zero(dense_a.cols());
+  for (int32_t v : verts) mean += dense_a.row(v);
+  mean /= static_cast<double>(verts.size());
+  EXPECT_LT((dense_n.row(dense_n.rows() - 1) - mean).cwiseAbs().maxCoeff(), 1e-15);
+  EXPECT_NEAR(dense_n.row(dense_n.rows() - 1).sum(), 1.0, 1e-14);
   // Each pyramid has positive volume: base normal points at the apex.
   for (int32_t el = 0; el < e.num_pyramid(); ++el) {
     const int32_t* q = &e.pyramid_nodes[5 * el];

@@ -382,6 +382,12 @@ std::vector<int32_t> MatchStiffnessGroups(const ElementLayout& layout,
   return match;
 }
 
+Key128 RestKey(const fem::NodeMatrixX3& rest) {
+  Hash128 h;
+  h.Doubles(rest.data(), rest.size());
+  return h.value();
+}
+
 namespace {
 
 // Material sample arrays deduplicated by content, numbered in the order
@@ -411,11 +417,13 @@ struct ShapeData {
   fem::NodeMatrixX3 centre_gradient;  // physical gradients at the centre
   double volume = 0;
   bool inverted = false;
+  Key128 rest_key;                    // RestKey(rest)
 };
 
 ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x) {
   ShapeData sd;
   sd.rest = x;
+  sd.rest_key = RestKey(x);
   fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
   thread_local std::vector<double> j;
   fem::RestJacobians(table, x, j);
@@ -519,6 +527,7 @@ void GroupElements(
     grp.centre_gradient = sd.centre_gradient;
     grp.shape_volume = sd.volume;
     grp.shape_inverted = sd.inverted;
+    grp.rest_key = sd.rest_key;
   }
   // Elements sorted by group, and within a group along a Z-order curve
   // of their centres (ties by index).
@@ -590,20 +599,17 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
     const ElementBlock* was = previous != nullptr ? &previous->blocks[kind] : nullptr;
     if (was != nullptr && was->nodes == block.nodes) {
       for (size_t g = 0; g < was->groups.size(); ++g) {
-        const fem::NodeMatrixX3& r = was->groups[g].rest;
-        Hash128 h;
-        h.Doubles(r.data(), r.size());
-        known.try_emplace(h.value(), static_cast<int32_t>(g));
+        known.try_emplace(was->groups[g].rest_key, static_cast<int32_t>(g));
       }
     }
     auto shape_of = [&](int32_t, const fem::NodeMatrixX3& x) {
       if (!known.empty()) {
-        Hash128 h;
-        h.Doubles(x.data(), x.size());
-        const auto it = known.find(h.value());
+        const auto it = known.find(RestKey(x));
         if (it != known.end()) {
           const ElementGroup& g = was->groups[it->second];
-          if (g.rest == x) return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted};
+          if (g.rest == x) {
+            return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
+          }
         }
       }
       return IntegrateShape(table, x);
@@ -638,7 +644,7 @@ ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& res
     // is that of the element's group before.
     auto shape_of = [&was](int32_t e, const fem::NodeMatrixX3&) {
       const ElementGroup& g = was.groups[was.group[e]];
-      return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted};
+      return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
     };
     GroupElements(layout, kind, rest, material_of, shape_of, pool);
   }

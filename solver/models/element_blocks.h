@@ -13,6 +13,7 @@
 
 #include <Eigen/Core>
 
+#include "solver/common/hash128.h"
 #include "solver/fem/element_data.h"
 #include "solver/fem/element_set.h"
 #include "solver/mesh/points.h"
@@ -54,7 +55,11 @@ struct ElementGroup {
   fem::NodeMatrixX3 centre_gradient;  // n x 3 physical gradients at the centre
   double shape_volume = 0;            // rest volume of one element of its shape
   bool shape_inverted = false;        // det J0 <= 0 at a quadrature point of its shape
+  Key128 rest_key;                    // RestKey(rest), for keys of what depends on it
 };
+
+// A 128-bit hash of rest nodes' bits (ElementGroup::rest_key).
+Key128 RestKey(const fem::NodeMatrixX3& rest);
 
 struct ElementBlock {
   fem::ElementKind kind = fem::ElementKind::kLinear;

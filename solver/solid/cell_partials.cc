@@ -229,6 +229,14 @@ struct MassPartials::Maker {
 
   Maker(const models::ElementLayout& layout, bool has_damping, CellPoints& points, int threads)
       : layout(layout), points(points), has_damping(has_damping), scratch(threads) {
+    for (const auto& array : layout.materials) {
+      Hash128 h;
+      for (const models::MaterialPoint& m : array) {
+        h.Double(m.density);
+        if (has_damping) h.Double(m.damping);
+      }
+      material_key.push_back(h.value());
+    }
     spec.dofs = 1;
     spec.outputs = has_damping ? 2 : 1;
     spec.salt = 0x6d617373;  // "mass"
@@ -240,15 +248,14 @@ struct MassPartials::Maker {
     };
   }
 
+  // A group's key: its kind, rest shape (the layout's rest key) and its
+  // material array's densities (and dampings), each array hashed once.
   Key128 GroupKey(int kind, int32_t gi) const {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     Hash128 h;
     h.Mix(static_cast<uint64_t>(kind));
-    h.Doubles(grp.rest.data(), grp.rest.size());
-    for (const models::MaterialPoint& m : layout.materials[grp.material]) {
-      h.Double(m.density);
-      if (has_damping) h.Double(m.damping);
-    }
+    h.Key(grp.rest_key);
+    h.Key(material_key[grp.material]);
     return h.value();
   }
 
@@ -327,6 +334,7 @@ struct MassPartials::Maker {
   const models::ElementLayout& layout;
   CellPoints& points;
   const bool has_damping;
+  std::vector<Key128> material_key;  // per material array
   CellSumSpec spec;
   std::vector<Scratch> scratch;
 };
@@ -370,16 +378,24 @@ struct StiffnessPartials::Maker {
     spec.dofs = 3;
     spec.outputs = 1;
     spec.salt = 0x6b32;  // "k2": integrated at the points, summed per cell
-    spec.group_key = [&layout, &corotational](int kind, int32_t gi) {
+    // A group's key: its kind, where the model applies it, its rest shape
+    // (the layout's rest key) and its material array's Young's moduli and
+    // Poisson ratios, each array hashed once.
+    for (const auto& array : layout.materials) {
+      Hash128 h;
+      for (const models::MaterialPoint& m : array) {
+        h.Double(m.young);
+        h.Double(m.poisson);
+      }
+      material_key.push_back(h.value());
+    }
+    spec.group_key = [this, &layout, &corotational](int kind, int32_t gi) {
       const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
       Hash128 h;
       h.Mix(static_cast<uint64_t>(kind));
       h.Mix(corotational.at_quadrature_points(kind, gi) ? 1 : 0);
-      h.Doubles(grp.rest.data(), grp.rest.size());
-      for (const models::MaterialPoint& m : layout.materials[grp.material]) {
-        h.Double(m.young);
-        h.Double(m.poisson);
-      }
+      h.Key(grp.rest_key);
+      h.Key(material_key[grp.material]);
       return h.value();
     };
     spec.make_cell = [this, &layout](int t, const std::vector<int32_t>& support,
@@ -594,6 +610,7 @@ struct StiffnessPartials::Maker {
   }
 
   CellPoints& points;
+  std::vector<Key128> material_key;  // per material array
   CellSumSpec spec;
   std::optional<fem::CubicTensorProducts> cubic;  // when the cubic table is on the 4-point rule
   std::vector<Scratch> scratch;

@@ -254,34 +254,33 @@ subdivision::SparseMatrix NodeMatrix(const CellComplex& m, const subdivision::Sp
                                      const ElementSet& elements) {
   if (elements.num_virtual_nodes == 0) return a;
   // A's rows as they are, then each virtual node's row: the mean of its
-  // cell's vertices' rows (summed in vertex order through a dense
-  // accumulator, columns ascending), written straight into the rows.
+  // cell's vertices' rows, S A with S the rows of those means.
   const int32_t cols = static_cast<int32_t>(a.cols());
+  subdivision::SparseMatrix mean(elements.num_virtual_nodes, a.rows());
+  {
+    std::vector<int32_t> mean_outer{0}, mean_inner;
+    std::vector<double> mean_values;
+    for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
+      const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);  // ascending
+      for (int32_t v : verts) {
+        mean_inner.push_back(v);
+        mean_values.push_back(1.0 / static_cast<double>(verts.size()));
+      }
+      mean_outer.push_back(static_cast<int32_t>(mean_inner.size()));
+    }
+    mean.resizeNonZeros(static_cast<Eigen::Index>(mean_inner.size()));
+    std::copy(mean_outer.begin(), mean_outer.end(), mean.outerIndexPtr());
+    std::copy(mean_inner.begin(), mean_inner.end(), mean.innerIndexPtr());
+    std::copy(mean_values.begin(), mean_values.end(), mean.valuePtr());
+  }
+  const subdivision::SparseMatrix virtual_rows = subdivision::MultiplyRowMajor(mean, a);
   std::vector<int32_t> outer(a.outerIndexPtr(), a.outerIndexPtr() + a.rows() + 1);
   std::vector<int32_t> inner(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
   std::vector<double> values(a.valuePtr(), a.valuePtr() + a.nonZeros());
-  std::vector<double> acc(cols, 0.0);
-  std::vector<int32_t> mark(cols, -1), touched;
   for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
-    const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);
-    const double w = 1.0 / static_cast<double>(verts.size());
-    touched.clear();
-    for (int32_t v : verts) {
-      for (subdivision::SparseMatrix::InnerIterator it(a, v); it; ++it) {
-        const int32_t c = static_cast<int32_t>(it.col());
-        if (mark[c] != i) {
-          mark[c] = i;
-          acc[c] = w * it.value();
-          touched.push_back(c);
-        } else {
-          acc[c] += w * it.value();
-        }
-      }
-    }
-    std::sort(touched.begin(), touched.end());
-    for (int32_t c : touched) {
-      inner.push_back(c);
-      values.push_back(acc[c]);
+    for (subdivision::SparseMatrix::InnerIterator it(virtual_rows, i); it; ++it) {
+      inner.push_back(static_cast<int32_t>(it.col()));
+      values.push_back(it.value());
     }
     outer.push_back(static_cast<int32_t>(inner.size()));
   }

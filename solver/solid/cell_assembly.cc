@@ -7,8 +7,6 @@
 #include <Eigen/Dense>
 
 namespace dynsolid::solid {
-
-
 namespace {
 
 using SparseMatrix = subdivision::SparseMatrix;
@@ -16,12 +14,7 @@ using SparseMatrix = subdivision::SparseMatrix;
 struct Cell {
   std::vector<std::pair<int, int32_t>> elements;  // (kind, index in block), block order
   std::vector<int32_t> support;                   // ascending control points
-  Key128 key;
 };
-
-}  // namespace
-
-namespace {
 
 // Node row r of nm, its columns numbered by `column`: its length, then
 // entry k's column and value mixed into lane k mod 4 (four independent

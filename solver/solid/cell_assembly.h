@@ -9,10 +9,9 @@
 // support that the caller makes from its elements (kind order, then block
 // order) at once (one rank update of their points' rows, for the mass and
 // K0); then the partials in cell order. A cell's partial is a function of
-// its key alone: its
-// elements' group contents (the caller's GroupKey: rest shape, material,
-// anything the element's X depends on) and node rows, the control points
-// numbered within the cell's support. A renumbering that keeps their order
+// its key alone: its elements' group contents (the caller's group key:
+// rest shape, material, anything the element's X depends on) and node
+// rows, the control points numbered within the cell's support. A renumbering that keeps their order
 // (cells deleted, points appended) keeps the key. So a matrix summed with
 // the partials of an earlier build has the bits of one summed from scratch,
 // and a solid rebuilt from its scene (crash recovery) equals the edited one.
@@ -34,7 +33,6 @@
 #include "solver/subdivision/mcj.h"
 
 namespace dynsolid::solid {
-
 
 // The partials of one build, by cell key, for the next.
 struct CellPartials {
@@ -74,7 +72,6 @@ struct CellSumSpec {
                      std::vector<Eigen::MatrixXd>& partial)>
       make_cell;
 };
-
 
 // The sums, dense (dofs #control square) or as triplets in cell order.
 struct CellSums {

@@ -15,6 +15,7 @@
 #include "solver/fem/element_data.h"
 #include "solver/models/corotational.h"
 #include "tests/models/model_fixture.h"
+#include "tests/testing/status_matchers.h"
 
 namespace dynsolid::solid {
 namespace {
@@ -115,6 +116,26 @@ TEST(CellPartialsTest, MassAndDampingEqualTheReferenceSum) {
     EXPECT_LT(RelativeError(s.mass.matrices[0], Reference(f, false)), 1e-13);
     EXPECT_LT(RelativeError(s.mass.matrices[1], Reference(f, true)), 1e-13);
   }
+}
+
+// A locally refined block: the refined cell's neighbours are split where
+// they meet it, and some cells' supports pass 64 control points (more than
+// one word of CellPoints' column masks). Mt and Dt still equal the
+// reference.
+TEST(CellPartialsTest, SupportsOfMoreThanSixtyFourPointsSumAsTheReference) {
+  absl::StatusOr<Scene> scene = scene::BuiltinScene("block3");
+  ASSERT_OK(scene);
+  scene->mutable_mesh()->add_refine_cells(13);  // the centre cell
+  models::test_util::MeshFixture f;
+  models::test_util::BuildMesh(
+      scene, 1, Damped([](const Eigen::Vector3d& x) { return 400.0 + 300.0 * x.z(); }), f);
+  const Sums s = Build(f, true);
+  size_t widest = 0;
+  for (const auto& support : s.stiffness.supports) widest = std::max(widest, support.size());
+  EXPECT_GT(widest, 64u);
+  ASSERT_EQ(s.mass.matrices.size(), 2u);
+  EXPECT_LT(RelativeError(s.mass.matrices[0], Reference(f, false)), 1e-13);
+  EXPECT_LT(RelativeError(s.mass.matrices[1], Reference(f, true)), 1e-13);
 }
 
 // Made in one pass, sharing what they read of each cell, the partials have

@@ -11,10 +11,11 @@
 // K0); then the partials in cell order. A cell's partial is a function of
 // its key alone: its elements' group contents (the caller's group key:
 // rest shape, material, anything the element's X depends on) and node
-// rows, the control points numbered within the cell's support. A renumbering that keeps their order
-// (cells deleted, points appended) keeps the key. So a matrix summed with
-// the partials of an earlier build has the bits of one summed from scratch,
-// and a solid rebuilt from its scene (crash recovery) equals the edited one.
+// rows, the control points numbered within the cell's support. A
+// renumbering that keeps their order (cells deleted, points appended)
+// keeps the key. So a matrix summed with the partials of an earlier build
+// has the bits of one summed from scratch, and a solid rebuilt from its
+// scene (crash recovery) equals the edited one.
 #pragma once
 
 #include <cstdint>

@@ -1,8 +1,8 @@
 #include "solver/solid/cell_partials.h"
 
 #include <algorithm>
-#include <bit>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <mutex>
 #include <optional>
@@ -134,9 +134,15 @@ struct CellPoints::Impl {
       }
       ElementRows& er = th.rows[i];
       er.support.clear();
+      er.outside.clear();
       for (int w = 0; w < words; ++w) {
         for (uint64_t bits = th.element_mask[w]; bits != 0; bits &= bits - 1) {
           er.support.push_back(64 * w + std::countr_zero(bits));
+        }
+        const int in_word = std::min(64, s - 64 * w);
+        const uint64_t all = in_word == 64 ? ~uint64_t{0} : (uint64_t{1} << in_word) - 1;
+        for (uint64_t bits = ~th.element_mask[w] & all; bits != 0; bits &= bits - 1) {
+          er.outside.push_back(64 * w + std::countr_zero(bits));
         }
       }
       const int se = static_cast<int>(er.support.size());
@@ -214,6 +220,7 @@ const std::vector<CellPoints::Element>& CellPoints::Of(
     const std::vector<std::pair<int, int32_t>>& elements) {
   return impl_->Of(thread, support, elements);
 }
+bool CellPoints::cubic_factorized() const { return impl_->cubic.has_value(); }
 const double* CellPoints::Values(int thread, size_t i) { return impl_->Values(thread, i); }
 void CellPoints::CubicDerivatives(int thread, size_t i, double* out) {
   impl_->CubicDerivatives(thread, i, out);
@@ -224,7 +231,6 @@ struct MassPartials::Maker {
   struct Scratch {
     std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
     std::vector<double> root;              // sqrt(rho dV) per point
-    std::vector<uint8_t> covered;          // per cell column: in the element's support
   };
 
   Maker(const models::ElementLayout& layout, bool has_damping, CellPoints& points, int threads)
@@ -291,7 +297,6 @@ struct MassPartials::Maker {
     // W (rows x s, column major) per output; each element's rows written
     // in its support's columns and zeroed in the others.
     for (int o = 0; o < ws; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
-    sc.covered.resize(s);
     int64_t row = 0;
     for (size_t i = 0; i < elements.size(); ++i) {
       const auto [kind, e] = elements[i];
@@ -299,10 +304,7 @@ struct MassPartials::Maker {
       const fem::KindTable& table = layout.tables[kind];
       const ElementRows& er = *cell[i].rows;
       const auto& material = layout.materials[block.groups[block.group[e]].material];
-      std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t col : er.support) sc.covered[col] = 1;
-      for (int col = 0; col < s; ++col) {
-        if (sc.covered[col]) continue;
+      for (int32_t col : er.outside) {
         for (int o = 0; o < ws; ++o) {
           std::fill_n(sc.w[o].data() + static_cast<int64_t>(col) * rows + row, table.points, 0.0);
         }
@@ -363,14 +365,12 @@ struct StiffnessPartials::Maker {
     Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> w, wl, g, gl, trace;
-    std::vector<uint8_t> covered;  // per cell column: in the element's support
     Group single;  // the group of one element (GroupOf)
   };
 
   Maker(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
         CellPoints& points, int threads)
       : points(points), scratch(threads) {
-    if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
     for (int kind = 0; kind < 3; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
       groups[kind].resize(layout.blocks[kind].groups.size());
@@ -414,7 +414,7 @@ struct StiffnessPartials::Maker {
                        const CellPoints::Element& at, Scratch& sc) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int32_t gi = block.group[e];
-    const bool factorized = kind == 0 && cubic.has_value();
+    const bool factorized = kind == 0 && points.cubic_factorized();
     if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
       MakeGroup(layout, kind, gi, factorized, at, sc.single);
       return sc.single;
@@ -468,7 +468,6 @@ struct StiffnessPartials::Maker {
     };
     Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, rows, 3 * s);
     Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : rows, 3 * s);
-    sc.covered.resize(s);
     int64_t row = 0;
     double volume = 0;
     for (size_t i = 0; i < elements.size(); ++i) {
@@ -488,16 +487,13 @@ struct StiffnessPartials::Maker {
         for (int a = 0; a < se; ++a) gradient.row(er.support[a]) += det * sc.ge.row(a);
         volume += det;
       }
-      std::fill(sc.covered.begin(), sc.covered.end(), 0);
-      for (int32_t col : er.support) sc.covered[col] = 1;
-      for (int col = 0; col < s; ++col) {
-        if (sc.covered[col]) continue;
+      for (int32_t col : er.outside) {
         for (int k = 0; k < 3; ++k) {
           std::fill_n(w.col(k * s + col).data() + row, q, 0.0);
           if (!uniform) std::fill_n(wl.col(k * s + col).data() + row, q, 0.0);
         }
       }
-      if (kind == 0 && cubic.has_value()) {
+      if (kind == 0 && points.cubic_factorized()) {
         // W's rows: sqrt(dV mu) J^-T (dN/du, dN/dv, dN/dw) B, the
         // parametric gradients of B's columns sum-factorized.
         sc.p.resize(static_cast<size_t>(3) * 64 * se);
@@ -518,7 +514,7 @@ struct StiffnessPartials::Maker {
               const double* f1 = f0 + 64;
               const double* f2 = f1 + 64;
               double* to = into.col(k * s + col).data() + row;
-              for (int i = 0; i < 64; ++i) to[i] = f0[i] * du[i] + f1[i] * dv[i] + f2[i] * dw[i];
+              for (int p = 0; p < 64; ++p) to[p] = f0[p] * du[p] + f1[p] * dv[p] + f2[p] * dw[p];
             }
           }
         }
@@ -612,7 +608,6 @@ struct StiffnessPartials::Maker {
   CellPoints& points;
   std::vector<Key128> material_key;  // per material array
   CellSumSpec spec;
-  std::optional<fem::CubicTensorProducts> cubic;  // when the cubic table is on the 4-point rule
   std::vector<Scratch> scratch;
   std::array<std::vector<std::once_flag>, 3> once;
   std::array<std::vector<Group>, 3> groups;

@@ -22,21 +22,22 @@ namespace dynsolid::solid {
 
 // An element's rows of the node matrix on the columns of its control
 // cell's support: B (n x s_e), support[a] the cell column of column a
-// (ascending).
+// (ascending); outside: the cell's other columns (ascending), where the
+// element's rows of a cell matrix are zero.
 struct ElementRows {
-  std::vector<int32_t> support;
+  std::vector<int32_t> support, outside;
   Eigen::MatrixXd b;
 };
 
 // What the mass and stiffness partials of a cell both read of its
 // elements, made once per cell on the pool thread that makes them
 // (SumByCells makes a cell's partials of every job on one thread): each
-// element's node rows on the cell columns they touch (ElementRows) and, at its
-// quadrature points, the rest volume dV = max(det J, 0) w and J^-T (zero
-// where dV is 0), as the model computes them (a cubic element's J by sum
-// factorization: the same up to rounding). Groups of
-// several elements keep their points' data for the life of this object.
-// `layout` and `nm` must outlive it; `threads`: the pool's size.
+// element's node rows on the cell columns they touch (ElementRows) and,
+// at its quadrature points, the rest volume dV = max(det J, 0) w and J^-T
+// (zero where dV is 0), as the model computes them (a cubic element's J by
+// sum factorization: the same up to rounding). Groups of several elements
+// keep their points' data for the life of this object. `layout` and `nm`
+// must outlive it; `threads`: the pool's size.
 class CellPoints {
  public:
   struct Element {
@@ -53,6 +54,9 @@ class CellPoints {
   // thread's last cell was this one. Valid until the thread's next call.
   const std::vector<Element>& Of(int thread, const std::vector<int32_t>& support,
                                  const std::vector<std::pair<int, int32_t>>& elements);
+  // Whether cubic elements are on the 4-point rule, their products
+  // sum-factorized (fem::CubicTensorProducts): CubicDerivatives applies.
+  bool cubic_factorized() const;
   // Of element i of the thread's last cell: N B (Q x s_e, column major),
   // made when first asked (or by CubicDerivatives) and kept for the cell.
   const double* Values(int thread, size_t i);

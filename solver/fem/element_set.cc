@@ -253,43 +253,27 @@ ElementSet ClassifyElements(const CellComplex& m) {
 subdivision::SparseMatrix NodeMatrix(const CellComplex& m, const subdivision::SparseMatrix& a,
                                      const ElementSet& elements) {
   if (elements.num_virtual_nodes == 0) return a;
-  // A's rows as they are, then each virtual node's row: the mean of its
-  // cell's vertices' rows, S A with S the rows of those means.
-  const int32_t cols = static_cast<int32_t>(a.cols());
-  subdivision::SparseMatrix mean(elements.num_virtual_nodes, a.rows());
-  {
-    std::vector<int32_t> mean_outer{0}, mean_inner;
-    std::vector<double> mean_values;
-    for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
-      const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);  // ascending
-      for (int32_t v : verts) {
-        mean_inner.push_back(v);
-        mean_values.push_back(1.0 / static_cast<double>(verts.size()));
-      }
-      mean_outer.push_back(static_cast<int32_t>(mean_inner.size()));
-    }
-    mean.resizeNonZeros(static_cast<Eigen::Index>(mean_inner.size()));
-    std::copy(mean_outer.begin(), mean_outer.end(), mean.outerIndexPtr());
-    std::copy(mean_inner.begin(), mean_inner.end(), mean.innerIndexPtr());
-    std::copy(mean_values.begin(), mean_values.end(), mean.valuePtr());
+  // S A with S = [I; the virtual nodes' rows of their cells' vertex
+  // means]: A's rows as they are (one term each, times 1), then each
+  // virtual node's mean of its cell's vertices' rows.
+  std::vector<int32_t> outer{0}, inner;
+  std::vector<double> values;
+  for (int32_t r = 0; r < a.rows(); ++r) {
+    inner.push_back(r);
+    values.push_back(1.0);
+    outer.push_back(static_cast<int32_t>(inner.size()));
   }
-  const subdivision::SparseMatrix virtual_rows = subdivision::MultiplyRowMajor(mean, a);
-  std::vector<int32_t> outer(a.outerIndexPtr(), a.outerIndexPtr() + a.rows() + 1);
-  std::vector<int32_t> inner(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
-  std::vector<double> values(a.valuePtr(), a.valuePtr() + a.nonZeros());
   for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
-    for (subdivision::SparseMatrix::InnerIterator it(virtual_rows, i); it; ++it) {
-      inner.push_back(static_cast<int32_t>(it.col()));
-      values.push_back(it.value());
+    const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);  // ascending
+    for (int32_t v : verts) {
+      inner.push_back(v);
+      values.push_back(1.0 / static_cast<double>(verts.size()));
     }
     outer.push_back(static_cast<int32_t>(inner.size()));
   }
-  subdivision::SparseMatrix out(elements.num_nodes(), cols);
-  out.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
-  std::copy(outer.begin(), outer.end(), out.outerIndexPtr());
-  std::copy(inner.begin(), inner.end(), out.innerIndexPtr());
-  std::copy(values.begin(), values.end(), out.valuePtr());
-  return out;
+  const subdivision::SparseMatrix s = subdivision::FromCsr(
+      elements.num_nodes(), static_cast<int32_t>(a.rows()), outer, inner, values);
+  return subdivision::MultiplyRowMajor(s, a);
 }
 
 }  // namespace dynsolid::fem

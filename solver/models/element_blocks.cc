@@ -332,19 +332,15 @@ void SumPartRows(const ElementSchedule& schedule, const Points* const* buffers, 
 
 namespace {
 
-// FNV-1a over the bytes of a group's rest shape and stiffness samples.
+// A group's rest shape (its rest key) and stiffness samples, hashed.
 uint64_t StiffnessKey(const ElementLayout& layout, const ElementGroup& grp) {
-  uint64_t h = 1469598103934665603ull;
-  auto mix = [&h](const void* data, size_t bytes) {
-    const auto* c = static_cast<const unsigned char*>(data);
-    for (size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ull;
-  };
-  mix(grp.rest.data(), static_cast<size_t>(grp.rest.size()) * sizeof(double));
+  Hash128 h;
+  h.Key(grp.rest_key);
   for (const MaterialPoint& m : layout.materials[grp.material]) {
-    mix(&m.young, sizeof m.young);
-    mix(&m.poisson, sizeof m.poisson);
+    h.Double(m.young);
+    h.Double(m.poisson);
   }
-  return h;
+  return h.value().first;
 }
 
 bool SameStiffness(const ElementLayout& a, const ElementGroup& ga, const ElementLayout& b,
@@ -420,10 +416,16 @@ struct ShapeData {
   Key128 rest_key;                    // RestKey(rest)
 };
 
-ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x) {
+// The data of a group's shape, as the group holds it.
+ShapeData ShapeOf(const ElementGroup& g) {
+  return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
+}
+
+// The data of rest nodes x, whose RestKey is `key`.
+ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x, const Key128& key) {
   ShapeData sd;
   sd.rest = x;
-  sd.rest_key = RestKey(x);
+  sd.rest_key = key;
   fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
   thread_local std::vector<double> j;
   fem::RestJacobians(table, x, j);
@@ -603,16 +605,12 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
       }
     }
     auto shape_of = [&](int32_t, const fem::NodeMatrixX3& x) {
-      if (!known.empty()) {
-        const auto it = known.find(RestKey(x));
-        if (it != known.end()) {
-          const ElementGroup& g = was->groups[it->second];
-          if (g.rest == x) {
-            return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
-          }
-        }
+      const Key128 key = RestKey(x);
+      const auto it = known.find(key);
+      if (it != known.end() && was->groups[it->second].rest == x) {
+        return ShapeOf(was->groups[it->second]);
       }
-      return IntegrateShape(table, x);
+      return IntegrateShape(table, x, key);
     };
     GroupElements(layout, kind, rest, material_of, shape_of, pool);
   }
@@ -620,7 +618,7 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
 }
 
 ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
-                                const ElementArrays& arrays, WorkerPool* pool) {
+                                const ElementArrays& arrays) {
   ElementLayout layout;
   MaterialTable table_of_materials(layout);
   // previous's arrays (distinct by content) by their new index.
@@ -643,10 +641,9 @@ ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& res
     // A shape's first element is the same whatever the materials: its data
     // is that of the element's group before.
     auto shape_of = [&was](int32_t e, const fem::NodeMatrixX3&) {
-      const ElementGroup& g = was.groups[was.group[e]];
-      return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
+      return ShapeOf(was.groups[was.group[e]]);
     };
-    GroupElements(layout, kind, rest, material_of, shape_of, pool);
+    GroupElements(layout, kind, rest, material_of, shape_of, nullptr);
   }
   return layout;
 }

@@ -220,6 +220,6 @@ using ElementArrays = std::function<const std::vector<MaterialPoint>*(int kind, 
 // groups numbered as BuildElementLayout numbers them, without sampling or
 // integrating anything (a paint, an undo to another material).
 ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& rest,
-                                const ElementArrays& arrays, WorkerPool* pool = nullptr);
+                                const ElementArrays& arrays);
 
 }  // namespace dynsolid::models

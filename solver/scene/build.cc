@@ -78,15 +78,12 @@ absl::StatusOr<Discretization> Discretize(const Scene& scene, const mesh::MeshIn
 
   d.control_sharp = *tags;
   // The finest cells are classified while the last level's product runs.
-  bool classified = false;
   ASSIGN_OR_RETURN(d.hierarchy,
                    subdivision::Subdivide(std::move(control_mesh), l, *std::move(tags),
                                           [&](const mesh::CellComplex& fine) {
                                             d.elements = fem::ClassifyElements(fine);
-                                            classified = true;
                                           }));
   t.subdivide_ms = clock.LapMs();
-  if (!classified) d.elements = fem::ClassifyElements(*d.hierarchy.fine);
   if (d.elements.num_virtual_nodes == 0) {
     d.node_matrix = std::move(d.hierarchy.a);
   } else {

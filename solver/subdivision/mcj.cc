@@ -46,16 +46,6 @@ class RowBuilder {
   std::vector<std::pair<int32_t, double>> terms_;
 };
 
-SparseMatrix FromCsr(int32_t rows, int32_t cols, const std::vector<int32_t>& outer,
-                     const std::vector<int32_t>& inner, const std::vector<double>& values) {
-  SparseMatrix m(rows, cols);
-  m.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
-  std::copy(outer.begin(), outer.end(), m.outerIndexPtr());
-  std::copy(inner.begin(), inner.end(), m.innerIndexPtr());
-  std::copy(values.begin(), values.end(), m.valuePtr());
-  return m;
-}
-
 // Newell normal of a face loop (not normalised).
 Eigen::Vector3d FaceNormal(const CellComplex& m, int32_t f) {
   Eigen::Vector3d n = Eigen::Vector3d::Zero();
@@ -70,6 +60,16 @@ Eigen::Vector3d FaceNormal(const CellComplex& m, int32_t f) {
 }
 
 }  // namespace
+
+SparseMatrix FromCsr(int32_t rows, int32_t cols, const std::vector<int32_t>& outer,
+                     const std::vector<int32_t>& inner, const std::vector<double>& values) {
+  SparseMatrix m(rows, cols);
+  m.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), m.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), m.innerIndexPtr());
+  std::copy(values.begin(), values.end(), m.valuePtr());
+  return m;
+}
 
 SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
   const int32_t rows = static_cast<int32_t>(a.rows()), cols = static_cast<int32_t>(b.cols());
@@ -535,7 +535,7 @@ absl::StatusOr<Hierarchy> Subdivide(std::shared_ptr<const CellComplex> control, 
       h.a = MultiplyRowMajor(level.a, h.a);
     }
   }
-  if (levels == 1 && beside_last) beside_last(*h.fine);
+  if (levels <= 1 && beside_last) beside_last(*h.fine);  // no product to run beside
   return h;
 }
 

@@ -44,6 +44,11 @@ struct Level {
 absl::StatusOr<Level> SubdivideOnce(const mesh::CellComplex& coarse,
                                     const SubdivisionOptions& options);
 
+// A row-major sparse matrix from its compressed rows (outer: rows + 1
+// offsets into inner and values; columns ascending within a row).
+SparseMatrix FromCsr(int32_t rows, int32_t cols, const std::vector<int32_t>& outer,
+                     const std::vector<int32_t>& inner, const std::vector<double>& values);
+
 // a * b for row-major sparse matrices, row by row with a dense accumulator
 // (deterministic summation order; no storage-order conversions).
 SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b);
@@ -58,9 +63,10 @@ struct Hierarchy {
   std::vector<uint8_t> sharp_edges;     // per fine edge
 };
 
-// beside_last (optional): called with the finest complex, on this thread,
-// while the last level's matrix product runs on another (work of the
-// caller's that needs the complex but not A); not called for 0 levels.
+// beside_last (optional): called once with the finest complex, on this
+// thread, while the last level's matrix product runs on another (work of
+// the caller's that needs the complex but not A); with fewer than two
+// levels (no product) after the rest.
 absl::StatusOr<Hierarchy> Subdivide(
     std::shared_ptr<const mesh::CellComplex> control, int levels,
     std::vector<uint8_t> control_sharp_edges,

@@ -21,6 +21,7 @@
 
 #include "absl/strings/str_format.h"
 #include "google/protobuf/text_format.h"
+#include "bench/cpu_name.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
@@ -37,25 +38,6 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-// "model name" of /proc/cpuinfo, and whether it has AVX-512 (the build
-// targets AVX2 either way).
-std::string CpuName() {
-  std::FILE* f = std::fopen("/proc/cpuinfo", "r");
-  if (f == nullptr) return "unknown CPU";
-  std::string name = "unknown CPU";
-  bool avx512 = false;
-  char line[4096];
-  while (std::fgets(line, sizeof line, f) != nullptr) {
-    const std::string l(line);
-    if (name == "unknown CPU" && l.rfind("model name", 0) == 0) {
-      const size_t colon = l.find(':');
-      if (colon != std::string::npos) name = l.substr(colon + 2, l.size() - colon - 3);
-    }
-    if (l.rfind("flags", 0) == 0 && l.find(" avx512f") != std::string::npos) avx512 = true;
-  }
-  std::fclose(f);
-  return name + (avx512 ? " (AVX-512)" : " (no AVX-512)");
-}
 
 }  // namespace
 
@@ -156,7 +138,7 @@ int main(int argc, char** argv) {
   };
   std::printf("sculpt_bench: %s at %d levels: %d control cells, %lld elements, %d threads, %s\n",
               name.c_str(), solid.discretization().hierarchy.levels, c.num_cells(),
-              static_cast<long long>(solid.discretization().elements.cubic_cell.size() + solid.discretization().elements.linear_cell.size() + solid.discretization().elements.pyramid_cell.size()), solid.threads(), CpuName().c_str());
+              static_cast<long long>(solid.discretization().elements.cubic_cell.size() + solid.discretization().elements.linear_cell.size() + solid.discretization().elements.pyramid_cell.size()), solid.threads(), dynsolid::bench::CpuName().c_str());
   constexpr double kTargetMs = 50;  // an edit of the chair at two levels, rebuild included
   std::printf("| what | median ms | best ms | best / %.0f ms | result |\n| --- | ---: | ---: | ---: | --- |\n",
               kTargetMs);

@@ -14,6 +14,7 @@
 #include "solver/common/hash128.h"
 #include "solver/fem/cubic_tensor.h"
 #include "solver/fem/element_data.h"
+#include "solver/models/gram.h"
 
 namespace dynsolid::solid {
 
@@ -364,7 +365,8 @@ struct StiffnessPartials::Maker {
     Eigen::MatrixXd h;
     Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
-    std::vector<double> w, wl, g, gl, trace;
+    std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
+    std::vector<double> g, gl, trace;
     Group single;  // the group of one element (GroupOf)
   };
 
@@ -455,19 +457,20 @@ struct StiffnessPartials::Maker {
       first = false;
     }
     // Scratch that keeps its pages from cell to cell (a matrix resized to
-    // each cell's size is new memory each time, every page a fault).
-    auto zeroed = [](std::vector<double>& buffer, int64_t r, int64_t c) {
-      buffer.assign(static_cast<size_t>(r * c), 0.0);
-      return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
-    };
-    // W is not cleared whole: each element's rows are written in its
-    // support's columns and zeroed in the others (most of W is written).
-    auto sized = [](std::vector<double>& buffer, int64_t r, int64_t c) {
+    // each cell's size is new memory each time, every page a fault). W is
+    // not cleared whole: each element's rows are written in its support's
+    // columns and zeroed in the others (most of W is written); G is
+    // written whole by Gram.
+    auto sized = [](auto& buffer, int64_t r, int64_t c) {
       buffer.resize(static_cast<size_t>(r * c));
       return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
     };
-    Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, rows, 3 * s);
-    Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : rows, 3 * s);
+    // W's rows padded with zeros to a multiple of 8 (models::Gram's lanes).
+    const int64_t padded = (rows + 7) / 8 * 8;
+    Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, padded, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : padded, 3 * s);
+    w.bottomRows(padded - rows).setZero();
+    if (!uniform) wl.bottomRows(padded - rows).setZero();
     int64_t row = 0;
     double volume = 0;
     for (size_t i = 0; i < elements.size(); ++i) {
@@ -537,15 +540,11 @@ struct StiffnessPartials::Maker {
       row += q;
     }
     if (volume > 0) gradient /= volume;
-    Eigen::Map<Eigen::MatrixXd> gm = zeroed(sc.g, 3 * s, 3 * s);
-    gm.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
-    if (!uniform) {
-      zeroed(sc.gl, 3 * s, 3 * s).selfadjointView<Eigen::Lower>().rankUpdate(wl.transpose());
-    }
-    // Both triangles of G (and G_lambda), then K column by column.
-    gm.triangularView<Eigen::StrictlyUpper>() = gm.transpose();
-    Eigen::Map<Eigen::MatrixXd> gl(sc.gl.data(), uniform ? 0 : 3 * s, 3 * s);
-    if (!uniform) gl.triangularView<Eigen::StrictlyUpper>() = gl.transpose();
+    // G = W^T W (and G_lambda), both triangles, then K column by column.
+    Eigen::Map<Eigen::MatrixXd> gm = sized(sc.g, 3 * s, 3 * s);
+    models::Gram(w.data(), padded, 3 * s, padded, gm.data(), 3 * s);
+    Eigen::Map<Eigen::MatrixXd> gl = sized(sc.gl, uniform ? 0 : 3 * s, 3 * s);
+    if (!uniform) models::Gram(wl.data(), padded, 3 * s, padded, gl.data(), 3 * s);
     sc.trace.resize(s);
     for (int bb = 0; bb < s; ++bb) {
       const double* g0 = gm.col(bb).data();

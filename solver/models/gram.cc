@@ -1,0 +1,115 @@
+#include "solver/models/gram.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace dynsolid::models {
+
+namespace gram_detail {
+#if defined(__x86_64__) && defined(__AVX2__) && defined(__FMA__)
+namespace avx2 {
+void Run(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+}
+#define DYNSOLID_GRAM_AVX2 1
+#endif
+#ifdef DYNSOLID_GRAM_AVX512
+namespace avx512 {
+void Run(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+}
+#endif
+}  // namespace gram_detail
+
+namespace {
+
+// gram.h's sum, one entry at a time.
+void Portable(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg) {
+  for (int j = 0; j < n; ++j) {
+    for (int i = j; i < n; ++i) {
+      const double* ci = w + i * ldw;
+      const double* cj = w + j * ldw;
+      double sum = 0;
+      for (int64_t r0 = 0; r0 < rows; r0 += kGramPanelRows) {
+        const int64_t r1 = std::min(rows, r0 + kGramPanelRows);
+        std::array<double, 8> l{};
+        for (int64_t r = r0; r < r1; ++r) l[r % 8] = std::fma(ci[r], cj[r], l[r % 8]);
+        sum += ((l[0] + l[4]) + (l[2] + l[6])) + ((l[1] + l[5]) + (l[3] + l[7]));
+      }
+      g[i + j * ldg] = sum;
+      g[j + i * ldg] = sum;
+    }
+  }
+}
+
+bool Runs(GramPath path) {
+  switch (path) {
+    case GramPath::kPortable:
+      return true;
+    case GramPath::kAvx2:
+#ifdef DYNSOLID_GRAM_AVX2
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+      return false;
+#endif
+    case GramPath::kAvx512:
+#ifdef DYNSOLID_GRAM_AVX512
+      // __builtin_cpu_supports also asks whether the OS saves the
+      // AVX-512 registers.
+      return __builtin_cpu_supports("avx512f");
+#else
+      return false;
+#endif
+  }
+  return false;
+}
+
+}  // namespace
+
+bool Gram(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
+          int64_t ldg) {
+  if (!Runs(path)) return false;
+  switch (path) {
+    case GramPath::kPortable:
+      Portable(w, rows, n, ldw, g, ldg);
+      break;
+    case GramPath::kAvx2:
+#ifdef DYNSOLID_GRAM_AVX2
+      gram_detail::avx2::Run(w, rows, n, ldw, g, ldg);
+#endif
+      break;
+    case GramPath::kAvx512:
+#ifdef DYNSOLID_GRAM_AVX512
+      gram_detail::avx512::Run(w, rows, n, ldw, g, ldg);
+#endif
+      break;
+  }
+  return true;
+}
+
+GramPath FastestGramPath() {
+  static const GramPath fastest = [] {
+    for (GramPath p : {GramPath::kAvx512, GramPath::kAvx2}) {
+      if (Runs(p)) return p;
+    }
+    return GramPath::kPortable;
+  }();
+  return fastest;
+}
+
+void Gram(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg) {
+  Gram(FastestGramPath(), w, rows, n, ldw, g, ldg);
+}
+
+const char* GramPathName(GramPath path) {
+  switch (path) {
+    case GramPath::kPortable:
+      return "portable";
+    case GramPath::kAvx2:
+      return "avx2";
+    case GramPath::kAvx512:
+      return "avx512";
+  }
+  return "?";
+}
+
+}  // namespace dynsolid::models

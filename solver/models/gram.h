@@ -1,0 +1,69 @@
+// G = W^T W for a tall W: the cell partials' one big product (a cell's
+// stiffness and mass partials are the Gram matrices of its quadrature
+// points' rows; solid/cell_partials.h).
+//
+// Eigen's rank update packs both copies of W on every call, and W is
+// used once: where W is a couple of thousand rows by a hundred or two
+// columns, the packing took a third of the product's time. Here W is
+// read in place, column major, and the kernels are compiled for AVX2 (the
+// build's baseline) and once more for AVX-512 (run where the CPU has it),
+// like the deformation measure's (measure.h). Every entry of G is a dot
+// product of two columns of W, in eight lanes.
+//
+// Every path gives the same bits, whatever the instruction set: the sum
+// is defined, not left to a kernel's register blocking. W's rows are
+// taken in panels of kGramPanelRows (the last one shorter); within a
+// panel, row r goes to lane r mod 8, each lane one fused multiply-add
+// chain over its rows in ascending order, from zero; a panel's eight
+// lanes are added as ((l0 + l4) + (l2 + l6)) + ((l1 + l5) + (l3 + l7));
+// and G(i, j) is the sum of the panels in order, from zero. An AVX-512
+// register holds the eight lanes, two AVX2 registers hold four each, the
+// portable path is scalar std::fma in the same order. G(i, j) and G(j, i)
+// are the same chains (a b = b a), so G is symmetric to the bit.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <new>
+
+namespace dynsolid::models {
+
+// Rows per panel (a multiple of 8).
+inline constexpr int64_t kGramPanelRows = 512;
+
+// An allocator of 64-byte aligned T (Gram's W).
+template <typename T>
+struct AlignedAllocator64 {
+  using value_type = T;
+  AlignedAllocator64() = default;
+  template <typename U>
+  AlignedAllocator64(const AlignedAllocator64<U>&) {}
+  T* allocate(size_t n) {
+    return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t{64}));
+  }
+  void deallocate(T* p, size_t) { ::operator delete(p, std::align_val_t{64}); }
+  template <typename U>
+  bool operator==(const AlignedAllocator64<U>&) const {
+    return true;
+  }
+};
+using GramAllocator = AlignedAllocator64<double>;
+
+enum class GramPath { kPortable, kAvx2, kAvx512 };
+
+// W: rows x n column major, leading dimension ldw >= rows; rows a
+// multiple of 8 (pad with zero rows: they add nothing). Fastest where W
+// is 64-byte aligned (GramAllocator) and ldw a multiple of 8: every
+// AVX-512 load of a column is then one cache line, not two. G: n x n
+// column major, leading dimension ldg >= n, overwritten with W^T W (both
+// triangles). The fastest path this CPU runs.
+void Gram(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+// The same on a given path (tests compare them); false, and G untouched,
+// where this CPU or build cannot run it.
+bool Gram(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
+          int64_t ldg);
+// The path Gram takes here, and a name for it ("avx512", "avx2", "portable").
+GramPath FastestGramPath();
+const char* GramPathName(GramPath path);
+
+}  // namespace dynsolid::models

@@ -1,0 +1,103 @@
+#include "solver/models/gram.h"
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+namespace dynsolid::models {
+namespace {
+
+Eigen::MatrixXd Random(int64_t rows, int cols, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::MatrixXd m(rows, cols);
+  for (int j = 0; j < cols; ++j)
+    for (int64_t i = 0; i < rows; ++i) m(i, j) = u(rng);
+  return m;
+}
+
+// The sizes around the blocks (4 x 4, 2 x 3), the panels (512 rows) and
+// the cells' W (a couple of thousand rows, 3 S columns).
+struct Case {
+  int64_t rows;
+  int n;
+};
+const Case kCases[] = {{8, 1},    {8, 2},     {16, 5},    {64, 7},     {512, 12},  {520, 13},
+                       {1024, 17}, {1000, 33}, {2304, 96}, {1856, 111}, {304, 168}};
+
+TEST(GramTest, EqualsWTransposeWAndIsSymmetricToTheBit) {
+  for (const Case& c : kCases) {
+    const int64_t ldw = c.rows + 5;  // a leading dimension past the rows
+    const Eigen::MatrixXd w = Random(ldw, c.n, 3u + c.n);
+    const int64_t ldg = c.n + 2;
+    Eigen::MatrixXd g = Eigen::MatrixXd::Constant(ldg, c.n, 99.0);
+    Gram(w.data(), c.rows, c.n, ldw, g.data(), ldg);
+    const Eigen::MatrixXd want = w.topRows(c.rows).transpose() * w.topRows(c.rows);
+    for (int j = 0; j < c.n; ++j) {
+      for (int i = 0; i < c.n; ++i) {
+        EXPECT_NEAR(g(i, j), want(i, j), 1e-14 * static_cast<double>(c.rows))
+            << "rows " << c.rows << " n " << c.n << " at " << i << ", " << j;
+        EXPECT_EQ(g(i, j), g(j, i));
+      }
+      for (int i = c.n; i < ldg; ++i) EXPECT_EQ(g(i, j), 99.0) << "past n: untouched";
+    }
+  }
+}
+
+// Every path this machine runs gives the portable path's bits (gram.h's
+// sum is defined, not left to the kernel): a journal replayed on a CPU
+// with another instruction set rebuilds the same matrices.
+TEST(GramTest, EveryPathGivesThePortableBits) {
+  int ran = 0;
+  for (GramPath path : {GramPath::kAvx2, GramPath::kAvx512}) {
+    for (const Case& c : kCases) {
+      const Eigen::MatrixXd w = Random(c.rows, c.n, 17u + c.n);
+      Eigen::MatrixXd portable(c.n, c.n), other(c.n, c.n);
+      ASSERT_TRUE(Gram(GramPath::kPortable, w.data(), c.rows, c.n, c.rows, portable.data(), c.n));
+      if (!Gram(path, w.data(), c.rows, c.n, c.rows, other.data(), c.n)) break;
+      ++ran;
+      EXPECT_EQ(std::memcmp(portable.data(), other.data(), sizeof(double) * c.n * c.n), 0)
+          << GramPathName(path) << " rows " << c.rows << " n " << c.n;
+    }
+  }
+  // Each path that runs here ran every case (none on a CPU without AVX2).
+  EXPECT_EQ(ran % std::size(kCases), 0u);
+  std::printf("fastest Gram path here: %s\n", GramPathName(FastestGramPath()));
+}
+
+// The lanes and panels are gram.h's: one row gives its products rounded
+// once; eight rows, lane by lane, the fixed tree of their products; and
+// rows of zeros appended (the callers' padding) change no bit.
+TEST(GramTest, TheSumIsTheDefinedOne) {
+  const int n = 9;
+  Eigen::MatrixXd w = Random(2048, n, 5u);
+  Eigen::MatrixXd one(n, n);
+  w.bottomRows(2048 - 8).setZero();
+  w.middleRows(1, 7).setZero();
+  Gram(w.data(), 8, n, 2048, one.data(), n);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) EXPECT_EQ(one(i, j), w(0, i) * w(0, j));
+  }
+  w = Random(2048, n, 6u);
+  Eigen::MatrixXd eight(n, n);
+  Gram(w.data(), 8, n, 2048, eight.data(), n);
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i < n; ++i) {
+      double l[8];
+      for (int r = 0; r < 8; ++r) l[r] = std::fma(w(r, i), w(r, j), 0.0);  // rounded: no add fuses it
+      EXPECT_EQ(eight(i, j), ((l[0] + l[4]) + (l[2] + l[6])) + ((l[1] + l[5]) + (l[3] + l[7])));
+    }
+  }
+  w.bottomRows(2048 - 600).setZero();
+  Eigen::MatrixXd whole(n, n), first(n, n);
+  Gram(w.data(), 2048, n, 2048, whole.data(), n);
+  Gram(w.data(), 600, n, 2048, first.data(), n);
+  EXPECT_EQ(std::memcmp(whole.data(), first.data(), sizeof(double) * n * n), 0);
+}
+
+}  // namespace
+}  // namespace dynsolid::models

@@ -62,18 +62,36 @@ std::vector<uint8_t> RegularVertices(const CellComplex& m, const std::vector<uin
   return regular;
 }
 
-// The star of a regular vertex x: for each of its 12 quad faces, the loop
-// neighbours of x (prev, next) and the vertex across the face from x.
+// The star of a regular vertex x, made once per vertex (a regular vertex
+// is a corner of 8 cells, each asking for it): for each of its 12 quad
+// faces, the loop neighbours of x (prev, next) and the vertex across the
+// face from x; and for each of its 6 edge neighbours, the one opposite.
 struct Star {
   std::array<std::array<int32_t, 3>, 12> faces;  // {prev, next, diagonal}
+  std::array<std::array<int32_t, 2>, 6> opposite;  // {neighbour, the one opposite it}
   int count = 0;
 
+  Star() = default;
   Star(const CellComplex& m, int32_t x) {
     for (int32_t f : m.vertex_faces(x)) {
       const auto loop = m.face_vertices(f);
       if (loop.size() != 4 || count == 12) continue;
       const size_t i = static_cast<size_t>(std::find(loop.begin(), loop.end(), x) - loop.begin());
       faces[count++] = {loop[(i + 3) % 4], loop[(i + 1) % 4], loop[(i + 2) % 4]};
+    }
+    // The edge neighbour of x opposite y: the first on no face with x and y.
+    const auto edges = m.vertex_edges(x);
+    for (size_t k = 0; k < 6; ++k) {
+      const int32_t y = OtherEnd(m, edges[k], x);
+      int32_t opp = -1;
+      for (int32_t e : edges) {
+        const int32_t n = OtherEnd(m, e, x);
+        if (n != y && !ShareFace(n, y)) {
+          opp = n;
+          break;
+        }
+      }
+      opposite[k] = {y, opp};
     }
   }
   bool ShareFace(int32_t a, int32_t b) const { return Diagonal(a, b) >= 0; }
@@ -85,15 +103,26 @@ struct Star {
     }
     return -1;
   }
-  // The edge neighbour of x opposite y: on no face with x and y.
-  int32_t Opposite(const CellComplex& m, int32_t x, int32_t y) const {
-    for (int32_t e : m.vertex_edges(x)) {
-      const int32_t n = OtherEnd(m, e, x);
-      if (n != y && !ShareFace(n, y)) return n;
+  // The edge neighbour of x opposite its edge neighbour y, or -1.
+  int32_t Opposite(int32_t y) const {
+    for (const auto& [n, opp] : opposite) {
+      if (n == y) return opp;
     }
     return -1;
   }
 };
+
+// The stars of the regular vertices (by vertex; others left empty), made
+// on a few threads.
+std::vector<Star> RegularStars(const CellComplex& m, const std::vector<uint8_t>& regular) {
+  std::vector<Star> stars(m.num_vertices());
+  ParallelChunks(m.num_vertices(), BuildThreads(), 4096, [&](int, int64_t b, int64_t e) {
+    for (int64_t v = b; v < e; ++v) {
+      if (regular[v]) stars[v] = Star(m, static_cast<int32_t>(v));
+    }
+  });
+  return stars;
+}
 
 // The hexahedron around x containing a, b and d: its eighth vertex, the one
 // not in `known` (x, a, b, d and the three face diagonals).
@@ -114,14 +143,15 @@ int32_t HexOpposite(const CellComplex& m, int32_t x, int32_t a, int32_t b, int32
 }
 
 // 64 nodes of a regular hexahedron in tensor order m = 16 i + 4 j + k.
-std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_t, 8>& h) {
+std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::vector<Star>& stars,
+                                   const std::array<int32_t, 8>& h) {
   std::array<int32_t, 64> nodes;
   nodes.fill(-1);
   auto at = [&](int i, int j, int k) -> int32_t& { return nodes[16 * i + 4 * j + k]; };
   for (int n = 0; n < 8; ++n) {
     const int u = kHexCorner[n][0], v = kHexCorner[n][1], w = kHexCorner[n][2];
     const int32_t x = h[n];
-    const Star star(m, x);
+    const Star& star = stars[x];
     // Outward step along each axis: across the edge opposite the in-cell one.
     std::array<int32_t, 3> out{};
     for (int axis = 0; axis < 3; ++axis) {
@@ -133,7 +163,7 @@ std::array<int32_t, 64> CubicNodes(const CellComplex& m, const std::array<int32_
           inside = h[q];
         }
       }
-      out[axis] = star.Opposite(m, x, inside);
+      out[axis] = star.Opposite(inside);
     }
     const int I = 1 + u, J = 1 + v, K = 1 + w;
     const int Io = u ? 3 : 0, Jo = v ? 3 : 0, Ko = w ? 3 : 0;
@@ -158,8 +188,8 @@ namespace {
 // Classifies cells [begin, end). Virtual nodes are numbered from 0 within
 // the chunk; ClassifyElements offsets them when joining chunks.
 void ClassifyRange(const CellComplex& m, const std::vector<uint8_t>& is_hex,
-                   const std::vector<uint8_t>& regular, int32_t begin, int32_t end,
-                   ElementSet& s) {
+                   const std::vector<uint8_t>& regular, const std::vector<Star>& stars,
+                   int32_t begin, int32_t end, ElementSet& s) {
   std::vector<int32_t> loop;
   for (int32_t c = begin; c < end; ++c) {
     if (is_hex[c]) {
@@ -167,7 +197,7 @@ void ClassifyRange(const CellComplex& m, const std::vector<uint8_t>& is_hex,
       bool cubic = true;
       for (int32_t v : h) cubic &= regular[v] != 0;
       if (cubic) {
-        const std::array<int32_t, 64> nodes = CubicNodes(m, h);
+        const std::array<int32_t, 64> nodes = CubicNodes(m, stars, h);
         if (std::find(nodes.begin(), nodes.end(), -1) == nodes.end()) {
           s.cubic_nodes.insert(s.cubic_nodes.end(), nodes.begin(), nodes.end());
           s.cubic_cell.push_back(c);
@@ -213,13 +243,15 @@ ElementSet ClassifyElements(const CellComplex& m) {
   // Interior faces, 26 hexahedral neighbours and valence-6 corners all
   // follow from the 8 corners being regular vertices.
   const std::vector<uint8_t> regular = RegularVertices(m, is_hex);
+  const std::vector<Star> stars = RegularStars(m, regular);
 
   // Cells in contiguous chunks on a few threads, joined in chunk order: the
   // result does not depend on the number of threads.
   std::vector<ElementSet> parts(BuildThreads());
   const int chunks = ParallelChunks(nc, static_cast<int>(parts.size()), 1024,
                                     [&](int k, int64_t b, int64_t e) {
-                                      ClassifyRange(m, is_hex, regular, static_cast<int32_t>(b),
+                                      ClassifyRange(m, is_hex, regular, stars,
+                                                    static_cast<int32_t>(b),
                                                     static_cast<int32_t>(e), parts[k]);
                                     });
   ElementSet s;

@@ -5,6 +5,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <numeric>
 #include <unordered_map>
 
@@ -12,6 +13,7 @@
 
 #include "solver/common/hash128.h"
 #include "solver/common/worker_pool.h"
+#include "solver/fem/cubic_tensor.h"
 
 namespace dynsolid::models {
 namespace {
@@ -421,14 +423,21 @@ ShapeData ShapeOf(const ElementGroup& g) {
   return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
 }
 
-// The data of rest nodes x, whose RestKey is `key`.
-ShapeData IntegrateShape(const fem::KindTable& table, const fem::NodeMatrixX3& x, const Key128& key) {
+// The data of rest nodes x, whose RestKey is `key`. cubic: the table's
+// sum-factorized products where it has them (the Jacobians in a sixth of
+// the multiply-adds, as the cell partials make them).
+ShapeData IntegrateShape(const fem::KindTable& table, const fem::CubicTensorProducts* cubic,
+                         const fem::NodeMatrixX3& x, const Key128& key) {
   ShapeData sd;
   sd.rest = x;
   sd.rest_key = key;
   fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
   thread_local std::vector<double> j;
-  fem::RestJacobians(table, x, j);
+  if (cubic != nullptr) {
+    cubic->Jacobians(x, j);
+  } else {
+    fem::RestJacobians(table, x, j);
+  }
   for (int q = 0; q < table.points; ++q) {
     const double det = fem::JacobianAt(j, table.points, q).determinant();
     sd.inverted |= det <= 0;
@@ -604,13 +613,15 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
         known.try_emplace(was->groups[g].rest_key, static_cast<int32_t>(g));
       }
     }
+    std::optional<fem::CubicTensorProducts> cubic;
+    if (kind == 0 && fem::CubicTensorProducts::Applies(table)) cubic.emplace(table);
     auto shape_of = [&](int32_t, const fem::NodeMatrixX3& x) {
       const Key128 key = RestKey(x);
       const auto it = known.find(key);
       if (it != known.end() && was->groups[it->second].rest == x) {
         return ShapeOf(was->groups[it->second]);
       }
-      return IntegrateShape(table, x, key);
+      return IntegrateShape(table, cubic ? &*cubic : nullptr, x, key);
     };
     GroupElements(layout, kind, rest, material_of, shape_of, pool);
   }

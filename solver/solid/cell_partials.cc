@@ -67,15 +67,34 @@ struct CellPoints::Impl {
     }
     r.dv.resize(points);
     r.jit.resize(static_cast<size_t>(9) * points);
+    // Point by point from the entries' rows of j (entry (a, b) of J_q at
+    // [(3 a + b) points + q]), straight-line so that the loop runs in SIMD
+    // lanes: J^-T = cofactors / det.
+    const double* e[9];
+    double* t[9];
+    for (int k = 0; k < 9; ++k) {
+      e[k] = j.data() + static_cast<size_t>(k) * points;
+      t[k] = r.jit.data() + static_cast<size_t>(k) * points;
+    }
     for (int q = 0; q < points; ++q) {
-      const Eigen::Matrix3d jq = fem::JacobianAt(j, points, q);
-      const double dv = std::max(jq.determinant(), 0.0) * table.weight[q];
-      const Eigen::Matrix3d jit =
-          dv > 0 ? Eigen::Matrix3d(jq.inverse().transpose()) : Eigen::Matrix3d::Zero();
+      const double j00 = e[0][q], j01 = e[1][q], j02 = e[2][q];
+      const double j10 = e[3][q], j11 = e[4][q], j12 = e[5][q];
+      const double j20 = e[6][q], j21 = e[7][q], j22 = e[8][q];
+      const double c00 = j11 * j22 - j12 * j21, c01 = j12 * j20 - j10 * j22,
+                   c02 = j10 * j21 - j11 * j20;
+      const double det = j00 * c00 + j01 * c01 + j02 * c02;
+      const double dv = std::max(det, 0.0) * table.weight[q];
+      const double inv = dv > 0 ? 1.0 / det : 0.0;
       r.dv[q] = dv;
-      for (int k = 0; k < 3; ++k) {
-        for (int c = 0; c < 3; ++c) r.jit[(3 * k + c) * points + q] = jit(k, c);
-      }
+      t[0][q] = c00 * inv;
+      t[1][q] = c01 * inv;
+      t[2][q] = c02 * inv;
+      t[3][q] = (j02 * j21 - j01 * j22) * inv;
+      t[4][q] = (j00 * j22 - j02 * j20) * inv;
+      t[5][q] = (j01 * j20 - j00 * j21) * inv;
+      t[6][q] = (j01 * j12 - j02 * j11) * inv;
+      t[7][q] = (j02 * j10 - j00 * j12) * inv;
+      t[8][q] = (j00 * j11 - j01 * j10) * inv;
     }
   }
 
@@ -147,11 +166,16 @@ struct CellPoints::Impl {
         }
       }
       const int se = static_cast<int>(er.support.size());
-      er.b.resize(block.nodes, se);
-      for (int a = 0; a < se; ++a) {
-        const double* from = th.table.data() + er.support[a];
-        double* to = er.b.col(a).data();
-        for (int k = 0; k < block.nodes; ++k) to[k] = from[static_cast<size_t>(th.local[ids[k]]) * s];
+      // Node by node: each node's table row read along (an L1-resident
+      // B written across), not each column down the table's rows (a
+      // cache line per entry).
+      er.nodes = block.nodes;
+      er.values.resize(static_cast<size_t>(block.nodes) * se);
+      const int32_t* cols = er.support.data();
+      for (int k = 0; k < block.nodes; ++k) {
+        const double* from = th.table.data() + static_cast<size_t>(th.local[ids[k]]) * s;
+        double* to = er.values.data() + k;
+        for (int a = 0; a < se; ++a) to[static_cast<size_t>(a) * block.nodes] = from[cols[a]];
       }
       // Groups of several elements keep their points' data for the build;
       // an irregular region's groups of one are made in the thread's
@@ -180,13 +204,14 @@ struct CellPoints::Impl {
     const auto [kind, e] = th.elements[i];
     const fem::KindTable& table = layout.tables[kind];
     const ElementRows& er = th.rows[i];
-    out.resize(static_cast<size_t>(table.points) * er.b.cols());
+    out.resize(static_cast<size_t>(table.points) * er.support.size());
     if (kind == 0 && cubic.has_value()) {
-      cubic->Values(er.b.data(), 64, static_cast<int>(er.b.cols()), out.data(), 64);
+      cubic->Values(er.values.data(), 64, static_cast<int>(er.support.size()), out.data(), 64);
     } else {
       const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>
           shape(table.n.data(), table.points, table.nodes);
-      Eigen::Map<Eigen::MatrixXd>(out.data(), table.points, er.b.cols()).noalias() = shape * er.b;
+      Eigen::Map<Eigen::MatrixXd>(out.data(), table.points, er.support.size()).noalias() =
+          shape * er.b();
     }
     th.has_values[i] = 1;
     return out.data();
@@ -195,14 +220,14 @@ struct CellPoints::Impl {
   void CubicDerivatives(int t, size_t i, double* out) {
     Thread& th = thread[t];
     const ElementRows& er = th.rows[i];
-    const int se = static_cast<int>(er.b.cols());
+    const int se = static_cast<int>(er.support.size());
     double* values = nullptr;
     if (!th.has_values[i]) {
       th.values[i].resize(static_cast<size_t>(64) * se);
       values = th.values[i].data();
       th.has_values[i] = 1;
     }
-    cubic->Derivatives(er.b.data(), 64, se, out, out + 64 * se, out + 128 * se, 64, values);
+    cubic->Derivatives(er.values.data(), 64, se, out, out + 64 * se, out + 128 * se, 64, values);
   }
 
   const models::ElementLayout& layout;
@@ -486,7 +511,7 @@ struct StiffnessPartials::Maker {
       const double det =
           fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, block.nodes).determinant();
       if (det > 0) {
-        sc.ge.noalias() = er.b.transpose() * grp.centre_gradient;
+        sc.ge.noalias() = er.b().transpose().lazyProduct(grp.centre_gradient);
         for (int a = 0; a < se; ++a) gradient.row(er.support[a]) += det * sc.ge.row(a);
         volume += det;
       }
@@ -524,7 +549,7 @@ struct StiffnessPartials::Maker {
         row += q;
         continue;
       }
-      sc.h.noalias() = g.d * er.b;  // 3Q x s_e
+      sc.h.noalias() = g.d.lazyProduct(er.b());  // 3Q x s_e (too small for a blocked product)
       for (size_t a = 0; a < er.support.size(); ++a) {
         const int col = er.support[a];
         for (int c = 0; c < 3; ++c) {

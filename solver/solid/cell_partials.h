@@ -26,7 +26,11 @@ namespace dynsolid::solid {
 // element's rows of a cell matrix are zero.
 struct ElementRows {
   std::vector<int32_t> support, outside;
-  Eigen::MatrixXd b;
+  int nodes = 0;
+  std::vector<double> values;  // B's entries (kept: a cell's B often fits the last one's room)
+  Eigen::Map<const Eigen::MatrixXd> b() const {
+    return {values.data(), nodes, static_cast<Eigen::Index>(support.size())};
+  }
 };
 
 // What the mass and stiffness partials of a cell both read of its

@@ -20,7 +20,7 @@ Eigen::MatrixXd Random(int64_t rows, int cols, uint32_t seed) {
   return m;
 }
 
-// The sizes around the blocks (4 x 4, 2 x 3), the panels (512 rows) and
+// The sizes around the blocks (4 x 4, 3 x 2), the panels (512 rows) and
 // the cells' W (a couple of thousand rows, 3 S columns).
 struct Case {
   int64_t rows;

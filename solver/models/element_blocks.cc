@@ -413,6 +413,7 @@ class MaterialTable {
 struct ShapeData {
   fem::NodeMatrixX3 rest;             // the first element of the shape's rest nodes
   fem::NodeMatrixX3 centre_gradient;  // physical gradients at the centre
+  double centre_det = 0;              // det J0 there
   double volume = 0;
   bool inverted = false;
   Key128 rest_key;                    // RestKey(rest)
@@ -420,7 +421,8 @@ struct ShapeData {
 
 // The data of a group's shape, as the group holds it.
 ShapeData ShapeOf(const ElementGroup& g) {
-  return ShapeData{g.rest, g.centre_gradient, g.shape_volume, g.shape_inverted, g.rest_key};
+  return ShapeData{g.rest,         g.centre_gradient, g.centre_det,
+                   g.shape_volume, g.shape_inverted,  g.rest_key};
 }
 
 // The data of rest nodes x, whose RestKey is `key`. cubic: the table's
@@ -431,7 +433,7 @@ ShapeData IntegrateShape(const fem::KindTable& table, const fem::CubicTensorProd
   ShapeData sd;
   sd.rest = x;
   sd.rest_key = key;
-  fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
+  sd.centre_det = fem::PhysicalGradients(table.centre_dn.data(), x, table.nodes, sd.centre_gradient);
   thread_local std::vector<double> j;
   if (cubic != nullptr) {
     cubic->Jacobians(x, j);
@@ -536,6 +538,7 @@ void GroupElements(
     ElementGroup& grp = block.groups[gi];
     grp.rest = sd.rest;
     grp.centre_gradient = sd.centre_gradient;
+    grp.centre_det = sd.centre_det;
     grp.shape_volume = sd.volume;
     grp.shape_inverted = sd.inverted;
     grp.rest_key = sd.rest_key;

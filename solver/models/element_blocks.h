@@ -53,6 +53,7 @@ struct ElementGroup {
   int32_t material = 0;               // material array id
   fem::NodeMatrixX3 rest;             // n x 3 rest nodes of the first element of its shape
   fem::NodeMatrixX3 centre_gradient;  // n x 3 physical gradients at the centre
+  double centre_det = 0;              // det J0 at the centre (fem::PhysicalGradients')
   double shape_volume = 0;            // rest volume of one element of its shape
   bool shape_inverted = false;        // det J0 <= 0 at a quadrature point of its shape
   Key128 rest_key;                    // RestKey(rest), for keys of what depends on it

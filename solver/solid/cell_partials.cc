@@ -388,7 +388,6 @@ struct StiffnessPartials::Maker {
   // Per pool thread.
   struct Scratch {
     Eigen::MatrixXd h;
-    Eigen::Matrix<double, Eigen::Dynamic, 3> ge;  // an element's share of g_j (s_e x 3)
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
     std::vector<double> g, gl, trace;
@@ -438,16 +437,16 @@ struct StiffnessPartials::Maker {
   // irregular region has a group per element: keeping each one's 3Q x n
   // gradients took more time in fresh pages than making them).
   const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e,
-                       const CellPoints::Element& at, Scratch& sc) {
+                       const CellPoints::Element& at, bool uniform, Scratch& sc) {
     const models::ElementBlock& block = layout.blocks[kind];
     const int32_t gi = block.group[e];
     const bool factorized = kind == 0 && points.cubic_factorized();
     if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
-      MakeGroup(layout, kind, gi, factorized, at, sc.single);
+      MakeGroup(layout, kind, gi, factorized, !uniform, at, sc.single);
       return sc.single;
     }
     std::call_once(once[kind][gi],
-                   [&] { MakeGroup(layout, kind, gi, factorized, at, groups[kind][gi]); });
+                   [&] { MakeGroup(layout, kind, gi, factorized, true, at, groups[kind][gi]); });
     return groups[kind][gi];
   }
 
@@ -500,7 +499,7 @@ struct StiffnessPartials::Maker {
     double volume = 0;
     for (size_t i = 0; i < elements.size(); ++i) {
       const auto [kind, e] = elements[i];
-      const Group& g = GroupOf(layout, kind, e, cell[i], sc);
+      const Group& g = GroupOf(layout, kind, e, cell[i], uniform, sc);
       const models::ElementBlock& block = layout.blocks[kind];
       const ElementRows& er = *cell[i].rows;
       const int q = static_cast<int>(g.root_mu.size());
@@ -508,11 +507,21 @@ struct StiffnessPartials::Maker {
       // g_j: the element's physical gradients at its centre (the group's
       // rest shape) by det J there, summed and divided by the cell's volume.
       const models::ElementGroup& grp = block.groups[block.group[e]];
-      const double det =
-          fem::RestJacobian(layout.tables[kind].centre_dn.data(), grp.rest, block.nodes).determinant();
+      const double det = grp.centre_det;
       if (det > 0) {
-        sc.ge.noalias() = er.b().transpose().lazyProduct(grp.centre_gradient);
-        for (int a = 0; a < se; ++a) gradient.row(er.support[a]) += det * sc.ge.row(a);
+        const double* cg = grp.centre_gradient.data();  // row major: node k's (x, y, z)
+        for (int a = 0; a < se; ++a) {
+          const double* bcol = er.values.data() + static_cast<size_t>(a) * block.nodes;
+          double g0 = 0, g1 = 0, g2 = 0;
+          for (int n = 0; n < block.nodes; ++n) {
+            g0 += bcol[n] * cg[3 * n];
+            g1 += bcol[n] * cg[3 * n + 1];
+            g2 += bcol[n] * cg[3 * n + 2];
+          }
+          gradient(er.support[a], 0) += det * g0;
+          gradient(er.support[a], 1) += det * g1;
+          gradient(er.support[a], 2) += det * g2;
+        }
         volume += det;
       }
       for (int32_t col : er.outside) {
@@ -592,36 +601,45 @@ struct StiffnessPartials::Maker {
     }
   }
 
-  // Group gi's data from its points' dV and J^-T (`at`, cell_partials.h).
+  // Group gi's data from its points' dV and J^-T (`at`, cell_partials.h);
+  // the lambda rows only `with_lambda` (a cell of one Poisson ratio reads
+  // none). Loops along the points, in SIMD lanes.
   static void MakeGroup(const models::ElementLayout& layout, int kind, int32_t gi, bool factorized,
-                        const CellPoints::Element& at, Group& g) {
+                        bool with_lambda, const CellPoints::Element& at, Group& g) {
     const models::ElementGroup& grp = layout.blocks[kind].groups[gi];
     const fem::KindTable& table = layout.tables[kind];
-    const std::vector<models::MaterialPoint>& material = layout.materials[grp.material];
+    const models::MaterialPoint* material = layout.materials[grp.material].data();
     const int n = table.nodes, points = table.points;
-    if (factorized) {
-      g.d.resize(0, 0);
-      g.mu_jit.resize(static_cast<size_t>(9) * points);
-      g.lambda_jit.resize(static_cast<size_t>(9) * points);
-    } else {
-      g.d.resize(3 * points, n);
-    }
     g.root_mu.resize(points);
     g.root_lambda.resize(points);
     for (int q = 0; q < points; ++q) {
+      g.root_mu[q] = std::sqrt(std::max(at.dv[q] * material[q].lame_mu(), 0.0));
+    }
+    if (with_lambda) {
+      for (int q = 0; q < points; ++q) {
+        g.root_lambda[q] = std::sqrt(std::max(at.dv[q] * material[q].lame_lambda(), 0.0));
+      }
+    }
+    if (factorized) {
+      g.d.resize(0, 0);
+      g.mu_jit.resize(static_cast<size_t>(9) * points);
+      g.lambda_jit.resize(with_lambda ? static_cast<size_t>(9) * points : 0);
+      // Entry (k, c) of J^-T at [(3 k + c) Q + q], times the point's root.
+      for (int kc = 0; kc < 9; ++kc) {
+        const double* jit = at.jit + static_cast<size_t>(kc) * points;
+        double* mu = g.mu_jit.data() + static_cast<size_t>(kc) * points;
+        for (int q = 0; q < points; ++q) mu[q] = g.root_mu[q] * jit[q];
+        if (!with_lambda) continue;
+        double* lambda = g.lambda_jit.data() + static_cast<size_t>(kc) * points;
+        for (int q = 0; q < points; ++q) lambda[q] = g.root_lambda[q] * jit[q];
+      }
+      return;
+    }
+    g.d.resize(3 * points, n);
+    for (int q = 0; q < points; ++q) {
       const double* dn = table.dN(q);
-      const double dv = at.dv[q];
-      g.root_mu[q] = std::sqrt(std::max(dv * material[q].lame_mu(), 0.0));
-      g.root_lambda[q] = std::sqrt(std::max(dv * material[q].lame_lambda(), 0.0));
       for (int k = 0; k < 3; ++k) {
         const double* jit_k = at.jit + static_cast<size_t>(3 * k) * points + q;  // (k, c) at c * points
-        if (factorized) {
-          for (int cc = 0; cc < 3; ++cc) {
-            g.mu_jit[(3 * k + cc) * points + q] = g.root_mu[q] * jit_k[cc * points];
-            g.lambda_jit[(3 * k + cc) * points + q] = g.root_lambda[q] * jit_k[cc * points];
-          }
-          continue;
-        }
         const double a = jit_k[0], b = jit_k[points], c = jit_k[2 * points];
         double* row = g.d.row(k * points + q).data();  // contiguous: d is row major
         for (int i = 0; i < n; ++i) row[i] = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];

@@ -172,6 +172,7 @@ void ExpectSameLayout(const ElementLayout& a, const ElementLayout& b) {
       EXPECT_EQ(x.groups[g].centre_gradient, y.groups[g].centre_gradient);
       EXPECT_EQ(x.groups[g].shape_volume, y.groups[g].shape_volume);
       EXPECT_EQ(x.groups[g].shape_inverted, y.groups[g].shape_inverted);
+      EXPECT_EQ(x.groups[g].centre_det, y.groups[g].centre_det);
       EXPECT_EQ(x.groups[g].rest_key, y.groups[g].rest_key);
     }
   }

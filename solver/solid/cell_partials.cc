@@ -247,6 +247,14 @@ const std::vector<CellPoints::Element>& CellPoints::Of(
   return impl_->Of(thread, support, elements);
 }
 bool CellPoints::cubic_factorized() const { return impl_->cubic.has_value(); }
+const double* CellPoints::NodeRows(int thread, int* count) const {
+  const Impl::Thread& th = impl_->thread[thread];
+  *count = static_cast<int>(th.nodes.size());
+  return th.table.data();
+}
+int32_t CellPoints::NodeRow(int thread, int32_t node) const {
+  return impl_->thread[thread].local[node];
+}
 const double* CellPoints::Values(int thread, size_t i) { return impl_->Values(thread, i); }
 void CellPoints::CubicDerivatives(int thread, size_t i, double* out) {
   impl_->CubicDerivatives(thread, i, out);
@@ -389,6 +397,7 @@ struct StiffnessPartials::Maker {
   struct Scratch {
     Eigen::MatrixXd h;
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
+    std::vector<double> y;  // g_j's sums per FEM node (3 per node row of CellPoints)
     std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
     std::vector<double> g, gl, trace;
     Group single;  // the group of one element (GroupOf)
@@ -497,6 +506,9 @@ struct StiffnessPartials::Maker {
     if (!uniform) wl.bottomRows(padded - rows).setZero();
     int64_t row = 0;
     double volume = 0;
+    int node_count = 0;
+    const double* node_rows = points.NodeRows(t, &node_count);
+    sc.y.assign(static_cast<size_t>(3) * node_count, 0.0);
     for (size_t i = 0; i < elements.size(); ++i) {
       const auto [kind, e] = elements[i];
       const Group& g = GroupOf(layout, kind, e, cell[i], uniform, sc);
@@ -505,22 +517,16 @@ struct StiffnessPartials::Maker {
       const int q = static_cast<int>(g.root_mu.size());
       const int se = static_cast<int>(er.support.size());
       // g_j: the element's physical gradients at its centre (the group's
-      // rest shape) by det J there, summed and divided by the cell's volume.
+      // rest shape) by det J there, summed and divided by the cell's
+      // volume. Summed per FEM node first (Y), then through the node rows
+      // once for the cell, below.
       const models::ElementGroup& grp = block.groups[block.group[e]];
       const double det = grp.centre_det;
       if (det > 0) {
-        const double* cg = grp.centre_gradient.data();  // row major: node k's (x, y, z)
-        for (int a = 0; a < se; ++a) {
-          const double* bcol = er.values.data() + static_cast<size_t>(a) * block.nodes;
-          double g0 = 0, g1 = 0, g2 = 0;
-          for (int n = 0; n < block.nodes; ++n) {
-            g0 += bcol[n] * cg[3 * n];
-            g1 += bcol[n] * cg[3 * n + 1];
-            g2 += bcol[n] * cg[3 * n + 2];
-          }
-          gradient(er.support[a], 0) += det * g0;
-          gradient(er.support[a], 1) += det * g1;
-          gradient(er.support[a], 2) += det * g2;
+        const int32_t* ids = block.element_nodes(e);
+        for (int n = 0; n < block.nodes; ++n) {
+          double* y = sc.y.data() + 3 * static_cast<size_t>(points.NodeRow(t, ids[n]));
+          for (int c = 0; c < 3; ++c) y[c] += det * grp.centre_gradient(n, c);
         }
         volume += det;
       }
@@ -572,6 +578,17 @@ struct StiffnessPartials::Maker {
         }
       }
       row += q;
+    }
+    // g_j = (sum over nodes l of row_l^T Y_l) / volume: S x 3 from the
+    // node rows (contiguous along the cell's columns).
+    for (int l = 0; l < node_count; ++l) {
+      const double* from = node_rows + static_cast<size_t>(l) * s;
+      for (int c = 0; c < 3; ++c) {
+        const double y = sc.y[3 * static_cast<size_t>(l) + c];
+        if (y == 0) continue;
+        double* to = gradient.col(c).data();
+        for (int a = 0; a < s; ++a) to[a] += from[a] * y;
+      }
     }
     if (volume > 0) gradient /= volume;
     // G = W^T W (and G_lambda), both triangles, then K column by column.

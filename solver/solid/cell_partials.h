@@ -61,6 +61,11 @@ class CellPoints {
   // Whether cubic elements are on the 4-point rule, their products
   // sum-factorized (fem::CubicTensorProducts): CubicDerivatives applies.
   bool cubic_factorized() const;
+  // The thread's last cell's distinct FEM nodes: their node-matrix rows
+  // dense on the cell's columns (row major: count x support size), and
+  // the row of node id `node` (one of the cell's elements' nodes).
+  const double* NodeRows(int thread, int* count) const;
+  int32_t NodeRow(int thread, int32_t node) const;
   // Of element i of the thread's last cell: N B (Q x s_e, column major),
   // made when first asked (or by CubicDerivatives) and kept for the cell.
   const double* Values(int thread, size_t i);

@@ -9,34 +9,28 @@ namespace dynsolid::models {
 namespace gram_detail {
 #if defined(__x86_64__) && defined(__AVX2__) && defined(__FMA__)
 namespace avx2 {
-void Run(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+void AddPanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
 }
 #define DYNSOLID_GRAM_AVX2 1
 #endif
 #ifdef DYNSOLID_GRAM_AVX512
 namespace avx512 {
-void Run(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+void AddPanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
 }
 #endif
 }  // namespace gram_detail
 
 namespace {
 
-// gram.h's sum, one entry at a time.
-void Portable(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg) {
+// A panel's sums (gram.h), one entry at a time.
+void PortablePanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg) {
   for (int j = 0; j < n; ++j) {
     for (int i = j; i < n; ++i) {
       const double* ci = w + i * ldw;
       const double* cj = w + j * ldw;
-      double sum = 0;
-      for (int64_t r0 = 0; r0 < rows; r0 += kGramPanelRows) {
-        const int64_t r1 = std::min(rows, r0 + kGramPanelRows);
-        std::array<double, 8> l{};
-        for (int64_t r = r0; r < r1; ++r) l[r % 8] = std::fma(ci[r], cj[r], l[r % 8]);
-        sum += ((l[0] + l[4]) + (l[2] + l[6])) + ((l[1] + l[5]) + (l[3] + l[7]));
-      }
-      g[i + j * ldg] = sum;
-      g[j + i * ldg] = sum;
+      std::array<double, 8> l{};
+      for (int64_t r = 0; r < rows; ++r) l[r % 8] = std::fma(ci[r], cj[r], l[r % 8]);
+      g[i + j * ldg] += ((l[0] + l[4]) + (l[2] + l[6])) + ((l[1] + l[5]) + (l[3] + l[7]));
     }
   }
 }
@@ -65,24 +59,49 @@ bool Runs(GramPath path) {
 
 }  // namespace
 
-bool Gram(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
-          int64_t ldg) {
+void GramStart(int n, double* g, int64_t ldg) {
+  for (int j = 0; j < n; ++j) std::fill_n(g + j + j * ldg, n - j, 0.0);
+}
+
+bool GramAddPanel(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
+                  int64_t ldg) {
   if (!Runs(path)) return false;
   switch (path) {
     case GramPath::kPortable:
-      Portable(w, rows, n, ldw, g, ldg);
+      PortablePanel(w, rows, n, ldw, g, ldg);
       break;
     case GramPath::kAvx2:
 #ifdef DYNSOLID_GRAM_AVX2
-      gram_detail::avx2::Run(w, rows, n, ldw, g, ldg);
+      gram_detail::avx2::AddPanel(w, rows, n, ldw, g, ldg);
 #endif
       break;
     case GramPath::kAvx512:
 #ifdef DYNSOLID_GRAM_AVX512
-      gram_detail::avx512::Run(w, rows, n, ldw, g, ldg);
+      gram_detail::avx512::AddPanel(w, rows, n, ldw, g, ldg);
 #endif
       break;
   }
+  return true;
+}
+
+void GramAddPanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg) {
+  GramAddPanel(FastestGramPath(), w, rows, n, ldw, g, ldg);
+}
+
+void GramFinish(int n, double* g, int64_t ldg) {
+  for (int j = 0; j < n; ++j) {
+    for (int i = j + 1; i < n; ++i) g[j + i * ldg] = g[i + j * ldg];
+  }
+}
+
+bool Gram(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
+          int64_t ldg) {
+  if (!Runs(path)) return false;
+  GramStart(n, g, ldg);
+  for (int64_t r0 = 0; r0 < rows; r0 += kGramPanelRows) {
+    GramAddPanel(path, w + r0, std::min(rows - r0, kGramPanelRows), n, ldw, g, ldg);
+  }
+  GramFinish(n, g, ldg);
   return true;
 }
 

@@ -62,6 +62,16 @@ void Gram(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t 
 // where this CPU or build cannot run it.
 bool Gram(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
           int64_t ldg);
+// The same sum a panel at a time, for a caller that makes W's rows as it
+// goes (and keeps only a panel of them): GramStart zeroes G's lower
+// triangle; GramAddPanel adds the sums of one panel of rows (a multiple of
+// 8; each panel but the last exactly kGramPanelRows rows, in order) to it;
+// GramFinish copies the lower triangle to the upper. Gram is these three.
+void GramStart(int n, double* g, int64_t ldg);
+void GramAddPanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, int64_t ldg);
+bool GramAddPanel(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
+                  int64_t ldg);
+void GramFinish(int n, double* g, int64_t ldg);
 // The path Gram takes here, and a name for it ("avx512", "avx2", "portable").
 GramPath FastestGramPath();
 const char* GramPathName(GramPath path);

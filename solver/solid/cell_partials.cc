@@ -400,16 +400,12 @@ struct StiffnessPartials::Maker {
     std::vector<double> y;  // g_j's sums per FEM node (3 per node row of CellPoints)
     std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
     std::vector<double> g, gl, trace;
-    Group single;  // the group of one element (GroupOf)
+    Group group;  // the element's group data (GroupOf)
   };
 
   Maker(const models::ElementLayout& layout, const models::CorotationalModel& corotational,
         CellPoints& points, int threads)
       : points(points), scratch(threads) {
-    for (int kind = 0; kind < 3; ++kind) {
-      once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
-      groups[kind].resize(layout.blocks[kind].groups.size());
-    }
     spec.dofs = 3;
     spec.outputs = 1;
     spec.salt = 0x6b32;  // "k2": integrated at the points, summed per cell
@@ -441,22 +437,16 @@ struct StiffnessPartials::Maker {
     };
   }
 
-  // Element e's group (its points' data `at`): made once and kept when the
-  // group has more than one element, else made in the thread's scratch (an
-  // irregular region has a group per element: keeping each one's 3Q x n
-  // gradients took more time in fresh pages than making them).
+  // Element e's group data (its points' `at`), made in the thread's
+  // scratch, valid until the next call: the same for every element of the
+  // group, and cheaper to make again (a few loops along the points) than
+  // to keep per group (each kept group's rows took more time in fresh
+  // pages than making them).
   const Group& GroupOf(const models::ElementLayout& layout, int kind, int32_t e,
                        const CellPoints::Element& at, bool uniform, Scratch& sc) {
-    const models::ElementBlock& block = layout.blocks[kind];
-    const int32_t gi = block.group[e];
     const bool factorized = kind == 0 && points.cubic_factorized();
-    if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
-      MakeGroup(layout, kind, gi, factorized, !uniform, at, sc.single);
-      return sc.single;
-    }
-    std::call_once(once[kind][gi],
-                   [&] { MakeGroup(layout, kind, gi, factorized, true, at, groups[kind][gi]); });
-    return groups[kind][gi];
+    MakeGroup(layout, kind, layout.blocks[kind].group[e], factorized, !uniform, at, sc.group);
+    return sc.group;
   }
 
   // Whether every point of e's material has one Poisson ratio, and
@@ -478,12 +468,12 @@ struct StiffnessPartials::Maker {
     if (s == 0) return;
     Scratch& sc = scratch[t];
     const std::vector<CellPoints::Element>& cell = points.Of(t, support, elements);
-    int64_t rows = 0;
+    int most_points = 0;  // of an element
     bool uniform = true, first = true;
     double ratio = 0;
     for (const auto& [kind, e] : elements) {
       const models::ElementBlock& block = layout.blocks[kind];
-      rows += layout.tables[kind].points;
+      most_points = std::max(most_points, layout.tables[kind].points);
       const auto [same, r] = UniformRatio(layout.materials[block.groups[block.group[e]].material]);
       if (!same || (!first && r != ratio)) uniform = false;
       ratio = r;
@@ -498,13 +488,33 @@ struct StiffnessPartials::Maker {
       buffer.resize(static_cast<size_t>(r * c));
       return Eigen::Map<Eigen::MatrixXd>(buffer.data(), r, c);
     };
-    // W's rows padded with zeros to a multiple of 8 (models::Gram's lanes).
-    const int64_t padded = (rows + 7) / 8 * 8;
-    Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, padded, 3 * s);
-    Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : padded, 3 * s);
-    w.bottomRows(padded - rows).setZero();
-    if (!uniform) wl.bottomRows(padded - rows).setZero();
-    int64_t row = 0;
+    // W is made a panel of rows at a time (models::GramAddPanel) and
+    // summed into G = W^T W (and G_lambda) as each fills: a panel stays in
+    // L2 between being written and read, where all of W (megabytes) went
+    // out to memory and back. The panels are W's, whole (the same bits as
+    // models::Gram of all of it): an element's rows past a panel's end
+    // carry over to the next panel's start. Leading dimension a multiple
+    // of 8 (aligned columns).
+    const int64_t panel = models::kGramPanelRows;
+    const int64_t ld = (panel + most_points + 7) / 8 * 8;  // room for an element past the end
+    Eigen::Map<Eigen::MatrixXd> w = sized(sc.w, ld, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> wl = sized(sc.wl, uniform ? 0 : ld, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> gm = sized(sc.g, 3 * s, 3 * s);
+    Eigen::Map<Eigen::MatrixXd> gl = sized(sc.gl, uniform ? 0 : 3 * s, 3 * s);
+    models::GramStart(3 * s, gm.data(), 3 * s);
+    if (!uniform) models::GramStart(3 * s, gl.data(), 3 * s);
+    // Sums W's first `count` rows (a multiple of 8) into G, and moves the
+    // rows after them, up to `row`, to the top.
+    auto flush = [&](int64_t count, int64_t row) {
+      models::GramAddPanel(w.data(), count, 3 * s, ld, gm.data(), 3 * s);
+      if (!uniform) models::GramAddPanel(wl.data(), count, 3 * s, ld, gl.data(), 3 * s);
+      if (row == count) return;
+      for (int c = 0; c < 3 * s; ++c) {
+        std::copy(w.col(c).data() + count, w.col(c).data() + row, w.col(c).data());
+        if (!uniform) std::copy(wl.col(c).data() + count, wl.col(c).data() + row, wl.col(c).data());
+      }
+    };
+    int64_t row = 0;  // in the panel
     double volume = 0;
     int node_count = 0;
     const double* node_rows = points.NodeRows(t, &node_count);
@@ -529,6 +539,10 @@ struct StiffnessPartials::Maker {
           for (int c = 0; c < 3; ++c) y[c] += det * grp.centre_gradient(n, c);
         }
         volume += det;
+      }
+      if (row >= panel) {
+        flush(panel, row);
+        row -= panel;
       }
       for (int32_t col : er.outside) {
         for (int k = 0; k < 3; ++k) {
@@ -591,11 +605,21 @@ struct StiffnessPartials::Maker {
       }
     }
     if (volume > 0) gradient /= volume;
-    // G = W^T W (and G_lambda), both triangles, then K column by column.
-    Eigen::Map<Eigen::MatrixXd> gm = sized(sc.g, 3 * s, 3 * s);
-    models::Gram(w.data(), padded, 3 * s, padded, gm.data(), 3 * s);
-    Eigen::Map<Eigen::MatrixXd> gl = sized(sc.gl, uniform ? 0 : 3 * s, 3 * s);
-    if (!uniform) models::Gram(wl.data(), padded, 3 * s, padded, gl.data(), 3 * s);
+    // The last panel, its rows padded with zeros to a multiple of 8 (they
+    // add nothing); then G's (and G_lambda's) both triangles, and K column
+    // by column.
+    if (row >= panel) {
+      flush(panel, row);
+      row -= panel;
+    }
+    const int64_t padded = (row + 7) / 8 * 8;
+    for (int c = 0; c < 3 * s; ++c) {
+      std::fill(w.col(c).data() + row, w.col(c).data() + padded, 0.0);
+      if (!uniform) std::fill(wl.col(c).data() + row, wl.col(c).data() + padded, 0.0);
+    }
+    if (padded > 0) flush(padded, padded);
+    models::GramFinish(3 * s, gm.data(), 3 * s);
+    if (!uniform) models::GramFinish(3 * s, gl.data(), 3 * s);
     sc.trace.resize(s);
     for (int bb = 0; bb < s; ++bb) {
       const double* g0 = gm.col(bb).data();
@@ -668,8 +692,6 @@ struct StiffnessPartials::Maker {
   std::vector<Key128> material_key;  // per material array
   CellSumSpec spec;
   std::vector<Scratch> scratch;
-  std::array<std::vector<std::once_flag>, 3> once;
-  std::array<std::vector<Group>, 3> groups;
 };
 
 StiffnessPartials::StiffnessPartials(const models::ElementLayout& layout,

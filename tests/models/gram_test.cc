@@ -1,5 +1,6 @@
 #include "solver/models/gram.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -97,6 +98,27 @@ TEST(GramTest, TheSumIsTheDefinedOne) {
   Gram(w.data(), 2048, n, 2048, whole.data(), n);
   Gram(w.data(), 600, n, 2048, first.data(), n);
   EXPECT_EQ(std::memcmp(whole.data(), first.data(), sizeof(double) * n * n), 0);
+}
+
+// A caller keeping one panel of rows at a time (each in a buffer of its
+// own) gets Gram's bits on every path.
+TEST(GramTest, PanelAtATimeGivesGramsBits) {
+  const int64_t rows = 3 * kGramPanelRows + 40;
+  const int n = 21;
+  const Eigen::MatrixXd w = Random(rows, n, 9u);
+  for (GramPath path : {GramPath::kPortable, GramPath::kAvx2, GramPath::kAvx512}) {
+    Eigen::MatrixXd whole(n, n), panels(n, n);
+    if (!Gram(path, w.data(), rows, n, rows, whole.data(), n)) continue;
+    GramStart(n, panels.data(), n);
+    for (int64_t r0 = 0; r0 < rows; r0 += kGramPanelRows) {
+      const int64_t count = std::min(kGramPanelRows, rows - r0);
+      const Eigen::MatrixXd panel = w.middleRows(r0, count);  // its own buffer
+      ASSERT_TRUE(GramAddPanel(path, panel.data(), count, n, count, panels.data(), n));
+    }
+    GramFinish(n, panels.data(), n);
+    EXPECT_EQ(std::memcmp(whole.data(), panels.data(), sizeof(double) * n * n), 0)
+        << GramPathName(path);
+  }
 }
 
 }  // namespace

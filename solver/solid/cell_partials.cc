@@ -263,7 +263,8 @@ void CellPoints::CubicDerivatives(int thread, size_t i, double* out) {
 struct MassPartials::Maker {
   // Per pool thread.
   struct Scratch {
-    std::array<std::vector<double>, 2> w;  // W, kept from cell to cell
+    // W, kept from cell to cell (64-byte aligned for models::Gram).
+    std::array<std::vector<double, models::GramAllocator>, 2> w;
     std::vector<double> root;              // sqrt(rho dV) per point
   };
 
@@ -323,14 +324,21 @@ struct MassPartials::Maker {
     Scratch& sc = scratch[t];
     const std::vector<CellPoints::Element>& cell = points.Of(t, support, elements);
     const int s = static_cast<int>(support.size());
-    int64_t rows = 0;
-    for (const auto& [kind, e] : elements) rows += layout.tables[kind].points;
+    int64_t points_in_cell = 0;
+    for (const auto& [kind, e] : elements) points_in_cell += layout.tables[kind].points;
+    // W's rows padded with zeros to a multiple of 8 (models::Gram's lanes).
+    const int64_t rows = (points_in_cell + 7) / 8 * 8;
     const auto [proportional, ratio] =
         has_damping ? DampingRatio(elements) : std::pair<bool, double>{true, 0.0};
     const int ws = has_damping && !proportional ? 2 : 1;
     // W (rows x s, column major) per output; each element's rows written
     // in its support's columns and zeroed in the others.
-    for (int o = 0; o < ws; ++o) sc.w[o].resize(static_cast<size_t>(rows) * s);
+    for (int o = 0; o < ws; ++o) {
+      sc.w[o].resize(static_cast<size_t>(rows) * s);
+      for (int c = 0; c < s; ++c) {
+        std::fill(sc.w[o].data() + c * rows + points_in_cell, sc.w[o].data() + (c + 1) * rows, 0.0);
+      }
+    }
     int64_t row = 0;
     for (size_t i = 0; i < elements.size(); ++i) {
       const auto [kind, e] = elements[i];
@@ -358,12 +366,7 @@ struct MassPartials::Maker {
       }
       row += table.points;
     }
-    for (int o = 0; o < ws; ++o) {
-      Eigen::MatrixXd& p = partial[o];
-      p.selfadjointView<Eigen::Lower>().rankUpdate(
-          Eigen::Map<const Eigen::MatrixXd>(sc.w[o].data(), rows, s).transpose());
-      p.triangularView<Eigen::StrictlyUpper>() = p.transpose();
-    }
+    for (int o = 0; o < ws; ++o) models::Gram(sc.w[o].data(), rows, s, rows, partial[o].data(), s);
     if (has_damping && proportional) partial[1] = ratio * partial[0];
   }
 

@@ -3,7 +3,7 @@
 // the per-cell corotation's matrices). Each is a CellSumSpec for SumByCell
 // (cell_assembly.h), whose cells are made at once from their elements'
 // quadrature points: the rows of all of a cell's points stacked into one
-// matrix W, the partial its Gram matrix W^T W (one symmetric rank update),
+// matrix W, the partial its Gram matrix W^T W (models::Gram),
 // no element matrix formed. (Element matrices per group, then B^T X B per
 // element, took three times the flops where every element has its own
 // shape, as after a local subdivision.)

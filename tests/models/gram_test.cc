@@ -3,23 +3,15 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <random>
 #include <vector>
 
 #include <Eigen/Core>
 #include <gtest/gtest.h>
 
+#include "tests/models/random_matrix.h"
+
 namespace dynsolid::models {
 namespace {
-
-Eigen::MatrixXd Random(int64_t rows, int cols, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::MatrixXd m(rows, cols);
-  for (int j = 0; j < cols; ++j)
-    for (int64_t i = 0; i < rows; ++i) m(i, j) = u(rng);
-  return m;
-}
 
 // The sizes around the blocks (4 x 4, 3 x 2), the panels (512 rows) and
 // the cells' W (a couple of thousand rows, 3 S columns).
@@ -33,7 +25,7 @@ const Case kCases[] = {{8, 1},    {8, 2},     {16, 5},    {64, 7},     {512, 12}
 TEST(GramTest, EqualsWTransposeWAndIsSymmetricToTheBit) {
   for (const Case& c : kCases) {
     const int64_t ldw = c.rows + 5;  // a leading dimension past the rows
-    const Eigen::MatrixXd w = Random(ldw, c.n, 3u + c.n);
+    const Eigen::MatrixXd w = RandomMatrix(ldw, c.n, 3u + c.n);
     const int64_t ldg = c.n + 2;
     Eigen::MatrixXd g = Eigen::MatrixXd::Constant(ldg, c.n, 99.0);
     Gram(w.data(), c.rows, c.n, ldw, g.data(), ldg);
@@ -56,7 +48,7 @@ TEST(GramTest, EveryPathGivesThePortableBits) {
   int ran = 0;
   for (GramPath path : {GramPath::kAvx2, GramPath::kAvx512}) {
     for (const Case& c : kCases) {
-      const Eigen::MatrixXd w = Random(c.rows, c.n, 17u + c.n);
+      const Eigen::MatrixXd w = RandomMatrix(c.rows, c.n, 17u + c.n);
       Eigen::MatrixXd portable(c.n, c.n), other(c.n, c.n);
       ASSERT_TRUE(Gram(GramPath::kPortable, w.data(), c.rows, c.n, c.rows, portable.data(), c.n));
       if (!Gram(path, w.data(), c.rows, c.n, c.rows, other.data(), c.n)) break;
@@ -75,7 +67,7 @@ TEST(GramTest, EveryPathGivesThePortableBits) {
 // rows of zeros appended (the callers' padding) change no bit.
 TEST(GramTest, TheSumIsTheDefinedOne) {
   const int n = 9;
-  Eigen::MatrixXd w = Random(2048, n, 5u);
+  Eigen::MatrixXd w = RandomMatrix(2048, n, 5u);
   Eigen::MatrixXd one(n, n);
   w.bottomRows(2048 - 8).setZero();
   w.middleRows(1, 7).setZero();
@@ -83,7 +75,7 @@ TEST(GramTest, TheSumIsTheDefinedOne) {
   for (int j = 0; j < n; ++j) {
     for (int i = 0; i < n; ++i) EXPECT_EQ(one(i, j), w(0, i) * w(0, j));
   }
-  w = Random(2048, n, 6u);
+  w = RandomMatrix(2048, n, 6u);
   Eigen::MatrixXd eight(n, n);
   Gram(w.data(), 8, n, 2048, eight.data(), n);
   for (int j = 0; j < n; ++j) {
@@ -105,7 +97,7 @@ TEST(GramTest, TheSumIsTheDefinedOne) {
 TEST(GramTest, PanelAtATimeGivesGramsBits) {
   const int64_t rows = 3 * kGramPanelRows + 40;
   const int n = 21;
-  const Eigen::MatrixXd w = Random(rows, n, 9u);
+  const Eigen::MatrixXd w = RandomMatrix(rows, n, 9u);
   for (GramPath path : {GramPath::kPortable, GramPath::kAvx2, GramPath::kAvx512}) {
     Eigen::MatrixXd whole(n, n), panels(n, n);
     if (!Gram(path, w.data(), rows, n, rows, whole.data(), n)) continue;

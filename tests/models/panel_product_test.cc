@@ -1,34 +1,26 @@
 #include "solver/models/panel_product.h"
 
 #include <cmath>
-#include <random>
 
 #include <gtest/gtest.h>
 
+#include "tests/models/random_matrix.h"
+
 namespace dynsolid::models {
 namespace {
-
-Eigen::MatrixXd Random(int rows, int cols, uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::MatrixXd m(rows, cols);
-  for (int j = 0; j < cols; ++j)
-    for (int i = 0; i < rows; ++i) m(i, j) = u(rng);
-  return m;
-}
 
 // Every shape the models use (local-frame n x n for n = 64, 8, 5;
 // corotational 3n x 3n) and batch sizes around the 6-column micro-kernel.
 TEST(PackedMatrixTest, MatchesEigenProductForEveryShapeAndBatchSize) {
   for (int n : {5, 8, 15, 24, 64, 192}) {
-    const Eigen::MatrixXd k = Random(n, n, 7u + n);
+    const Eigen::MatrixXd k = RandomMatrix(n, n, 7u + n);
     const PackedMatrix packed(k);
     ASSERT_EQ(packed.rows(), n);
     ASSERT_EQ(packed.padded_rows() % PackedMatrix::kPanel, 0);
     ASSERT_GE(packed.padded_rows(), n);
     for (int count : {1, 2, 5, 6, 7, 12, 13, 64}) {
       const int ld = packed.padded_rows() + 3;  // strides larger than the rows
-      Eigen::MatrixXd x = Random(ld, count, 11u + count);
+      Eigen::MatrixXd x = RandomMatrix(ld, count, 11u + count);
       Eigen::MatrixXd y = Eigen::MatrixXd::Constant(ld, count, 99.0);
       packed.Apply(x.data(), ld, count, y.data(), ld);
       const Eigen::MatrixXd want = k * x.topRows(n);
@@ -47,8 +39,8 @@ TEST(PackedMatrixTest, MatchesEigenProductForEveryShapeAndBatchSize) {
 // whatever the batch size: each entry is one fma chain in a fixed order.
 TEST(PackedMatrixTest, ColumnBitsDoNotDependOnTheBatch) {
   const int n = 64;
-  const PackedMatrix packed(Random(n, n, 3));
-  const Eigen::MatrixXd x = Random(n, 17, 5);
+  const PackedMatrix packed(RandomMatrix(n, n, 3));
+  const Eigen::MatrixXd x = RandomMatrix(n, 17, 5);
   Eigen::MatrixXd all(n, 17);
   packed.Apply(x.data(), n, 17, all.data(), n);
   for (int j = 0; j < 17; ++j) {
@@ -62,7 +54,7 @@ TEST(PackedMatrixTest, ColumnBitsDoNotDependOnTheBatch) {
 // documented rounding, shared by the SIMD and the portable paths).
 TEST(PackedMatrixTest, EntriesAreAscendingFmaChains) {
   const int n = 24;
-  const Eigen::MatrixXd k = Random(n, n, 9), x = Random(n, 3, 10);
+  const Eigen::MatrixXd k = RandomMatrix(n, n, 9), x = RandomMatrix(n, 3, 10);
   const PackedMatrix packed(k);
   Eigen::MatrixXd y(packed.padded_rows(), 3);
   packed.Apply(x.data(), n, 3, y.data(), packed.padded_rows());
@@ -79,13 +71,13 @@ TEST(PackedMatrixTest, EntriesAreAscendingFmaChains) {
 // product, to float rounding of the sum of |K| |x| terms; padding rows zero.
 TEST(PackedMatrixFTest, MatchesTheDoubleProductToFloatRounding) {
   for (int n : {5, 8, 15, 24, 45, 192}) {
-    const Eigen::MatrixXd k = Random(n, n, 17u + n);
+    const Eigen::MatrixXd k = RandomMatrix(n, n, 17u + n);
     const PackedMatrixF packed{PackedMatrix(k)};
     ASSERT_EQ(packed.padded_rows() % PackedMatrixF::kPanel, 0);
     ASSERT_GE(packed.padded_rows(), n);
     for (int count : {1, 5, 6, 7, 13, 64}) {
       const int ld = packed.padded_rows() + 3;
-      const Eigen::MatrixXd x = Random(ld, count, 21u + count);
+      const Eigen::MatrixXd x = RandomMatrix(ld, count, 21u + count);
       const Eigen::MatrixXf xf = x.cast<float>();
       Eigen::MatrixXd y = Eigen::MatrixXd::Constant(ld, count, 99.0);
       packed.Apply(xf.data(), ld, count, y.data(), ld);
@@ -106,8 +98,8 @@ TEST(PackedMatrixFTest, MatchesTheDoubleProductToFloatRounding) {
 // bits wherever a column sits in a batch.
 TEST(PackedMatrixFTest, EntriesAreAscendingFloatFmaChains) {
   const int n = 24;
-  const Eigen::MatrixXd k = Random(n, n, 9);
-  const Eigen::MatrixXf x = Random(n, 7, 10).cast<float>();
+  const Eigen::MatrixXd k = RandomMatrix(n, n, 9);
+  const Eigen::MatrixXf x = RandomMatrix(n, 7, 10).cast<float>();
   const PackedMatrixF packed{PackedMatrix(k)};
   const Eigen::MatrixXf kf = k.cast<float>();
   Eigen::MatrixXd y(packed.padded_rows(), 7);

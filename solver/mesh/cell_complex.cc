@@ -344,58 +344,55 @@ absl::Status CellComplex::BuildAdjacency() {
   edge_cells_.items.clear();
   edge_cells_.items.reserve(edge_faces.items.size());
   edge_boundary_.assign(ne, 0);
-  std::vector<std::pair<int32_t, int32_t>> inc;  // (face, cell) incidences
+  // Per face of the edge (its slot in the edge's face list): its two
+  // cells and whether the walk has passed it.
+  std::vector<int32_t> cell0, cell1;
   std::vector<uint8_t> used;
   for (int32_t e = 0; e < ne; ++e) {
     const auto faces = edge_faces.row(e);
-    inc.clear();
-    int32_t start = -1;
-    for (int32_t f : faces) {
-      inc.push_back({f, face_cells_[f][0]});
-      if (face_cells_[f][1] >= 0) {
-        inc.push_back({f, face_cells_[f][1]});
-      } else {
-        edge_boundary_[e] = 1;
-        if (start < 0) start = f;
-      }
+    const int k = static_cast<int>(faces.size());
+    cell0.resize(k);
+    cell1.resize(k);
+    used.assign(k, 0);
+    for (int i = 0; i < k; ++i) {
+      cell0[i] = face_cells_[faces[i]][0];
+      cell1[i] = face_cells_[faces[i]][1];
+      if (cell1[i] < 0) edge_boundary_[e] = 1;
     }
-    used.assign(faces.size(), 0);
     int32_t out = edge_faces_.offsets[e];
-    auto face_slot = [&](int32_t f) {
-      return static_cast<int32_t>(std::find(faces.begin(), faces.end(), f) - faces.begin());
-    };
     // Walk face -> cell -> the cell's other face at e, from boundary faces
     // first, then from any face left (interior edges).
     while (true) {
-      int32_t f0 = -1;
-      for (int32_t f : faces) {
-        if (!used[face_slot(f)] && face_cells_[f][1] < 0) { f0 = f; break; }
+      int start = -1;
+      for (int i = 0; i < k && start < 0; ++i) {
+        if (!used[i] && cell1[i] < 0) start = i;
       }
-      if (f0 < 0) {
-        for (int32_t f : faces) {
-          if (!used[face_slot(f)]) { f0 = f; break; }
-        }
+      for (int i = 0; i < k && start < 0; ++i) {
+        if (!used[i]) start = i;
       }
-      if (f0 < 0) break;
-      int32_t f = f0, prev_cell = -1;
+      if (start < 0) break;
+      int i = start;
+      int32_t prev_cell = -1;
       while (true) {
-        used[face_slot(f)] = 1;
-        edge_faces_.items[out++] = f;
+        used[i] = 1;
+        edge_faces_.items[out++] = faces[i];
         int32_t cell = -1;
-        for (int s = 0; s < 2; ++s) {
-          const int32_t c = face_cells_[f][s];
-          if (c >= 0 && c != prev_cell) { cell = c; break; }
+        if (cell0[i] >= 0 && cell0[i] != prev_cell) {
+          cell = cell0[i];
+        } else if (cell1[i] >= 0 && cell1[i] != prev_cell) {
+          cell = cell1[i];
         }
         if (cell < 0) break;
-        int32_t next = -1;
-        for (const auto& [g, c] : inc) {
-          if (c == cell && g != f) { next = g; break; }
+        // The first other face of the edge on that cell.
+        int next = -1;
+        for (int j = 0; j < k && next < 0; ++j) {
+          if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
         }
         if (next < 0) break;  // open cell: reported by CheckCellsClosed
         edge_cells_.items.push_back(cell);
-        if (used[face_slot(next)]) break;
+        if (used[next]) break;
         prev_cell = cell;
-        f = next;
+        i = next;
       }
     }
     edge_cells_.offsets[e + 1] = static_cast<int32_t>(edge_cells_.items.size());

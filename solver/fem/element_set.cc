@@ -26,9 +26,9 @@ bool LoopContains(std::span<const int32_t> loop, int32_t v) {
 // Corners of hexahedral cell c in VTK order: the first face, reversed so its
 // normal points into the cell, then the vertex across the edge leaving
 // each of its corners.
-std::array<int32_t, 8> HexCorners(const CellComplex& m, int32_t c) {
+// bottom: scratch (kept by the caller from cell to cell).
+std::array<int32_t, 8> HexCorners(const CellComplex& m, int32_t c, std::vector<int32_t>& bottom) {
   std::array<int32_t, 8> h{};
-  std::vector<int32_t> bottom;
   m.CellFaceLoop(c, 0, bottom);
   std::reverse(bottom.begin() + 1, bottom.end());
   for (int i = 0; i < 4; ++i) h[i] = bottom[i];
@@ -193,7 +193,7 @@ void ClassifyRange(const CellComplex& m, const std::vector<uint8_t>& is_hex,
   std::vector<int32_t> loop;
   for (int32_t c = begin; c < end; ++c) {
     if (is_hex[c]) {
-      const std::array<int32_t, 8> h = HexCorners(m, c);
+      const std::array<int32_t, 8> h = HexCorners(m, c, loop);
       bool cubic = true;
       for (int32_t v : h) cubic &= regular[v] != 0;
       if (cubic) {

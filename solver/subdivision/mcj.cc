@@ -135,6 +135,166 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
   return m;
 }
 
+namespace {
+
+// Which coarse elements a subdivision splits: the fine point of each split
+// edge, face and cell (-1: not split), and the "frozen" ones, which also
+// touch an unrefined cell and are split linearly so that cell keeps its
+// shape.
+struct Split {
+  std::vector<int32_t> edge_point, face_point, cell_point;
+  std::vector<uint8_t> edge_frozen, face_frozen, vertex_frozen;
+  int32_t fine_vertices = 0;
+};
+
+// The subdivision matrix (fine vertices x coarse vertices), from the coarse
+// complex alone. sharp_edges: per edge, nonzero where tagged (empty: none).
+SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
+                               const std::vector<uint8_t>& sharp_edges) {
+  const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
+                nc = m.num_cells();
+  auto sharp = [&](int32_t e) { return !sharp_edges.empty() && sharp_edges[e] != 0; };
+  const std::vector<int32_t>& edge_point = split.edge_point;
+  const std::vector<int32_t>& face_point = split.face_point;
+  const std::vector<int32_t>& cell_point = split.cell_point;
+  const std::vector<uint8_t>& edge_frozen = split.edge_frozen;
+  const std::vector<uint8_t>& face_frozen = split.face_frozen;
+  const std::vector<uint8_t>& vertex_frozen = split.vertex_frozen;
+  const int32_t nv_fine = split.fine_vertices;
+  // ---- The subdivision matrix, row by row. ----
+  std::vector<int32_t> outer{0}, inner;
+  std::vector<double> values;
+  outer.reserve(nv_fine + 1);
+  inner.reserve(static_cast<size_t>(nv_fine) * 27);
+  values.reserve(static_cast<size_t>(nv_fine) * 27);
+  RowBuilder row;
+  std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
+
+  // Old vertices -> vertex points.
+  for (int32_t v = 0; v < nv; ++v) {
+    sharp_nbrs.clear();
+    for (int32_t e : m.vertex_edges(v)) {
+      if (!sharp(e)) continue;
+      const auto& ev = m.edge_vertices(e);
+      sharp_nbrs.push_back(ev[0] == v ? ev[1] : ev[0]);
+    }
+    boundary_faces.clear();
+    boundary_edges.clear();
+    if (m.vertex_is_boundary(v)) {
+      for (int32_t f : m.vertex_faces(v)) {
+        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+      }
+      for (int32_t e : m.vertex_edges(v)) {
+        if (m.edge_is_boundary(e)) boundary_edges.push_back(e);
+      }
+    }
+    if (vertex_frozen[v] || sharp_nbrs.size() >= 3 ||
+        (m.vertex_is_boundary(v) && sharp_nbrs.size() < 2 &&
+         boundary_faces.size() != boundary_edges.size())) {
+      // Unrefined neighbour, sharp corner, or a non-manifold boundary vertex.
+      row.Add(v, 1.0);
+    } else if (sharp_nbrs.size() == 2) {
+      // Crease: cubic B-spline curve rule (a + 6 V + b) / 8.
+      row.Add(sharp_nbrs[0], 1.0 / 8.0);
+      row.Add(v, 6.0 / 8.0);
+      row.Add(sharp_nbrs[1], 1.0 / 8.0);
+    } else if (m.vertex_is_boundary(v)) {
+      // Catmull-Clark on the boundary surface: (Fbar + 2 Rbar + (n - 3) V) / n
+      // with face points = face centroids and R = boundary edge midpoints.
+      const double n = static_cast<double>(boundary_faces.size());
+      for (int32_t f : boundary_faces) row.AddAverage(m.face_vertices(f), 1.0 / (n * n));
+      for (int32_t e : boundary_edges) {
+        const auto& ev = m.edge_vertices(e);
+        row.Add(ev[0], 1.0 / (n * n));
+        row.Add(ev[1], 1.0 / (n * n));
+      }
+      row.Add(v, (n - 3.0) / n);
+    } else {
+      // Interior: (Cbar + 3 Abar + 3 Ebar + (n - 7) V) / n, n cells around v.
+      const auto cells = m.vertex_cells(v);
+      const auto faces = m.vertex_faces(v);
+      const auto edges = m.vertex_edges(v);
+      const double n = static_cast<double>(cells.size());
+      for (int32_t c : cells) {
+        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+      }
+      for (int32_t f : faces) {
+        row.AddAverage(m.face_vertices(f), 3.0 / (n * static_cast<double>(faces.size())));
+      }
+      for (int32_t e : edges) {
+        const auto& ev = m.edge_vertices(e);
+        const double w = 3.0 / (n * static_cast<double>(edges.size()) * 2.0);
+        row.Add(ev[0], w);
+        row.Add(ev[1], w);
+      }
+      row.Add(v, (n - 7.0) / n);
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Edge points.
+  for (int32_t e = 0; e < ne; ++e) {
+    if (edge_point[e] < 0) continue;
+    const auto& ev = m.edge_vertices(e);
+    boundary_faces.clear();
+    if (m.edge_is_boundary(e)) {
+      for (int32_t f : m.edge_faces(e)) {
+        if (m.face_is_boundary(f)) boundary_faces.push_back(f);
+      }
+    }
+    if (edge_frozen[e] || sharp(e) ||
+        (m.edge_is_boundary(e) && boundary_faces.size() != 2)) {
+      row.Add(ev[0], 0.5);
+      row.Add(ev[1], 0.5);
+    } else if (m.edge_is_boundary(e)) {
+      // (v0 + v1 + F0 + F1) / 4 with the boundary face points (centroids).
+      row.Add(ev[0], 0.25);
+      row.Add(ev[1], 0.25);
+      row.AddAverage(m.face_vertices(boundary_faces[0]), 0.25);
+      row.AddAverage(m.face_vertices(boundary_faces[1]), 0.25);
+    } else {
+      // (Cbar + 2 Abar + (n - 3) Mid) / n, n cells around the edge.
+      const auto cells = m.edge_cells(e);
+      const auto faces = m.edge_faces(e);
+      const double n = static_cast<double>(cells.size());
+      for (int32_t c : cells) {
+        row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
+      }
+      for (int32_t f : faces) {
+        row.AddAverage(m.face_vertices(f), 2.0 / (n * static_cast<double>(faces.size())));
+      }
+      row.Add(ev[0], (n - 3.0) / (2.0 * n));
+      row.Add(ev[1], (n - 3.0) / (2.0 * n));
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Face points.
+  for (int32_t f = 0; f < nf; ++f) {
+    if (face_point[f] < 0) continue;
+    if (face_frozen[f] || m.face_is_boundary(f)) {
+      row.AddAverage(m.face_vertices(f), 1.0);
+    } else {
+      // (C0 + 2 A + C1) / 4.
+      const auto& fc = m.face_cells(f);
+      row.AddAverage(m.cell_vertices(fc[0]), 0.25);
+      row.AddAverage(m.face_vertices(f), 0.5);
+      row.AddAverage(m.cell_vertices(fc[1]), 0.25);
+    }
+    row.Flush(outer, inner, values);
+  }
+
+  // Cell points: the centroid of the cell's vertices.
+  for (int32_t c = 0; c < nc; ++c) {
+    if (cell_point[c] < 0) continue;
+    row.AddAverage(m.cell_vertices(c), 1.0);
+    row.Flush(outer, inner, values);
+  }
+  return FromCsr(nv_fine, nv, outer, inner, values);
+}
+
+}  // namespace
+
 // Coarse complexes of this many cells make their subdivision matrix on a
 // second thread.
 constexpr int32_t kCellsForAThread = 256;
@@ -161,10 +321,20 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   const bool local = !options.cells.empty() &&
                      std::find(refined.begin(), refined.end(), 0) != refined.end();
 
-  // Split faces and edges belong to a refined cell; "frozen" ones also touch
-  // an unrefined cell and are split linearly so that cell keeps its shape.
-  std::vector<int32_t> edge_point(ne, -1), face_point(nf, -1), cell_point(nc, -1);
-  std::vector<uint8_t> edge_frozen(ne, 0), face_frozen(nf, 0), vertex_frozen(nv, 0);
+  // Split faces and edges belong to a refined cell (Split).
+  Split split;
+  std::vector<int32_t>& edge_point = split.edge_point;
+  std::vector<int32_t>& face_point = split.face_point;
+  std::vector<int32_t>& cell_point = split.cell_point;
+  std::vector<uint8_t>& edge_frozen = split.edge_frozen;
+  std::vector<uint8_t>& face_frozen = split.face_frozen;
+  std::vector<uint8_t>& vertex_frozen = split.vertex_frozen;
+  edge_point.assign(ne, -1);
+  face_point.assign(nf, -1);
+  cell_point.assign(nc, -1);
+  edge_frozen.assign(ne, 0);
+  face_frozen.assign(nf, 0);
+  vertex_frozen.assign(nv, 0);
   int32_t next = nv;
   for (int32_t e = 0; e < ne; ++e) {
     bool any = false, all = true;
@@ -184,7 +354,7 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   for (int32_t c = 0; c < nc; ++c) {
     if (refined[c]) cell_point[c] = next++;
   }
-  const int32_t nv_fine = next;
+  const int32_t nv_fine = split.fine_vertices = next;
   for (int32_t v = 0; v < nv; ++v) {
     for (int32_t c : m.vertex_cells(v)) vertex_frozen[v] |= refined[c] == 0;
   }
@@ -195,136 +365,7 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   Level level;
   Points fine_positions;
   auto matrix = [&] {
-    // ---- The subdivision matrix, row by row. ----
-    std::vector<int32_t> outer{0}, inner;
-    std::vector<double> values;
-    outer.reserve(nv_fine + 1);
-    inner.reserve(static_cast<size_t>(nv_fine) * 27);
-    values.reserve(static_cast<size_t>(nv_fine) * 27);
-    RowBuilder row;
-    std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
-
-    // Old vertices -> vertex points.
-    for (int32_t v = 0; v < nv; ++v) {
-      sharp_nbrs.clear();
-      for (int32_t e : m.vertex_edges(v)) {
-        if (!sharp(e)) continue;
-        const auto& ev = m.edge_vertices(e);
-        sharp_nbrs.push_back(ev[0] == v ? ev[1] : ev[0]);
-      }
-      boundary_faces.clear();
-      boundary_edges.clear();
-      if (m.vertex_is_boundary(v)) {
-        for (int32_t f : m.vertex_faces(v)) {
-          if (m.face_is_boundary(f)) boundary_faces.push_back(f);
-        }
-        for (int32_t e : m.vertex_edges(v)) {
-          if (m.edge_is_boundary(e)) boundary_edges.push_back(e);
-        }
-      }
-      if (vertex_frozen[v] || sharp_nbrs.size() >= 3 ||
-          (m.vertex_is_boundary(v) && sharp_nbrs.size() < 2 &&
-           boundary_faces.size() != boundary_edges.size())) {
-        // Unrefined neighbour, sharp corner, or a non-manifold boundary vertex.
-        row.Add(v, 1.0);
-      } else if (sharp_nbrs.size() == 2) {
-        // Crease: cubic B-spline curve rule (a + 6 V + b) / 8.
-        row.Add(sharp_nbrs[0], 1.0 / 8.0);
-        row.Add(v, 6.0 / 8.0);
-        row.Add(sharp_nbrs[1], 1.0 / 8.0);
-      } else if (m.vertex_is_boundary(v)) {
-        // Catmull-Clark on the boundary surface: (Fbar + 2 Rbar + (n - 3) V) / n
-        // with face points = face centroids and R = boundary edge midpoints.
-        const double n = static_cast<double>(boundary_faces.size());
-        for (int32_t f : boundary_faces) row.AddAverage(m.face_vertices(f), 1.0 / (n * n));
-        for (int32_t e : boundary_edges) {
-          const auto& ev = m.edge_vertices(e);
-          row.Add(ev[0], 1.0 / (n * n));
-          row.Add(ev[1], 1.0 / (n * n));
-        }
-        row.Add(v, (n - 3.0) / n);
-      } else {
-        // Interior: (Cbar + 3 Abar + 3 Ebar + (n - 7) V) / n, n cells around v.
-        const auto cells = m.vertex_cells(v);
-        const auto faces = m.vertex_faces(v);
-        const auto edges = m.vertex_edges(v);
-        const double n = static_cast<double>(cells.size());
-        for (int32_t c : cells) {
-          row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
-        }
-        for (int32_t f : faces) {
-          row.AddAverage(m.face_vertices(f), 3.0 / (n * static_cast<double>(faces.size())));
-        }
-        for (int32_t e : edges) {
-          const auto& ev = m.edge_vertices(e);
-          const double w = 3.0 / (n * static_cast<double>(edges.size()) * 2.0);
-          row.Add(ev[0], w);
-          row.Add(ev[1], w);
-        }
-        row.Add(v, (n - 7.0) / n);
-      }
-      row.Flush(outer, inner, values);
-    }
-
-    // Edge points.
-    for (int32_t e = 0; e < ne; ++e) {
-      if (edge_point[e] < 0) continue;
-      const auto& ev = m.edge_vertices(e);
-      boundary_faces.clear();
-      if (m.edge_is_boundary(e)) {
-        for (int32_t f : m.edge_faces(e)) {
-          if (m.face_is_boundary(f)) boundary_faces.push_back(f);
-        }
-      }
-      if (edge_frozen[e] || sharp(e) ||
-          (m.edge_is_boundary(e) && boundary_faces.size() != 2)) {
-        row.Add(ev[0], 0.5);
-        row.Add(ev[1], 0.5);
-      } else if (m.edge_is_boundary(e)) {
-        // (v0 + v1 + F0 + F1) / 4 with the boundary face points (centroids).
-        row.Add(ev[0], 0.25);
-        row.Add(ev[1], 0.25);
-        row.AddAverage(m.face_vertices(boundary_faces[0]), 0.25);
-        row.AddAverage(m.face_vertices(boundary_faces[1]), 0.25);
-      } else {
-        // (Cbar + 2 Abar + (n - 3) Mid) / n, n cells around the edge.
-        const auto cells = m.edge_cells(e);
-        const auto faces = m.edge_faces(e);
-        const double n = static_cast<double>(cells.size());
-        for (int32_t c : cells) {
-          row.AddAverage(m.cell_vertices(c), 1.0 / (n * static_cast<double>(cells.size())));
-        }
-        for (int32_t f : faces) {
-          row.AddAverage(m.face_vertices(f), 2.0 / (n * static_cast<double>(faces.size())));
-        }
-        row.Add(ev[0], (n - 3.0) / (2.0 * n));
-        row.Add(ev[1], (n - 3.0) / (2.0 * n));
-      }
-      row.Flush(outer, inner, values);
-    }
-
-    // Face points.
-    for (int32_t f = 0; f < nf; ++f) {
-      if (face_point[f] < 0) continue;
-      if (face_frozen[f] || m.face_is_boundary(f)) {
-        row.AddAverage(m.face_vertices(f), 1.0);
-      } else {
-        // (C0 + 2 A + C1) / 4.
-        const auto& fc = m.face_cells(f);
-        row.AddAverage(m.cell_vertices(fc[0]), 0.25);
-        row.AddAverage(m.face_vertices(f), 0.5);
-        row.AddAverage(m.cell_vertices(fc[1]), 0.25);
-      }
-      row.Flush(outer, inner, values);
-    }
-
-    // Cell points: the centroid of the cell's vertices.
-    for (int32_t c = 0; c < nc; ++c) {
-      if (cell_point[c] < 0) continue;
-      row.AddAverage(m.cell_vertices(c), 1.0);
-      row.Flush(outer, inner, values);
-    }
-    level.a = FromCsr(nv_fine, nv, outer, inner, values);
+    level.a = SubdivisionMatrix(m, split, options.sharp_edges);
     fine_positions = level.a * m.positions();
   };
   std::thread beside;
@@ -339,7 +380,6 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   } else {
     matrix();
   }
-
 
   // ---- Topology of the fine complex. ----
   // Face ids: children of split faces (one quad per corner, in the parent's

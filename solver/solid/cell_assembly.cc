@@ -204,7 +204,7 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       }
     }
   }
-  // Costliest first (points times support squared: the rank updates), so
+  // Costliest first (points times support squared: the Gram products), so
   // that no thread is left with a large cell while the others are done.
   // Each partial is the same whichever thread makes it, and when.
   std::vector<double> cost(control_cells, 0);

@@ -7,7 +7,7 @@
 // element's rows of the node matrix on its control support. Here it is
 // summed in a fixed order: per control cell, a partial over the cell's
 // support that the caller makes from its elements (kind order, then block
-// order) at once (one rank update of their points' rows, for the mass and
+// order) at once (the Gram matrix of their points' rows, for the mass and
 // K0); then the partials in cell order. A cell's partial is a function of
 // its key alone: its elements' group contents (the caller's group key:
 // rest shape, material, anything the element's X depends on) and node

@@ -301,7 +301,7 @@ struct MassPartials::Maker {
   }
 
   // Whether every point of the cell has one damping / density ratio (then
-  // Dt's partial is that ratio times Mt's: one rank update, not two).
+  // Dt's partial is that ratio times Mt's: one Gram product, not two).
   std::pair<bool, double> DampingRatio(const std::vector<std::pair<int, int32_t>>& elements) const {
     bool first = true;
     double ratio = 0;

@@ -41,24 +41,23 @@ int main() {
   for (const auto& [rows, n] : sizes) {
     std::mt19937 rng(rows + n);
     std::uniform_real_distribution<double> u(-1, 1);
-    const int ldw = rows;
     // W 64-byte aligned, as the cell partials keep it.
-    std::vector<double, dynsolid::models::GramAllocator> storage(static_cast<size_t>(ldw) * n);
-    Eigen::Map<Eigen::MatrixXd> w(storage.data(), ldw, n);
+    std::vector<double, dynsolid::models::GramAllocator> storage(static_cast<size_t>(rows) * n);
+    Eigen::Map<Eigen::MatrixXd> w(storage.data(), rows, n);
     for (int64_t i = 0; i < w.size(); ++i) w.data()[i] = u(rng);
     Eigen::MatrixXd g(n, n);
     const double eigen = BestMs(
         [&] {
           g.setZero();
-          g.selfadjointView<Eigen::Lower>().rankUpdate(w.topRows(rows).transpose());
+          g.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
         },
         20);
     // Flops of the lower triangle: rows n (n + 1) / 2 multiply-adds.
     const double flops = 2.0 * rows * n * (n + 1) / 2.0;
     for (GramPath path : {GramPath::kPortable, GramPath::kAvx2, GramPath::kAvx512}) {
-      if (!dynsolid::models::Gram(path, w.data(), rows, n, ldw, g.data(), n)) continue;
+      if (!dynsolid::models::Gram(path, w.data(), rows, n, rows, g.data(), n)) continue;
       const double ms = BestMs(
-          [&] { dynsolid::models::Gram(path, w.data(), rows, n, ldw, g.data(), n); }, 20);
+          [&] { dynsolid::models::Gram(path, w.data(), rows, n, rows, g.data(), n); }, 20);
       std::printf("| %d x %d | %.3f | %s | %.3f | %.2f | %.1f |\n", rows, n, eigen,
                   dynsolid::models::GramPathName(path), ms, eigen / ms, flops / ms / 1e6);
     }

@@ -83,6 +83,18 @@ std::vector<uint64_t> ZOrderKeys(const ElementBlock& block, const Points& rest) 
   return key;
 }
 
+// Calls fn(begin, end) over [0, n) in pool-size contiguous ranges on
+// `pool` (null: at once on this thread).
+template <typename Fn>
+void Ranges(WorkerPool* pool, int64_t n, Fn&& fn) {
+  if (pool == nullptr || pool->size() == 1 || n < 64) {
+    fn(int64_t{0}, n);
+    return;
+  }
+  const int parts = pool->size();
+  pool->Run([&](int k) { fn(n * k / parts, n * (k + 1) / parts); });
+}
+
 // The linear hexahedron's node a sits at parametric corner kCorner[a]
 // (fem/shape.cc); a cubic element's node 16 i + 4 j + k at tensor index
 // (i, j, k).
@@ -103,7 +115,7 @@ constexpr int kLinearCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
 // are symmetric under the cube's rotations (N_i(1 - u) = N_{3-i}(u)) and
 // symmetric Gauss rules map onto themselves, so the relabelled element is
 // the same element: same shape functions at the same physical points.
-void AlignElementAxes(ElementBlock& block, const Points& rest) {
+void AlignElementAxes(ElementBlock& block, const Points& rest, WorkerPool* pool) {
   if (block.kind == fem::ElementKind::kPyramid) return;
   const int side = block.kind == fem::ElementKind::kCubic ? 4 : 2;
   const int n = block.nodes;
@@ -145,29 +157,32 @@ void AlignElementAxes(ElementBlock& block, const Points& rest) {
       source[r][a] = number[(old[0] * side + old[1]) * side + old[2]];
     }
   }
-  std::vector<int32_t> ids(n);
-  for (int32_t e = 0; e < block.size(); ++e) {
-    int32_t* nodes = block.node_ids.data() + static_cast<size_t>(e) * n;
-    // The old axes' directions: sum over nodes of (index - centre) x.
-    Eigen::Matrix3d axis = Eigen::Matrix3d::Zero();  // column b: old axis b
-    for (int a = 0; a < n; ++a) {
-      for (int b = 0; b < 3; ++b) {
-        axis.col(b) += (index[a][b] - 0.5 * (side - 1)) * rest.row(nodes[a]).transpose();
+  // Each element on its own (its own node ids written): in parallel.
+  Ranges(pool, block.size(), [&](int64_t begin, int64_t end) {
+    std::vector<int32_t> ids(n);
+    for (int64_t e = begin; e < end; ++e) {
+      int32_t* nodes = block.node_ids.data() + static_cast<size_t>(e) * n;
+      // The old axes' directions: sum over nodes of (index - centre) x.
+      Eigen::Matrix3d axis = Eigen::Matrix3d::Zero();  // column b: old axis b
+      for (int a = 0; a < n; ++a) {
+        for (int b = 0; b < 3; ++b) {
+          axis.col(b) += (index[a][b] - 0.5 * (side - 1)) * rest.row(nodes[a]).transpose();
+        }
       }
-    }
-    size_t best = 0;
-    double best_score = -std::numeric_limits<double>::infinity();
-    for (size_t r = 0; r < rotations.size(); ++r) {
-      double score = 0;
-      for (int c = 0; c < 3; ++c) {
-        const double along = axis(c, rotations[r].perm[c]);
-        score += rotations[r].flip[c] ? -along : along;
+      size_t best = 0;
+      double best_score = -std::numeric_limits<double>::infinity();
+      for (size_t r = 0; r < rotations.size(); ++r) {
+        double score = 0;
+        for (int c = 0; c < 3; ++c) {
+          const double along = axis(c, rotations[r].perm[c]);
+          score += rotations[r].flip[c] ? -along : along;
+        }
+        if (score > best_score) best_score = score, best = r;
       }
-      if (score > best_score) best_score = score, best = r;
+      for (int a = 0; a < n; ++a) ids[a] = nodes[source[best][a]];
+      std::copy(ids.begin(), ids.end(), nodes);
     }
-    for (int a = 0; a < n; ++a) ids[a] = nodes[source[best][a]];
-    std::copy(ids.begin(), ids.end(), nodes);
-  }
+  });
 }
 
 }  // namespace
@@ -448,18 +463,6 @@ ShapeData IntegrateShape(const fem::KindTable& table, const fem::CubicTensorProd
   return sd;
 }
 
-// Calls fn(begin, end) over [0, n) in pool-size contiguous ranges on
-// `pool` (null: at once on this thread).
-template <typename Fn>
-void Ranges(WorkerPool* pool, int64_t n, Fn&& fn) {
-  if (pool == nullptr || pool->size() == 1 || n < 64) {
-    fn(int64_t{0}, n);
-    return;
-  }
-  const int parts = pool->size();
-  pool->Run([&](int k) { fn(n * k / parts, n * (k + 1) / parts); });
-}
-
 // The groups of block `kind` (its node ids and cells set) and their
 // elements' order: element e (rest nodes x) has material array
 // material_of(e, x) and, when its rest shape is new, that shape's data
@@ -586,7 +589,7 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
     block.nodes = table.nodes;
     block.node_ids = NodesOfKind(elements, kind);
     block.cell = CellsOfKind(elements, kind);
-    AlignElementAxes(block, rest);
+    AlignElementAxes(block, rest, pool);
     auto material_of = [&](int32_t e, const fem::NodeMatrixX3& x) {
       // Material samples at the quadrature points' rest positions.
       const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]

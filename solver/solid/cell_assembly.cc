@@ -225,8 +225,10 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       if (!makes[j][c]) continue;
       const CellSumSpec& spec = *jobs[j].spec;
       const int side = spec.dofs * static_cast<int>(cell.support.size());
-      auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(spec.outputs,
-                                                              Eigen::MatrixXd::Zero(side, side));
+      // Sized, not cleared nor copied from a prototype: make_cell writes
+      // every entry (cell_assembly.h).
+      auto p = std::make_shared<std::vector<Eigen::MatrixXd>>(spec.outputs);
+      for (Eigen::MatrixXd& m : *p) m.resize(side, side);
       spec.make_cell(t, cell.support, cell.elements, *p);
       made[j][c] = std::move(p);
     }

@@ -64,8 +64,9 @@ struct CellSumSpec {
   // A key of everything the blocks of a group's elements depend on besides
   // their node rows.
   std::function<Key128(int kind, int32_t group)> group_key;
-  // A cell's whole partial (outputs matrices of dofs S square, given zero)
-  // made at once from its support and elements (kind, index in block), on
+  // A cell's whole partial (outputs matrices of dofs S square, given
+  // sized but not cleared: every entry is to be written) made at once from
+  // its support and elements (kind, index in block), on
   // pool thread `thread`; a function of the cell's key alone. It may
   // append more matrices, which the partial keeps (carried with it).
   std::function<void(int thread, const std::vector<int32_t>& support,

@@ -461,8 +461,8 @@ struct StiffnessPartials::Maker {
     return {same, same ? 2 * material[0].poisson / (1 - 2 * material[0].poisson) : 0};
   }
 
-  // A cell's K partial (3S square, given zero) and its gradient weights
-  // g_j (S x 3): cell_partials.h.
+  // A cell's K partial (3S square, given uncleared: written whole) and
+  // its gradient weights g_j (S x 3): cell_partials.h.
   void MakeCell(const models::ElementLayout& layout, int t, const std::vector<int32_t>& support,
                 const std::vector<std::pair<int, int32_t>>& elements, Eigen::MatrixXd& k,
                 Eigen::MatrixXd& gradient) {

@@ -120,28 +120,36 @@ class MassSolver {
       cg_.Setup(&mass, fixed);
       return;
     }
-    std::vector<Eigen::Triplet<double, int32_t>> t;
-    t.reserve(static_cast<size_t>(mass.nonZeros()));
-    for (int64_t i = 0; i < n; ++i) {
-      if (!fixed.empty() && fixed[i]) {
-        t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(i), 1.0);
-        continue;
+    // Mt with the fixed rows and columns made the identity.
+    auto for_each_entry = [&](auto&& put) {
+      for (int64_t i = 0; i < n; ++i) {
+        if (!fixed.empty() && fixed[i]) {
+          put(i, i, 1.0);
+          continue;
+        }
+        for (SparseMatrix::InnerIterator it(mass, i); it; ++it) {
+          if (!fixed.empty() && fixed[it.col()]) continue;
+          put(i, static_cast<int64_t>(it.col()), it.value());
+        }
       }
-      for (SparseMatrix::InnerIterator it(mass, i); it; ++it) {
-        if (!fixed.empty() && fixed[it.col()]) continue;
-        t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(it.col()), it.value());
-      }
-    }
-    Eigen::SparseMatrix<double> m(n, n);
-    m.setFromTriplets(t.begin(), t.end());
+    };
     if (n <= kDensePoints) {
       // Small: dense Cholesky (a few hundred control points' mass matrix
       // is nearly full; the sparse factor's column-by-column solves cost
-      // more than the whole dense one).
-      llt_.emplace(Eigen::MatrixXd(m));
+      // more than the whole dense one). Written straight in, no triplets.
+      Eigen::MatrixXd m = Eigen::MatrixXd::Zero(n, n);
+      for_each_entry([&](int64_t i, int64_t j, double v) { m(i, j) = v; });
+      llt_.emplace(m);
       if (llt_->info() == Eigen::Success) return;
       llt_.reset();
     } else {
+      std::vector<Eigen::Triplet<double, int32_t>> t;
+      t.reserve(static_cast<size_t>(mass.nonZeros()));
+      for_each_entry([&](int64_t i, int64_t j, double v) {
+        t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(j), v);
+      });
+      Eigen::SparseMatrix<double> m(n, n);
+      m.setFromTriplets(t.begin(), t.end());
       ldlt_.emplace(m);
       if (ldlt_->info() == Eigen::Success) return;
       ldlt_.reset();

@@ -12,11 +12,12 @@
 
 #include <Eigen/SparseCore>
 
+#include "solver/common/sparse_matrix.h"
 #include "solver/mesh/points.h"
 
 namespace dynsolid::integrators {
 
-using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>;
+using SparseMatrix = dynsolid::SparseMatrix;  // Eigen's, with a real move (common/sparse_matrix.h)
 
 enum class Preconditioner {
   kJacobi,               // diagonal

@@ -14,11 +14,12 @@
 #include <Eigen/SparseCore>
 
 #include "absl/status/statusor.h"
+#include "solver/common/sparse_matrix.h"
 #include "solver/mesh/cell_complex.h"
 
 namespace dynsolid::subdivision {
 
-using SparseMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>;
+using SparseMatrix = dynsolid::SparseMatrix;  // Eigen's, with a real move (common/sparse_matrix.h)
 
 struct SubdivisionOptions {
   // Per-edge sharp tags of the input complex (empty: none sharp).

@@ -160,11 +160,14 @@ std::vector<std::pair<Command, int64_t>> Script() {
     EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, &c)) << text;
     s.emplace_back(c, 120);
   }
-  // The server is killed while this runs (after step 150).
-  s.emplace_back(StepCommand(100), 150);
+  // The server is killed while this runs (after step 150). Long enough
+  // that the kill lands inside it on a loaded machine too: with 100 steps
+  // the test's own process, slowed by a neighbour, once reached the kill
+  // after the run had ended.
+  s.emplace_back(StepCommand(1000), 150);
   return s;
 }
-constexpr int64_t kEnd = 220;
+constexpr int64_t kEnd = 1120;
 
 TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
   TempDir dir;

@@ -384,21 +384,44 @@ MassPartials::MassPartials(const models::ElementLayout& layout, bool has_damping
 MassPartials::~MassPartials() = default;
 CellSumSpec& MassPartials::spec() { return maker_->spec; }
 
+namespace {
+
+// to[p] = sum over i < n, in order, of b[i] d[i stride + p], for p < q.
+template <int Q>
+void CombineColumns(const double* b, int n, const double* d, size_t stride, double* to) {
+  double acc[Q];
+  for (int p = 0; p < Q; ++p) acc[p] = b[0] * d[p];
+  for (int i = 1; i < n; ++i) {
+    const double* di = d + i * stride;
+    for (int p = 0; p < Q; ++p) acc[p] += b[i] * di[p];
+  }
+  for (int p = 0; p < Q; ++p) to[p] = acc[p];
+}
+void CombineColumns(int q, const double* b, int n, const double* d, size_t stride, double* to) {
+  for (int p = 0; p < q; ++p) to[p] = b[0] * d[p];
+  for (int i = 1; i < n; ++i) {
+    const double* di = d + i * stride;
+    for (int p = 0; p < q; ++p) to[p] += b[i] * di[p];
+  }
+}
+
+}  // namespace
+
 struct StiffnessPartials::Maker {
   struct Group {
-    // 3Q x n, row k Q + q: (J_q^-T dN_q)_k. Cubic elements on the 4-point
-    // rule have none: their parametric gradients are sum-factorized
-    // (fem::CubicTensorProducts) and mu_jit, lambda_jit hold the points'
-    // J_q^-T (entry (k, c) at [(3 k + c) Q + q]) times sqrt(dV mu) and
-    // sqrt(dV lambda).
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> d;
+    // 3Q x n column major, row k Q + q: (J_q^-T dN_q)_k times sqrt(dV mu)
+    // (mu_d) and sqrt(dV lambda) (lambda_d) of point q. Cubic elements on
+    // the 4-point rule have none: their parametric gradients are
+    // sum-factorized (fem::CubicTensorProducts) and mu_jit, lambda_jit hold
+    // the points' J_q^-T (entry (k, c) at [(3 k + c) Q + q]) times the
+    // same roots.
+    std::vector<double> mu_d, lambda_d;
     std::vector<double> mu_jit, lambda_jit;
     Eigen::VectorXd root_mu;   // Q: sqrt(dV mu)
     Eigen::VectorXd root_lambda;  // Q: sqrt(dV lambda)
   };
   // Per pool thread.
   struct Scratch {
-    Eigen::MatrixXd h;
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> y;  // g_j's sums per FEM node (3 per node row of CellPoints)
     std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
@@ -581,16 +604,25 @@ struct StiffnessPartials::Maker {
         row += q;
         continue;
       }
-      sc.h.noalias() = g.d.lazyProduct(er.b());  // 3Q x s_e (too small for a blocked product)
-      for (size_t a = 0; a < er.support.size(); ++a) {
+      // W's rows: column a of (root * D) B, as a sum of D's columns
+      // weighted by B's entries in node order (runs of Q in SIMD lanes: no
+      // per-entry dot products).
+      const int n = block.nodes;
+      const size_t rows3 = static_cast<size_t>(3) * q;
+      for (int a = 0; a < se; ++a) {
         const int col = er.support[a];
-        for (int c = 0; c < 3; ++c) {
-          const double* from = sc.h.col(static_cast<Eigen::Index>(a)).data() + c * q;
-          double* to = w.col(c * s + col).data() + row;
-          for (int i = 0; i < q; ++i) to[i] = g.root_mu[i] * from[i];
-          if (!uniform) {
-            double* tol = wl.col(c * s + col).data() + row;
-            for (int i = 0; i < q; ++i) tol[i] = g.root_lambda[i] * from[i];
+        const double* b = er.values.data() + static_cast<size_t>(a) * n;
+        for (int pass = 0; pass < (uniform ? 1 : 2); ++pass) {
+          const double* d = pass == 0 ? g.mu_d.data() : g.lambda_d.data();
+          Eigen::Map<Eigen::MatrixXd>& into = pass == 0 ? w : wl;
+          for (int c = 0; c < 3; ++c) {
+            double* to = into.col(c * s + col).data() + row;
+            const double* dc = d + static_cast<size_t>(c) * q;
+            if (q == 8) {
+              CombineColumns<8>(b, n, dc, rows3, to);  // the trilinear rule: in registers
+            } else {
+              CombineColumns(q, b, n, dc, rows3, to);
+            }
           }
         }
       }
@@ -665,7 +697,8 @@ struct StiffnessPartials::Maker {
       }
     }
     if (factorized) {
-      g.d.resize(0, 0);
+      g.mu_d.clear();
+      g.lambda_d.clear();
       g.mu_jit.resize(static_cast<size_t>(9) * points);
       g.lambda_jit.resize(with_lambda ? static_cast<size_t>(9) * points : 0);
       // Entry (k, c) of J^-T at [(3 k + c) Q + q], times the point's root.
@@ -679,14 +712,20 @@ struct StiffnessPartials::Maker {
       }
       return;
     }
-    g.d.resize(3 * points, n);
+    const size_t rows3 = static_cast<size_t>(3) * points;
+    g.mu_d.resize(rows3 * n);
+    g.lambda_d.resize(with_lambda ? rows3 * n : 0);
     for (int q = 0; q < points; ++q) {
       const double* dn = table.dN(q);
       for (int k = 0; k < 3; ++k) {
         const double* jit_k = at.jit + static_cast<size_t>(3 * k) * points + q;  // (k, c) at c * points
         const double a = jit_k[0], b = jit_k[points], c = jit_k[2 * points];
-        double* row = g.d.row(k * points + q).data();  // contiguous: d is row major
-        for (int i = 0; i < n; ++i) row[i] = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];
+        const size_t r = static_cast<size_t>(k) * points + q;
+        for (int i = 0; i < n; ++i) {
+          const double d = a * dn[3 * i] + b * dn[3 * i + 1] + c * dn[3 * i + 2];
+          g.mu_d[i * rows3 + r] = g.root_mu[q] * d;
+          if (with_lambda) g.lambda_d[i * rows3 + r] = g.root_lambda[q] * d;
+        }
       }
     }
   }

@@ -3,33 +3,15 @@
 // used before), at the sizes of the chair's cells: a couple of thousand
 // quadrature rows by 3 S columns. One thread; figures printed, never
 // asserted.
-#include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <random>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "bench/best_ms.h"
 #include "bench/cpu_name.h"
 #include "solver/models/gram.h"
-
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-template <typename F>
-double BestMs(F&& f, int reps) {
-  double best = 1e30;
-  for (int k = 0; k < reps; ++k) {
-    const auto t0 = Clock::now();
-    f();
-    best = std::min(best, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-  }
-  return best;
-}
-
-}  // namespace
 
 int main() {
   using dynsolid::models::GramPath;
@@ -46,18 +28,16 @@ int main() {
     Eigen::Map<Eigen::MatrixXd> w(storage.data(), rows, n);
     for (int64_t i = 0; i < w.size(); ++i) w.data()[i] = u(rng);
     Eigen::MatrixXd g(n, n);
-    const double eigen = BestMs(
-        [&] {
-          g.setZero();
-          g.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
-        },
-        20);
+    const double eigen = dynsolid::bench::BestMs(20, 1, [&] {
+      g.setZero();
+      g.selfadjointView<Eigen::Lower>().rankUpdate(w.transpose());
+    });
     // Flops of the lower triangle: rows n (n + 1) / 2 multiply-adds.
     const double flops = 2.0 * rows * n * (n + 1) / 2.0;
     for (GramPath path : {GramPath::kPortable, GramPath::kAvx2, GramPath::kAvx512}) {
       if (!dynsolid::models::Gram(path, w.data(), rows, n, rows, g.data(), n)) continue;
-      const double ms = BestMs(
-          [&] { dynsolid::models::Gram(path, w.data(), rows, n, rows, g.data(), n); }, 20);
+      const double ms = dynsolid::bench::BestMs(
+          20, 1, [&] { dynsolid::models::Gram(path, w.data(), rows, n, rows, g.data(), n); });
       std::printf("| %d x %d | %.3f | %s | %.3f | %.2f | %.1f |\n", rows, n, eigen,
                   dynsolid::models::GramPathName(path), ms, eigen / ms, flops / ms / 1e6);
     }

@@ -9,33 +9,15 @@
 //
 // Prints figures only; nothing here is a test.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 
+#include "bench/best_ms.h"
 #include "solver/models/measure.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
-
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-// Best-of-rounds milliseconds of `f`, repeated `reps` times per round.
-template <typename F>
-double BestMs(int reps, F&& f) {
-  double best = 1e300;
-  for (int round = 0; round < 7; ++round) {
-    const auto t0 = Clock::now();
-    for (int r = 0; r < reps; ++r) f();
-    best = std::min(best, std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
-  }
-  return best / reps;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   const int64_t max_elements = argc > 1 ? std::atoll(argv[1]) : 50000;
@@ -88,8 +70,8 @@ int main(int argc, char** argv) {
       const double terms = static_cast<double>(m.num_edges() + m.num_corners());
       const int reps = std::max(1, static_cast<int>(2e6 / terms));
       const double ns = 1e6 / terms;
-      const double f = BestMs(reps, [&] { m.Apply(x, dq); }) * ns;
-      const double b = BestMs(reps, [&] { m.ApplyTranspose(x, y, tq); }) * ns;
+      const double f = dynsolid::bench::BestMs(7, reps, [&] { m.Apply(x, dq); }) * ns;
+      const double b = dynsolid::bench::BestMs(7, reps, [&] { m.ApplyTranspose(x, y, tq); }) * ns;
       if (path == QuadPath::kPerCorner) fc = f, bc = b;
       std::printf("| %d^3 | %lld | %lld | %lld | %lld | %s | %.2f | %.2f | %.2fx | %.2fx | "
                   "%.1e |\n",

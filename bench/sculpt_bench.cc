@@ -38,7 +38,6 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-
 }  // namespace
 
 int main(int argc, char** argv) {

@@ -30,6 +30,8 @@ namespace dynsolid::models {
 
 // Rows per panel (a multiple of 8).
 inline constexpr int64_t kGramPanelRows = 512;
+static_assert(kGramPanelRows % 8 == 0 && kGramPanelRows <= 512,
+              "a panel's 8-row chunks fit one 64-bit mask (GramAddPanel)");
 
 // An allocator of 64-byte aligned T (Gram's W).
 template <typename T>
@@ -72,6 +74,19 @@ void GramAddPanel(const double* w, int64_t rows, int n, int64_t ldw, double* g, 
 bool GramAddPanel(GramPath path, const double* w, int64_t rows, int n, int64_t ldw, double* g,
                   int64_t ldg);
 void GramFinish(int n, double* g, int64_t ldg);
+// A panel where most of W is known zero (a cell's element rows are zero
+// outside the element's support): chunks[c]'s bit b is set where rows
+// [8 b, 8 b + 8) of column c may be nonzero (b < 64: a panel has at most
+// kGramPanelRows rows). Rows outside a column's chunks must be zeros (a
+// kernel's block of columns may still read them); the chunks no product
+// of a block's columns is nonzero in, and blocks of G with none, are
+// skipped. The same bits as the unmasked sum where
+// those rows are zero: each skipped product is an exact zero, and a lane's
+// sum (from +0, never -0 in round to nearest) plus zero is that sum.
+void GramAddPanel(const double* w, int64_t rows, int n, int64_t ldw, const uint64_t* chunks,
+                  double* g, int64_t ldg);
+bool GramAddPanel(GramPath path, const double* w, int64_t rows, int n, int64_t ldw,
+                  const uint64_t* chunks, double* g, int64_t ldg);
 // The path Gram takes here, and a name for it ("avx512", "avx2", "portable").
 GramPath FastestGramPath();
 const char* GramPathName(GramPath path);

@@ -393,7 +393,7 @@ void CombineColumns(const double* b, int n, const double* d, size_t stride, doub
   for (int p = 0; p < Q; ++p) acc[p] = b[0] * d[p];
   for (int i = 1; i < n; ++i) {
     const double* di = d + i * stride;
-    for (int p = 0; p < Q; ++p) acc[p] += b[i] * di[p];
+    for (int p = 0; p < Q; ++p) acc[p] = std::fma(b[i], di[p], acc[p]);
   }
   for (int p = 0; p < Q; ++p) to[p] = acc[p];
 }
@@ -401,7 +401,7 @@ void CombineColumns(int q, const double* b, int n, const double* d, size_t strid
   for (int p = 0; p < q; ++p) to[p] = b[0] * d[p];
   for (int i = 1; i < n; ++i) {
     const double* di = d + i * stride;
-    for (int p = 0; p < q; ++p) to[p] += b[i] * di[p];
+    for (int p = 0; p < q; ++p) to[p] = std::fma(b[i], di[p], to[p]);
   }
 }
 
@@ -425,6 +425,10 @@ struct StiffnessPartials::Maker {
     std::vector<double> p;  // a cubic element's parametric gradients (3 x 64 x s_e)
     std::vector<double> y;  // g_j's sums per FEM node (3 per node row of CellPoints)
     std::vector<double, models::GramAllocator> w, wl;  // 64-byte aligned for Gram
+    // Per column of W, the 8-row chunks its rows may be nonzero in
+    // (models::GramAddPanel): 3S words for the panel, then 3S for the rows
+    // an element carries past the panel's end.
+    std::vector<uint64_t> chunks;
     std::vector<double> g, gl, trace;
     Group group;  // the element's group data (GroupOf)
   };
@@ -529,11 +533,22 @@ struct StiffnessPartials::Maker {
     Eigen::Map<Eigen::MatrixXd> gl = sized(sc.gl, uniform ? 0 : 3 * s, 3 * s);
     models::GramStart(3 * s, gm.data(), 3 * s);
     if (!uniform) models::GramStart(3 * s, gl.data(), 3 * s);
+    // Each element's rows are zero outside its support's columns: the Gram
+    // skips the chunks of rows where a product's columns are not both
+    // written (the same bits; near a local subdivision an element's
+    // support is often a fraction of its cell's).
+    sc.chunks.assign(static_cast<size_t>(6) * s, 0);
+    uint64_t* carried = sc.chunks.data() + 3 * s;
     // Sums W's first `count` rows (a multiple of 8) into G, and moves the
     // rows after them, up to `row`, to the top.
     auto flush = [&](int64_t count, int64_t row) {
-      models::GramAddPanel(w.data(), count, 3 * s, ld, gm.data(), 3 * s);
-      if (!uniform) models::GramAddPanel(wl.data(), count, 3 * s, ld, gl.data(), 3 * s);
+      models::GramAddPanel(w.data(), count, 3 * s, ld, sc.chunks.data(), gm.data(), 3 * s);
+      if (!uniform) {
+        models::GramAddPanel(wl.data(), count, 3 * s, ld, sc.chunks.data(), gl.data(), 3 * s);
+      }
+      // Rows carry over only past a whole panel.
+      std::copy(carried, carried + 3 * s, sc.chunks.data());
+      std::fill(carried, carried + 3 * s, 0);
       if (row == count) return;
       for (int c = 0; c < 3 * s; ++c) {
         std::copy(w.col(c).data() + count, w.col(c).data() + row, w.col(c).data());
@@ -562,7 +577,7 @@ struct StiffnessPartials::Maker {
         const int32_t* ids = block.element_nodes(e);
         for (int n = 0; n < block.nodes; ++n) {
           double* y = sc.y.data() + 3 * static_cast<size_t>(points.NodeRow(t, ids[n]));
-          for (int c = 0; c < 3; ++c) y[c] += det * grp.centre_gradient(n, c);
+          for (int c = 0; c < 3; ++c) y[c] = std::fma(det, grp.centre_gradient(n, c), y[c]);
         }
         volume += det;
       }
@@ -574,6 +589,24 @@ struct StiffnessPartials::Maker {
         for (int k = 0; k < 3; ++k) {
           std::fill_n(w.col(k * s + col).data() + row, q, 0.0);
           if (!uniform) std::fill_n(wl.col(k * s + col).data() + row, q, 0.0);
+        }
+      }
+      {
+        // The element's chunks, rows [row, row + q): in the panel's word
+        // and, past its end, the carried word.
+        uint64_t in_panel = 0, past = 0;
+        for (int64_t c = row / 8; c <= (row + q - 1) / 8; ++c) {
+          if (c < panel / 8) {
+            in_panel |= uint64_t{1} << c;
+          } else {
+            past |= uint64_t{1} << (c - panel / 8);
+          }
+        }
+        for (int32_t col : er.support) {
+          for (int k = 0; k < 3; ++k) {
+            sc.chunks[k * s + col] |= in_panel;
+            carried[k * s + col] |= past;
+          }
         }
       }
       if (kind == 0 && points.cubic_factorized()) {
@@ -597,7 +630,9 @@ struct StiffnessPartials::Maker {
               const double* f1 = f0 + 64;
               const double* f2 = f1 + 64;
               double* to = into.col(k * s + col).data() + row;
-              for (int p = 0; p < 64; ++p) to[p] = f0[p] * du[p] + f1[p] * dv[p] + f2[p] * dw[p];
+              for (int p = 0; p < 64; ++p) {
+                to[p] = std::fma(f2[p], dw[p], std::fma(f1[p], dv[p], f0[p] * du[p]));
+              }
             }
           }
         }
@@ -636,7 +671,7 @@ struct StiffnessPartials::Maker {
         const double y = sc.y[3 * static_cast<size_t>(l) + c];
         if (y == 0) continue;
         double* to = gradient.col(c).data();
-        for (int a = 0; a < s; ++a) to[a] += from[a] * y;
+        for (int a = 0; a < s; ++a) to[a] = std::fma(from[a], y, to[a]);
       }
     }
     if (volume > 0) gradient /= volume;

@@ -113,5 +113,63 @@ TEST(GramTest, PanelAtATimeGivesGramsBits) {
   }
 }
 
+// A panel whose columns are zero outside given chunks of 8 rows (a cell's
+// elements outside their support): the masked sum gives the unmasked
+// one's bits on every path. Masks of runs, scattered chunks, empty
+// columns, full columns, and bits past a short last panel's rows.
+TEST(GramTest, ChunkMasksSkipZerosAndKeepTheBits) {
+  const int64_t rows = 2 * kGramPanelRows + 40;
+  const int n = 23;
+  Eigen::MatrixXd w = RandomMatrix(rows, n, 11u);
+  std::vector<std::vector<uint64_t>> masks;  // per panel, per column
+  uint64_t state = 0x9e3779b97f4a7c15ull;
+  auto next = [&] {
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    return state;
+  };
+  for (int64_t r0 = 0; r0 < rows; r0 += kGramPanelRows) {
+    std::vector<uint64_t>& m = masks.emplace_back(n);
+    for (int c = 0; c < n; ++c) {
+      switch (c % 5) {
+        case 0: m[c] = next() & next(); break;                  // scattered
+        case 1: m[c] = (~uint64_t{0} >> (c % 64)) << (c % 7); break;  // a run
+        case 2: m[c] = c % 2 == 0 ? 0 : ~uint64_t{0}; break;    // none or all
+        default: m[c] = next(); break;
+      }
+    }
+  }
+  Eigen::MatrixXd zeroed = w;
+  for (size_t p = 0; p < masks.size(); ++p) {
+    for (int c = 0; c < n; ++c) {
+      for (int64_t r = 0; r < kGramPanelRows && p * kGramPanelRows + r < rows; ++r) {
+        if ((masks[p][c] >> (r / 8) & 1) != 0) continue;
+        zeroed(p * kGramPanelRows + r, c) = 0;
+      }
+    }
+  }
+  int ran = 0;
+  for (GramPath path : {GramPath::kPortable, GramPath::kAvx2, GramPath::kAvx512}) {
+    Eigen::MatrixXd whole(n, n), masked(n, n);
+    if (!Gram(path, zeroed.data(), rows, n, rows, whole.data(), n)) continue;
+    ++ran;
+    GramStart(n, masked.data(), n);
+    for (size_t p = 0; p < masks.size(); ++p) {
+      const int64_t r0 = static_cast<int64_t>(p) * kGramPanelRows;
+      const int64_t count = std::min(kGramPanelRows, rows - r0);
+      ASSERT_TRUE(GramAddPanel(path, zeroed.data() + r0, count, n, rows, masks[p].data(),
+                               masked.data(), n));
+    }
+    GramFinish(n, masked.data(), n);
+    EXPECT_EQ(std::memcmp(whole.data(), masked.data(), sizeof(double) * n * n), 0)
+        << GramPathName(path);
+    // Columns zero in every panel have zero rows and columns of G.
+    EXPECT_EQ(masked(2, 2), 0.0);
+    EXPECT_EQ(masked(7, 2), 0.0);
+  }
+  EXPECT_GE(ran, 1);
+}
+
 }  // namespace
 }  // namespace dynsolid::models

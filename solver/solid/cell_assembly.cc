@@ -137,15 +137,20 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       for (size_t a = 0; a < support.size(); ++a) s.cell_mark[support[a]] = static_cast<int32_t>(a);
       // Each node's row, its columns numbered within the cell.
       for (int32_t node : s.nodes) s.node_key[node] = RowKey(nm, node, s.cell_mark);
+      // Four independent lanes of the elements' node rows, by node slot
+      // (as RowKey): a single hash chain of a cell's thousands of node
+      // keys waited on its multiplies.
+      Hash128 lane[4];
+      for (const auto& [kind, e] : cell.elements) {
+        const models::ElementBlock& block = layout.blocks[kind];
+        lane[0].Mix(static_cast<uint64_t>(kind));
+        const int32_t* ids = block.element_nodes(e);
+        for (int i = 0; i < block.nodes; ++i) lane[i & 3].Key(s.node_key[ids[i]]);
+      }
       Hash128 h;
       h.Mix(support.size());
       h.Mix(cell.elements.size());
-      for (const auto& [kind, e] : cell.elements) {
-        const models::ElementBlock& block = layout.blocks[kind];
-        h.Mix(static_cast<uint64_t>(kind));
-        const int32_t* ids = block.element_nodes(e);
-        for (int i = 0; i < block.nodes; ++i) h.Key(s.node_key[ids[i]]);
-      }
+      for (const Hash128& l : lane) h.Key(l.value());
       geometry.keys[c] = h.value();
       for (int32_t col : support) s.cell_mark[col] = -1;
     });

@@ -221,7 +221,7 @@ absl::StatusOr<CellComplex> CellComplex::FromInput(const MeshInput& input) {
 absl::StatusOr<CellComplex> CellComplex::FromFaces(Points vertices, Csr face_loops,
                                                    Csr cell_faces,
                                                    std::vector<uint8_t> cell_face_flipped,
-                                                   bool validate_geometry) {
+                                                   bool validate_geometry, bool check_closed) {
   CellComplex m;
   m.positions_ = std::move(vertices);
   m.face_vertices_ = std::move(face_loops);
@@ -230,12 +230,12 @@ absl::StatusOr<CellComplex> CellComplex::FromFaces(Points vertices, Csr face_loo
   if (m.cell_face_flipped_.size() != m.cell_faces_.items.size()) {
     return absl::InternalError("cell_face_flipped does not match cell_faces");
   }
-  RETURN_IF_ERROR(m.BuildAdjacency());
+  RETURN_IF_ERROR(m.BuildAdjacency(check_closed));
   if (validate_geometry) RETURN_IF_ERROR(m.CheckVolumes(""));
   return m;
 }
 
-absl::Status CellComplex::BuildAdjacency() {
+absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   const int32_t nv = num_vertices();
   const int32_t nf = num_faces();
   const int32_t nc = num_cells();
@@ -325,8 +325,8 @@ absl::Status CellComplex::BuildAdjacency() {
   // their own when the complex is large (a subdivision's finest level):
   // the same result either way.
   absl::Status closed;
-  auto side = [this, &closed] {
-    closed = CheckCellsClosed();
+  auto side = [this, &closed, check_closed] {
+    if (check_closed) closed = CheckCellsClosed();
     cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
   };
   std::thread beside;

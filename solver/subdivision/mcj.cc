@@ -506,18 +506,26 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
     }
   }
 
+  // A fine cell is made of its parent's faces (split into children or
+  // with split edges' points inserted) and, for a refined cell, interior
+  // quads at its corner: closed and consistently oriented when its parent
+  // is, and the coarse cells were checked when their complex was built
+  // (FromInput, or an earlier level of closed parents). So closedness is
+  // checked again only with the geometry (options.validate_geometry; the
+  // tests check every level: tests/subdivision/mcj_test.cc).
+  const bool check_closed = options.validate_geometry;
   if (beside.joinable()) {
     // Adjacency needs the vertex count only: the positions follow.
     ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(Points::Zero(nv_fine, 3), std::move(loops),
                                                         std::move(cell_faces), std::move(cell_flip),
-                                                        /*validate_geometry=*/false));
+                                                        /*validate_geometry=*/false, check_closed));
     beside.join();
     level.fine.set_positions(std::move(fine_positions));
   } else {
     ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(std::move(fine_positions),
                                                         std::move(loops), std::move(cell_faces),
                                                         std::move(cell_flip),
-                                                        options.validate_geometry));
+                                                        options.validate_geometry, check_closed));
   }
 
   // Sharp tags pass to both children of a split edge, or stay on an

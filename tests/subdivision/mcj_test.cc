@@ -282,6 +282,55 @@ TEST(MacCrackenJoyTest, LocalSubdivisionKeepsNeighbours) {
   EXPECT_EQ(f.CountBoundary().euler(), 2);
 }
 
+// Subdivision builds its fine levels without checking their cells'
+// closedness (closed by construction from closed parents): every level of
+// uniform and local subdivisions of hexahedra, a pyramid, a tetrahedron
+// and a sharp-edged block is checked here.
+TEST(MacCrackenJoyTest, EveryLevelsCellsAreClosed) {
+  std::vector<std::shared_ptr<const CellComplex>> inputs = {
+      Build(Grid(3, 2, 2)), Build(::dynsolid::testing::Pyramid()),
+      Build(::dynsolid::testing::Tetrahedron())};
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    auto h = Subdivide(inputs[i], 3, {});
+    ASSERT_OK(h);
+    EXPECT_OK(h->fine->CheckCellsClosed()) << "input " << i << " at 3 levels";
+    for (int levels = 1; levels < 3; ++levels) {
+      auto coarser = Subdivide(inputs[i], levels, {});
+      ASSERT_OK(coarser);
+      EXPECT_OK(coarser->fine->CheckCellsClosed()) << "input " << i << " at " << levels;
+    }
+    // Locally refined (the first cell), then subdivided twice.
+    SubdivisionOptions local;
+    local.cells = {0};
+    auto refined = SubdivideOnce(*inputs[i], local);
+    ASSERT_OK(refined);
+    EXPECT_OK(refined->fine.CheckCellsClosed()) << "input " << i << " refined locally";
+    auto after = Subdivide(std::make_shared<const CellComplex>(refined->fine), 2, {});
+    ASSERT_OK(after);
+    EXPECT_OK(after->fine->CheckCellsClosed()) << "input " << i << " refined, 2 levels";
+  }
+  // Sharp edges change the rules, not the topology; a block with all its
+  // boundary edges sharp, 2 levels.
+  auto block = inputs[0];
+  std::vector<uint8_t> sharp(block->num_edges(), 0);
+  for (int32_t e = 0; e < block->num_edges(); ++e) {
+    for (int32_t f : block->edge_faces(e)) sharp[e] |= block->face_is_boundary(f) ? 1 : 0;
+  }
+  auto h = Subdivide(block, 2, sharp);
+  ASSERT_OK(h);
+  EXPECT_OK(h->fine->CheckCellsClosed());
+}
+
+// The check itself: a cell missing a face is refused by name.
+TEST(MacCrackenJoyTest, AnOpenCellIsFound) {
+  mesh::MeshInput in = Grid(1, 1, 1);
+  ASSERT_EQ(in.cells.size(), 1u);
+  in.cells[0].pop_back();  // five faces of a cube: open
+  auto m = CellComplex::FromInput(in);
+  EXPECT_THAT(m, ::dynsolid::testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                               ::testing::HasSubstr("is not closed")));
+}
+
 TEST(MacCrackenJoyTest, LocalSubdivisionRejectsBadCell) {
   auto m = Build(Grid(2, 1, 1));
   EXPECT_THAT(SubdivideOnce(*m, Local({5})),

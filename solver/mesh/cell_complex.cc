@@ -320,14 +320,80 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   }
   const int32_t ne = num_edges();
 
+  // Edge -> faces (unordered first), then radial order with cells.
+  auto radial = [this, ne] {
+    Csr edge_faces = Invert(face_edges_, ne);
+    edge_faces_.offsets = edge_faces.offsets;
+    edge_faces_.items.resize(edge_faces.items.size());
+    edge_cells_.offsets.assign(ne + 1, 0);
+    edge_cells_.items.clear();
+    edge_cells_.items.reserve(edge_faces.items.size());
+    edge_boundary_.assign(ne, 0);
+    // Per face of the edge (its slot in the edge's face list): its two
+    // cells and whether the walk has passed it.
+    std::vector<int32_t> cell0, cell1;
+    std::vector<uint8_t> used;
+    for (int32_t e = 0; e < ne; ++e) {
+      const auto faces = edge_faces.row(e);
+      const int k = static_cast<int>(faces.size());
+      cell0.resize(k);
+      cell1.resize(k);
+      used.assign(k, 0);
+      for (int i = 0; i < k; ++i) {
+        cell0[i] = face_cells_[faces[i]][0];
+        cell1[i] = face_cells_[faces[i]][1];
+        if (cell1[i] < 0) edge_boundary_[e] = 1;
+      }
+      int32_t out = edge_faces_.offsets[e];
+      // Walk face -> cell -> the cell's other face at e, from boundary faces
+      // first, then from any face left (interior edges).
+      while (true) {
+        int start = -1;
+        for (int i = 0; i < k && start < 0; ++i) {
+          if (!used[i] && cell1[i] < 0) start = i;
+        }
+        for (int i = 0; i < k && start < 0; ++i) {
+          if (!used[i]) start = i;
+        }
+        if (start < 0) break;
+        int i = start;
+        int32_t prev_cell = -1;
+        while (true) {
+          used[i] = 1;
+          edge_faces_.items[out++] = faces[i];
+          int32_t cell = -1;
+          if (cell0[i] >= 0 && cell0[i] != prev_cell) {
+            cell = cell0[i];
+          } else if (cell1[i] >= 0 && cell1[i] != prev_cell) {
+            cell = cell1[i];
+          }
+          if (cell < 0) break;
+          // The first other face of the edge on that cell.
+          int next = -1;
+          for (int j = 0; j < k && next < 0; ++j) {
+            if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
+          }
+          if (next < 0) break;  // open cell: reported by CheckCellsClosed
+          edge_cells_.items.push_back(cell);
+          if (used[next]) break;
+          prev_cell = cell;
+          i = next;
+        }
+      }
+      edge_cells_.offsets[e + 1] = static_cast<int32_t>(edge_cells_.items.size());
+    }
+  };
+
   // The rest reads the faces' edges and writes members of its own. The
   // cells' closedness check and their edges run beside it on a thread of
-  // their own when the complex is large (a subdivision's finest level):
-  // the same result either way.
+  // their own when the complex is large (a subdivision's finest level),
+  // and so does the edges' radial order where there is no check (the
+  // two threads' shares then about even): the same result either way.
   absl::Status closed;
-  auto side = [this, &closed, check_closed] {
+  auto side = [this, &closed, check_closed, &radial] {
     if (check_closed) closed = CheckCellsClosed();
     cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
+    if (!check_closed) radial();
   };
   std::thread beside;
   if (nc >= kCellsForAThread) {
@@ -336,67 +402,7 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
     side();
   }
 
-  // Edge -> faces (unordered first), then radial order with cells.
-  Csr edge_faces = Invert(face_edges_, ne);
-  edge_faces_.offsets = edge_faces.offsets;
-  edge_faces_.items.resize(edge_faces.items.size());
-  edge_cells_.offsets.assign(ne + 1, 0);
-  edge_cells_.items.clear();
-  edge_cells_.items.reserve(edge_faces.items.size());
-  edge_boundary_.assign(ne, 0);
-  // Per face of the edge (its slot in the edge's face list): its two
-  // cells and whether the walk has passed it.
-  std::vector<int32_t> cell0, cell1;
-  std::vector<uint8_t> used;
-  for (int32_t e = 0; e < ne; ++e) {
-    const auto faces = edge_faces.row(e);
-    const int k = static_cast<int>(faces.size());
-    cell0.resize(k);
-    cell1.resize(k);
-    used.assign(k, 0);
-    for (int i = 0; i < k; ++i) {
-      cell0[i] = face_cells_[faces[i]][0];
-      cell1[i] = face_cells_[faces[i]][1];
-      if (cell1[i] < 0) edge_boundary_[e] = 1;
-    }
-    int32_t out = edge_faces_.offsets[e];
-    // Walk face -> cell -> the cell's other face at e, from boundary faces
-    // first, then from any face left (interior edges).
-    while (true) {
-      int start = -1;
-      for (int i = 0; i < k && start < 0; ++i) {
-        if (!used[i] && cell1[i] < 0) start = i;
-      }
-      for (int i = 0; i < k && start < 0; ++i) {
-        if (!used[i]) start = i;
-      }
-      if (start < 0) break;
-      int i = start;
-      int32_t prev_cell = -1;
-      while (true) {
-        used[i] = 1;
-        edge_faces_.items[out++] = faces[i];
-        int32_t cell = -1;
-        if (cell0[i] >= 0 && cell0[i] != prev_cell) {
-          cell = cell0[i];
-        } else if (cell1[i] >= 0 && cell1[i] != prev_cell) {
-          cell = cell1[i];
-        }
-        if (cell < 0) break;
-        // The first other face of the edge on that cell.
-        int next = -1;
-        for (int j = 0; j < k && next < 0; ++j) {
-          if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
-        }
-        if (next < 0) break;  // open cell: reported by CheckCellsClosed
-        edge_cells_.items.push_back(cell);
-        if (used[next]) break;
-        prev_cell = cell;
-        i = next;
-      }
-    }
-    edge_cells_.offsets[e + 1] = static_cast<int32_t>(edge_cells_.items.size());
-  }
+  if (check_closed) radial();
 
   // Cells -> vertices (and edges, above), sorted, unique.
   cell_vertices_ = ComposeUnique(cell_faces_, face_vertices_);

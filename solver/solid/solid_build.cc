@@ -367,6 +367,22 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     }
     return m;
   };
+  // One material throughout (no painted regions, no sampler or arrays
+  // given): every point's sample is `base`, so each element takes a whole
+  // array of base samples for its kind, the array sampling would make,
+  // without a rest position per quadrature point (a cubic element's 64
+  // points by its 64 nodes: most of the layout's own work on the chair).
+  std::array<std::vector<models::MaterialPoint>, 3> base_arrays;
+  models::ElementMaterials base_whole;
+  if (materials == nullptr && whole == nullptr && painted.empty()) {
+    for (int kind = 0; kind < 3; ++kind) {
+      base_arrays[kind].assign(fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points, base);
+    }
+    base_whole = [&base_arrays](int kind, const fem::NodeMatrixX3&, int32_t) {
+      return &base_arrays[kind];
+    };
+    whole = &base_whole;
+  }
   BuildReport& rep = s->report_;
   auto t_phase = Clock::now();
   auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(

@@ -370,8 +370,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   // One material throughout (no painted regions, no sampler or arrays
   // given): every point's sample is `base`, so each element takes a whole
   // array of base samples for its kind, the array sampling would make,
-  // without a rest position per quadrature point (a cubic element's 64
-  // points by its 64 nodes: most of the layout's own work on the chair).
+  // without a rest position and a sample per quadrature point (block3's
+  // scenes; the chair has a painted region and samples).
   std::array<std::vector<models::MaterialPoint>, 3> base_arrays;
   models::ElementMaterials base_whole;
   if (materials == nullptr && whole == nullptr && painted.empty()) {

@@ -80,9 +80,9 @@ void GramFinish(int n, double* g, int64_t ldg);
 // kGramPanelRows rows). Rows outside a column's chunks must be zeros (a
 // kernel's block of columns may still read them); the chunks no product
 // of a block's columns is nonzero in, and blocks of G with none, are
-// skipped. The same bits as the unmasked sum where
-// those rows are zero: each skipped product is an exact zero, and a lane's
-// sum (from +0, never -0 in round to nearest) plus zero is that sum.
+// skipped. The same bits as the unmasked sum where those rows are zero:
+// each skipped product is an exact zero, and a lane's sum (from +0, never
+// -0 in round to nearest) plus zero is that sum.
 void GramAddPanel(const double* w, int64_t rows, int n, int64_t ldw, const uint64_t* chunks,
                   double* g, int64_t ldg);
 bool GramAddPanel(GramPath path, const double* w, int64_t rows, int n, int64_t ldw,

@@ -36,13 +36,10 @@ class SparseMatrix : public Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t
     Base::operator=(other);
     return *this;
   }
-  // The old arrays are freed here, the moved-from matrix left empty.
   SparseMatrix& operator=(SparseMatrix&& other) noexcept {
-    Base taken;
-    taken.swap(other);
-    swap(taken);
-    return *this;
+    return *this = static_cast<Base&&>(other);
   }
+  // The old arrays are freed here, the moved-from matrix left empty.
   SparseMatrix& operator=(Base&& other) noexcept {
     Base taken;
     taken.swap(other);

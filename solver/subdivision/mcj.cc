@@ -113,20 +113,17 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
       }
       if (words <= 4 * static_cast<int64_t>(touched.size())) {
         for (int32_t c : touched) bits[c >> 6] |= uint64_t{1} << (c & 63);
+        touched.clear();
         for (int32_t w = 0; w < words; ++w) {
-          for (uint64_t m = bits[w]; m != 0; m &= m - 1) {
-            const int32_t c = 64 * w + __builtin_ctzll(m);
-            p.inner.push_back(c);
-            p.values.push_back(acc[c]);
-          }
+          for (uint64_t m = bits[w]; m != 0; m &= m - 1) touched.push_back(64 * w + __builtin_ctzll(m));
           bits[w] = 0;
         }
       } else {
         std::sort(touched.begin(), touched.end());
-        for (int32_t c : touched) {
-          p.inner.push_back(c);
-          p.values.push_back(acc[c]);
-        }
+      }
+      for (int32_t c : touched) {
+        p.inner.push_back(c);
+        p.values.push_back(acc[c]);
       }
       p.row_nnz.push_back(static_cast<int32_t>(touched.size()));
     }

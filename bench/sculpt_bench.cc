@@ -162,7 +162,7 @@ int main(int argc, char** argv) {
             "| %s | %d of %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f |",
             what, b.mass_cells_made, b.control_cell_partials, p.edit, p.discretize, p.build - b.build_ms, b.phases.layout, b.phases.model,
             b.phases.mass, b.phases.surface, b.phases.stable_step, b.phases.k0,
-            b.build_ms - b.phases.layout - b.phases.model - b.phases.mass - b.phases.surface -
+            b.build_ms - b.phases.layout - b.phases.model - b.phases.mass -
                 b.phases.stable_step - b.phases.k0,
             a->milliseconds - a->prepare_milliseconds));
       }
@@ -172,7 +172,7 @@ int main(int argc, char** argv) {
                 result.c_str());
   }
   std::printf("\nwhere an edit's time goes (ms, the last run):\n"
-              "| edit | cells made | edit | discretize | transfer | layout | model | mass | surface | "
+              "| edit | cells made | edit | discretize | transfer, integrator | layout | model | mass | surface (in model) | "
               "stable step | K0 | rest of build | finish |\n"
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const std::string& row : phases) std::printf("%s\n", row.c_str());

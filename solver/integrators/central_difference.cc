@@ -10,7 +10,8 @@ void CentralDifference::Setup(const SparseMatrix* mt, const SparseMatrix* dt, do
   h_ = h;
   lhs_ = 2.0 * (*mt);
   if (dt != nullptr) lhs_ += h * (*dt);
-  cg_.Setup(&lhs_, std::move(fixed));
+  cg_.Setup(&lhs_, std::move(fixed),
+            lhs_.rows() <= kExactRows ? Preconditioner::kDirect : Preconditioner::kIncompleteCholesky);
   lhs_diagonal_max_ = 0;
   for (int64_t i = 0; i < lhs_.rows(); ++i) lhs_diagonal_max_ = std::max(lhs_diagonal_max_, lhs_.coeff(i, i));
   rhs_.setZero(mt->rows(), 3);

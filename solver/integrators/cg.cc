@@ -3,7 +3,11 @@
 #include <algorithm>
 #include <cmath>
 
+#include <optional>
+
+#include <Eigen/Cholesky>
 #include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCholesky>
 
 namespace dynsolid::integrators {
 
@@ -11,6 +15,48 @@ struct ColumnPreconditioner::Ic {
   Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::AMDOrdering<int>> factor;
   mutable Eigen::VectorXd in, out;
   std::vector<uint8_t> fixed;
+};
+
+struct ColumnPreconditioner::Direct {
+  std::optional<Eigen::LLT<Eigen::MatrixXd>> llt;
+  std::optional<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> ldlt;
+  std::vector<uint8_t> fixed;
+
+  // S with the fixed rows and columns made the identity, factored; false
+  // where it is not positive definite (or too large to factor here).
+  bool Factor(const SparseMatrix& s, const std::vector<uint8_t>& fixed_rows) {
+    const int64_t n = s.rows();
+    if (n > kDirectRows) return false;
+    fixed = fixed_rows;
+    auto for_each_entry = [&](auto&& put) {
+      for (int64_t i = 0; i < n; ++i) {
+        if (fixed[i]) {
+          put(i, i, 1.0);
+          continue;
+        }
+        for (SparseMatrix::InnerIterator it(s, i); it; ++it) {
+          if (fixed[it.col()]) continue;
+          put(i, static_cast<int64_t>(it.col()), it.value());
+        }
+      }
+    };
+    if (n <= kDenseRows) {
+      // Written straight in, no triplets.
+      Eigen::MatrixXd m = Eigen::MatrixXd::Zero(n, n);
+      for_each_entry([&](int64_t i, int64_t j, double v) { m(i, j) = v; });
+      llt.emplace(m);
+      return llt->info() == Eigen::Success;
+    }
+    std::vector<Eigen::Triplet<double, int32_t>> t;
+    t.reserve(static_cast<size_t>(s.nonZeros()));
+    for_each_entry([&](int64_t i, int64_t j, double v) {
+      t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(j), v);
+    });
+    Eigen::SparseMatrix<double> m(n, n);
+    m.setFromTriplets(t.begin(), t.end());
+    ldlt.emplace(m);
+    return ldlt->info() == Eigen::Success;
+  }
 };
 
 ColumnPreconditioner::ColumnPreconditioner() = default;
@@ -26,7 +72,15 @@ void ColumnPreconditioner::Setup(const SparseMatrix& s, const std::vector<uint8_
     inv_diag_[i] = inv_diag_[i] > 0 && !fixed[i] ? 1.0 / inv_diag_[i] : 0.0;
   }
   ic_.reset();
-  if (kind != Preconditioner::kIncompleteCholesky) return;
+  direct_.reset();
+  if (kind == Preconditioner::kDirect) {
+    auto direct = std::make_unique<Direct>();
+    if (direct->Factor(s, fixed)) {
+      direct_ = std::move(direct);
+      return;
+    }
+  }
+  if (kind == Preconditioner::kJacobi) return;
   // The reduced matrix: fixed rows and columns replaced by identity.
   Eigen::SparseMatrix<double> reduced = s;
   for (int k = 0; k < reduced.outerSize(); ++k) {
@@ -46,6 +100,17 @@ void ColumnPreconditioner::Setup(const SparseMatrix& s, const std::vector<uint8_
 }
 
 void ColumnPreconditioner::Apply(const Points& r, Points& z) const {
+  if (direct_ != nullptr) {
+    if (direct_->llt.has_value()) {
+      z = direct_->llt->solve(r);
+    } else {
+      z = direct_->ldlt->solve(Eigen::MatrixXd(r));
+    }
+    for (int64_t i = 0; i < z.rows(); ++i) {
+      if (direct_->fixed[i]) z.row(i).setZero();
+    }
+    return;
+  }
   if (!ic_) {
     z = inv_diag_.asDiagonal() * r;
     return;

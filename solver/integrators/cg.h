@@ -22,6 +22,12 @@ using SparseMatrix = dynsolid::SparseMatrix;  // Eigen's, with a real move (comm
 enum class Preconditioner {
   kJacobi,               // diagonal
   kIncompleteCholesky,   // Eigen's IncompleteCholesky (threshold IC, AMD order)
+  // The reduced matrix factored exactly: dense Cholesky up to kDenseRows
+  // rows (a few hundred control points' mass matrix is a quarter full or
+  // more, and its sparse factor fills in), a sparse LDL^T up to
+  // kDirectRows; above that, or where the factor fails, incomplete
+  // Cholesky. CG then stops after an iteration.
+  kDirect,
 };
 
 struct CgStats {
@@ -36,6 +42,7 @@ struct CgStats {
 // the identity (it then maps fixed rows to zero).
 class ColumnPreconditioner {
  public:
+  static constexpr int64_t kDenseRows = 1024, kDirectRows = 4096;
   ColumnPreconditioner();
   ~ColumnPreconditioner();
   ColumnPreconditioner(ColumnPreconditioner&&) noexcept;
@@ -44,11 +51,16 @@ class ColumnPreconditioner {
   void Setup(const SparseMatrix& s, const std::vector<uint8_t>& fixed, Preconditioner kind);
   // z = P^-1 r (#rows by 3); fixed rows of z are zero.
   void Apply(const Points& r, Points& z) const;
+  // Whether P is S itself on the free rows (kDirect's factor was made):
+  // Apply then solves S z = r there.
+  bool exact() const { return direct_ != nullptr; }
 
  private:
   struct Ic;
+  struct Direct;
   Eigen::VectorXd inv_diag_;
   std::unique_ptr<Ic> ic_;
+  std::unique_ptr<Direct> direct_;
 };
 
 class ConjugateGradient {

@@ -80,7 +80,8 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
 
 void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
                 const std::vector<int32_t>& control_cell, int32_t control_cells,
-                std::vector<CellSumJob>& jobs, WorkerPool& pool) {
+                std::vector<CellSumJob>& jobs, WorkerPool& pool,
+                const std::function<void()>& beside) {
   const int32_t nc = static_cast<int32_t>(nm.cols());
   std::vector<Cell> cells(control_cells);
   for (int kind = 0; kind < 3; ++kind) {
@@ -223,8 +224,14 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
                    [&](int32_t a, int32_t b) { return cost[a] > cost[b]; });
   std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> made(
       nj, std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>(control_cells));
-  Parts(pool, static_cast<int>(to_make.size()), [&](int t, int k) {
-    const int32_t c = to_make[k];
+  // Part 0 is the caller's work beside, when given.
+  const int first = beside ? 1 : 0;
+  Parts(pool, static_cast<int>(to_make.size()) + first, [&](int t, int part) {
+    if (part < first) {
+      beside();
+      return;
+    }
+    const int32_t c = to_make[part - first];
     const Cell& cell = cells[c];
     for (int j = 0; j < nj; ++j) {
       if (!makes[j][c]) continue;

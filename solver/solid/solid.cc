@@ -31,9 +31,9 @@
 
 namespace dynsolid::solid {
 
-void Solid::Impl::MakeElementBoxes() {
+void Solid::Impl::MakeElementBoxes(const models::ElementLayout& l) {
   for (int kind = 0; kind < 3; ++kind) {
-    const models::ElementBlock& block = layout->blocks[kind];
+    const models::ElementBlock& block = l.blocks[kind];
     std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
     boxes.resize(block.size());
     for (int32_t e = 0; e < block.size(); ++e) {
@@ -104,64 +104,26 @@ namespace {
 
 // Mt^-1 on the free control points (the fixed rows of the answer are zero),
 // for the stable-step estimate's Lanczos passes: Mt with its fixed rows
-// and columns made the identity, factored once per estimate: dense
-// Cholesky up to kDensePoints control points (224 points and 13k entries
-// on the chair at 2 levels: a quarter of the dense matrix, whose factor
-// fills in), a sparse LDL^T up to kDirectPoints (a control mesh's mass
-// matrix couples a point with its cells' neighbours only), CG to 1e-10
-// above that.
+// and columns made the identity, factored once per estimate
+// (integrators::Preconditioner::kDirect: dense Cholesky up to 1024 control
+// points (239 points and 14k entries on the chair at 2 levels after a local
+// subdivision: a quarter of the dense matrix, whose factor fills in), a
+// sparse LDL^T up to 4096 (a control mesh's mass matrix couples a point
+// with its cells' neighbours only)), CG to 1e-10 above that.
 class MassSolver {
  public:
-  static constexpr int64_t kDirectPoints = 4096, kDensePoints = 1024;
-
-  MassSolver(const SparseMatrix& mass, const std::vector<uint8_t>& fixed) {
-    const int64_t n = mass.rows();
-    if (n > kDirectPoints) {
-      cg_.Setup(&mass, fixed);
-      return;
+  MassSolver(const SparseMatrix& mass, const std::vector<uint8_t>& fixed)
+      : fixed_(fixed.empty() ? std::vector<uint8_t>(mass.rows(), 0) : fixed) {
+    if (mass.rows() <= integrators::ColumnPreconditioner::kDirectRows) {
+      exact_.Setup(mass, fixed_, integrators::Preconditioner::kDirect);
     }
-    // Mt with the fixed rows and columns made the identity.
-    auto for_each_entry = [&](auto&& put) {
-      for (int64_t i = 0; i < n; ++i) {
-        if (!fixed.empty() && fixed[i]) {
-          put(i, i, 1.0);
-          continue;
-        }
-        for (SparseMatrix::InnerIterator it(mass, i); it; ++it) {
-          if (!fixed.empty() && fixed[it.col()]) continue;
-          put(i, static_cast<int64_t>(it.col()), it.value());
-        }
-      }
-    };
-    if (n <= kDensePoints) {
-      // Small: dense Cholesky (a few hundred control points' mass matrix
-      // is nearly full; the sparse factor's column-by-column solves cost
-      // more than the whole dense one). Written straight in, no triplets.
-      Eigen::MatrixXd m = Eigen::MatrixXd::Zero(n, n);
-      for_each_entry([&](int64_t i, int64_t j, double v) { m(i, j) = v; });
-      llt_.emplace(m);
-      if (llt_->info() == Eigen::Success) return;
-      llt_.reset();
-    } else {
-      std::vector<Eigen::Triplet<double, int32_t>> t;
-      t.reserve(static_cast<size_t>(mass.nonZeros()));
-      for_each_entry([&](int64_t i, int64_t j, double v) {
-        t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(j), v);
-      });
-      Eigen::SparseMatrix<double> m(n, n);
-      m.setFromTriplets(t.begin(), t.end());
-      ldlt_.emplace(m);
-      if (ldlt_->info() == Eigen::Success) return;
-      ldlt_.reset();
-    }
-    cg_.Setup(&mass, fixed);  // not positive definite: CG says how far it gets
+    // Too large to factor here, or not positive definite: CG says how far it gets.
+    if (!exact_.exact()) cg_.Setup(&mass, fixed_);
   }
   // x = Mt^-1 b on the free rows (b's fixed rows zero).
   void Solve(const Points& b, Points& x) {
-    if (llt_.has_value()) {
-      x = llt_->solve(b);
-    } else if (ldlt_.has_value()) {
-      x = ldlt_->solve(Eigen::MatrixXd(b));
+    if (exact_.exact()) {
+      exact_.Apply(b, x);
     } else {
       x.setZero();
       cg_.Solve(b, x, 1e-10, 1000);
@@ -169,8 +131,8 @@ class MassSolver {
   }
 
  private:
-  std::optional<Eigen::LLT<Eigen::MatrixXd>> llt_;
-  std::optional<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> ldlt_;
+  std::vector<uint8_t> fixed_;
+  integrators::ColumnPreconditioner exact_;
   integrators::ConjugateGradient cg_;
 };
 

@@ -89,8 +89,10 @@ struct BuildReport {
   int64_t materials_taken_back = 0;
   // Where build_ms went (milliseconds): the element layout (shapes grouped,
   // materials sampled), the force model, the mass and damping in control
-  // space, the boundary surface, the stable-step estimate, backward Euler's
-  // K0 (0 when explicit).
+  // space, the boundary surface (with the element boxes: made on a pool
+  // thread beside the model's cell partials, so `model` includes its wall
+  // time where there are partials to make), the stable-step estimate,
+  // backward Euler's K0 (0 when explicit).
   struct Phases {
     double layout = 0, model = 0, mass = 0, surface = 0, stable_step = 0, k0 = 0;
   } phases;

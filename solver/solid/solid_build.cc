@@ -103,7 +103,8 @@ void Solid::SetMaxElementBytesForTesting(double bytes) {
 }
 
 absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
-                                                         bool reuse, WorkerPool* model_pool) const {
+                                                         bool reuse, WorkerPool* model_pool,
+                                                         const std::function<void()>& beside) const {
   reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
   WorkerPool& threads = model_pool != nullptr ? *model_pool : *pool;
   MaterialBuild b;
@@ -194,7 +195,9 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
     jobs.push_back({&mass->spec(), mass_cells.get(), dense_mass, &m_sums, nullptr});
   }
   if (!jobs.empty()) {
-    SumByCells(nm, *l, d->hierarchy.control_cell, d->control().num_cells(), jobs, threads);
+    SumByCells(nm, *l, d->hierarchy.control_cell, d->control().num_cells(), jobs, threads, beside);
+  } else if (beside) {
+    beside();
   }
   if (per_cell) {
     const std::shared_ptr<const CellPartials> made = jobs[0].made;
@@ -400,18 +403,24 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     im.mass_cells = carried->impl_->mass_cells;
     im.k0_cells = carried->impl_->k0_cells;
   }
-  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout)));
+  // The element boxes and the boundary surface read the layout's elements
+  // and the discretization only: made beside the cells' partials, on the
+  // pool thread that is free first (a cell fewer for it).
+  const models::ElementLayout& laid = *layout;
+  auto surface = [&] {
+    const auto t0 = Clock::now();
+    im.MakeElementBoxes(laid);
+    s->BuildSurface();
+    rep.phases.surface = MsSince(t0);
+  };
+  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout), false, nullptr, surface));
   rep.phases.model = material.model_ms;
   rep.phases.mass = material.mass_ms;
   rep.control_cell_partials = control.num_cells();
   rep.mass_cells_made = material.mass_cells != nullptr ? material.mass_cells->made : -1;
   if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
-  im.MakeElementBoxes();
   s->total_mass_ = SumOfValues(im.mt);
-  t_phase = Clock::now();
-  s->BuildSurface();
-  rep.phases.surface = MsSince(t_phase);
 
   // Constraints: the scene's fixed regions, held at rest.
   im.fix_count.assign(nc, 0);

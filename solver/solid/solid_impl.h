@@ -481,7 +481,7 @@ struct Solid::Impl {
   // and rest nodes never change (a topology edit makes another solid),
   // whatever material is laid out over them.
   std::array<std::vector<Eigen::AlignedBox3d>, 3> element_boxes;
-  void MakeElementBoxes();
+  void MakeElementBoxes(const models::ElementLayout& l);
   // The material point at rest position x (rest_nodes).
   absl::StatusOr<MaterialLocation> Locate(const Eigen::Vector3d& x, bool snap) const;
   // Mt and Dt from the sums of MassPartials (dense or as triplets), lumped
@@ -538,10 +538,12 @@ struct Solid::Impl {
   // deformation measure, and Mt and Dt when no density or damping sample
   // changed. Each is what integrating again would give, bit for bit.
   // The model runs on `model_pool` (default: the solid's pool) until
-  // set_pool moves it.
-  absl::StatusOr<MaterialBuild> BuildMaterial(std::unique_ptr<models::ElementLayout> l,
-                                              bool reuse = false,
-                                              WorkerPool* model_pool = nullptr) const;
+  // set_pool moves it. `beside` (optional): the caller's work that reads
+  // nothing this makes, run once on a pool thread while the cells'
+  // partials are made (SumByCells), else before they are summed.
+  absl::StatusOr<MaterialBuild> BuildMaterial(
+      std::unique_ptr<models::ElementLayout> l, bool reuse = false,
+      WorkerPool* model_pool = nullptr, const std::function<void()>& beside = nullptr) const;
   // True when every element's density and damping samples in `l` equal the
   // current layout's.
   bool SameMassAndDamping(const models::ElementLayout& l) const;

@@ -260,8 +260,24 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       return &layout.materials[block.groups[block.group[e]].material];
     };
   }
-  return CreateWith(CleanScene(scene, cell_source), std::move(discretization), old.pool->size(),
-                    uniform ? nullptr : &sampler, this, uniform ? nullptr : &whole);
+  ASSIGN_OR_RETURN(std::unique_ptr<Solid> out,
+                   CreateWith(CleanScene(scene, cell_source), std::move(discretization),
+                              old.pool->size(), uniform ? nullptr : &sampler, this,
+                              uniform ? nullptr : &whole));
+  // The explicit integrator set up here, off the loop, for the fixed set
+  // the carried pins will give (pins do not change while an edit builds:
+  // the server lets only loads and drags pass it); CarryOver's own set-up
+  // then finds it made for those very values and keeps it (SetSubsteps).
+  Impl& im = *out->impl_;
+  if (!im.use_implicit) {
+    const std::vector<uint8_t> scene_fixed = im.fixed;
+    for (const Impl::FixConstraint& c : old.fixes) {
+      for (int32_t i : im.SelectControlPoints(RemapRegion(c.region, cell_source))) im.fixed[i] = 1;
+    }
+    im.SetSubsteps(im.substeps, out->h_);
+    im.fixed = scene_fixed;
+  }
+  return out;
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> out,

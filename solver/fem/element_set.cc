@@ -116,7 +116,7 @@ struct Star {
 // on a few threads.
 std::vector<Star> RegularStars(const CellComplex& m, const std::vector<uint8_t>& regular) {
   std::vector<Star> stars(m.num_vertices());
-  ParallelChunks(m.num_vertices(), BuildThreads(), 4096, [&](int, int64_t b, int64_t e) {
+  ParallelParts(m.num_vertices(), BuildThreads(), 16, 1024, [&](int, int, int64_t b, int64_t e) {
     for (int64_t v = b; v < e; ++v) {
       if (regular[v]) stars[v] = Star(m, static_cast<int32_t>(v));
     }
@@ -247,13 +247,15 @@ ElementSet ClassifyElements(const CellComplex& m) {
 
   // Cells in contiguous chunks on a few threads, joined in chunk order: the
   // result does not depend on the number of threads.
-  std::vector<ElementSet> parts(BuildThreads());
-  const int chunks = ParallelChunks(nc, static_cast<int>(parts.size()), 1024,
-                                    [&](int k, int64_t b, int64_t e) {
-                                      ClassifyRange(m, is_hex, regular, stars,
-                                                    static_cast<int32_t>(b),
-                                                    static_cast<int32_t>(e), parts[k]);
-                                    });
+  // (Parts of 512 cells or more, taken by whichever thread is free: the
+  // last level's matrix product runs beside this.)
+  std::vector<ElementSet> parts(16);
+  const int chunks = ParallelParts(nc, BuildThreads(), static_cast<int>(parts.size()), 512,
+                                   [&](int, int k, int64_t b, int64_t e) {
+                                     ClassifyRange(m, is_hex, regular, stars,
+                                                   static_cast<int32_t>(b),
+                                                   static_cast<int32_t>(e), parts[k]);
+                                   });
   ElementSet s;
   s.num_mesh_vertices = m.num_vertices();
   size_t cubic = 0, linear = 0, pyramid = 0;
@@ -285,16 +287,16 @@ ElementSet ClassifyElements(const CellComplex& m) {
 subdivision::SparseMatrix NodeMatrix(const CellComplex& m, const subdivision::SparseMatrix& a,
                                      const ElementSet& elements) {
   if (elements.num_virtual_nodes == 0) return a;
-  // S A with S = [I; the virtual nodes' rows of their cells' vertex
-  // means]: A's rows as they are (one term each, times 1), then each
-  // virtual node's mean of its cell's vertices' rows.
+  if (!a.isCompressed()) {
+    subdivision::SparseMatrix compressed = a;
+    compressed.makeCompressed();
+    return NodeMatrix(m, compressed, elements);
+  }
+  // S A with S = [I; V], V the virtual nodes' rows of their cells' vertex
+  // means: A's rows as they are (the product's row of an identity row is
+  // that row, bit for bit: one term times 1), copied; then V A.
   std::vector<int32_t> outer{0}, inner;
   std::vector<double> values;
-  for (int32_t r = 0; r < a.rows(); ++r) {
-    inner.push_back(r);
-    values.push_back(1.0);
-    outer.push_back(static_cast<int32_t>(inner.size()));
-  }
   for (int32_t i = 0; i < elements.num_virtual_nodes; ++i) {
     const auto verts = m.cell_vertices(elements.virtual_node_cell[i]);  // ascending
     for (int32_t v : verts) {
@@ -303,9 +305,22 @@ subdivision::SparseMatrix NodeMatrix(const CellComplex& m, const subdivision::Sp
     }
     outer.push_back(static_cast<int32_t>(inner.size()));
   }
-  const subdivision::SparseMatrix s = subdivision::FromCsr(
-      elements.num_nodes(), static_cast<int32_t>(a.rows()), outer, inner, values);
-  return subdivision::MultiplyRowMajor(s, a);
+  const subdivision::SparseMatrix v = subdivision::MultiplyRowMajor(
+      subdivision::FromCsr(elements.num_virtual_nodes, static_cast<int32_t>(a.rows()), outer,
+                           inner, values),
+      a);
+  const Eigen::Index rows = a.rows(), nnz = a.nonZeros();
+  subdivision::SparseMatrix out(elements.num_nodes(), a.cols());
+  out.resizeNonZeros(nnz + v.nonZeros());
+  std::copy(a.outerIndexPtr(), a.outerIndexPtr() + rows + 1, out.outerIndexPtr());
+  for (Eigen::Index r = 1; r <= v.rows(); ++r) {
+    out.outerIndexPtr()[rows + r] = static_cast<int32_t>(nnz) + v.outerIndexPtr()[r];
+  }
+  std::copy(a.innerIndexPtr(), a.innerIndexPtr() + nnz, out.innerIndexPtr());
+  std::copy(a.valuePtr(), a.valuePtr() + nnz, out.valuePtr());
+  std::copy(v.innerIndexPtr(), v.innerIndexPtr() + v.nonZeros(), out.innerIndexPtr() + nnz);
+  std::copy(v.valuePtr(), v.valuePtr() + v.nonZeros(), out.valuePtr() + nnz);
+  return out;
 }
 
 }  // namespace dynsolid::fem

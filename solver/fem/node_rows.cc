@@ -4,46 +4,37 @@ namespace dynsolid::fem {
 
 NodeRows::NodeRows(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& a)
     : cols_(a.cols()) {
-  const int64_t n = a.rows();
-  start_.resize(n + 1);
-  start_[0] = 0;
-  bool exact = true;
-  for (int64_t i = 0; i < n; ++i) {
-    int64_t k = start_[i];
-    for (Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>::InnerIterator it(a, i); it;
-         ++it, ++k) {
-      const double v = it.value();
-      exact = exact && static_cast<double>(static_cast<float>(v)) == v;
-    }
-    start_[i + 1] = k;
+  if (!a.isCompressed()) {
+    Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t> compressed = a;
+    compressed.makeCompressed();
+    *this = NodeRows(compressed);
+    return;
   }
+  // Straight from the compressed arrays (a node matrix has hundreds of
+  // thousands of entries: no iterator or push_back per entry).
+  const int64_t n = a.rows();
+  const int32_t* outer = a.outerIndexPtr();
+  const int32_t* inner = a.innerIndexPtr();
+  const double* values = a.valuePtr();
+  start_.assign(outer, outer + n + 1);
   const int64_t nnz = start_[n];
+  bool exact = true;
+  for (int64_t k = 0; k < nnz; ++k) {
+    exact &= static_cast<double>(static_cast<float>(values[k])) == values[k];
+  }
   narrow_ = cols_ <= 65536;
   exact_ = exact;
   if (narrow_) {
-    col16_.reserve(nnz);
+    col16_.resize(nnz);
+    for (int64_t k = 0; k < nnz; ++k) col16_[k] = static_cast<uint16_t>(inner[k]);
   } else {
-    col32_.reserve(nnz);
+    col32_.assign(inner, inner + nnz);
   }
   if (exact) {
-    val32_.reserve(nnz);
+    val32_.resize(nnz);
+    for (int64_t k = 0; k < nnz; ++k) val32_[k] = static_cast<float>(values[k]);
   } else {
-    val64_.reserve(nnz);
-  }
-  for (int64_t i = 0; i < n; ++i) {
-    for (Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>::InnerIterator it(a, i); it;
-         ++it) {
-      if (narrow_) {
-        col16_.push_back(static_cast<uint16_t>(it.col()));
-      } else {
-        col32_.push_back(static_cast<int32_t>(it.col()));
-      }
-      if (exact) {
-        val32_.push_back(static_cast<float>(it.value()));
-      } else {
-        val64_.push_back(it.value());
-      }
-    }
+    val64_.assign(values, values + nnz);
   }
 }
 

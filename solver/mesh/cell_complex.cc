@@ -320,22 +320,28 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   }
   const int32_t ne = num_edges();
 
-  // Edge -> faces (unordered first), then radial order with cells.
-  auto radial = [this, ne] {
-    Csr edge_faces = Invert(face_edges_, ne);
-    edge_faces_.offsets = edge_faces.offsets;
-    edge_faces_.items.resize(edge_faces.items.size());
-    edge_cells_.offsets.assign(ne + 1, 0);
-    edge_cells_.items.clear();
-    edge_cells_.items.reserve(edge_faces.items.size());
-    edge_boundary_.assign(ne, 0);
+  // Edge -> faces (unordered first), then radial order with cells, edges
+  // [e0, e1) at a time: each range writes its edges' faces in place and
+  // their cells to a list of its own, joined in edge order below.
+  const Csr edge_faces = Invert(face_edges_, ne);
+  edge_faces_.offsets = edge_faces.offsets;
+  edge_faces_.items.resize(edge_faces.items.size());
+  edge_boundary_.assign(ne, 0);
+  struct RadialCells {
+    std::vector<int32_t> count, items;  // per edge of the range; its cells
+  };
+  auto radial = [this, &edge_faces](int32_t e0, int32_t e1, RadialCells& out) {
+    out.count.assign(e1 - e0, 0);
+    out.items.clear();
+    out.items.reserve(edge_faces.offsets[e1] - edge_faces.offsets[e0]);
     // Per face of the edge (its slot in the edge's face list): its two
     // cells and whether the walk has passed it.
     std::vector<int32_t> cell0, cell1;
     std::vector<uint8_t> used;
-    for (int32_t e = 0; e < ne; ++e) {
+    for (int32_t e = e0; e < e1; ++e) {
       const auto faces = edge_faces.row(e);
       const int k = static_cast<int>(faces.size());
+      const size_t cells_before = out.items.size();
       cell0.resize(k);
       cell1.resize(k);
       used.assign(k, 0);
@@ -344,7 +350,7 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
         cell1[i] = face_cells_[faces[i]][1];
         if (cell1[i] < 0) edge_boundary_[e] = 1;
       }
-      int32_t out = edge_faces_.offsets[e];
+      int32_t at = edge_faces_.offsets[e];
       // Walk face -> cell -> the cell's other face at e, from boundary faces
       // first, then from any face left (interior edges).
       while (true) {
@@ -360,7 +366,7 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
         int32_t prev_cell = -1;
         while (true) {
           used[i] = 1;
-          edge_faces_.items[out++] = faces[i];
+          edge_faces_.items[at++] = faces[i];
           int32_t cell = -1;
           if (cell0[i] >= 0 && cell0[i] != prev_cell) {
             cell = cell0[i];
@@ -374,26 +380,29 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
             if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
           }
           if (next < 0) break;  // open cell: reported by CheckCellsClosed
-          edge_cells_.items.push_back(cell);
+          out.items.push_back(cell);
           if (used[next]) break;
           prev_cell = cell;
           i = next;
         }
       }
-      edge_cells_.offsets[e + 1] = static_cast<int32_t>(edge_cells_.items.size());
+      out.count[e - e0] = static_cast<int32_t>(out.items.size() - cells_before);
     }
   };
 
   // The rest reads the faces' edges and writes members of its own. The
   // cells' closedness check and their edges run beside it on a thread of
-  // their own when the complex is large (a subdivision's finest level),
-  // and so does the edges' radial order where there is no check (the
-  // two threads' shares then about even): the same result either way.
+  // their own when the complex is large (a subdivision's finest level);
+  // where there is no check, that thread also takes the first half of
+  // the edges' radial order (the two threads' shares then about even):
+  // the same result either way.
+  const int32_t split = check_closed ? 0 : ne / 2;
+  RadialCells first, second;
   absl::Status closed;
-  auto side = [this, &closed, check_closed, &radial] {
+  auto side = [this, &closed, check_closed, &radial, split, &first] {
     if (check_closed) closed = CheckCellsClosed();
     cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
-    if (!check_closed) radial();
+    radial(0, split, first);
   };
   std::thread beside;
   if (nc >= kCellsForAThread) {
@@ -401,8 +410,6 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   } else {
     side();
   }
-
-  if (check_closed) radial();
 
   // Cells -> vertices (and edges, above), sorted, unique.
   cell_vertices_ = ComposeUnique(cell_faces_, face_vertices_);
@@ -424,7 +431,15 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
     if (face_cells_[f][1] >= 0) continue;
     for (int32_t v : face_vertices_.row(f)) vertex_boundary_[v] = 1;
   }
+  radial(split, ne, second);
   if (beside.joinable()) beside.join();
+  edge_cells_.offsets.assign(ne + 1, 0);
+  for (int32_t e = 0; e < ne; ++e) {
+    edge_cells_.offsets[e + 1] =
+        edge_cells_.offsets[e] + (e < split ? first.count[e] : second.count[e - split]);
+  }
+  edge_cells_.items = std::move(first.items);
+  edge_cells_.items.insert(edge_cells_.items.end(), second.items.begin(), second.items.end());
   return closed;
 }
 

@@ -19,31 +19,43 @@ using mesh::Csr;
 
 // Accumulates one sparse row as (column, weight) pairs, then merges
 // duplicates in column order (deterministic).
+// One row of a subdivision matrix: terms added in stencil order, a
+// column's terms summed in the order they were added (a dense slot per
+// coarse vertex: rows of hundreds of terms over a few dozen columns),
+// emitted in ascending column order.
 class RowBuilder {
  public:
-  void Add(int32_t col, double w) { terms_.push_back({col, w}); }
+  explicit RowBuilder(int32_t cols) : sum_(cols, 0.0), seen_(cols, 0) {}
+  void Add(int32_t col, double w) {
+    if (!seen_[col]) {
+      seen_[col] = 1;
+      sum_[col] = w;
+      cols_.push_back(col);
+    } else {
+      sum_[col] += w;
+    }
+  }
   // Adds w times the average of the vertices in `cols`.
   void AddAverage(std::span<const int32_t> cols, double w) {
     const double s = w / static_cast<double>(cols.size());
-    for (int32_t c : cols) terms_.push_back({c, s});
+    for (int32_t c : cols) Add(c, s);
   }
   void Flush(std::vector<int32_t>& outer, std::vector<int32_t>& inner,
              std::vector<double>& values) {
-    std::sort(terms_.begin(), terms_.end(),
-              [](const auto& a, const auto& b) { return a.first < b.first; });
-    for (size_t i = 0; i < terms_.size();) {
-      const int32_t col = terms_[i].first;
-      double w = 0.0;
-      for (; i < terms_.size() && terms_[i].first == col; ++i) w += terms_[i].second;
+    std::sort(cols_.begin(), cols_.end());
+    for (int32_t col : cols_) {
       inner.push_back(col);
-      values.push_back(w);
+      values.push_back(sum_[col]);
+      seen_[col] = 0;
     }
     outer.push_back(static_cast<int32_t>(inner.size()));
-    terms_.clear();
+    cols_.clear();
   }
 
  private:
-  std::vector<std::pair<int32_t, double>> terms_;
+  std::vector<double> sum_;
+  std::vector<uint8_t> seen_;
+  std::vector<int32_t> cols_;
 };
 
 // Newell normal of a face loop (not normalised).
@@ -77,21 +89,37 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
     std::vector<int32_t> row_nnz, inner;
     std::vector<double> values;
   };
-  std::vector<Part> parts(BuildThreads());
-  // Rows in contiguous chunks, each with its own dense accumulator; joined
-  // in order, so the result does not depend on the thread count.
-  const int chunks = ParallelChunks(rows, static_cast<int>(parts.size()), 2048,
-                                    [&](int k, int64_t begin, int64_t end) {
+  // Rows in contiguous parts of 1024 or more, each thread taking the next
+  // part with its own dense accumulator (the finest level's product runs
+  // beside the element classification); joined in order, so the result
+  // does not depend on the thread count or the timing.
+  std::vector<Part> parts(16);
+  const int threads = BuildThreads();
+  struct Scratch {
+    std::vector<double> acc;
+    std::vector<int32_t> mark, touched;
+    std::vector<uint64_t> bits;
+  };
+  std::vector<Scratch> scratch(threads);
+  // A row's columns in ascending order: from a bitset of the columns
+  // where scanning its words costs less than sorting the row's columns
+  // (a control mesh of a few hundred points: a handful of words), else
+  // by sorting them. The same columns and values either way.
+  const int32_t words = (cols + 63) / 64;
+  const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
+  const int chunks = ParallelParts(rows, threads, static_cast<int>(parts.size()), 1024,
+                                   [&](int t, int k, int64_t begin, int64_t end) {
     Part& p = parts[k];
-    std::vector<double> acc(cols, 0.0);
-    std::vector<int32_t> mark(cols, -1), touched;
-    // A row's columns in ascending order: from a bitset of the columns
-    // where scanning its words costs less than sorting the row's columns
-    // (a control mesh of a few hundred points: a handful of words), else
-    // by sorting them. The same columns and values either way.
-    const int32_t words = (cols + 63) / 64;
-    std::vector<uint64_t> bits(words, 0);
-    const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
+    Scratch& sc = scratch[t];
+    if (sc.acc.empty() && cols > 0) {
+      sc.acc.assign(cols, 0.0);
+      sc.mark.assign(cols, -1);
+      sc.bits.assign(words, 0);
+    }
+    std::vector<double>& acc = sc.acc;
+    std::vector<int32_t>& mark = sc.mark;
+    std::vector<int32_t>& touched = sc.touched;
+    std::vector<uint64_t>& bits = sc.bits;
     const double a_nnz = static_cast<double>(a.outerIndexPtr()[end] - a.outerIndexPtr()[begin]);
     p.inner.reserve(static_cast<size_t>(a_nnz * per_row / 4.0));
     p.values.reserve(p.inner.capacity());
@@ -182,7 +210,7 @@ SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
   outer.reserve(nv_fine + 1);
   inner.reserve(static_cast<size_t>(nv_fine) * 27);
   values.reserve(static_cast<size_t>(nv_fine) * 27);
-  RowBuilder row;
+  RowBuilder row(nv);
   std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
 
   // Old vertices -> vertex points.

@@ -81,7 +81,7 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
 void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
                 const std::vector<int32_t>& control_cell, int32_t control_cells,
                 std::vector<CellSumJob>& jobs, WorkerPool& pool,
-                const std::function<void()>& beside) {
+                const std::vector<std::function<void()>>& beside) {
   const int32_t nc = static_cast<int32_t>(nm.cols());
   std::vector<Cell> cells(control_cells);
   for (int kind = 0; kind < 3; ++kind) {
@@ -224,11 +224,11 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
                    [&](int32_t a, int32_t b) { return cost[a] > cost[b]; });
   std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> made(
       nj, std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>(control_cells));
-  // Part 0 is the caller's work beside, when given.
-  const int first = beside ? 1 : 0;
+  // The first parts are the caller's jobs beside.
+  const int first = static_cast<int>(beside.size());
   Parts(pool, static_cast<int>(to_make.size()) + first, [&](int t, int part) {
     if (part < first) {
-      beside();
+      beside[part]();
       return;
     }
     const int32_t c = to_make[part - first];

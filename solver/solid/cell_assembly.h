@@ -112,13 +112,13 @@ struct CellSumJob {
 // their new partials made in one pass over the cells: a cell's partials of
 // every job one after another, in job order, on one pool thread (so that
 // makers sharing what they read of a cell, CellPoints, read it once).
-// `beside` (optional): the caller's work, sharing nothing with the sums,
-// run once by the first pool thread to reach it in that pass (before the
-// sums when there is no cell to make).
+// `beside`: the caller's jobs, sharing nothing with the sums, each run
+// once in that pass by the pool thread that reaches it first (the first
+// parts of the pass, before the costliest cell).
 void SumByCells(const subdivision::SparseMatrix& nm, const models::ElementLayout& layout,
                 const std::vector<int32_t>& control_cell, int32_t control_cells,
                 std::vector<CellSumJob>& jobs, WorkerPool& pool,
-                const std::function<void()>& beside = nullptr);
+                const std::vector<std::function<void()>>& beside = {});
 
 // Partials above this many bytes are not carried to the next build.
 inline constexpr double kMaxCarriedBytes = 64.0 * 1048576.0;

@@ -655,7 +655,10 @@ class Solid {
   Solid();
   void ReportMaterial();
   void BuildSurface();
+  // The scene's hash with the geometry key (its rest positions, node
+  // matrix and elements' nodes: Impl::geometry_key, made by the build).
   std::pair<uint64_t, uint64_t> Fingerprint(const Scene& scene) const;
+  std::pair<uint64_t, uint64_t> GeometryKey() const;
   // `clock`: the time and steps to set instead of the saved ones.
   absl::Status Restore(std::string_view bytes, const std::pair<double, int64_t>* clock);
   absl::StatusOr<std::shared_ptr<PreparedState>> PrepareStateView(std::string_view bytes) const;

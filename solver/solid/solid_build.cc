@@ -102,9 +102,9 @@ void Solid::SetMaxElementBytesForTesting(double bytes) {
   g_max_element_bytes.store(bytes > 0 ? bytes : kMaxSharedMatrixBytes);
 }
 
-absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models::ElementLayout> l,
-                                                         bool reuse, WorkerPool* model_pool,
-                                                         const std::function<void()>& beside) const {
+absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
+    std::unique_ptr<models::ElementLayout> l, bool reuse, WorkerPool* model_pool,
+    const std::vector<std::function<void()>>& beside) const {
   reuse = reuse && paint_reuse && model != nullptr && layout != nullptr;
   WorkerPool& threads = model_pool != nullptr ? *model_pool : *pool;
   MaterialBuild b;
@@ -196,8 +196,8 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(std::unique_ptr<models:
   }
   if (!jobs.empty()) {
     SumByCells(nm, *l, d->hierarchy.control_cell, d->control().num_cells(), jobs, threads, beside);
-  } else if (beside) {
-    beside();
+  } else {
+    for (const std::function<void()>& job : beside) job();
   }
   if (per_cell) {
     const std::shared_ptr<const CellPartials> made = jobs[0].made;
@@ -356,6 +356,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   im.rest_nodes = im.node_rows.Multiply(im.rest_control);
   const Points& rest = im.rest_nodes;
   im.pool = std::make_unique<WorkerPool>(threads > 0 ? threads : BuildThreads());
+  BuildReport& rep = s->report_;
 
   // Materials: base, then painted regions in order.
   const models::MaterialPoint base = ToPoint(scene.materials().base());
@@ -386,7 +387,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     };
     whole = &base_whole;
   }
-  BuildReport& rep = s->report_;
   auto t_phase = Clock::now();
   auto layout = std::make_unique<models::ElementLayout>(models::BuildElementLayout(
       s->d_.elements, rest, s->d_.hierarchy.control_cell,
@@ -403,17 +403,21 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     im.mass_cells = carried->impl_->mass_cells;
     im.k0_cells = carried->impl_->k0_cells;
   }
-  // The element boxes and the boundary surface read the layout's elements
-  // and the discretization only: made beside the cells' partials, on the
-  // pool thread that is free first (a cell fewer for it).
+  // What the build needs only after its material, of the discretization,
+  // rest positions and layout alone: made beside the cells' partials, each
+  // on the pool thread that is free first (common/worker_pool.h RunParts).
+  // The element boxes, the boundary surface, and the geometry the
+  // fingerprint covers.
   const models::ElementLayout& laid = *layout;
-  auto surface = [&] {
-    const auto t0 = Clock::now();
-    im.MakeElementBoxes(laid);
-    s->BuildSurface();
-    rep.phases.surface = MsSince(t0);
-  };
-  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout), false, nullptr, surface));
+  const std::vector<std::function<void()>> beside = {
+      [&] { im.MakeElementBoxes(laid); },
+      [&] {
+        const auto t0 = Clock::now();
+        s->BuildSurface();
+        rep.phases.surface = MsSince(t0);
+      },
+      [&] { im.geometry_key = s->GeometryKey(); }};
+  ASSIGN_OR_RETURN(MaterialBuild material, im.BuildMaterial(std::move(layout), false, nullptr, beside));
   rep.phases.model = material.model_ms;
   rep.phases.mass = material.mass_ms;
   rep.control_cell_partials = control.num_cells();
@@ -597,8 +601,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
   im.ledger.peak = im.ledger.h_min;
   // (A remeshed solid, built here for CarryOver, gets its fingerprint
-  // there, from the scene it keeps: a hash of the whole node matrix, made
-  // once.)
+  // there, from the scene it keeps.)
   if (carried == nullptr) im.fingerprint = s->Fingerprint(scene);
   rep.build_ms = MsSince(t_build);
   return s;
@@ -700,6 +703,12 @@ std::pair<uint64_t, uint64_t> Solid::Fingerprint(const Scene& scene) const {
     scene.SerializeToCodedStream(&coded);
   }
   h.Bytes(bytes);
+  h.Key(impl_->geometry_key);
+  return h.value();
+}
+
+std::pair<uint64_t, uint64_t> Solid::GeometryKey() const {
+  Hash128 h;
   const Impl& im = *impl_;
   h.Doubles(im.rest_control.data(), im.rest_control.size());
   const SparseMatrix& nm = d_.node_matrix;
@@ -708,8 +717,10 @@ std::pair<uint64_t, uint64_t> Solid::Fingerprint(const Scene& scene) const {
   h.Ints(nm.outerIndexPtr(), nm.outerSize() + 1);
   h.Ints(nm.innerIndexPtr(), nm.nonZeros());
   h.Doubles(nm.valuePtr(), nm.nonZeros());
-  for (const models::ElementBlock& block : im.layout->blocks) {
-    h.Ints(block.node_ids.data(), block.node_ids.size());
+  const fem::ElementSet& e = d_.elements;
+  for (const std::vector<int32_t>* nodes : {&e.cubic_nodes, &e.linear_nodes, &e.pyramid_nodes}) {
+    h.Mix(nodes->size());
+    h.Ints(nodes->data(), nodes->size());
   }
   return h.value();
 }

@@ -231,6 +231,9 @@ struct Solid::Impl {
   double last_strain_energy = 0;
   const Solid::Surface* surface = nullptr;  // the solid's boundary surface
   std::pair<uint64_t, uint64_t> fingerprint;
+  // What the fingerprint covers besides the scene (Solid::GeometryKey):
+  // hashed once per build, beside its cell partials.
+  std::pair<uint64_t, uint64_t> geometry_key;
 
   // ---- Runtime loads and constraints (ids from one counter, ascending).
   // A control point's weight in a material point (ControlRowAt), ascending
@@ -538,12 +541,13 @@ struct Solid::Impl {
   // deformation measure, and Mt and Dt when no density or damping sample
   // changed. Each is what integrating again would give, bit for bit.
   // The model runs on `model_pool` (default: the solid's pool) until
-  // set_pool moves it. `beside` (optional): the caller's work that reads
-  // nothing this makes, run once on a pool thread while the cells'
-  // partials are made (SumByCells), else before they are summed.
+  // set_pool moves it. `beside`: the caller's jobs that read nothing this
+  // makes, each run once on a pool thread while the cells' partials are
+  // made (SumByCells), else before they are summed.
   absl::StatusOr<MaterialBuild> BuildMaterial(
       std::unique_ptr<models::ElementLayout> l, bool reuse = false,
-      WorkerPool* model_pool = nullptr, const std::function<void()>& beside = nullptr) const;
+      WorkerPool* model_pool = nullptr,
+      const std::vector<std::function<void()>>& beside = {}) const;
   // True when every element's density and damping samples in `l` equal the
   // current layout's.
   bool SameMassAndDamping(const models::ElementLayout& l) const;

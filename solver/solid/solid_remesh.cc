@@ -7,7 +7,6 @@
 #include <limits>
 #include <map>
 #include <string>
-#include <thread>
 #include <unordered_map>
 #include <vector>
 
@@ -370,10 +369,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
       rep.dropped_traced.push_back(scene.traced(i).name());
     }
   }
-  // The fingerprint (a hash of the scene, rest positions and node matrix)
-  // on a thread of its own, beside the state's transfer below.
-  std::pair<uint64_t, uint64_t> fingerprint;
-  std::thread hashing([&] { fingerprint = s.Fingerprint(clean); });
 
   // Positions and velocities.
   s.p_ = t.current;
@@ -405,8 +400,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   s.report_.gravity = im.gravity.squaredNorm() > 0;
   s.report_.fixed_control_points =
       static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
-  hashing.join();
-  im.fingerprint = fingerprint;
+  // (The geometry it covers was hashed by the build: only the scene here.)
+  im.fingerprint = s.Fingerprint(clean);
   rep.scene = std::move(clean);
   return out;
 }

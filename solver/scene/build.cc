@@ -22,6 +22,15 @@ class Stopwatch {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
 
+absl::StatusOr<int> Levels(const Scene& scene, std::optional<int> levels) {
+  const int l = levels.value_or(scene.subdivision().levels());
+  if (l < 0 || l > 4) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("subdivision levels must be in 0..4, got ", l));
+  }
+  return l;
+}
+
 absl::Status WithPrefix(const absl::Status& s, std::string_view prefix) {
   return absl::Status(s.code(), std::string(prefix) + std::string(s.message()));
 }
@@ -30,16 +39,21 @@ absl::Status WithPrefix(const absl::Status& s, std::string_view prefix) {
 
 absl::StatusOr<Discretization> Discretize(const Scene& scene, const mesh::MeshInput& control,
                                           std::optional<int> levels, BuildTimings* timings) {
+  RETURN_IF_ERROR(Levels(scene, levels).status());
+  Stopwatch clock;
+  ASSIGN_OR_RETURN(mesh::CellComplex base, mesh::CellComplex::FromInput(control));
+  const double validate_ms = clock.LapMs();
+  absl::StatusOr<Discretization> d = Discretize(scene, std::move(base), levels, timings);
+  if (timings != nullptr) timings->validate_ms = validate_ms;
+  return d;
+}
+
+absl::StatusOr<Discretization> Discretize(const Scene& scene, mesh::CellComplex base,
+                                          std::optional<int> levels, BuildTimings* timings) {
   BuildTimings local_timings;
   BuildTimings& t = timings != nullptr ? *timings : local_timings;
   Stopwatch clock;
-  const int l = levels.value_or(scene.subdivision().levels());
-  if (l < 0 || l > 4) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("subdivision levels must be in 0..4, got ", l));
-  }
-  ASSIGN_OR_RETURN(mesh::CellComplex base, mesh::CellComplex::FromInput(control));
-  t.validate_ms = clock.LapMs();
+  ASSIGN_OR_RETURN(const int l, Levels(scene, levels));
 
   Discretization d;
   d.name = scene.name();

@@ -50,6 +50,11 @@ struct BuildTimings {
 absl::StatusOr<Discretization> Discretize(const Scene& scene, const mesh::MeshInput& control,
                                           std::optional<int> levels,
                                           BuildTimings* timings = nullptr);
+// The same from the complex FromInput built of that mesh (a topology edit
+// has built and checked it already).
+absl::StatusOr<Discretization> Discretize(const Scene& scene, mesh::CellComplex base,
+                                          std::optional<int> levels,
+                                          BuildTimings* timings = nullptr);
 
 // Loads the scene's control mesh (ControlMeshInput) and discretizes it.
 absl::StatusOr<Discretization> BuildDiscretization(const Scene& scene, std::string_view base_dir,

@@ -157,7 +157,9 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   }
   out.phases.edit = MsSince(t0);
   auto t_phase = Clock::now();
-  absl::StatusOr<scene::Discretization> nd = scene::Discretize(edited, r.mesh, std::nullopt);
+  absl::StatusOr<scene::Discretization> nd =
+      r.complex != nullptr ? scene::Discretize(edited, std::move(*r.complex), std::nullopt)
+                           : scene::Discretize(edited, r.mesh, std::nullopt);
   if (!nd.ok()) return absl::Status(nd.status().code(), absl::StrCat("edit: ", nd.status().message()));
   out.cells_before = rest.num_cells();
   out.vertices_before = rest.num_vertices();

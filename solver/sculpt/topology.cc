@@ -228,6 +228,7 @@ absl::StatusOr<EditResult> Finish(absl::string_view edit, EditResult result,
     if (e >= 0) tags[e] = 1;
   }
   result.sharp_edges = SharpPairs(*built, tags);
+  result.complex = std::make_shared<mesh::CellComplex>(*std::move(built));
   return result;
 }
 

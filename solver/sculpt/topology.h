@@ -24,6 +24,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <utility>
@@ -39,6 +40,9 @@ struct EditResult {
   // The new control mesh at REST: cells as outward face loops. New vertex
   // ids: survivors first in their old order, then new vertices.
   mesh::MeshInput mesh;
+  // The same as mesh::CellComplex::FromInput(mesh) made it for the checks
+  // below (a rebuild discretizes it without building it again).
+  std::shared_ptr<mesh::CellComplex> complex;
   // #new vertices by 3: the same vertices in the CURRENT configuration.
   Points current;
   // Per new vertex: the old vertices it comes from with weights summing to 1

@@ -403,25 +403,32 @@ Key128 RestKey(const fem::NodeMatrixX3& rest) {
 
 namespace {
 
-// Material sample arrays deduplicated by content, numbered in the order
-// they are first added (BuildElementLayout's order).
+// Material sample arrays deduplicated by content (equal values, as ==
+// compares them), numbered in the order they are first added
+// (BuildElementLayout's order): found by a hash of their values (-0 as
+// +0), then compared.
 class MaterialTable {
  public:
   explicit MaterialTable(ElementLayout& layout) : layout_(layout) {}
   int32_t Add(const std::vector<MaterialPoint>& samples) {
-    key_.clear();
+    Hash128 h;
+    h.Mix(samples.size());
     for (const MaterialPoint& m : samples) {
-      key_.insert(key_.end(), {m.young, m.poisson, m.density, m.damping});
+      for (double v : {m.young, m.poisson, m.density, m.damping}) h.Double(v + 0.0);
     }
-    auto [it, fresh] = index_.try_emplace(key_, static_cast<int32_t>(layout_.materials.size()));
-    if (fresh) layout_.materials.push_back(samples);
-    return it->second;
+    std::vector<int32_t>& same_key = index_[h.value()];
+    for (int32_t k : same_key) {
+      if (layout_.materials[k] == samples) return k;
+    }
+    const int32_t k = static_cast<int32_t>(layout_.materials.size());
+    layout_.materials.push_back(samples);
+    same_key.push_back(k);
+    return k;
   }
 
  private:
   ElementLayout& layout_;
-  std::map<std::vector<double>, int32_t> index_;
-  std::vector<double> key_;
+  std::unordered_map<Key128, std::vector<int32_t>, Key128Hash> index_;
 };
 
 // What a group keeps of its rest shape (groups of one shape share it).

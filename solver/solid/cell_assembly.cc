@@ -274,11 +274,13 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
     const int64_t n = static_cast<int64_t>(dofs) * nc;
     out.matrices.clear();
     out.triplets.assign(outputs, {});
-    if (job.dense) out.matrices.assign(outputs, Eigen::MatrixXd::Zero(n, n));
-    for (int32_t c = 0; c < control_cells; ++c) {
-      const std::vector<int32_t>& support = cells[c].support;
-      const int side = dofs * static_cast<int>(support.size());
-      for (int o = 0; o < outputs; ++o) {
+    if (job.dense) out.matrices.resize(outputs);
+    // Each output on a pool thread of its own (Mt and Dt), its cells in order.
+    pool.RunParts(outputs, [&](int o) {
+      if (job.dense) out.matrices[o].setZero(n, n);
+      for (int32_t c = 0; c < control_cells; ++c) {
+        const std::vector<int32_t>& support = cells[c].support;
+        const int side = dofs * static_cast<int>(support.size());
         const Eigen::MatrixXd& p = (*partial[c])[o];
         for (int jj = 0; jj < side; ++jj) {
           const int64_t col = static_cast<int64_t>(dofs) * support[jj / dofs] + jj % dofs;
@@ -292,7 +294,7 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
           }
         }
       }
-    }
+    });
   }
 }
 

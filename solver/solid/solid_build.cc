@@ -44,13 +44,37 @@
 
 namespace dynsolid::solid {
 
+namespace {
+
+// The nonzero entries of a dense square matrix as a row-major sparse one
+// (what sparseView(0, 0) keeps), written row by row into their arrays.
+SparseMatrix SparseOf(const Eigen::MatrixXd& m) {
+  const Eigen::Index n = m.rows();
+  std::vector<int32_t> outer{0}, inner;
+  std::vector<double> values;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    for (Eigen::Index j = 0; j < m.cols(); ++j) {
+      const double v = m(i, j);
+      if (!(std::abs(v) <= 0.0)) {
+        inner.push_back(static_cast<int32_t>(j));
+        values.push_back(v);
+      }
+    }
+    outer.push_back(static_cast<int32_t>(inner.size()));
+  }
+  return subdivision::FromCsr(static_cast<int32_t>(n), static_cast<int32_t>(m.cols()), outer,
+                              inner, values);
+}
+
+}  // namespace
+
 // Mt and Dt from their cell sums (cell_assembly.h, cell_partials.h).
 void Solid::Impl::ControlMatricesFrom(const CellSums& sums, bool dense, bool has_damping,
                                       SparseMatrix& mt, SparseMatrix& dt) const {
   const int32_t nc = static_cast<int32_t>(d->node_matrix.cols());
   if (dense) {
-    mt = sums.matrices[0].sparseView(0.0, 0.0);
-    if (has_damping) dt = sums.matrices[1].sparseView(0.0, 0.0);
+    mt = SparseOf(sums.matrices[0]);
+    if (has_damping) dt = SparseOf(sums.matrices[1]);
   } else {
     mt.resize(nc, nc);
     mt.setFromTriplets(sums.triplets[0].begin(), sums.triplets[0].end());

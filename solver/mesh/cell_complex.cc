@@ -391,17 +391,24 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   };
 
   // The rest reads the faces' edges and writes members of its own. The
-  // cells' closedness check and their edges run beside it on a thread of
-  // their own when the complex is large (a subdivision's finest level);
-  // where there is no check, that thread also takes the first half of
-  // the edges' radial order (the two threads' shares then about even):
-  // the same result either way.
+  // cells' closedness check, their edges, the vertices' faces and which
+  // vertices are on the boundary run beside it on a thread of their own
+  // when the complex is large (a subdivision's finest level); where there
+  // is no check, that thread also takes the first half of the edges'
+  // radial order (the two threads' shares then about even): the same
+  // result either way.
   const int32_t split = check_closed ? 0 : ne / 2;
   RadialCells first, second;
   absl::Status closed;
-  auto side = [this, &closed, check_closed, &radial, split, &first] {
+  auto side = [this, &closed, check_closed, &radial, split, &first, nv, nf] {
     if (check_closed) closed = CheckCellsClosed();
     cell_edges_ = ComposeUnique(cell_faces_, face_edges_);
+    vertex_faces_ = Invert(face_vertices_, nv);
+    vertex_boundary_.assign(nv, 0);
+    for (int32_t f = 0; f < nf; ++f) {
+      if (face_cells_[f][1] >= 0) continue;
+      for (int32_t v : face_vertices_.row(f)) vertex_boundary_[v] = 1;
+    }
     radial(0, split, first);
   };
   std::thread beside;
@@ -424,13 +431,7 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
     edge_rows.items[2 * e + 1] = edge_vertices_[e][1];
   }
   vertex_edges_ = Invert(edge_rows, nv);
-  vertex_faces_ = Invert(face_vertices_, nv);
   vertex_cells_ = Invert(cell_vertices_, nv);
-  vertex_boundary_.assign(nv, 0);
-  for (int32_t f = 0; f < nf; ++f) {
-    if (face_cells_[f][1] >= 0) continue;
-    for (int32_t v : face_vertices_.row(f)) vertex_boundary_[v] = 1;
-  }
   radial(split, ne, second);
   if (beside.joinable()) beside.join();
   edge_cells_.offsets.assign(ne + 1, 0);

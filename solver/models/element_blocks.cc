@@ -587,7 +587,6 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
   MaterialTable table_of_materials(layout);
   // Arrays `whole` gave, by address: their material index once known.
   std::unordered_map<const void*, int32_t> whole_index;
-  std::vector<MaterialPoint> samples;
   for (int kind = 0; kind < 3; ++kind) {
     const auto k = static_cast<fem::ElementKind>(kind);
     const fem::KindTable& table = layout.tables[kind] = fem::MakeKindTable(k);
@@ -599,42 +598,68 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
     AlignElementAxes(block, rest, pool);
     std::optional<fem::CubicTensorProducts> cubic;
     if (kind == 0 && fem::CubicTensorProducts::Applies(table)) cubic.emplace(table);
-    double columns[3 * 64], positions[3 * 64];
-    auto material_of = [&](int32_t e, const fem::NodeMatrixX3& x) {
-      // Material samples at the quadrature points' rest positions.
-      const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]
-                                                             : cell_control_cell[block.cell[e]];
-      const std::vector<MaterialPoint>* given =
-          whole != nullptr ? (*whole)(kind, x, control_cell) : nullptr;
-      if (given != nullptr && static_cast<int>(given->size()) != table.points) given = nullptr;
-      if (given != nullptr) {
-        auto w = whole_index.find(given);
-        if (w != whole_index.end()) return w->second;
-        const int32_t material = table_of_materials.Add(*given);
-        whole_index.emplace(given, material);
-        return material;
-      }
-      samples.resize(table.points);
-      if (cubic) {
-        // A cubic element's point positions sum-factorized
-        // (fem::CubicTensorProducts::Values: a fifth of N x's 64 x 64
-        // multiply-adds, on the thread that calls the sampler), equal to
-        // SamplePosition's up to rounding.
-        for (int m = 0; m < 64; ++m) {
-          for (int r = 0; r < 3; ++r) columns[64 * r + m] = x(m, r);
+    // Each element's material array: the one `whole` gives, or samples at
+    // its quadrature points' rest positions; made on the pool's threads
+    // (parts of 64 elements, taken as threads are free), then numbered in
+    // element order (the same numbers on any number of threads).
+    const int32_t count = block.size();
+    std::vector<const std::vector<MaterialPoint>*> given(count, nullptr);
+    std::vector<std::vector<MaterialPoint>> sampled(count);
+    auto arrays = [&](int32_t begin, int32_t end) {
+      fem::NodeMatrixX3 x(block.nodes, 3);
+      double columns[3 * 64], positions[3 * 64];
+      for (int32_t e = begin; e < end; ++e) {
+        const int32_t* ids = block.element_nodes(e);
+        for (int i = 0; i < block.nodes; ++i) x.row(i) = rest.row(ids[i]);
+        const int32_t control_cell = cell_control_cell.empty() ? block.cell[e]
+                                                               : cell_control_cell[block.cell[e]];
+        const std::vector<MaterialPoint>* g =
+            whole != nullptr ? (*whole)(kind, x, control_cell) : nullptr;
+        if (g != nullptr && static_cast<int>(g->size()) != table.points) g = nullptr;
+        given[e] = g;
+        if (g != nullptr) continue;
+        std::vector<MaterialPoint>& samples = sampled[e];
+        samples.resize(table.points);
+        if (cubic) {
+          // A cubic element's point positions sum-factorized
+          // (fem::CubicTensorProducts::Values: a fifth of N x's 64 x 64
+          // multiply-adds), equal to SamplePosition's up to rounding.
+          for (int m = 0; m < 64; ++m) {
+            for (int r = 0; r < 3; ++r) columns[64 * r + m] = x(m, r);
+          }
+          cubic->Values(columns, 64, 3, positions, 64);
+          for (int q = 0; q < 64; ++q) {
+            samples[q] = sampler(
+                Eigen::Vector3d(positions[q], positions[64 + q], positions[128 + q]), control_cell);
+          }
+        } else {
+          for (int q = 0; q < table.points; ++q) {
+            samples[q] = sampler(SamplePosition(table, q, x), control_cell);
+          }
         }
-        cubic->Values(columns, 64, 3, positions, 64);
-        for (int q = 0; q < 64; ++q) {
-          samples[q] = sampler(Eigen::Vector3d(positions[q], positions[64 + q], positions[128 + q]),
-                               control_cell);
-        }
-        return table_of_materials.Add(samples);
       }
-      for (int q = 0; q < table.points; ++q) {
-        samples[q] = sampler(SamplePosition(table, q, x), control_cell);
-      }
-      return table_of_materials.Add(samples);
     };
+    constexpr int32_t kPart = 64;
+    const int parts = static_cast<int>((count + kPart - 1) / kPart);
+    if (pool != nullptr && pool->size() > 1 && parts > 1) {
+      pool->RunParts(parts, [&](int k) { arrays(k * kPart, std::min(count, (k + 1) * kPart)); });
+    } else {
+      arrays(0, count);
+    }
+    std::vector<int32_t> material(count);
+    for (int32_t e = 0; e < count; ++e) {
+      if (given[e] == nullptr) {
+        material[e] = table_of_materials.Add(sampled[e]);
+        sampled[e] = std::vector<MaterialPoint>();
+        continue;
+      }
+      auto w = whole_index.find(given[e]);
+      if (w == whole_index.end()) {
+        w = whole_index.emplace(given[e], table_of_materials.Add(*given[e])).first;
+      }
+      material[e] = w->second;
+    }
+    auto material_of = [&material](int32_t e, const fem::NodeMatrixX3&) { return material[e]; };
     // A shape `previous` has a group of (the same rest nodes, to the bit)
     // takes that group's data: the same as integrating it again.
     std::unordered_map<Key128, int32_t, Key128Hash> known;

@@ -202,8 +202,10 @@ inline Eigen::Vector3d SamplePosition(const fem::KindTable& table, int q,
 // (optional): a layout built before, whose groups' shape data (a function
 // of their rest nodes alone) a shape with the same rest nodes takes
 // instead of integrating them again (a topology edit). `pool` (optional):
-// threads for the shapes' keys and integrals; the sampler and `whole` are
-// called on the calling thread only. The result does not depend on either.
+// threads for the elements' material arrays, the shapes' keys and their
+// integrals: the sampler and `whole` are called on its threads at once
+// (they must be safe to call concurrently). The result does not depend on
+// the threads.
 ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& rest,
                                  const std::vector<int32_t>& cell_control_cell,
                                  const MaterialSampler& sampler,

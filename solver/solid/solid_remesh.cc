@@ -156,12 +156,13 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   // Painted: an element whose rest nodes are, bit for bit, those of an old
   // element in its source cell keeps that element's samples (the edit left
   // it alone); any other sample takes the material of the nearest old
-  // sample in its source cell. A source cell's elements are keyed by their
-  // rest nodes, and its samples binned, when first needed (a cell of one
-  // material needs neither).
+  // sample in its source cell. A source cell of one material throughout
+  // gives every element of its new cells that material at every point.
+  // What the callbacks read is made first, for the source cells the new
+  // cells name (a cell of one material needs no keys nor bins): the
+  // layout calls them on its pool threads.
   std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
   std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
-  std::vector<uint8_t> keyed;
   // The key of an element's rest nodes: kind, then node row(i) for i < n.
   auto nodes_key = [](int kind, int n, const auto& row) {
     Hash128 h;
@@ -170,12 +171,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     return h.value();
   };
   std::vector<CellSamples> by_cell;
-  std::vector<uint8_t> binned;
   std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
   models::ElementMaterials whole;
-  std::vector<int8_t> cell_uniform;  // per old cell: -1 not known, 0 no, 1 yes
-  std::unordered_map<int32_t, models::MaterialPoint> uniform_material;
-  std::map<std::pair<int32_t, int>, std::vector<models::MaterialPoint>> uniform_arrays;
+  // Per old cell: its arrays of one material (by kind), when it is of one.
+  std::vector<std::array<std::vector<models::MaterialPoint>, 3>> uniform_arrays;
+  std::vector<uint8_t> cell_uniform;
   if (!uniform) {
     for (int kind = 0; kind < 3; ++kind) {
       const models::ElementBlock& block = layout.blocks[kind];
@@ -183,69 +183,60 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
         old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
       }
     }
-    keyed.assign(old_cells, 0);
     by_cell.resize(old_cells);
-    binned.assign(old_cells, 0);
+    uniform_arrays.resize(old_cells);
+    cell_uniform.assign(old_cells, 0);
+    std::vector<uint8_t> named(old_cells, 0);
+    for (int32_t src : cell_source) {
+      if (src >= 0) named[src] = 1;
+    }
+    for (int32_t src = 0; src < old_cells; ++src) {
+      if (!named[src] || old_elements[src].empty()) continue;
+      const models::MaterialPoint* first = nullptr;
+      bool same = true;
+      for (const auto& [k, e] : old_elements[src]) {
+        const models::ElementBlock& block = layout.blocks[k];
+        for (const models::MaterialPoint& m : layout.materials[block.groups[block.group[e]].material]) {
+          if (first == nullptr) first = &m;
+          same = same && m == *first;
+        }
+        if (!same) break;
+      }
+      if (same && first != nullptr) {
+        cell_uniform[src] = 1;
+        for (int kind = 0; kind < 3; ++kind) {
+          uniform_arrays[src][kind].assign(layout.tables[kind].points, *first);
+        }
+        continue;
+      }
+      // Its elements keyed by their rest nodes, its samples binned.
+      for (const auto& [k, e] : old_elements[src]) {
+        const models::ElementBlock& block = layout.blocks[k];
+        const int32_t* ids = block.element_nodes(e);
+        by_nodes.try_emplace(
+            nodes_key(k, block.nodes, [&](int i) { return old.rest_nodes.row(ids[i]).data(); }), k,
+            e);
+        const fem::KindTable& table = layout.tables[k];
+        const std::vector<models::MaterialPoint>& array =
+            layout.materials[block.groups[block.group[e]].material];
+        for (int q = 0; q < table.points; ++q) {
+          Eigen::Vector3d p = Eigen::Vector3d::Zero();
+          for (int i = 0; i < block.nodes; ++i) p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
+          by_cell[src].Add(p, array[q]);
+        }
+      }
+      by_cell[src].Index();
+    }
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
       const int32_t src = cell_source[cell];
       if (src < 0 || old_elements[src].empty()) return base;
-      if (!binned[src]) {
-        for (const auto& [kind, e] : old_elements[src]) {
-          const models::ElementBlock& block = layout.blocks[kind];
-          const fem::KindTable& table = layout.tables[kind];
-          const int32_t* ids = block.element_nodes(e);
-          const std::vector<models::MaterialPoint>& array =
-              layout.materials[block.groups[block.group[e]].material];
-          for (int q = 0; q < table.points; ++q) {
-            Eigen::Vector3d p = Eigen::Vector3d::Zero();
-            for (int i = 0; i < block.nodes; ++i) p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
-            by_cell[src].Add(p, array[q]);
-          }
-        }
-        by_cell[src].Index();
-        binned[src] = 1;
-      }
       return by_cell[src].Nearest(x);
     };
-    // A source cell of one material throughout gives every element of its
-    // new cells that material at every point: the array sampling would
-    // give, without sampling (made once per cell and kind).
-    cell_uniform.assign(old_cells, -1);
     whole = [&](int kind, const fem::NodeMatrixX3& x,
                 int32_t cell) -> const std::vector<models::MaterialPoint>* {
       const int32_t src = cell_source[cell];
-      if (src >= 0 && !old_elements[src].empty()) {
-        if (cell_uniform[src] < 0) {
-          const models::MaterialPoint* first = nullptr;
-          bool same = true;
-          for (const auto& [k, e] : old_elements[src]) {
-            const models::ElementBlock& block = layout.blocks[k];
-            for (const models::MaterialPoint& m : layout.materials[block.groups[block.group[e]].material]) {
-              if (first == nullptr) first = &m;
-              same = same && m == *first;
-            }
-            if (!same) break;
-          }
-          cell_uniform[src] = same && first != nullptr ? 1 : 0;
-          if (cell_uniform[src] == 1) uniform_material[src] = *first;
-        }
-        if (cell_uniform[src] == 1) {
-          const int points = layout.tables[kind].points;
-          std::vector<models::MaterialPoint>& array = uniform_arrays[{src, kind}];
-          if (array.empty()) array.assign(points, uniform_material[src]);
-          return &array;
-        }
-      }
-      if (src < 0) return nullptr;
-      if (!keyed[src]) {
-        for (const auto& [k, e] : old_elements[src]) {
-          const int32_t* ids = layout.blocks[k].element_nodes(e);
-          by_nodes.try_emplace(nodes_key(k, layout.blocks[k].nodes,
-                                         [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
-                               k, e);
-        }
-        keyed[src] = 1;
-      }
+      if (src < 0 || old_elements[src].empty()) return nullptr;
+      if (cell_uniform[src]) return &uniform_arrays[src][kind];
       auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
                                         [&](int i) { return x.row(i).data(); }));
       if (it == by_nodes.end()) return nullptr;

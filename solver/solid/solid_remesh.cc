@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -158,9 +160,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   // it alone); any other sample takes the material of the nearest old
   // sample in its source cell. A source cell of one material throughout
   // gives every element of its new cells that material at every point.
-  // What the callbacks read is made first, for the source cells the new
-  // cells name (a cell of one material needs no keys nor bins): the
-  // layout calls them on its pool threads.
+  // The layout calls the callbacks on its pool threads: what they read is
+  // made first, for the source cells the new cells name (a cell of one
+  // material needs no keys nor bins), but for a cell's sample bins, made
+  // once when first needed (std::call_once: most cells never need them).
   std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
   std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
   // The key of an element's rest nodes: kind, then node row(i) for i < n.
@@ -171,6 +174,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     return h.value();
   };
   std::vector<CellSamples> by_cell;
+  std::unique_ptr<std::once_flag[]> binned;
   std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
   models::ElementMaterials whole;
   // Per old cell: its arrays of one material (by kind), when it is of one.
@@ -184,11 +188,21 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       }
     }
     by_cell.resize(old_cells);
+    binned = std::make_unique<std::once_flag[]>(old_cells);
     uniform_arrays.resize(old_cells);
     cell_uniform.assign(old_cells, 0);
     std::vector<uint8_t> named(old_cells, 0);
     for (int32_t src : cell_source) {
       if (src >= 0) named[src] = 1;
+    }
+    // Per material array: every sample equal to its first (arrays are
+    // distinct by content, so a cell is of one material when its elements'
+    // arrays are each of one and those agree).
+    std::vector<uint8_t> constant(layout.materials.size(), 0);
+    for (size_t m = 0; m < layout.materials.size(); ++m) {
+      const std::vector<models::MaterialPoint>& a = layout.materials[m];
+      constant[m] = !a.empty() && std::all_of(a.begin(), a.end(),
+                                              [&](const models::MaterialPoint& p) { return p == a[0]; });
     }
     for (int32_t src = 0; src < old_cells; ++src) {
       if (!named[src] || old_elements[src].empty()) continue;
@@ -196,11 +210,16 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       bool same = true;
       for (const auto& [k, e] : old_elements[src]) {
         const models::ElementBlock& block = layout.blocks[k];
-        for (const models::MaterialPoint& m : layout.materials[block.groups[block.group[e]].material]) {
-          if (first == nullptr) first = &m;
-          same = same && m == *first;
+        const int32_t m = block.groups[block.group[e]].material;
+        if (!constant[m]) {
+          same = false;
+          break;
         }
-        if (!same) break;
+        if (first == nullptr) first = &layout.materials[m][0];
+        if (!(layout.materials[m][0] == *first)) {
+          same = false;
+          break;
+        }
       }
       if (same && first != nullptr) {
         cell_uniform[src] = 1;
@@ -209,14 +228,19 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
         }
         continue;
       }
-      // Its elements keyed by their rest nodes, its samples binned.
+      // Its elements keyed by their rest nodes.
+      for (const auto& [k, e] : old_elements[src]) {
+        const int32_t* ids = layout.blocks[k].element_nodes(e);
+        by_nodes.try_emplace(nodes_key(k, layout.blocks[k].nodes,
+                                       [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
+                             k, e);
+      }
+    }
+    auto bin = [&](int32_t src) {
       for (const auto& [k, e] : old_elements[src]) {
         const models::ElementBlock& block = layout.blocks[k];
-        const int32_t* ids = block.element_nodes(e);
-        by_nodes.try_emplace(
-            nodes_key(k, block.nodes, [&](int i) { return old.rest_nodes.row(ids[i]).data(); }), k,
-            e);
         const fem::KindTable& table = layout.tables[k];
+        const int32_t* ids = block.element_nodes(e);
         const std::vector<models::MaterialPoint>& array =
             layout.materials[block.groups[block.group[e]].material];
         for (int q = 0; q < table.points; ++q) {
@@ -226,10 +250,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
         }
       }
       by_cell[src].Index();
-    }
+    };
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
       const int32_t src = cell_source[cell];
       if (src < 0 || old_elements[src].empty()) return base;
+      std::call_once(binned[src], bin, src);
       return by_cell[src].Nearest(x);
     };
     whole = [&](int kind, const fem::NodeMatrixX3& x,

@@ -236,25 +236,28 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
                              k, e);
       }
     }
-    auto bin = [&](int32_t src) {
-      for (const auto& [k, e] : old_elements[src]) {
-        const models::ElementBlock& block = layout.blocks[k];
-        const fem::KindTable& table = layout.tables[k];
-        const int32_t* ids = block.element_nodes(e);
-        const std::vector<models::MaterialPoint>& array =
-            layout.materials[block.groups[block.group[e]].material];
-        for (int q = 0; q < table.points; ++q) {
-          Eigen::Vector3d p = Eigen::Vector3d::Zero();
-          for (int i = 0; i < block.nodes; ++i) p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
-          by_cell[src].Add(p, array[q]);
-        }
-      }
-      by_cell[src].Index();
-    };
+    // (The callbacks outlive this block: they capture only what is
+    // declared before it.)
     sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
       const int32_t src = cell_source[cell];
       if (src < 0 || old_elements[src].empty()) return base;
-      std::call_once(binned[src], bin, src);
+      std::call_once(binned[src], [&] {
+        for (const auto& [k, e] : old_elements[src]) {
+          const models::ElementBlock& block = layout.blocks[k];
+          const fem::KindTable& table = layout.tables[k];
+          const int32_t* ids = block.element_nodes(e);
+          const std::vector<models::MaterialPoint>& array =
+              layout.materials[block.groups[block.group[e]].material];
+          for (int q = 0; q < table.points; ++q) {
+            Eigen::Vector3d p = Eigen::Vector3d::Zero();
+            for (int i = 0; i < block.nodes; ++i) {
+              p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
+            }
+            by_cell[src].Add(p, array[q]);
+          }
+        }
+        by_cell[src].Index();
+      });
       return by_cell[src].Nearest(x);
     };
     whole = [&](int kind, const fem::NodeMatrixX3& x,

@@ -429,9 +429,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   // What the build needs only after its material, of the discretization,
   // rest positions and layout alone: made beside the cells' partials, each
-  // on the pool thread that is free first (common/worker_pool.h RunParts).
-  // The element boxes, the boundary surface, and the geometry the
-  // fingerprint covers.
+  // a part of their pass, on the pool thread that is free first
+  // (SumByCells): the element boxes, the boundary surface, and the
+  // geometry the fingerprint covers.
   const models::ElementLayout& laid = *layout;
   const std::vector<std::function<void()>> beside = {
       [&] { im.MakeElementBoxes(laid); },

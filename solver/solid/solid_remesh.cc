@@ -3,6 +3,7 @@
 // builds the solid of the new mesh and moves positions, velocities,
 // materials, loads, drags, constraints and the clock onto it.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -177,9 +178,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   std::unique_ptr<std::once_flag[]> binned;
   std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
   models::ElementMaterials whole;
-  // Per old cell: its arrays of one material (by kind), when it is of one.
+  // Per old cell: its arrays of one material (by kind), when it is of one
+  // (else empty).
   std::vector<std::array<std::vector<models::MaterialPoint>, 3>> uniform_arrays;
-  std::vector<uint8_t> cell_uniform;
   if (!uniform) {
     for (int kind = 0; kind < 3; ++kind) {
       const models::ElementBlock& block = layout.blocks[kind];
@@ -190,7 +191,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     by_cell.resize(old_cells);
     binned = std::make_unique<std::once_flag[]>(old_cells);
     uniform_arrays.resize(old_cells);
-    cell_uniform.assign(old_cells, 0);
     std::vector<uint8_t> named(old_cells, 0);
     for (int32_t src : cell_source) {
       if (src >= 0) named[src] = 1;
@@ -222,7 +222,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
         }
       }
       if (same && first != nullptr) {
-        cell_uniform[src] = 1;
         for (int kind = 0; kind < 3; ++kind) {
           uniform_arrays[src][kind].assign(layout.tables[kind].points, *first);
         }
@@ -264,7 +263,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
                 int32_t cell) -> const std::vector<models::MaterialPoint>* {
       const int32_t src = cell_source[cell];
       if (src < 0 || old_elements[src].empty()) return nullptr;
-      if (cell_uniform[src]) return &uniform_arrays[src][kind];
+      if (!uniform_arrays[src][kind].empty()) return &uniform_arrays[src][kind];
       auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
                                         [&](int i) { return x.row(i).data(); }));
       if (it == by_nodes.end()) return nullptr;

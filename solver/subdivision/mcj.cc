@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <thread>
 
 #include <Eigen/Geometry>
@@ -17,15 +18,17 @@ namespace {
 using mesh::CellComplex;
 using mesh::Csr;
 
-// Accumulates one sparse row as (column, weight) pairs, then merges
-// duplicates in column order (deterministic).
-// One row of a subdivision matrix: terms added in stencil order, a
-// column's terms summed in the order they were added (a dense slot per
-// coarse vertex: rows of hundreds of terms over a few dozen columns),
-// emitted in ascending column order.
+// One sparse row summed in a dense slot per column (a subdivision
+// stencil's hundreds of terms, or a product row's, over a few dozen
+// columns): a column's terms summed in the order they were added, the
+// first one taken as it is; emitted in ascending column order, from a
+// bitset of the columns where scanning its words costs less than sorting
+// the row's columns (a control mesh of a few hundred points: a handful of
+// words), else by sorting them (the same columns and values either way).
 class RowBuilder {
  public:
-  explicit RowBuilder(int32_t cols) : sum_(cols, 0.0), seen_(cols, 0) {}
+  explicit RowBuilder(int32_t cols)
+      : sum_(cols, 0.0), seen_(cols, 0), bits_((cols + 63) / 64, 0) {}
   void Add(int32_t col, double w) {
     if (!seen_[col]) {
       seen_[col] = 1;
@@ -40,21 +43,42 @@ class RowBuilder {
     const double s = w / static_cast<double>(cols.size());
     for (int32_t c : cols) Add(c, s);
   }
-  void Flush(std::vector<int32_t>& outer, std::vector<int32_t>& inner,
-             std::vector<double>& values) {
-    std::sort(cols_.begin(), cols_.end());
+  // Appends the row to inner and values and starts the next; returns its
+  // number of entries.
+  int32_t Emit(std::vector<int32_t>& inner, std::vector<double>& values) {
+    const int64_t words = static_cast<int64_t>(bits_.size());
+    if (words <= 4 * static_cast<int64_t>(cols_.size())) {
+      for (int32_t c : cols_) bits_[c >> 6] |= uint64_t{1} << (c & 63);
+      cols_.clear();
+      for (int64_t w = 0; w < words; ++w) {
+        for (uint64_t m = bits_[w]; m != 0; m &= m - 1) {
+          cols_.push_back(static_cast<int32_t>(64 * w + __builtin_ctzll(m)));
+        }
+        bits_[w] = 0;
+      }
+    } else {
+      std::sort(cols_.begin(), cols_.end());
+    }
     for (int32_t col : cols_) {
       inner.push_back(col);
       values.push_back(sum_[col]);
       seen_[col] = 0;
     }
-    outer.push_back(static_cast<int32_t>(inner.size()));
+    const int32_t n = static_cast<int32_t>(cols_.size());
     cols_.clear();
+    return n;
+  }
+  // Emit, then the row's end in outer.
+  void Flush(std::vector<int32_t>& outer, std::vector<int32_t>& inner,
+             std::vector<double>& values) {
+    Emit(inner, values);
+    outer.push_back(static_cast<int32_t>(inner.size()));
   }
 
  private:
   std::vector<double> sum_;
   std::vector<uint8_t> seen_;
+  std::vector<uint64_t> bits_;
   std::vector<int32_t> cols_;
 };
 
@@ -90,70 +114,30 @@ SparseMatrix MultiplyRowMajor(const SparseMatrix& a, const SparseMatrix& b) {
     std::vector<double> values;
   };
   // Rows in contiguous parts of 1024 or more, each thread taking the next
-  // part with its own dense accumulator (the finest level's product runs
-  // beside the element classification); joined in order, so the result
-  // does not depend on the thread count or the timing.
+  // part with its own dense accumulator (RowBuilder; the finest level's
+  // product runs beside the element classification); joined in order, so
+  // the result does not depend on the thread count or the timing.
   std::vector<Part> parts(16);
   const int threads = BuildThreads();
-  struct Scratch {
-    std::vector<double> acc;
-    std::vector<int32_t> mark, touched;
-    std::vector<uint64_t> bits;
-  };
-  std::vector<Scratch> scratch(threads);
-  // A row's columns in ascending order: from a bitset of the columns
-  // where scanning its words costs less than sorting the row's columns
-  // (a control mesh of a few hundred points: a handful of words), else
-  // by sorting them. The same columns and values either way.
-  const int32_t words = (cols + 63) / 64;
+  std::vector<std::optional<RowBuilder>> builders(threads);
   const double per_row = b.rows() > 0 ? static_cast<double>(b.nonZeros()) / b.rows() : 0.0;
   const int chunks = ParallelParts(rows, threads, static_cast<int>(parts.size()), 1024,
                                    [&](int t, int k, int64_t begin, int64_t end) {
     Part& p = parts[k];
-    Scratch& sc = scratch[t];
-    if (sc.acc.empty() && cols > 0) {
-      sc.acc.assign(cols, 0.0);
-      sc.mark.assign(cols, -1);
-      sc.bits.assign(words, 0);
-    }
-    std::vector<double>& acc = sc.acc;
-    std::vector<int32_t>& mark = sc.mark;
-    std::vector<int32_t>& touched = sc.touched;
-    std::vector<uint64_t>& bits = sc.bits;
+    if (!builders[t].has_value()) builders[t].emplace(cols);
+    RowBuilder& row = *builders[t];
     const double a_nnz = static_cast<double>(a.outerIndexPtr()[end] - a.outerIndexPtr()[begin]);
     p.inner.reserve(static_cast<size_t>(a_nnz * per_row / 4.0));
     p.values.reserve(p.inner.capacity());
     p.row_nnz.reserve(end - begin);
     for (int32_t i = static_cast<int32_t>(begin); i < end; ++i) {
-      touched.clear();
       for (SparseMatrix::InnerIterator ia(a, i); ia; ++ia) {
         const double w = ia.value();
         for (SparseMatrix::InnerIterator ib(b, ia.col()); ib; ++ib) {
-          const int32_t c = static_cast<int32_t>(ib.col());
-          if (mark[c] != i) {
-            mark[c] = i;
-            acc[c] = w * ib.value();
-            touched.push_back(c);
-          } else {
-            acc[c] += w * ib.value();
-          }
+          row.Add(static_cast<int32_t>(ib.col()), w * ib.value());
         }
       }
-      if (words <= 4 * static_cast<int64_t>(touched.size())) {
-        for (int32_t c : touched) bits[c >> 6] |= uint64_t{1} << (c & 63);
-        touched.clear();
-        for (int32_t w = 0; w < words; ++w) {
-          for (uint64_t m = bits[w]; m != 0; m &= m - 1) touched.push_back(64 * w + __builtin_ctzll(m));
-          bits[w] = 0;
-        }
-      } else {
-        std::sort(touched.begin(), touched.end());
-      }
-      for (int32_t c : touched) {
-        p.inner.push_back(c);
-        p.values.push_back(acc[c]);
-      }
-      p.row_nnz.push_back(static_cast<int32_t>(touched.size()));
+      p.row_nnz.push_back(row.Emit(p.inner, p.values));
     }
   });
   size_t nnz = 0;

@@ -10,7 +10,7 @@
 //                                       Commands stream (opened on demand,
 //                                       one per session)
 // Gateway -> page:
-//   {op: "hello", server, gateway}
+//   {op: "hello", server, gateway, max_message_bytes, max_messages_per_second}
 //   {op: "result", id, ok, response | code, code_name, message}
 //   binary: one serialized dynsolid.Frame per message
 //   {op: "watch_end", code, code_name, message}
@@ -19,31 +19,49 @@
 //                                       page resends what is unanswered
 //                                       (same client_id and seq: exactly once)
 //   {op: "error", message}              a message the gateway could not take
+//
+// A page sees and controls only its own sessions: those it created here or
+// joined with their token (a GetSession the server accepted). ListSessions
+// lists only those, with their tokens; nothing lists another page's
+// tokens. Messages beyond the connection's rate (a token bucket) are
+// refused: a call gets RESOURCE_EXHAUSTED, a command a reply saying it was
+// not applied (the page sends it again a little later), anything else an
+// error. README.md "Doors".
 
 import { UNARY_METHODS, watchRaw, statusName, grpc } from './grpc.js';
 import { MAX_REDIRECTS } from './router.js';
+import { TokenBucket } from './guard.js';
 
 // Watch frames queued in the WebSocket beyond this pause the gRPC stream, so
 // a slow page makes the server skip frames for it instead of the gateway
 // buffering them.
 const MAX_BUFFERED_BYTES = 2 << 20;
 
+// Per connection, unless main.js is told otherwise (--max_message_bytes,
+// --max_messages_per_second, --message_burst). A drag sends about 60
+// messages a second.
+export const DEFAULT_LIMITS = { maxMessageBytes: 4 << 20, rate: 200, burst: 400 };
+
+const isObject = (v) => v !== null && typeof v === 'object' && !Array.isArray(v);
+
 export class Bridge {
-  // tokens: a Map, session id -> token, of the sessions created through
-  // this gateway (shared by its pages). router: where sessions live
-  // (router.js), shared likewise.
-  constructor({ ws, service, router, tokens, address, callDeadlineSeconds = 600 }) {
+  // router: where sessions live (router.js), shared by every page.
+  // limits: DEFAULT_LIMITS's fields, and now() (ms) for the rate limit.
+  constructor({ ws, service, router, address, callDeadlineSeconds = 600, limits = {} }) {
     this.ws = ws;
     this.service = service;
     this.router = router;
-    this.tokens = tokens;
+    this.limits = { ...DEFAULT_LIMITS, ...limits };
+    this.bucket = new TokenBucket({ rate: this.limits.rate, burst: this.limits.burst, now: limits.now });
+    this.sessions = new Map();  // id -> token: this page's own sessions
     this.deadlineSeconds = callDeadlineSeconds;
     this.watch = null;
     this.commands = null;
     this.commandsSession = null;
     this.closed = false;
     this.drainTimer = null;
-    this.send({ op: 'hello', server: address, gateway: 'dynsolid-web' });
+    this.send({ op: 'hello', server: address, gateway: 'dynsolid-web',
+      max_message_bytes: this.limits.maxMessageBytes, max_messages_per_second: this.limits.rate });
   }
 
   send(message) {
@@ -53,23 +71,65 @@ export class Bridge {
   }
 
   onMessage(data, isBinary) {
+    const inRate = this.bucket.take();
+    const m = this.parse(data, isBinary);
+    if (!m) return;
+    if (!inRate) {
+      this.refuse(m, `over this connection's rate limit (${this.limits.rate} messages/s, bursts of ` +
+        `${this.limits.burst}): not passed on`);
+      return;
+    }
+    try {
+      this.dispatch(m);
+    } catch (e) {
+      this.refuse(m, `the gateway could not take this ${m.op}: ${e.message}`, grpc.status.INVALID_ARGUMENT);
+    }
+  }
+
+  // The message as an object {op, request?}, or null (the page told why).
+  parse(data, isBinary) {
     if (isBinary) {
       this.send({ op: 'error', message: 'the gateway takes JSON text messages only' });
-      return;
+      return null;
     }
     let m;
     try {
       m = JSON.parse(data.toString());
     } catch (e) {
       this.send({ op: 'error', message: `not JSON: ${e.message}` });
-      return;
+      return null;
     }
-    switch (m && m.op) {
+    if (!isObject(m)) {
+      this.send({ op: 'error', message: 'a message is a JSON object {op, ...}' });
+      return null;
+    }
+    if (m.request !== undefined && !isObject(m.request)) {
+      this.refuse(m, 'request must be a JSON object', grpc.status.INVALID_ARGUMENT);
+      return null;
+    }
+    return m;
+  }
+
+  dispatch(m) {
+    switch (m.op) {
       case 'call': return this.call(m);
       case 'watch': return this.startWatch(m.request || {});
       case 'unwatch': return this.stopWatch();
       case 'command': return this.command(m.request || {});
-      default: this.send({ op: 'error', message: `unknown op ${JSON.stringify(m && m.op)}` });
+      default: this.send({ op: 'error', message: `unknown op ${JSON.stringify(m.op)}` });
+    }
+  }
+
+  // Answers a message not passed on, in the form its sender waits for.
+  refuse(m, message, code = grpc.status.RESOURCE_EXHAUSTED) {
+    if (m.op === 'call') {
+      this.send({ op: 'result', id: m.id, ok: false, code, code_name: statusName(code), message });
+    } else if (m.op === 'command' && isObject(m.request) && code === grpc.status.RESOURCE_EXHAUSTED) {
+      // As the server's own rate limit: not applied (applied_step -1).
+      const { client_id: clientId, seq } = m.request;
+      this.send({ op: 'reply', reply: { client_id: clientId, seq, code, message, applied_step: -1 } });
+    } else {
+      this.send({ op: 'error', message: `${m.op}: ${message}` });
     }
   }
 
@@ -79,6 +139,7 @@ export class Bridge {
         code_name: 'UNIMPLEMENTED', message: `the gateway does not pass ${method}` });
       return;
     }
+    const r = request || {};
     const deadline = new Date(Date.now() + this.deadlineSeconds * 1000);
     const done = (err, response) => {
       if (err) {
@@ -86,17 +147,7 @@ export class Bridge {
           message: err.details || err.message });
         return;
       }
-      if (method === 'CreateSession' || method === 'GetSession') this.router.learn(response);
-      if (method === 'CreateSession') this.tokens.set(response.id, response.token);
-      if (method === 'CloseSession') {
-        this.tokens.delete(request.id);
-        this.router.forget(request.id);
-      }
-      if (method === 'ListSessions') {
-        for (const s of response.sessions || []) {
-          if (this.tokens.has(s.id)) s.token = this.tokens.get(s.id);
-        }
-      }
+      this.answered(method, r, response);
       this.send({ op: 'result', id, ok: true, response });
     };
     if (method === 'ListSessions') {
@@ -104,7 +155,6 @@ export class Bridge {
       return;
     }
     // The session a call names: SessionRef (id) or a request's session.
-    const r = request || {};
     const session = r.session ? r.session.id : r.id;
     const attempt = (redirects) => {
       this.router.forSession(session)[method](r, { deadline }, (err, response) => {
@@ -116,6 +166,22 @@ export class Bridge {
       });
     };
     attempt(0);
+  }
+
+  // What a successful call tells about this page's own sessions. A
+  // GetSession the server answered proves the page has the token (joined).
+  answered(method, request, response) {
+    if (method === 'CreateSession' || method === 'GetSession') this.router.learn(response);
+    if (method === 'CreateSession') this.sessions.set(response.id, response.token);
+    if (method === 'GetSession') this.sessions.set(request.id, request.token);
+    if (method === 'CloseSession') {
+      this.sessions.delete(request.id);
+      this.router.forget(request.id);
+    }
+    if (method === 'ListSessions') {
+      response.sessions = (response.sessions || []).filter((s) => this.sessions.has(s.id))
+        .map((s) => ({ ...s, token: this.sessions.get(s.id) }));
+    }
   }
 
   // ListSessions of every replica (the first one's GetServerInfo names its

@@ -4,10 +4,11 @@
 // page's WebSocket to dynsolid-server's gRPC service.
 //
 //   node gateway/main.js --server 127.0.0.1:50051 [--listen 127.0.0.1:8080]
-//                        [--tls_ca ROOTS.pem]
+//                        [--tls_ca ROOTS.pem] [--allow_origin ORIGINS]
+//                        [--access_token_file FILE] [limits]
 //
 // Prints "listening on http://HOST:PORT/" on stdout once it serves (port 0:
-// a free one).
+// a free one). What it lets in: guard.js and README.md "Doors".
 
 import http from 'node:http';
 import fs from 'node:fs';
@@ -16,35 +17,87 @@ import { fileURLToPath } from 'node:url';
 import { WebSocketServer } from 'ws';
 import { loadService, DEFAULT_PROTO_ROOT, grpc } from './grpc.js';
 import { Router } from './router.js';
-import { Bridge } from './bridge.js';
+import { Bridge, DEFAULT_LIMITS } from './bridge.js';
+import { upgradeRefusal, parseOriginList, requestPath, isLoopback } from './guard.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..');
 
+const USAGE = `usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]
+  --listen HOST:PORT             where pages connect (default 127.0.0.1:8080; port 0: a free one)
+  --tls_ca ROOTS.pem             call the servers over TLS with these roots
+  --create SCENE [--levels N]    open a session on a built-in scene and print its URL
+  --allow_origin ORIGINS         comma-separated origins (http://host:port) whose pages may
+                                 connect besides the gateway's own (default none)
+  --access_token_file FILE       pages must carry ?access=<the file's first line> (default none)
+  --max_message_bytes N          a page's largest message (default ${DEFAULT_LIMITS.maxMessageBytes})
+  --max_messages_per_second N    a page's sustained message rate (default ${DEFAULT_LIMITS.rate})
+  --message_burst N              messages a page may send at once above it (default ${DEFAULT_LIMITS.burst})`;
+
+function fail(message) {
+  console.error(`gateway: ${message}`);
+  process.exit(2);
+}
+
 function parseArgs(argv) {
   const args = { server: '127.0.0.1:50051', listen: '127.0.0.1:8080', proto: DEFAULT_PROTO_ROOT,
-    create: '', levels: '', tls_ca: '' };
+    create: '', levels: '', tls_ca: '', allow_origin: '', access_token_file: '',
+    max_message_bytes: String(DEFAULT_LIMITS.maxMessageBytes),
+    max_messages_per_second: String(DEFAULT_LIMITS.rate), message_burst: String(DEFAULT_LIMITS.burst) };
   for (let i = 0; i < argv.length; ++i) {
     const a = argv[i];
     const eq = a.indexOf('=');
     const key = a.replace(/^--/, '').slice(0, eq > 0 ? eq - 2 : undefined);
     if (!a.startsWith('--') || !(key in args)) {
       if (a === '--help' || a === '-h') {
-        console.log('usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]\n' +
-          '         [--tls_ca ROOTS.pem]          call the servers over TLS with these roots\n' +
-          '         [--create SCENE [--levels N]]   open a session on a built-in scene and print its URL');
+        console.log(USAGE);
         process.exit(0);
       }
-      console.error(`gateway: unknown argument ${a} (--server, --listen, --proto, --tls_ca, --create, --levels)`);
-      process.exit(2);
+      fail(`unknown argument ${a} (--help lists the flags)`);
     }
     args[key] = eq > 0 ? a.slice(eq + 1) : argv[++i];
-    if (args[key] === undefined) {
-      console.error(`gateway: ${a} needs a value`);
-      process.exit(2);
-    }
+    if (args[key] === undefined) fail(`${a} needs a value`);
   }
   return args;
+}
+
+function positive(args, key) {
+  const n = Number(args[key]);
+  if (!Number.isInteger(n) || n < 1) fail(`--${key} must be a whole number above 0 (got ${args[key]})`);
+  return n;
+}
+
+// --listen as [host, port]; refused when the port is not 0-65535.
+function listenAddress(text) {
+  const colon = text.lastIndexOf(':');
+  const host = text.slice(0, colon).replace(/^\[|\]$/g, '');
+  const port = Number(text.slice(colon + 1));
+  if (colon < 0 || !Number.isInteger(port) || port < 0 || port > 65535) {
+    fail(`--listen ${text}: want HOST:PORT with PORT 0-65535`);
+  }
+  return [host, port];
+}
+
+// What the doors take (guard.js), from the flags.
+function doorsOf(args) {
+  let allowOrigins;
+  try {
+    allowOrigins = parseOriginList(args.allow_origin);
+  } catch (e) {
+    fail(e.message);
+  }
+  let accessToken = '';
+  if (args.access_token_file) {
+    try {
+      accessToken = fs.readFileSync(args.access_token_file, 'utf8').split('\n')[0].trim();
+    } catch (e) {
+      fail(`cannot read --access_token_file ${args.access_token_file}: ${e.message}`);
+    }
+    if (accessToken.length < 16) fail('the access token must be at least 16 characters');
+  }
+  const limits = { maxMessageBytes: positive(args, 'max_message_bytes'),
+    rate: positive(args, 'max_messages_per_second'), burst: positive(args, 'message_burst') };
+  return { allowOrigins, accessToken, limits };
 }
 
 // URL prefix -> folder. Only these are served; nothing outside them.
@@ -59,9 +112,17 @@ const TYPES = {
   '.json': 'application/json', '.textproto': 'text/plain; charset=utf-8',
 };
 
+function answer(res, status, text) {
+  res.writeHead(status, { 'content-type': 'text/plain; charset=utf-8' });
+  res.end(`${text}\n`);
+}
+
 function serveStatic(req, res) {
-  const url = new URL(req.url, 'http://x');
-  let pathname = decodeURIComponent(url.pathname);
+  let pathname = requestPath(req.url);
+  if (pathname === null) {
+    answer(res, 400, 'malformed URL (bad percent-encoding)');
+    return;
+  }
   if (pathname === '/') pathname = '/index.html';
   if (pathname === '/favicon.ico') {
     res.writeHead(204);
@@ -74,8 +135,7 @@ function serveStatic(req, res) {
     if (!file.startsWith(dir)) break;  // ../ out of the folder
     fs.readFile(file, (err, data) => {
       if (err) {
-        res.writeHead(404, { 'content-type': 'text/plain' });
-        res.end(`not found: ${pathname}\n`);
+        answer(res, 404, `not found: ${pathname}`);
         return;
       }
       res.writeHead(200, { 'content-type': TYPES[path.extname(file)] || 'application/octet-stream' });
@@ -83,26 +143,32 @@ function serveStatic(req, res) {
     });
     return;
   }
-  res.writeHead(404, { 'content-type': 'text/plain' });
-  res.end(`not found: ${pathname}\n`);
+  answer(res, 404, `not found: ${pathname}`);
+}
+
+// An upgrade not taken: an HTTP answer on the raw socket, then closed.
+function refuseUpgrade(socket, status, text) {
+  const body = `${text}\n`;
+  socket.end(`HTTP/1.1 ${status} ${http.STATUS_CODES[status]}\r\n` +
+    `content-type: text/plain; charset=utf-8\r\ncontent-length: ${Buffer.byteLength(body)}\r\n` +
+    `connection: close\r\n\r\n${body}`);
 }
 
 // --create: a session on a built-in scene, its URL printed (the server may
 // still be starting: try for a minute).
-function createSession(router, tokens, args, base, log, attempt = 0) {
+function createSession(router, args, base, log, attempt = 0) {
   const request = { builtin_scene: args.create };
   if (args.levels !== '') request.levels_override = Number(args.levels);
   router.client().CreateSession(request, { deadline: new Date(Date.now() + 600000) }, (err, s) => {
     if (err) {
       if (err.code === 14 && attempt < 60) {
-        setTimeout(() => createSession(router, tokens, args, base, log, attempt + 1), 1000);
+        setTimeout(() => createSession(router, args, base, log, attempt + 1), 1000);
         return;
       }
       log(`could not create ${args.create}: ${err.details || err.message}`);
       process.exitCode = 1;
       return;
     }
-    tokens.set(s.id, s.token);
     router.learn(s);
     console.log(`session ${s.id} (${s.scene_name}): ${base}#session=${s.id}&token=${s.token}`);
   });
@@ -122,36 +188,64 @@ function main() {
     }
   }
   const router = new Router(service, args.server, credentials);
-  // Sessions created through this gateway: id -> token. Its pages may join
-  // them from the list (docs/viewer.md "Access").
-  const tokens = new Map();
+  const doors = doorsOf(args);
   const log = (...m) => console.error(new Date().toISOString(), 'gateway:', ...m);
-  const [host, portText] = [args.listen.slice(0, args.listen.lastIndexOf(':')),
-    args.listen.slice(args.listen.lastIndexOf(':') + 1)];
-  const server = http.createServer(serveStatic);
-  const wss = new WebSocketServer({ noServer: true, maxPayload: 8 << 20 });
+  const [host, port] = listenAddress(args.listen);
+  const server = http.createServer((req, res) => {
+    try {
+      serveStatic(req, res);
+    } catch (e) {
+      log(`request ${JSON.stringify(req.url)} failed: ${e.message}`);
+      if (!res.headersSent) answer(res, 500, 'the gateway could not answer this request');
+    }
+  });
+  const wss = new WebSocketServer({ noServer: true, maxPayload: doors.limits.maxMessageBytes });
   server.on('upgrade', (req, socket, head) => {
-    if (new URL(req.url, 'http://x').pathname !== '/ws') {
-      socket.destroy();
+    socket.on('error', () => {});
+    const pathname = requestPath(req.url);
+    if (pathname !== '/ws') {
+      refuseUpgrade(socket, pathname === null ? 400 : 404,
+        pathname === null ? 'malformed URL (bad percent-encoding)' : 'the WebSocket is at /ws');
       return;
     }
-    wss.handleUpgrade(req, socket, head, (ws) => {
-      const bridge = new Bridge({ ws, service, router, tokens, address: args.server });
-      log(`page connected from ${req.socket.remoteAddress}`);
-      ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
-      ws.on('close', () => {
-        bridge.close();
-        log('page disconnected');
-      });
-      ws.on('error', () => bridge.close());
-    });
+    const why = upgradeRefusal(req, doors);
+    if (why) {
+      log(`refused a WebSocket from ${req.socket.remoteAddress}: ${why}`);
+      refuseUpgrade(socket, 403, `refused: ${why}`);
+      return;
+    }
+    wss.handleUpgrade(req, socket, head, (ws) => connected(ws, req));
   });
-  server.listen(Number(portText), host, () => {
+  const connected = (ws, req) => {
+    const bridge = new Bridge({ ws, service, router, address: args.server, limits: doors.limits });
+    log(`page connected from ${req.socket.remoteAddress}`);
+    ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
+    ws.on('close', () => {
+      bridge.close();
+      log('page disconnected');
+    });
+    ws.on('error', (e) => {
+      log(`page connection closed: ${e.message}`);
+      bridge.close();
+    });
+  };
+  server.on('error', (e) => {
+    const why = e.code === 'EADDRINUSE' ? 'the port is taken (EADDRINUSE)' : e.message;
+    console.error(`gateway: cannot listen on ${args.listen}: ${why}`);
+    process.exit(1);
+  });
+  server.listen(port, host, () => {
     const a = server.address();
-    const base = `http://${a.address}:${a.port}/`;
+    const name = a.family === 'IPv6' ? `[${a.address}]` : a.address;
+    const base = `http://${name}:${a.port}/`;
+    const open = doors.accessToken ? `${base}?access=${encodeURIComponent(doors.accessToken)}` : base;
     console.log(`listening on ${base}`);
+    if (doors.accessToken) console.log(`open ${open}`);
     log(`serving the viewer, dynsolid-server at ${args.server}`);
-    if (args.create) createSession(router, tokens, args, base, log);
+    if (!isLoopback(a.address) && !doors.accessToken) {
+      log(`serving beyond loopback without --access_token_file: anyone who reaches ${base} can use it`);
+    }
+    if (args.create) createSession(router, args, open, log);
   });
   const stop = () => {
     log('stopping');

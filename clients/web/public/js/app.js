@@ -13,7 +13,11 @@ const $ = (id) => document.getElementById(id);
 
 class App {
   constructor() {
-    const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`;
+    // The gateway's access token, when it has one, comes in the page's URL
+    // (?access=...) and goes with the WebSocket.
+    const access = new URLSearchParams(location.search).get('access');
+    const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws` +
+      (access ? `?access=${encodeURIComponent(access)}` : '');
     this.conn = new Connection({ url: wsUrl });
     this.decoder = new SurfaceDecoder();
     this.view = new View($('view'));

@@ -51,6 +51,7 @@ export class Connection {
     this.closedByUser = false;
     this.session = null;         // {id, token}: the session commands go to
     this.watchRequest = null;    // re-sent after a reconnect
+    this.maxMessageBytes = Infinity;  // the gateway's, from its hello
     // Callbacks the app sets.
     this.onFrame = () => {};
     this.onWatchEnd = () => {};
@@ -98,6 +99,15 @@ export class Connection {
     return true;
   }
 
+  // Why `message` is over the gateway's size limit (it would close the
+  // connection), or null.
+  tooBig(message) {
+    const bytes = new TextEncoder().encode(JSON.stringify(message)).length;
+    if (bytes <= this.maxMessageBytes) return null;
+    return new CallError(Code.RESOURCE_EXHAUSTED, 'RESOURCE_EXHAUSTED',
+      `${bytes} bytes: more than the gateway takes in one message (${this.maxMessageBytes})`);
+  }
+
   onMessage(data) {
     if (typeof data !== 'string') {
       this.onFrame(new Uint8Array(data));
@@ -135,6 +145,7 @@ export class Connection {
         }
         return;
       case 'hello':
+        this.maxMessageBytes = m.max_message_bytes || Infinity;
         return;
       case 'error':
         this.onError(m.message);
@@ -148,6 +159,11 @@ export class Connection {
   call(method, request = {}) {
     return new Promise((resolve, reject) => {
       const id = this.nextCallId++;
+      const tooBig = this.tooBig({ op: 'call', id, method, request });
+      if (tooBig) {
+        reject(tooBig);
+        return;
+      }
       if (!this.sendJson({ op: 'call', id, method, request })) {
         reject(new CallError(Code.UNAVAILABLE, 'UNAVAILABLE', 'not connected to the gateway'));
         return;
@@ -183,6 +199,8 @@ export class Connection {
     }
     const seq = ++this.seq;
     const request = { session: this.session, client_id: this.clientId, seq, command };
+    const tooBig = this.tooBig({ op: 'command', request });
+    if (tooBig) return Promise.reject(tooBig);
     return new Promise((resolve, reject) => {
       this.pending.set(seq, { request, resolve, reject, sentAt: this.now() });
       this.sendJson({ op: 'command', request });

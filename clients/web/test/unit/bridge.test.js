@@ -1,6 +1,7 @@
 // The gateway's per-page bridge with a fake WebSocket and a fake gRPC
 // client: malformed messages get an error and reach nothing; only the
-// listed unary methods pass; tokens of sessions created here are listed.
+// listed unary methods pass; a page lists the sessions it created, with
+// their tokens, and no others (doors.test.js has more).
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -31,7 +32,7 @@ function fakes() {
     first: 'x', client: () => client, forSession: () => client,
     learn: () => {}, follow: () => false, forget: () => {},
   };
-  const bridge = new Bridge({ ws, service: null, router, tokens: new Map(), address: 'x' });
+  const bridge = new Bridge({ ws, service: null, router, address: 'x' });
   const send = (m) => bridge.onMessage(Buffer.from(typeof m === 'string' ? m : JSON.stringify(m)), false);
   return { bridge, sent, calls, streams, send };
 }
@@ -53,14 +54,14 @@ test('says hello, then refuses what is not a message it takes, calling nothing',
   assert.equal(calls.length, 0);
 });
 
-test('unary calls pass through with their answers and errors; created sessions are listed with tokens', () => {
+test('unary calls pass through with their answers and errors; the page\'s own sessions are listed with tokens', () => {
   const { sent, calls, send } = fakes();
   send({ op: 'call', id: 7, method: 'CreateSession', request: { builtin_scene: 'block3' } });
   send({ op: 'call', id: 8, method: 'ListSessions', request: {} });
   send({ op: 'call', id: 9, method: 'GetStats', request: { id: 'a1', token: 'bad' } });
   assert.deepEqual(calls.map((c) => c[0]), ['CreateSession', 'GetServerInfo', 'ListSessions', 'GetStats']);
   assert.deepEqual(sent[1], { op: 'result', id: 7, ok: true, response: { id: 'a1', token: 't1', scene_name: 'block3' } });
-  assert.deepEqual(sent[2].response.sessions, [{ id: 'a1', token: 't1' }, { id: 'b2' }]);
+  assert.deepEqual(sent[2].response.sessions, [{ id: 'a1', token: 't1' }]);
   assert.deepEqual([sent[3].ok, sent[3].code, sent[3].message], [false, 7, 'wrong token']);
 });
 

@@ -138,3 +138,16 @@ test('leaving a session fails its pending commands instead of sending them to th
   await assert.rejects(a, /left the session/);
   assert.equal(conn.pending.size, 0);
 });
+
+test('a call or command over the gateway\'s message limit (from its hello) is refused here, not sent', async () => {
+  const { conn, socket } = setup();
+  socket().receive({ op: 'hello', server: 'x', gateway: 'dynsolid-web', max_message_bytes: 200 });
+  conn.setSession(SESSION);
+  await assert.rejects(conn.call('CreateSession', { scene_text: 'x'.repeat(300) }),
+    (e) => e.code === Code.RESOURCE_EXHAUSTED && /more than the gateway takes in one message \(200\)/.test(e.message));
+  await assert.rejects(conn.command({ curve: { points: 'y'.repeat(300) } }), /more than the gateway takes/);
+  assert.equal(socket().sent.length, 0);
+  // What fits still goes.
+  conn.call('GetStats', SESSION);
+  assert.equal(socket().sent.length, 1);
+});

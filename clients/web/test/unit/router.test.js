@@ -70,7 +70,7 @@ function twoReplicas() {
   router.clients.set('b', replica('b', 'r1.x'));
   const sent = [];
   const ws = { readyState: 1, bufferedAmount: 0, send: (m) => sent.push(JSON.parse(m)) };
-  const bridge = new Bridge({ ws, service: null, router, tokens: new Map(), address: 'a' });
+  const bridge = new Bridge({ ws, service: null, router, address: 'a' });
   const send = (m) => bridge.onMessage(Buffer.from(JSON.stringify(m)), false);
   return { router, calls, streams, sent, send };
 }

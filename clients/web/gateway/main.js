@@ -154,6 +154,49 @@ function refuseUpgrade(socket, status, text) {
     `connection: close\r\n\r\n${body}`);
 }
 
+function serveSafely(req, res, log) {
+  try {
+    serveStatic(req, res);
+  } catch (e) {
+    log(`request ${JSON.stringify(req.url)} failed: ${e.message}`);
+    if (!res.headersSent) answer(res, 500, 'the gateway could not answer this request');
+  }
+}
+
+// Whether a WebSocket upgrade may go on (guard.js); answered and closed if not.
+function admit(req, socket, doors, log) {
+  socket.on('error', () => {});
+  const pathname = requestPath(req.url);
+  if (pathname === null) {
+    refuseUpgrade(socket, 400, 'malformed URL (bad percent-encoding)');
+    return false;
+  }
+  if (pathname !== '/ws') {
+    refuseUpgrade(socket, 404, 'the WebSocket is at /ws');
+    return false;
+  }
+  const why = upgradeRefusal(req, doors);
+  if (why) {
+    log(`refused a WebSocket from ${req.socket.remoteAddress}: ${why}`);
+    refuseUpgrade(socket, 403, `refused: ${why}`);
+    return false;
+  }
+  return true;
+}
+
+function bridgePage(ws, req, log, bridge) {
+  log(`page connected from ${req.socket.remoteAddress}`);
+  ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
+  ws.on('close', () => {
+    bridge.close();
+    log('page disconnected');
+  });
+  ws.on('error', (e) => {
+    log(`page connection closed: ${e.message}`);
+    bridge.close();
+  });
+}
+
 // --create: a session on a built-in scene, its URL printed (the server may
 // still be starting: try for a minute).
 function createSession(router, args, base, log, attempt = 0) {
@@ -191,44 +234,13 @@ function main() {
   const doors = doorsOf(args);
   const log = (...m) => console.error(new Date().toISOString(), 'gateway:', ...m);
   const [host, port] = listenAddress(args.listen);
-  const server = http.createServer((req, res) => {
-    try {
-      serveStatic(req, res);
-    } catch (e) {
-      log(`request ${JSON.stringify(req.url)} failed: ${e.message}`);
-      if (!res.headersSent) answer(res, 500, 'the gateway could not answer this request');
-    }
-  });
+  const server = http.createServer((req, res) => serveSafely(req, res, log));
   const wss = new WebSocketServer({ noServer: true, maxPayload: doors.limits.maxMessageBytes });
   server.on('upgrade', (req, socket, head) => {
-    socket.on('error', () => {});
-    const pathname = requestPath(req.url);
-    if (pathname !== '/ws') {
-      refuseUpgrade(socket, pathname === null ? 400 : 404,
-        pathname === null ? 'malformed URL (bad percent-encoding)' : 'the WebSocket is at /ws');
-      return;
-    }
-    const why = upgradeRefusal(req, doors);
-    if (why) {
-      log(`refused a WebSocket from ${req.socket.remoteAddress}: ${why}`);
-      refuseUpgrade(socket, 403, `refused: ${why}`);
-      return;
-    }
-    wss.handleUpgrade(req, socket, head, (ws) => connected(ws, req));
+    if (!admit(req, socket, doors, log)) return;
+    wss.handleUpgrade(req, socket, head, (ws) => bridgePage(ws, req, log,
+      new Bridge({ ws, service, router, address: args.server, limits: doors.limits })));
   });
-  const connected = (ws, req) => {
-    const bridge = new Bridge({ ws, service, router, address: args.server, limits: doors.limits });
-    log(`page connected from ${req.socket.remoteAddress}`);
-    ws.on('message', (data, isBinary) => bridge.onMessage(data, isBinary));
-    ws.on('close', () => {
-      bridge.close();
-      log('page disconnected');
-    });
-    ws.on('error', (e) => {
-      log(`page connection closed: ${e.message}`);
-      bridge.close();
-    });
-  };
   server.on('error', (e) => {
     const why = e.code === 'EADDRINUSE' ? 'the port is taken (EADDRINUSE)' : e.message;
     console.error(`gateway: cannot listen on ${args.listen}: ${why}`);

@@ -13,6 +13,12 @@ import { loadService, grpc } from '../../gateway/grpc.js';
 const here = path.dirname(fileURLToPath(import.meta.url));
 const MAIN = path.resolve(here, '../../gateway/main.js');
 
+// Every gateway started here dies with the test process, whatever ends it.
+const children = new Set();
+process.on('exit', () => {
+  for (const c of children) if (c.exitCode === null && c.signalCode === null) c.kill('SIGKILL');
+});
+
 // A fake server: sessions with tokens, every session call checking its token.
 export async function fakeServer() {
   const service = loadService();
@@ -59,6 +65,8 @@ export async function fakeServer() {
 export function startGateway(serverAddress, args = []) {
   const proc = spawn(process.execPath, [MAIN, '--server', serverAddress, '--listen', '127.0.0.1:0', ...args],
     { stdio: ['ignore', 'pipe', 'pipe'] });
+  children.add(proc);
+  proc.once('exit', () => children.delete(proc));
   let out = '';
   let err = '';
   proc.stderr.on('data', (d) => { err += d; });

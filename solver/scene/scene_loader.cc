@@ -1,5 +1,7 @@
 #include "solver/scene/scene_loader.h"
 
+#include "solver/contact/obstacle_contact.h"
+
 #include <cctype>
 #include <cmath>
 #include <filesystem>
@@ -540,6 +542,7 @@ absl::Status ValidateScene(const Scene& scene) {
   }
   RETURN_IF_ERROR(ValidateTraced(scene));
   RETURN_IF_ERROR(ValidateSolverSettings(scene.solver()));
+  RETURN_IF_ERROR(contact::ObstacleContact::Validate(scene.environment(), "environment"));
   return absl::OkStatus();
 }
 

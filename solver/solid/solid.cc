@@ -240,8 +240,8 @@ void Solid::Impl::FromNodes(const Points& g, Points& out) {
   for (int k = 1; k < kProjectParts; ++k) out += project_parts[k];
 }
 
-void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases,
-                                Points& pressure) {
+void Solid::Impl::ControlForces(const Points& p, const Points& prev, Points& out,
+                                PhaseTimes& phases, Points& pressure) {
   auto t0 = Clock::now();
   if (cell_model != nullptr) {
     // Control space throughout: no node positions, no projection.
@@ -273,15 +273,15 @@ void Solid::Impl::ControlForces(const Points& p, Points& out, PhaseTimes& phases
       out.row(i) -= spring_k[s] * (p.row(i) - rest_control.row(i));
     }
     if (has_pressure) {
-      PressureForces(p, pressure);
+      PositionForces(p, prev, pressure);
       out += pressure;
     }
     phases.loads = MsSince(t0);
   }
 }
 
-void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phases,
-                                 Points& pressure, bool energy) {
+void Solid::Impl::ImplicitForces(const Points& p, const Points& prev, Points& out,
+                                 PhaseTimes& phases, Points& pressure, bool energy) {
   auto t0 = Clock::now();
   if (cell_model == nullptr) {
     ToNodes(p, nodes);
@@ -309,11 +309,11 @@ void Solid::Impl::ImplicitForces(const Points& p, Points& out, PhaseTimes& phase
   phases.measure = -1;
   phases.stiffness = MsSince(t0);
   phases.project = cell_model != nullptr ? -1 : 0;
-  ExternalForces(p, out, pressure, phases);
+  ExternalForces(p, prev, out, pressure, phases);
 }
 
-void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
-                                 PhaseTimes& phases) {
+void Solid::Impl::ExternalForces(const Points& p, const Points& prev, Points& out,
+                                 Points& pressure, PhaseTimes& phases) {
   const auto t0 = Clock::now();
   if (has_const_force) {
     out = f_const;
@@ -321,7 +321,7 @@ void Solid::Impl::ExternalForces(const Points& p, Points& out, Points& pressure,
     out.setZero(p.rows(), 3);
   }
   if (has_pressure) {
-    PressureForces(p, pressure);
+    PositionForces(p, prev, pressure);
     out += pressure;
   }
   if (contact.active) out += contact.force;
@@ -354,14 +354,14 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // is checked in the step that produced it.
   if (!forces_valid) {
     if (Folded()) {
-      ImplicitForces(p, f, sub, f_press, /*energy=*/true);
+      ImplicitForces(p, p_prev, f, sub, f_press, /*energy=*/true);
     } else {
-      ControlForces(p, f, sub, f_press);
+      ControlForces(p, p_prev, f, sub, f_press);
     }
     add(sub);
     forces_valid = true;
   } else if (Folded() && loads_changed) {
-    ExternalForces(p, f, f_press, sub);
+    ExternalForces(p, p_prev, f, f_press, sub);
     if (sub.loads >= 0) sum.loads += sub.loads;
   }
   if (ledger_rebase) {
@@ -412,10 +412,10 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       const double hs = implicit.h();
       const double strain = ahead_energy + hs * (c.array() * g_ahead.array()).sum() +
                             0.5 * hs * hs * quad;
-      ImplicitForces(p_next, f_next, sub, f_press_next, /*energy=*/false);
+      ImplicitForces(p_next, p, f_next, sub, f_press_next, /*energy=*/false);
       last_strain_energy = strain;
     } else {
-      ControlForces(p_next, f_next, sub, f_press_next);
+      ControlForces(p_next, p, f_next, sub, f_press_next);
     }
     add(sub);
     // Energy ledger: H = kinetic + strain + springs - external work.
@@ -463,6 +463,7 @@ absl::Status Solid::Step() {
   im.backup_p = p_;
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
+  if (im.environment != nullptr) im.environment->Checkpoint();
   const bool rebase_at_start = im.ledger_rebase;
   const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
   const int64_t rechecks_at_start = im.implicit.rechecked_starts();
@@ -478,6 +479,7 @@ absl::Status Solid::Step() {
     p_prev_ = im.backup_prev;
     im.ledger = ledger_at_start;
     im.ledger_rebase = rebase_at_start;
+    if (im.environment != nullptr) im.environment->Rollback();
     im.model->ResetFrames();
     im.forces_valid = false;
     ++stats.rollbacks;

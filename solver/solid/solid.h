@@ -80,6 +80,9 @@ struct BuildReport {
   // (cg_tolerance >= kSinglePrecisionCgTolerance; see solid.cc).
   bool single_precision_cg = false;
   double build_ms = 0.0;
+  // The environment's contact stiffness, N/m per m^2 of surface
+  // (contact/obstacle_contact.h Calibrate); 0: no floor or obstacles.
+  double contact_kappa = 0.0;
   // Distinct control-cell partial sums of Mt (and Dt) and of K0 this build
   // made rather than took from the solid it was remeshed from
   // (cell_assembly.h), of `control_cell_partials`; -1: too large to keep.
@@ -424,8 +427,9 @@ class Solid {
   // DataLoss for truncated or corrupted bytes.
   // 3: drags and curves; 4: a word-wise checksum; 5: the material samples
   // last, in a section whose checksum the saving solid keeps while its
-  // material is unchanged (versions 3 and 4 still read).
-  static constexpr uint32_t kStateFormatVersion = 5;
+  // material is unchanged; 6: the environment's contacts (floor and
+  // obstacles) after the drags (versions 3 to 5 still read).
+  static constexpr uint32_t kStateFormatVersion = 6;
   std::string SaveState() const;
   // The same in two parts (saved_state.h), the material section shared
   // with every other state saved while the material is unchanged: what

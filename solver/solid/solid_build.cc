@@ -322,7 +322,7 @@ void Solid::Impl::ConfigureLinearized() {
 int Solid::Impl::SubstepsFor(double omega) const {
   const double stable = omega > 0 ? 2.0 / omega : INFINITY;
   const double limit = settings.stability_safety() * stable;
-  return std::max(1, static_cast<int>(std::ceil(settings.time_step() / limit)));
+  return std::max(MinSubsteps(), static_cast<int>(std::ceil(settings.time_step() / limit)));
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,
@@ -500,6 +500,18 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   im.gravity = V(scene.loads().gravity());
+  // The environment (floor, obstacles): grouped by control cell for its
+  // culling; calibrated below, once the sub-step is known.
+  {
+    const std::vector<int32_t>& to_control = s->d_.hierarchy.control_cell;
+    std::vector<int32_t> quad_group(im.quad_cell.size());
+    for (size_t q = 0; q < im.quad_cell.size(); ++q) {
+      quad_group[q] = to_control.empty() ? im.quad_cell[q] : to_control[im.quad_cell[q]];
+    }
+    const contact::SurfaceInput input{&im.surface_rows, &s->surface_.quads, &quad_group,
+                                      &im.surface_rest};
+    ASSIGN_OR_RETURN(im.environment, contact::ObstacleContact::Create(scene.environment(), input));
+  }
   im.RebuildConstantLoads();
   im.RebuildPressure();
   rep.point_forces = static_cast<int32_t>(im.point_loads.size());
@@ -583,6 +595,20 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     rep.phases.k0 = MsSince(t_phase);
     // (The per-cell corotation made these partials already: counted there.)
     if (im.cell_model == nullptr) rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
+  }
+  if (im.environment != nullptr) {
+    // The contact's stiffness for the solid's mean modulus, and the
+    // sub-steps it needs (either integrator).
+    double young = 0;
+    int64_t samples = 0;
+    for (const auto& array : im.layout->materials) {
+      for (const models::MaterialPoint& m : array) young += m.young;
+      samples += static_cast<int64_t>(array.size());
+    }
+    young /= std::max<int64_t>(1, samples);
+    im.environment->Calibrate(im.mt, young, s->h_, im.settings.max_substeps());
+    im.substeps = std::max(im.substeps, im.environment->min_substeps());
+    rep.contact_kappa = im.environment->kappa();
   }
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -27,6 +27,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
 #include "solver/common/worker_pool.h"
+#include "solver/contact/obstacle_contact.h"
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
@@ -370,6 +371,19 @@ struct Solid::Impl {
   bool has_pressure = false;
   Points surf_x, surf_f, f_press, f_press_next;
 
+  // ---- The environment: the floor and obstacles (scene.environment), a
+  // part with its own state (solver/contact/obstacle_contact.h); null when
+  // the scene has none. Its forces are position- and velocity-dependent
+  // like the pressure's, so they ride in f_press (work counted
+  // trapezoidally in the ledger): PositionForces adds them.
+  std::unique_ptr<contact::ObstacleContact> environment;
+  // pressure = the follower loads (pressures, drags) and the environment's
+  // contact forces at p, with the velocity from prev over one sub-step.
+  void PositionForces(const Points& p, const Points& prev, Points& pressure) {
+    PressureForces(p, pressure);
+    if (environment != nullptr) environment->AddForces(p, prev, h_sub, pressure);
+  }
+
   // Shape values of a kind at (u, v, w).
   void ShapeAt(const MaterialLocation& m, std::vector<double>& n) const {
     const int nodes_per = layout->blocks[m.kind].nodes;
@@ -498,7 +512,9 @@ struct Solid::Impl {
                           const std::vector<uint8_t>& fixed_set, int* passes = nullptr,
                           const models::CellCorotation* cells = nullptr,
                           WorkerPool* cell_pool = nullptr) const;
-  void ControlForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure);
+  // `prev`: the positions one sub-step before p (the environment's velocities).
+  void ControlForces(const Points& p, const Points& prev, Points& out, PhaseTimes& phases,
+                     Points& pressure);
   // out = A p (A the node matrix, as node_rows), its rows split over the
   // pool: each row's sum is taken whole by one thread, so the bits do not
   // depend on the thread count.
@@ -513,11 +529,12 @@ struct Solid::Impl {
   // Folded implicit path: the frames at p and out = f_ext(p) (constant loads
   // and pressure at p; no internal or spring forces); with `energy` also the
   // exact strain energy at p (one element pass more).
-  void ImplicitForces(const Points& p, Points& out, PhaseTimes& phases, Points& pressure,
-                      bool energy);
+  void ImplicitForces(const Points& p, const Points& prev, Points& out, PhaseTimes& phases,
+                      Points& pressure, bool energy);
   bool Folded() const { return use_implicit && !implicit_two_pass; }
   // out = f_ext(p): constant loads and the pressure at p (into `pressure`).
-  void ExternalForces(const Points& p, Points& out, Points& pressure, PhaseTimes& phases);
+  void ExternalForces(const Points& p, const Points& prev, Points& out, Points& pressure,
+                      PhaseTimes& phases);
   // A load edit (point force, pressure, gravity). The folded implicit path
   // carries only the external forces in `f`: they are recomputed at the next
   // step, no element pass (loads_changed; recomputing unchanged loads gives
@@ -593,6 +610,8 @@ struct Solid::Impl {
                                                         WorkerPool& pool) const;
   bool double_cg = false;  // SetDoublePrecisionCgForTesting
   int SubstepsFor(double omega) const;
+  // The fewest sub-steps the environment's contact needs (1 without one).
+  int MinSubsteps() const { return environment != nullptr ? environment->min_substeps() : 1; }
   // Loads from the lists (in id order), from scratch: f_const (point forces
   // then gravity) and the per-quad pressure.
   void RebuildConstantLoads();
@@ -645,6 +664,7 @@ class Solid::PreparedState {
   std::vector<Impl::FixConstraint> fixes;
   std::vector<int32_t> fix_count;
   std::vector<Impl::DragLoad> drags;
+  std::vector<contact::ObstacleContact::Touch> touches;  // the environment's
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
   bool taken_back = false;             // build is Impl::retired's

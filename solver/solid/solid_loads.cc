@@ -50,7 +50,7 @@ const Eigen::VectorXd& Solid::Impl::GravityMass() {
 void Solid::Impl::RebuildPressure() {
   // The follower loads: pressures and drag springs (forces that depend on
   // the positions; work counted trapezoidally in the ledger).
-  has_pressure = !pressures.empty() || !drags.empty();
+  has_pressure = !pressures.empty() || !drags.empty() || environment != nullptr;
   quad_pascals.assign(quad_cell.size(), 0.0);
   for (const PressureLoad& load : pressures) {
     for (int32_t q : load.quads) quad_pascals[q] += load.msg.pascals();

@@ -155,7 +155,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   // costliest part of a paint). Sub-steps never drop on a paint.
   const auto t_stable = Clock::now();
   double omega = im.omega_max * std::sqrt(stiffness_ratio / mass_ratio);
-  int substeps = im.use_implicit ? 1 : std::max(im.substeps, im.SubstepsFor(omega));
+  int substeps = im.use_implicit ? im.MinSubsteps() : std::max(im.substeps, im.SubstepsFor(omega));
   if (!im.use_implicit && substeps > im.substeps) {
     omega = im.EstimateOmegaMax(*out->build.model, out->build.mt, im.fixed, nullptr,
                                 out->build.cell_model.get(), out->pool.get());

@@ -280,6 +280,8 @@ SavedState Solid::SaveStateParts() const {
     w.Put<uint8_t>(d.curve);
     w.Bytes(d.curve ? d.shape.SerializeAsString() : d.drag.SerializeAsString());
   }
+  // Version 6: the environment's contacts (empty without one).
+  w.Bytes(im.environment != nullptr ? im.environment->SaveState() : std::string());
   // Element frames (warm starts).
   const models::InternalForceModel::Frames& frames = im.model->frames();
   for (const auto& f : frames) {
@@ -339,7 +341,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   const uint64_t payload_size = header.Get<uint64_t>("payload size");
   // Version 3 differs from 4 only in its checksum, 4 from 5 in the place
   // of the material section and the checksum: still read.
-  if (version != kStateFormatVersion && version != 3 && version != 4) {
+  if (version != kStateFormatVersion && version != 3 && version != 4 && version != 5) {
     return absl::InvalidArgumentError(absl::StrCat("solid state: format version ", version,
                                                    "; this build reads versions 3 to ",
                                                    kStateFormatVersion));
@@ -520,8 +522,24 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     load->id = id;
     drags.push_back(*std::move(load));
   }
-  if (r.ok() && saved_pressure != !(pressures.empty() && drags.empty())) {
-    r.Fail("follower forces without pressures or drags");
+  if (r.ok() &&
+      saved_pressure != (!(pressures.empty() && drags.empty()) || im.environment != nullptr)) {
+    r.Fail("follower forces without pressures, drags or an environment");
+  }
+  std::vector<contact::ObstacleContact::Touch> touches;
+  if (version >= 6) {
+    const std::string env = r.Bytes("environment");
+    if (r.ok() && im.environment == nullptr && !env.empty()) {
+      r.Fail("environment contacts for a scene without an environment");
+    } else if (r.ok() && im.environment != nullptr) {
+      absl::StatusOr<std::vector<contact::ObstacleContact::Touch>> parsed =
+          im.environment->ParseState(env);
+      if (!parsed.ok()) {
+        r.Fail(std::string(parsed.status().message()));
+      } else {
+        touches = *std::move(parsed);
+      }
+    }
   }
   RETURN_IF_ERROR(r.status());
 
@@ -678,6 +696,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   out->fixes = std::move(fixes);
   out->fix_count = std::move(fix_count);
   out->drags = std::move(drags);
+  out->touches = std::move(touches);
   out->frames = std::move(frames);
   out->build = std::move(build);
   out->k0 = std::move(k0);
@@ -735,6 +754,7 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   im.pressures = std::move(s.pressures);
   im.fixes = std::move(s.fixes);
   im.drags = std::move(s.drags);
+  if (im.environment != nullptr) im.environment->set_touches(std::move(s.touches));
   im.fix_count = std::move(s.fix_count);
   im.next_id = s.next_id;
   im.gravity = s.gravity;

@@ -1,0 +1,166 @@
+// A floor and static obstacles (scene.proto Environment) the solid's
+// boundary surface rests on and bumps into: a part of the solid with its own
+// state (the vertices in contact, with their entry planes and friction
+// anchors), given the surface rows of the node matrix and asked for forces.
+//
+// The surface: vertices x_n = S_n p (S the boundary vertices' rows of the
+// node matrix A; p the control points). A vertex that enters an obstacle
+// gets a penalty force along the normal of the plane it entered through,
+//
+//   depth d = o - n . x  (> 0 inside),  f_N = max(0, k_n d - c_n n . v),
+//
+// k_n = kappa a_n (a_n the vertex's share of the rest surface area), c_n =
+// 2 zeta k_n / omega_c, and Coulomb friction as a stick spring of the same
+// stiffness to an anchor on the plane: f_T = -k_n (x - a)_T - c_n v_T,
+// capped at mu f_N; past the cap the vertex slides and its anchor follows
+// (docs/model.md "Contact"). A touch ends when its vertex rises a hundredth
+// of the vertex spacing above its plane (no force above the plane: no
+// adhesion), so that a vertex trembling on the floor keeps its anchor. The control forces are S^T f. The entry plane
+// is fixed when the contact starts: for the floor its plane, for a box the
+// face the vertex's path over the sub-step crossed first (so a vertex
+// moving fast enough to reach the far side of a box within one sub-step is
+// still pushed back the way it came: no tunnelling), for a ball the
+// tangent plane at the point nearest the vertex (found again each time).
+//
+// Stiffness: kappa = 8 E / l per unit area (E the solid's mean Young's
+// modulus, l the surface's vertex spacing): a layer about an eighth of a
+// fine cell thick as stiff as the solid, so that an impact that squashes the
+// solid's own cells sinks into the floor by a fraction of that. Its highest
+// frequency with every surface vertex in contact, omega_c = sqrt(kappa
+// lambda) (lambda the largest eigenvalue of (S^T diag(a) S) u = lambda Mt u,
+// by power iteration at build), must stay below 0.6 / h_sub for the
+// explicit force (central differences, and backward Euler's, which takes
+// contact explicitly) with its damping to be stable: the solid takes the
+// sub-steps that asks for (min_substeps), up to solver.max_substeps, past
+// which kappa is lowered to fit.
+//
+// Culling: the vertices are grouped by control cell; a group is looked at
+// only when the box around its control points (at the sub-step's start and
+// end) reaches an obstacle. Every row of S is a convex combination of
+// control points (subdivision weights are non-negative and sum to one;
+// checked at build, else no group is skipped), so a vertex lies in that box.
+//
+// Determinism: vertices and obstacles are visited in a fixed order and the
+// state changes only in AddForces(); the same positions and state give the
+// same bits.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "absl/status/statusor.h"
+#include "dynsolid/scene.pb.h"
+#include "solver/mesh/points.h"
+
+namespace dynsolid::contact {
+
+// What the solid gives the environment to build against.
+struct SurfaceInput {
+  // The boundary vertices' rows of the node matrix (#surface x #control).
+  const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>* rows = nullptr;
+  // Outward quads over the surface vertices (a triangle as (a, b, c, c)).
+  const std::vector<std::array<int32_t, 4>>* quads = nullptr;
+  // Per quad, the group it belongs to (e.g. its control cell); -1: none.
+  const std::vector<int32_t>* quad_group = nullptr;
+  // The surface vertices at rest (#surface x 3).
+  const Points* rest = nullptr;
+};
+
+class ObstacleContact {
+ public:
+  // Obstacle kinds, in scene order after the floor.
+  struct Shape {
+    enum Kind { kPlane, kBox, kSphere } kind = kPlane;
+    Eigen::Vector3d a = Eigen::Vector3d::Zero();  // plane point, box min, ball centre
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();  // plane unit normal, box max
+    double radius = 0;                            // ball
+  };
+  // One vertex touching one obstacle.
+  struct Touch {
+    int32_t vertex = 0;
+    int32_t obstacle = 0;
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // entry plane: n . y = offset
+    double offset = 0;
+    Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // friction anchor (on the plane)
+  };
+  // Checks the environment (InvalidArgument naming the field, e.g.
+  // "environment.obstacles[1].sphere.radius must be > 0") and builds the
+  // vertex groups. Null with OK status when the environment is empty.
+  static absl::StatusOr<std::unique_ptr<ObstacleContact>> Create(const Environment& env,
+                                                                 const SurfaceInput& surface);
+  static absl::Status Validate(const Environment& env, std::string_view field);
+
+  // Sets the penalty stiffness for a solid of mean Young's modulus `young`
+  // (Pa) and control mass matrix mt stepped by h (seconds), as the header
+  // says, and returns the sub-steps it needs (1..max_substeps).
+  int Calibrate(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& mt, double young,
+                double h, int max_substeps);
+  double kappa() const { return kappa_; }
+  int min_substeps() const { return min_substeps_; }
+
+  // The contact forces on the control points at p, the vertices' velocities
+  // taken as (x(p) - x(prev)) / h, added to `out` (#control x 3).
+  // Updates the contacts (new ones, releases, friction anchors): the state
+  // is that of p afterwards. Allocates nothing once warmed up.
+  void AddForces(const Points& p, const Points& prev, double h, Points& out);
+  // The largest penetration (metres) over the vertices in contact, as of the
+  // last AddForces().
+  double max_depth() const { return max_depth_; }
+  const std::vector<Touch>& touches() const { return touches_; }
+  const std::vector<Shape>& obstacles() const { return obstacles_; }
+  int32_t groups_checked() const { return groups_checked_; }
+
+  // The state (the touches) as bytes, and back. Restore checks the bytes
+  // against this surface and obstacle count (DataLoss naming what is wrong)
+  // and changes nothing on error.
+  std::string SaveState() const;
+  absl::StatusOr<std::vector<Touch>> ParseState(std::string_view bytes) const;
+  void set_touches(std::vector<Touch> touches) { touches_ = std::move(touches); }
+  absl::Status RestoreState(std::string_view bytes);
+  // For the stability guard's rollback: Checkpoint keeps a copy of the
+  // touches (in a buffer of its own, reused), Rollback takes it back.
+  void Checkpoint() { checkpoint_ = touches_; }
+  void Rollback() { touches_ = checkpoint_; }
+
+ private:
+  ObstacleContact() = default;
+  void BuildGroups(const SurfaceInput& s);
+  bool GroupMayTouch(int32_t group, int32_t obstacle, const Points& p, const Points& prev) const;
+  Eigen::Vector3d VertexAt(int32_t v, const Points& p) const;
+  // A new touch of vertex v (at x, from x_prev) with obstacle o, if it is
+  // inside it or its path crossed it.
+  bool Begin(int32_t v, int32_t o, const Eigen::Vector3d& x, const Eigen::Vector3d& x_prev,
+             Touch& t) const;
+  // Whether touch t still holds at x (updates a ball's plane).
+  bool Holds(Touch& t, const Eigen::Vector3d& x) const;
+
+  std::vector<Shape> obstacles_;
+  double friction_ = 0, damping_ratio_ = 0.5;
+  // Surface rows in CSR form.
+  std::vector<int64_t> row_start_;
+  std::vector<int32_t> row_col_;
+  std::vector<double> row_val_;
+  std::vector<double> area_;  // per vertex, m^2
+  // Groups: their vertices and control points (CSR).
+  std::vector<int64_t> group_vertex_start_, group_point_start_;
+  std::vector<int32_t> group_vertex_, group_point_;
+  bool convex_rows_ = true;  // every row a convex combination: culling is exact
+  int64_t controls_ = 0;
+  double kappa_ = 0, omega_ = 0, spacing_ = 0, release_ = 0;
+  int min_substeps_ = 1;
+  std::vector<Touch> touches_;  // ascending (vertex, obstacle)
+  std::vector<Touch> next_;     // scratch
+  std::vector<Touch> checkpoint_;
+  std::vector<uint8_t> seen_;   // scratch: per (vertex, obstacle) of touches_
+  double max_depth_ = 0;
+  int32_t groups_checked_ = 0;
+};
+
+}  // namespace dynsolid::contact

@@ -162,11 +162,31 @@ Eigen::Matrix3d CellCorotation::FrameOf(const CellData& c, const Points& p,
     const Eigen::Vector3d x = p.row(support[a]).transpose() - centre;
     f += x * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
   }
+  if (const double* offsets = flow_ != nullptr ? flow_->offsets() : nullptr) {
+    // Relative to the plastic rest shape: F F_p^-1 (CellFlow).
+    const double* u = offsets + 3 * static_cast<int64_t>(c.first);
+    Eigen::Matrix3d fp = Eigen::Matrix3d::Identity();
+    for (int a = 0; a < c.size; ++a) {
+      fp += Eigen::Vector3d(u[3 * a], u[3 * a + 1], u[3 * a + 2]) *
+            Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+    }
+    return Polar(f * fp.inverse());
+  }
   return Polar(f);
+}
+
+double CellCorotation::Energy(int32_t cell, const double* u) const {
+  const CellData& c = cells_[cell];
+  const Eigen::MatrixXd& k = *matrices_[c.matrix];
+  const Eigen::Map<const Eigen::VectorXd> v(u, 3 * c.size);
+  return 0.5 * v.dot(k * v);
 }
 
 double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Scratch>& scratch,
                            std::vector<Eigen::Matrix3d>* held, WorkerPool& pool) const {
+  const bool nonlinear = mode != Mode::kLinear && mode != Mode::kRest;
+  const double* plastic = nonlinear && flow_ != nullptr ? flow_->offsets() : nullptr;
+  const bool flowing = mode == Mode::kHold && flow_ != nullptr && flow_->flowing();
   pool.RunParts(kForceParts, [&](int part) {
     Scratch& s = scratch[part];
     s.energy = 0;
@@ -208,6 +228,10 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
           s.u(3 * a + 1, j) = linear ? local.y() : local.y() - rest[3 * a + 1];
           s.u(3 * a + 2, j) = linear ? local.z() : local.z() - rest[3 * a + 2];
         }
+        if (plastic != nullptr && !linear) {
+          const double* up = plastic + 3 * static_cast<int64_t>(c.first);
+          for (int e = 0; e < 3 * c.size; ++e) s.u(e, j) -= up[e];
+        }
       }
       s.y.topLeftCorner(side, m).noalias() = k * s.u.topLeftCorner(side, m);
       for (int j = 0; j < m; ++j) {
@@ -219,6 +243,7 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
           const Eigen::Vector3d f = r * s.y.col(j).segment<3>(3 * a);
           s.f.row(support[a]) += f.transpose();
         }
+        if (flowing) flow_->Flow(b.cells[j], s.u.col(j).data(), s.y.col(j).data());
       }
     }
   });

@@ -60,6 +60,28 @@
 
 namespace dynsolid::models {
 
+// Plasticity's hook into the per-cell corotation (material/plasticity.h
+// implements it): each cell's rest shape moved by offsets u_p (3 per support
+// entry, in the order of the cell's support, rest frame):
+//
+//   u_c = R_c^T (x - xbar) - (X - Xbar) - u_p,   R_c = polar(F_c F_p^-1),
+//   F_p = I + sum_j u_pj g_j^T,
+//
+// so that the plastically deformed rest shape, moved rigidly, carries no
+// force. A force pass that holds frames (Forces) calls Flow for each cell
+// after its force, on the pool's threads: Flow may change that cell's
+// offsets only.
+class CellFlow {
+ public:
+  virtual ~CellFlow() = default;
+  // All cells' offsets (null: none yet, all zero).
+  virtual const double* offsets() const = 0;
+  // Whether this pass flows (a flow step is armed).
+  virtual bool flowing() const = 0;
+  // Cell `cell`'s elastic local displacement u and K_c u (3 S each).
+  virtual void Flow(int32_t cell, const double* u, const double* ku) = 0;
+};
+
 class CellCorotation {
  public:
   struct Cell {
@@ -91,6 +113,20 @@ class CellCorotation {
 
 
   void set_pool(WorkerPool& pool) { pool_ = &pool; }
+  // The plastic flow hook (null: elastic; the default).
+  void set_flow(CellFlow* flow) { flow_ = flow; }
+  // A cell's support: where its entries start among all cells' (the
+  // offsets' index / 3), how many, and its points' rest positions about the
+  // cell's weighted centre (3 per entry).
+  int32_t support_first(int32_t cell) const { return cells_[cell].first; }
+  int32_t support_size(int32_t cell) const { return cells_[cell].size; }
+  int64_t support_entries() const { return static_cast<int64_t>(support_.size()); }
+  const int32_t* support(int32_t cell) const { return support_.data() + cells_[cell].first; }
+  const double* rest_local(int32_t cell) const {
+    return rest_local_.data() + 3 * static_cast<int64_t>(cells_[cell].first);
+  }
+  // 1/2 u . K_c u for a local displacement u of cell `cell` (3 S values).
+  double Energy(int32_t cell, const double* u) const;
   int32_t cells() const { return static_cast<int32_t>(cells_.size()); }
   int32_t distinct_matrices() const { return static_cast<int32_t>(matrices_.size()); }
   int64_t matrix_bytes() const { return matrix_bytes_; }
@@ -125,6 +161,7 @@ class CellCorotation {
   std::vector<Scratch> MakeScratch(int64_t points) const;
 
   WorkerPool* pool_;
+  CellFlow* flow_ = nullptr;
   std::vector<CellData> cells_;
   std::vector<int32_t> support_;      // all cells' supports, concatenated
   std::vector<double> weight_;        // w_j, normalized per cell, same order

@@ -354,9 +354,12 @@ absl::Status ValidateMaterialPaint(const MaterialPaint& paint, std::string_view 
   const std::string material = absl::StrCat(A(field), ".material");
   RETURN_IF_ERROR(ValidateMaterial(paint.material(), material));
   const Material& m = paint.material();
-  if (m.young_modulus() == 0 && m.poisson_ratio() == 0 && m.density() == 0 && m.damping() == 0) {
+  if (m.young_modulus() == 0 && m.poisson_ratio() == 0 && m.density() == 0 && m.damping() == 0 &&
+      m.yield_strain() == 0 && m.flow_rate() == 0 && m.hardening() == 0 &&
+      m.preset() == Material::PRESET_NONE) {
     return absl::InvalidArgumentError(absl::StrCat(
-        material, " sets no field: give young_modulus, poisson_ratio, density or damping"));
+        material, " sets no field: give young_modulus, poisson_ratio, density, damping, "
+                  "yield_strain, flow_rate, hardening or a preset"));
   }
   if (!(paint.strength() > 0 && paint.strength() <= 1)) {
     return absl::InvalidArgumentError(
@@ -392,11 +395,70 @@ absl::Status ValidateMaterial(const Material& material, std::string_view field) 
         f, ".damping must be >= 0 kg/(m^3 s) and finite (0 = no damping), got ",
         material.damping()));
   }
+  if (!(material.yield_strain() >= 0 && material.yield_strain() < 1)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".yield_strain must be in [0, 1) (a strain: 0.01 yields past 1 % stretch; 0 = never "
+           "yields), got ",
+        material.yield_strain()));
+  }
+  if (!(material.flow_rate() >= 0 && std::isfinite(material.flow_rate()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".flow_rate must be >= 0 per second and finite (0: the default ", kDefaultFlowRate,
+        "), got ", material.flow_rate()));
+  }
+  if (!(material.hardening() >= 0 && std::isfinite(material.hardening()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".hardening must be >= 0 and finite (0: perfectly plastic), got ",
+        material.hardening()));
+  }
   return absl::OkStatus();
 }
 
-Material ResolvedMaterial(const Material& material) {
+Material WithPreset(const Material& material) {
   Material m = material;
+  Material preset;
+  switch (m.preset()) {
+    case Material::RUBBER:
+      preset.set_young_modulus(1e6);
+      preset.set_poisson_ratio(0.45);
+      preset.set_density(1100);
+      preset.set_damping(3000);
+      break;
+    case Material::CLAY:
+      preset.set_young_modulus(2e5);
+      preset.set_poisson_ratio(0.4);
+      preset.set_density(1800);
+      preset.set_damping(9000);
+      preset.set_yield_strain(0.005);
+      preset.set_flow_rate(50);
+      preset.set_hardening(0.1);
+      break;
+    case Material::WAX:
+      preset.set_young_modulus(1e6);
+      preset.set_poisson_ratio(0.4);
+      preset.set_density(950);
+      preset.set_damping(2900);
+      preset.set_yield_strain(0.01);
+      preset.set_flow_rate(10);
+      preset.set_hardening(0.5);
+      break;
+    default:
+      return m;
+  }
+  if (m.young_modulus() == 0) m.set_young_modulus(preset.young_modulus());
+  if (m.poisson_ratio() == 0) m.set_poisson_ratio(preset.poisson_ratio());
+  if (m.density() == 0) m.set_density(preset.density());
+  if (m.damping() == 0) m.set_damping(preset.damping());
+  if (m.yield_strain() == 0) m.set_yield_strain(preset.yield_strain());
+  if (m.flow_rate() == 0) m.set_flow_rate(preset.flow_rate());
+  if (m.hardening() == 0) m.set_hardening(preset.hardening());
+  m.clear_preset();
+  return m;
+}
+
+Material ResolvedMaterial(const Material& material) {
+  Material m = WithPreset(material);
+  if (m.yield_strain() > 0 && m.flow_rate() == 0) m.set_flow_rate(kDefaultFlowRate);
   if (m.young_modulus() == 0) m.set_young_modulus(kDefaultYoungModulus);
   if (m.poisson_ratio() == 0) m.set_poisson_ratio(kDefaultPoissonRatio);
   if (m.density() == 0) m.set_density(kDefaultDensity);
@@ -434,6 +496,33 @@ std::string ModelName(const SolverSettings& settings) {
 SolverSettings ResolvedSolverSettings(const Scene& scene) {
   return ResolvedSolverSettings(scene.solver());
 }
+
+namespace {
+// A material that yields needs the per-control-cell corotation (plasticity
+// lives in its cells: solver/material/plasticity.h).
+absl::Status ValidatePlasticModel(const Scene& scene) {
+  const Materials& materials = scene.materials();
+  std::string field;
+  if (WithPreset(materials.base()).yield_strain() > 0) field = "materials.base";
+  for (int i = 0; field.empty() && i < materials.regions_size(); ++i) {
+    if (WithPreset(materials.regions(i).material()).yield_strain() > 0) {
+      field = absl::StrCat("materials.regions[", i, "].material");
+    }
+  }
+  if (field.empty()) return absl::OkStatus();
+  const SolverSettings s = ResolvedSolverSettings(scene.solver());
+  if (s.model() != SolverSettings::COROTATIONAL || s.corotation() != SolverSettings::CONTROL_CELL) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, ".yield_strain: a material that yields (clay) needs solver.model COROTATIONAL and "
+               "solver.corotation CONTROL_CELL; this scene asks for ",
+        SolverSettings::Model_Name(s.model()), " with ",
+        SolverSettings::Corotation_Name(s.corotation()),
+        " (the paper's local-frame model and the per-element frames do not carry plastic "
+        "flow yet)"));
+  }
+  return absl::OkStatus();
+}
+}  // namespace
 
 absl::Status ValidateScene(const Scene& scene) {
   const ControlMesh& m = scene.mesh();
@@ -543,6 +632,7 @@ absl::Status ValidateScene(const Scene& scene) {
   RETURN_IF_ERROR(ValidateTraced(scene));
   RETURN_IF_ERROR(ValidateSolverSettings(scene.solver()));
   RETURN_IF_ERROR(contact::ObstacleContact::Validate(scene.environment(), "environment"));
+  RETURN_IF_ERROR(ValidatePlasticModel(scene));
   return absl::OkStatus();
 }
 

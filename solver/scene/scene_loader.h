@@ -93,6 +93,7 @@ inline constexpr double kDefaultYoungModulus = 1e5;    // Pa
 inline constexpr double kDefaultPoissonRatio = 0.3;
 inline constexpr double kDefaultDensity = 1000.0;      // kg/m^3
 inline constexpr double kDefaultDamping = 0.0;         // kg/(m^3 s): no damping
+inline constexpr double kDefaultFlowRate = 50.0;       // 1/s (a material that yields)
 inline constexpr double kDefaultTimeStep = 1e-3;       // s
 inline constexpr double kDefaultCgTolerance = 1e-4;    // relative residual
 inline constexpr int32_t kDefaultCgMaxIterations = 500;
@@ -104,6 +105,10 @@ inline constexpr double kDefaultStabilitySafety = 0.9;
 // material region's material resolves on its own: a zero field there means
 // the default above, not the value of materials.base.
 Material ResolvedMaterial(const Material& material);
+// The preset's values (scene.proto Material.Preset) in the fields
+// `material` leaves at zero; the preset itself cleared. A paint's target
+// goes through this before it is painted.
+Material WithPreset(const Material& material);
 
 // `settings` with every zero field replaced by its default: model
 // LOCAL_FRAME, integrator CENTRAL_DIFFERENCE (AUTO stays AUTO), time_step

@@ -412,11 +412,16 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       const double hs = implicit.h();
       const double strain = ahead_energy + hs * (c.array() * g_ahead.array()).sum() +
                             0.5 * hs * hs * quad;
-      ImplicitForces(p_next, p, f_next, sub, f_press_next, /*energy=*/false);
+      // (Clay flows in a pass that holds frames and has each cell's
+      // displacement: the full force pass instead of frames alone.)
+      if (plasticity != nullptr) plasticity->Arm(h_sub);
+      ImplicitForces(p_next, p, f_next, sub, f_press_next, /*energy=*/plasticity != nullptr);
       last_strain_energy = strain;
     } else {
+      if (plasticity != nullptr) plasticity->Arm(h_sub);
       ControlForces(p_next, p, f_next, sub, f_press_next);
     }
+    if (plasticity != nullptr) plasticity->Disarm();
     add(sub);
     // Energy ledger: H = kinetic + strain + springs - external work.
     velocity = (p_next - p) / h_sub;
@@ -464,6 +469,7 @@ absl::Status Solid::Step() {
   im.backup_prev = p_prev_;
   const Impl::Ledger ledger_at_start = im.ledger;
   if (im.environment != nullptr) im.environment->Checkpoint();
+  if (im.plasticity != nullptr) im.plasticity->Checkpoint();
   const bool rebase_at_start = im.ledger_rebase;
   const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
   const int64_t rechecks_at_start = im.implicit.rechecked_starts();
@@ -480,6 +486,7 @@ absl::Status Solid::Step() {
     im.ledger = ledger_at_start;
     im.ledger_rebase = rebase_at_start;
     if (im.environment != nullptr) im.environment->Rollback();
+    if (im.plasticity != nullptr) im.plasticity->Rollback();
     im.model->ResetFrames();
     im.forces_valid = false;
     ++stats.rollbacks;
@@ -520,6 +527,28 @@ void Solid::SetAtRest(const Points& p) {
 }
 
 int Solid::threads() const { return impl_->pool->size(); }
+
+Solid::PlasticStats Solid::plastic_stats() const {
+  PlasticStats out;
+  const material::CellPlasticity* pl = impl_->plasticity.get();
+  if (pl == nullptr) return out;
+  for (size_t c = 0; c < pl->laws().size(); ++c) {
+    if (pl->laws()[c].yield > 0) ++out.cells;
+    out.max_strain = std::max(out.max_strain, pl->alpha(static_cast<int32_t>(c)));
+  }
+  out.yielded = pl->yielded_cells();
+  out.dissipation = pl->dissipation();
+  return out;
+}
+
+Solid::ContactStats Solid::contact_stats() const {
+  ContactStats out;
+  if (const contact::ObstacleContact* env = impl_->environment.get()) {
+    out.touching = static_cast<int32_t>(env->touches().size());
+    out.max_depth = env->max_depth();
+  }
+  return out;
+}
 
 void Solid::SetPaintReuseForTesting(bool reuse) { impl_->paint_reuse = reuse; }
 

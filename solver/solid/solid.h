@@ -649,6 +649,22 @@ class Solid {
   };
   Bounds SurfaceBounds() const;
 
+  // Clay (material/plasticity.h): the control cells whose material yields,
+  // those that have yielded, the plastic dissipation so far (J) and the
+  // largest accumulated plastic strain. All zero without a yielding material.
+  struct PlasticStats {
+    int32_t cells = 0, yielded = 0;
+    double dissipation = 0, max_strain = 0;
+  };
+  PlasticStats plastic_stats() const;
+  // The environment (floor, obstacles): surface vertices in contact now and
+  // the deepest of them (metres below the plane it entered by).
+  struct ContactStats {
+    int32_t touching = 0;
+    double max_depth = 0;
+  };
+  ContactStats contact_stats() const;
+
   const BuildReport& build_report() const { return report_; }
   const PhaseTimes& last_phases() const { return phases_; }
   const StepStats& last_step() const { return last_step_; }

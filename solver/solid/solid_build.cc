@@ -283,7 +283,28 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   if (b.geometry != nullptr) cell_geometry = std::move(b.geometry);
   has_damping = b.has_damping;
   ++contact.epoch;  // the contact stiffness depends on the material
+  if (cell_model != nullptr) {
+    if (plasticity != nullptr) {
+      plasticity->Attach(*cell_model);
+    } else {
+      cell_model->set_flow(nullptr);
+    }
+  }
   ConfigureLinearized();
+}
+
+std::vector<material::FlowLaw> Solid::Impl::SceneFlowLaws(const Scene& scene) const {
+  const mesh::CellComplex& control = d->control();
+  std::vector<material::FlowLaw> laws(control.num_cells());
+  for (int32_t c = 0; c < control.num_cells(); ++c) {
+    const Eigen::Vector3d x = control.CellCentroid(c);
+    const Material* m = &scene.materials().base();
+    for (const MaterialRegion& r : scene.materials().regions()) {
+      if (InRegion(r.region(), x, c)) m = &r.material();
+    }
+    laws[c] = material::FlowLawOf(scene::ResolvedMaterial(*m));
+  }
+  return laws;
 }
 
 std::optional<Solid::Impl::RetiredMaterial> Solid::Impl::TakeRetired(
@@ -449,6 +470,18 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
   s->total_mass_ = SumOfValues(im.mt);
+  // Clay: the cells' flow laws, when some material yields (the scene's
+  // rules refused it for models without control-cell frames).
+  if (std::vector<material::FlowLaw> laws = im.SceneFlowLaws(scene);
+      std::any_of(laws.begin(), laws.end(), [](const material::FlowLaw& l) { return l.yield > 0; })) {
+    if (im.cell_model == nullptr) {
+      return absl::InvalidArgumentError(
+          "materials: a material that yields needs solver.model COROTATIONAL and "
+          "solver.corotation CONTROL_CELL");
+    }
+    im.plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
+    im.plasticity->Attach(*im.cell_model);
+  }
 
   // Constraints: the scene's fixed regions, held at rest.
   im.fix_count.assign(nc, 0);

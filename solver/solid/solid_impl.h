@@ -28,6 +28,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/worker_pool.h"
 #include "solver/contact/obstacle_contact.h"
+#include "solver/material/plasticity.h"
 #include "solver/fem/node_rows.h"
 #include "solver/integrators/backward_euler.h"
 #include "solver/integrators/central_difference.h"
@@ -165,6 +166,9 @@ class Solid::PreparedPaint {
   // build.k_cells_made), mass, and the stable step.
   double layout_ms = 0, stable_ms = 0, total_ms = 0;
   int64_t samples_painted = 0;
+  // Clay: the cells' flow laws after the paint, when it paints them.
+  bool paints_flow = false;
+  std::vector<material::FlowLaw> laws;
   // build.model runs on this pool until installed (then on the solid's).
   std::unique_ptr<WorkerPool> pool;
 };
@@ -377,6 +381,14 @@ struct Solid::Impl {
   // like the pressure's, so they ride in f_press (work counted
   // trapezoidally in the ledger): PositionForces adds them.
   std::unique_ptr<contact::ObstacleContact> environment;
+  // ---- Clay: plastic flow per control cell (solver/material/
+  // plasticity.h), a part with its own state; null when no material of the
+  // scene yields. Hooked into cell_model (Attach) whenever that changes.
+  std::unique_ptr<material::CellPlasticity> plasticity;
+  // The scene's flow law per control cell (the material at its rest
+  // centroid, as the material regions give it).
+  std::vector<material::FlowLaw> SceneFlowLaws(const Scene& scene) const;
+
   // pressure = the follower loads (pressures, drags) and the environment's
   // contact forces at p, with the velocity from prev over one sub-step.
   void PositionForces(const Points& p, const Points& prev, Points& pressure) {
@@ -665,6 +677,7 @@ class Solid::PreparedState {
   std::vector<int32_t> fix_count;
   std::vector<Impl::DragLoad> drags;
   std::vector<contact::ObstacleContact::Touch> touches;  // the environment's
+  std::optional<material::CellPlasticity::State> plastic;  // clay's
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
   bool taken_back = false;             // build is Impl::retired's

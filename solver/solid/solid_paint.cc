@@ -51,6 +51,30 @@ double Blend(double value, double target, double w) {
   return value + w * (target - value);
 }
 
+// Clay's flow laws per control cell after `paint` (weights at the cells'
+// rest centroids). A preset paints all three fields, zeros included (rubber
+// stops a cell from yielding); otherwise only the fields set.
+std::vector<material::FlowLaw> PaintedLaws(const MaterialPaint& paint, const Material& target,
+                                           std::vector<material::FlowLaw> laws,
+                                           const mesh::CellComplex& control) {
+  const bool all = paint.material().preset() != Material::PRESET_NONE;
+  auto blend = [&](double value, double to, double w) {
+    if (!all) return Blend(value, to, w);
+    if (w <= 0) return value;
+    return w >= 1 ? to : value + w * (to - value);
+  };
+  for (int32_t c = 0; c < control.num_cells(); ++c) {
+    const double w = PaintWeight(paint, control.CellCentroid(c), c);
+    material::FlowLaw& l = laws[c];
+    l.yield = blend(l.yield, target.yield_strain(), w);
+    l.rate = blend(l.rate, target.flow_rate(), w);
+    l.hardening = blend(l.hardening, target.hardening(), w);
+    if (target.poisson_ratio() > 0) l.poisson = Blend(l.poisson, target.poisson_ratio(), w);
+    if (l.yield > 0 && l.rate == 0) l.rate = scene::kDefaultFlowRate;
+  }
+  return laws;
+}
+
 }  // namespace
 
 // ---- Material painting.
@@ -69,8 +93,27 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   auto out = std::make_shared<PreparedPaint>();
   out->paint = paint;
   out->made_for = im.PreparedForNow();
+
   const models::ElementLayout& old = *im.layout;
-  const Material& target = paint.material();
+  const Material target = scene::WithPreset(paint.material());
+  {
+    const Material& m = paint.material();
+    out->paints_flow = m.yield_strain() > 0 || m.flow_rate() > 0 || m.hardening() > 0 ||
+                       m.preset() != Material::PRESET_NONE;
+  }
+  if (out->paints_flow) {
+    std::vector<material::FlowLaw> now =
+        im.plasticity != nullptr ? im.plasticity->laws()
+                                 : std::vector<material::FlowLaw>(d_.control().num_cells());
+    out->laws = PaintedLaws(paint, target, std::move(now), d_.control());
+    const bool yields = std::any_of(out->laws.begin(), out->laws.end(),
+                                    [](const material::FlowLaw& l) { return l.yield > 0; });
+    if (yields && im.cell_model == nullptr) {
+      return absl::InvalidArgumentError(
+          "paint.material.yield_strain: painting clay (a material that yields) needs "
+          "solver.model COROTATIONAL and solver.corotation CONTROL_CELL");
+    }
+  }
   int64_t touched = 0;
   // Bounds for the new stable step: K' <= r K and M' >= m M in the PSD
   // sense, r the largest ratio of the isotropic stiffness's eigenvalues
@@ -214,6 +257,12 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   // Nothing can fail from here on.
   build.model->set_frames(im.model->frames());
   build.model->set_pool(*im.pool);
+  if (p->paints_flow && im.plasticity == nullptr) {
+    // The first clay on this solid: its part, attached by InstallMaterial.
+    im.plasticity = std::make_unique<material::CellPlasticity>(p->laws);
+  } else if (p->paints_flow) {
+    im.plasticity->set_laws(p->laws);
+  }
   im.InstallMaterial(std::move(build));
   if (im.use_implicit) {
     im.k0 = std::move(p->k0);

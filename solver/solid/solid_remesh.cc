@@ -329,6 +329,26 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   TransferReport& rep = report != nullptr ? *report : local;
   rep = TransferReport();
 
+  // Clay: each cell keeps the flow law of the cell it comes from (new
+  // cells the scene's). Its plastic offsets are not carried: a topology
+  // edit rebuilds the rest shape from the control mesh (docs/sculpt.md).
+  if (old.plasticity != nullptr && im.cell_model != nullptr) {
+    std::vector<material::FlowLaw> laws =
+        im.plasticity != nullptr ? im.plasticity->laws()
+                                 : std::vector<material::FlowLaw>(control.num_cells());
+    const std::vector<material::FlowLaw>& was = old.plasticity->laws();
+    for (int32_t c = 0; c < control.num_cells(); ++c) {
+      const int32_t src = t.cell_source[c];
+      if (src >= 0 && src < static_cast<int32_t>(was.size())) laws[c] = was[src];
+    }
+    if (im.plasticity == nullptr) {
+      im.plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
+      im.plasticity->Attach(*im.cell_model);
+    } else {
+      im.plasticity->set_laws(std::move(laws));
+    }
+  }
+
   // Loads, drags and constraints, with their ids.
   im.next_id = old.next_id;
   im.gravity = old.gravity;

@@ -282,6 +282,8 @@ SavedState Solid::SaveStateParts() const {
   }
   // Version 6: the environment's contacts (empty without one).
   w.Bytes(im.environment != nullptr ? im.environment->SaveState() : std::string());
+  // And clay's flow laws, plastic offsets and strains (empty without).
+  w.Bytes(im.plasticity != nullptr ? im.plasticity->SaveState() : std::string());
   // Element frames (warm starts).
   const models::InternalForceModel::Frames& frames = im.model->frames();
   for (const auto& f : frames) {
@@ -541,6 +543,22 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
       }
     }
   }
+  // Clay: none in the bytes (no material yielded then), or its state.
+  std::optional<material::CellPlasticity::State> plastic;
+  if (version >= 6 && r.ok()) {
+    const std::string bytes = r.Bytes("plasticity");
+    if (r.ok() && !bytes.empty() && im.cell_model == nullptr) {
+      r.Fail("plastic state for a solid without control-cell frames");
+    } else if (r.ok() && !bytes.empty()) {
+      absl::StatusOr<material::CellPlasticity::State> parsed = material::CellPlasticity::ParseState(
+          bytes, im.cell_model->cells(), im.cell_model->support_entries());
+      if (!parsed.ok()) {
+        r.Fail(std::string(parsed.status().message()));
+      } else {
+        plastic = *std::move(parsed);
+      }
+    }
+  }
   RETURN_IF_ERROR(r.status());
 
   // Material samples and element frames (version 5: frames first, then
@@ -697,6 +715,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   out->fix_count = std::move(fix_count);
   out->drags = std::move(drags);
   out->touches = std::move(touches);
+  out->plastic = std::move(plastic);
   out->frames = std::move(frames);
   out->build = std::move(build);
   out->k0 = std::move(k0);
@@ -755,6 +774,23 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   im.fixes = std::move(s.fixes);
   im.drags = std::move(s.drags);
   if (im.environment != nullptr) im.environment->set_touches(std::move(s.touches));
+  if (s.plastic.has_value()) {
+    if (im.plasticity == nullptr) {
+      im.plasticity = std::make_unique<material::CellPlasticity>(s.plastic->laws);
+      im.plasticity->Attach(*im.cell_model);
+    }
+    im.plasticity->set_state(*std::move(s.plastic));
+  } else if (im.plasticity != nullptr) {
+    // A state from before the first clay was painted: elastic again.
+    im.cell_model->set_flow(nullptr);
+    {
+      std::lock_guard<std::mutex> lock(im.retired_mu);
+      if (im.retired.has_value() && im.retired->build.cell_model != nullptr) {
+        im.retired->build.cell_model->set_flow(nullptr);
+      }
+    }
+    im.plasticity.reset();
+  }
   im.fix_count = std::move(s.fix_count);
   im.next_id = s.next_id;
   im.gravity = s.gravity;

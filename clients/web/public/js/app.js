@@ -65,6 +65,7 @@ class App {
     }
     $('undo').onclick = () => this.send(C.undo(), 'undo');
     $('redo').onclick = () => this.send(C.redo(), 'redo');
+    $('bake').onclick = () => this.tools.edit(C.bake(), 'bake').catch((err) => this.showError(err));
     $('pause').onclick = () => this.send(C.pause());
     $('resume').onclick = () => this.send(C.resume());
     $('step').onclick = () => this.send(C.step(1));
@@ -97,25 +98,39 @@ class App {
     for (const [key, label, , step] of PARAMS[this.tools.tool] || []) {
       const l = document.createElement('label');
       l.textContent = label;
-      const input = document.createElement('input');
-      input.type = 'number';
-      input.step = String(step);
-      input.value = String(this.tools.params[key]);
+      const input = Array.isArray(step) ? this.choiceParam(key, step) : this.numberParam(key, label, step);
       input.dataset.param = key;
-      input.onchange = () => {
-        const v = Number(input.value);
-        if (!Number.isFinite(v)) {
-          this.showError(new Error(`${label}: not a number`));
-          input.value = String(this.tools.params[key]);
-          return;
-        }
-        this.tools.params[key] = v;
-      };
       l.appendChild(input);
       box.appendChild(l);
     }
     if (this.tools.tool === 'sharp') this.controlMesh().catch(() => {});
     this.view.showCursor(null);
+  }
+
+  numberParam(key, label, step) {
+    const input = document.createElement('input');
+    input.type = 'number';
+    input.step = String(step);
+    input.value = String(this.tools.params[key]);
+    input.onchange = () => {
+      const v = Number(input.value);
+      if (!Number.isFinite(v)) {
+        this.showError(new Error(`${label}: not a number`));
+        input.value = String(this.tools.params[key]);
+        return;
+      }
+      this.tools.params[key] = v;
+    };
+    return input;
+  }
+
+  // A select of [value, text] options (the material brush's preset).
+  choiceParam(key, options) {
+    const select = document.createElement('select');
+    for (const [value, text] of options) select.add(new Option(text, value));
+    select.value = this.tools.params[key];
+    select.onchange = () => { this.tools.params[key] = select.value; };
+    return select;
   }
 
   banner(text, kind = 'info', ms = 6000) {
@@ -202,6 +217,7 @@ class App {
     this.watch();
     history.replaceState(null, '', `#session=${ref.id}&token=${ref.token}`);
     $('share').textContent = `share: ${location.href}`;
+    $('bake').disabled = false;
     this.refreshSessions();
   }
 
@@ -212,6 +228,7 @@ class App {
     this.conn.setSession(null);
     history.replaceState(null, '', '#');
     $('share').textContent = '';
+    $('bake').disabled = true;
   }
 
   async closeSession() {

@@ -63,13 +63,25 @@ export function paint(field, materialPoint, { radius, strength, falloff, value }
   const key = { stiffness: 'young_modulus', mass: 'density', damping: 'damping' }[field];
   if (!key) throw new Error(`paint: unknown field ${field}`);
   positive(`${field} value`, value);
+  return brushDab(materialPoint, { [key]: value }, radius, strength, falloff);
+}
+
+// The material brush's presets (scene.proto Material.Preset): rubber never
+// yields; clay yields (what you pull stays); wax is stiffer clay.
+export const PRESETS = ['RUBBER', 'CLAY', 'WAX'];
+
+// A dab of the material brush: paints a whole preset.
+export function paintPreset(materialPoint, { radius, strength, falloff, preset }) {
+  if (!PRESETS.includes(preset)) throw new Error(`paint: unknown preset ${preset}`);
+  return brushDab(materialPoint, { preset }, radius, strength, falloff);
+}
+
+function brushDab(materialPoint, material, radius, strength, falloff) {
   finite('strength', strength);
   if (!(strength > 0 && strength <= 1)) throw new Error(`strength: must be in (0, 1], got ${strength}`);
   finite('falloff', falloff);
   if (!(falloff >= 0 && falloff <= 1)) throw new Error(`falloff: must be in [0, 1], got ${falloff}`);
-  return {
-    paint_material: { region: sphere(materialPoint, radius), material: { [key]: value }, strength, falloff },
-  };
+  return { paint_material: { region: sphere(materialPoint, radius), material, strength, falloff } };
 }
 
 export function pin(materialPoint, radius) {
@@ -101,6 +113,10 @@ export function subdivideCell(cell) {
 export function sharpEdge(v0, v1, sharp) {
   return { edit: { sharp_edges: { edges: [{ v0, v1 }], sharp } } };
 }
+
+// The solid's current shape becomes its rest shape (the server fills in
+// rest_positions).
+export const bake = () => ({ edit: { bake: {} } });
 
 export const undo = () => ({ undo: {} });
 export const redo = () => ({ redo: {} });

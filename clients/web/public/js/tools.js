@@ -4,7 +4,8 @@
 
 import * as C from './commands.js';
 
-// Parameters per tool: [key, label, default, step].
+// Parameters per tool: [key, label, default, step], or for a choice
+// [key, label, default, [[value, text], ...]].
 export const PARAMS = {
   drag: [['dragStiffness', 'stiffness (N/m)', 5e4, 1e4]],
   inflate: [['pressure', 'pressure (Pa)', 3000, 500], ['radius', 'radius (m)', 0.8, 0.1]],
@@ -13,6 +14,9 @@ export const PARAMS = {
     ['falloff', 'falloff', 0.25, 0.05], ['stiffnessValue', 'value (Pa)', 1e6, 1e5]],
   mass: [['radius', 'radius (m)', 0.8, 0.1], ['strength', 'strength', 1, 0.05],
     ['falloff', 'falloff', 0.25, 0.05], ['massValue', 'value (kg/m³)', 5000, 500]],
+  material: [['radius', 'radius (m)', 0.8, 0.1], ['strength', 'strength', 1, 0.05],
+    ['falloff', 'falloff', 0.25, 0.05],
+    ['preset', 'material', 'CLAY', [['RUBBER', 'Rubber'], ['CLAY', 'Clay'], ['WAX', 'Wax']]]],
   pin: [['pinRadius', 'radius (m)', 0.8, 0.1]],
   curve: [['curveStiffness', 'stiffness (N/m)', 2e4, 5e3]],
   extrude: [['extrudeDistance', 'distance (m)', 0.8, 0.1], ['extrudeLayers', 'layers', 1, 1]],
@@ -20,6 +24,7 @@ export const PARAMS = {
 
 const MOVE_INTERVAL_MS = 1000 / 120;  // at most 120 target updates a second
 const DAB_INTERVAL_MS = 40;
+const BRUSHES = ['stiffness', 'mass', 'material'];
 
 export class Tools {
   constructor(app) {
@@ -51,7 +56,7 @@ export class Tools {
   }
 
   brushRadius() {
-    if (['inflate', 'deflate', 'stiffness', 'mass'].includes(this.tool)) return this.params.radius;
+    if (['inflate', 'deflate', ...BRUSHES].includes(this.tool)) return this.params.radius;
     if (this.tool === 'pin') return this.params.pinRadius;
     return this.app.scale * 0.02;
   }
@@ -97,7 +102,7 @@ export class Tools {
       switch (this.tool) {
         case 'drag': return await this.startDrag(press);
         case 'inflate': case 'deflate': return await this.startPressure(press);
-        case 'stiffness': case 'mass': return await this.dab(press);
+        case 'stiffness': case 'mass': case 'material': return await this.dab(press);
         case 'curve': return await this.curveDown(press);
         default: return await this.click(press);
       }
@@ -197,19 +202,14 @@ export class Tools {
   // Brush: a dab at the press, then one per DAB_INTERVAL_MS while moving,
   // never more than one in flight (the server's answer paces the brush).
   async dab(press) {
-    const field = this.tool;
-    const values = { stiffness: this.params.stiffnessValue, mass: this.params.massValue };
+    const tool = this.tool;
     let busy = false;
     let moved = false;
     const once = async (x, y) => {
       busy = true;
       try {
         const hit = await this.pick(x, y);
-        if (hit) {
-          await this.conn.command(C.paint(field, hit.material_point, {
-            radius: this.params.radius, strength: this.params.strength, falloff: this.params.falloff,
-            value: values[field] }));
-        }
+        if (hit) await this.conn.command(this.brushCommand(tool, hit.material_point));
       } finally {
         busy = false;
       }
@@ -223,6 +223,15 @@ export class Tools {
         await once(press.last.clientX, press.last.clientY);
       }
     }
+  }
+
+  // A dab of brush `tool` at a material point, with the panel's parameters.
+  brushCommand(tool, materialPoint) {
+    const p = this.params;
+    const brush = { radius: p.radius, strength: p.strength, falloff: p.falloff };
+    if (tool === 'material') return C.paintPreset(materialPoint, { ...brush, preset: p.preset });
+    const value = { stiffness: p.stiffnessValue, mass: p.massValue }[tool];
+    return C.paint(tool, materialPoint, { ...brush, value });
   }
 
   async curveDown(press) {
@@ -305,8 +314,8 @@ export class Tools {
   async edit(command, what) {
     const reply = await this.conn.command(command);
     const e = reply.edit || {};
-    this.app.message(`${what}: ${e.control_cells_before} → ${e.control_cells_after} control cells` +
-      (reply.hold_ms ? `, ${reply.hold_ms.toFixed(0)} ms` : ''));
+    const text = e.summary || `${e.control_cells_before} → ${e.control_cells_after} control cells`;
+    this.app.message(`${what}: ${text}` + (reply.hold_ms ? `, ${reply.hold_ms.toFixed(0)} ms` : ''));
   }
 
   // Called after a frame is drawn: drag round trips whose command's step

@@ -4,6 +4,8 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import * as C from '../../public/js/commands.js';
+import { Tools } from '../../public/js/tools.js';
+import { loadService } from '../../gateway/grpc.js';
 import { viridis, fieldRange, colorize, formatValue } from '../../public/js/colormap.js';
 
 const P = { x: 0.1, y: 0.9, z: -0.2 };
@@ -28,6 +30,48 @@ test('brush dabs paint young_modulus or density with strength and falloff checke
   assert.throws(() => C.paint('stiffness', P, { radius: 0.2, strength: 2, falloff: 0, value: 1 }), /strength: must be in \(0, 1\]/);
   assert.throws(() => C.paint('stiffness', P, { radius: -1, strength: 1, falloff: 0, value: 1 }), /radius: must be > 0/);
   assert.throws(() => C.paint('colour', P, { radius: 1, strength: 1, falloff: 0, value: 1 }), /unknown field colour/);
+});
+
+test('the material brush paints a preset with the brush\'s radius, strength and falloff', () => {
+  assert.deepEqual(C.paintPreset(P, { radius: 0.5, strength: 1, falloff: 0.25, preset: 'CLAY' }), {
+    paint_material: { region: { sphere: { center: P, radius: 0.5 } }, material: { preset: 'CLAY' },
+      strength: 1, falloff: 0.25 },
+  });
+  assert.deepEqual(C.paintPreset(P, { radius: 1, strength: 0.5, falloff: 0, preset: 'RUBBER' })
+    .paint_material.material, { preset: 'RUBBER' });
+  assert.deepEqual(C.PRESETS, ['RUBBER', 'CLAY', 'WAX']);
+  assert.throws(() => C.paintPreset(P, { radius: 1, strength: 1, falloff: 0, preset: 'GLASS' }), /unknown preset GLASS/);
+  assert.throws(() => C.paintPreset(P, { radius: 1, strength: 0, falloff: 0, preset: 'WAX' }), /strength: must be in \(0, 1\]/);
+  assert.throws(() => C.paintPreset(P, { radius: 0, strength: 1, falloff: 0, preset: 'WAX' }), /radius: must be > 0/);
+});
+
+test('the panel\'s brushes: clay by default on the material brush, numbers on the others', () => {
+  const tools = new Tools({ onToolChanged() {}, refreshMarkers() {} });
+  assert.deepEqual(tools.brushCommand('material', P), {
+    paint_material: { region: { sphere: { center: P, radius: 0.8 } }, material: { preset: 'CLAY' },
+      strength: 1, falloff: 0.25 },
+  });
+  tools.params.preset = 'WAX';
+  assert.deepEqual(tools.brushCommand('material', P).paint_material.material, { preset: 'WAX' });
+  assert.deepEqual(tools.brushCommand('stiffness', P).paint_material.material, { young_modulus: 1e6 });
+  assert.deepEqual(tools.brushCommand('mass', P).paint_material.material, { density: 5000 });
+});
+
+test('bake: an edit with an empty bake (the server fills in the rest positions)', () => {
+  assert.deepEqual(C.bake(), { edit: { bake: {} } });
+});
+
+test('bake and the preset paint survive the real service.proto (as the gateway sends them)', () => {
+  const m = loadService().definition['dynsolid.Sessions'].Commands;
+  const roundTrip = (command) => m.requestDeserialize(m.requestSerialize({ seq: 1, command })).command;
+  const baked = roundTrip(C.bake());
+  assert.equal(baked.kind, 'edit');
+  assert.equal(baked.edit.kind, 'bake');
+  assert.deepEqual(baked.edit.bake.rest_positions, []);
+  const dab = roundTrip(C.paintPreset(P, { radius: 0.5, strength: 1, falloff: 0.25, preset: 'WAX' }));
+  assert.equal(dab.kind, 'paint_material');
+  assert.equal(dab.paint_material.material.preset, 'WAX');
+  assert.equal(dab.paint_material.region.sphere.radius, 0.5);
 });
 
 test('topology edits name the picked ids', () => {

@@ -483,7 +483,9 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
   for (size_t k = 0; k < commands.size(); ++k) {
     if (prebuilt == nullptr && core_->NeedsBuild(commands[k].request)) {
       // Build off the loop; this command waits for it, and so do the rest
-      // but those HoldBehindBuild lets go ahead.
+      // but those HoldBehindBuild lets go ahead. What the server fills in
+      // (a bake's positions) is taken now, and journaled with it.
+      core_->Stamp(commands[k].request);
       std::function<std::shared_ptr<SimCore::Prebuilt>()> job =
           core_->Prebuild(commands[k].request);
       building_ = std::move(commands[k]);

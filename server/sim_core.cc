@@ -149,6 +149,23 @@ bool SimCore::MayPassBuild(const Command& building, const Command& command) {
   }
 }
 
+void SimCore::Stamp(CommandRequest& request) const {
+  Command* c = request.mutable_command();
+  if (c->kind_case() != Command::kEdit || !c->edit().has_bake() ||
+      c->edit().bake().rest_positions_size() != 0) {
+    return;
+  }
+  FillBake(*solid_, *c->mutable_edit()->mutable_bake());
+}
+
+void SimCore::FillBake(const solid::Solid& solid, Bake& bake) {
+  const Points& p = solid.control_positions();
+  bake.mutable_rest_positions()->Reserve(static_cast<int>(p.size()));
+  for (int64_t i = 0; i < p.rows(); ++i) {
+    for (int k = 0; k < 3; ++k) bake.add_rest_positions(p(i, k));
+  }
+}
+
 std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
     const CommandRequest& request) const {
   const Command& c = request.command();
@@ -501,6 +518,12 @@ absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply,
     } else {
       applied = prebuilt->edit->status();
     }
+  } else if (edit.has_bake() && edit.bake().rest_positions_size() == 0) {
+    // A bake left to the server: the positions at this step (a replay of
+    // such a record reaches this very step with the same bits).
+    TopologyEdit stamped = edit;
+    FillBake(*solid_, *stamped.mutable_bake());
+    applied = sculpt::ApplyEdit(*scene_, *solid_, stamped);
   } else {
     applied = sculpt::ApplyEdit(*scene_, *solid_, edit);
   }

@@ -96,6 +96,12 @@ class SimCore {
   // The last seq applied for `client_id` (0: none).
   uint64_t LastSeq(const std::string& client_id) const;
   std::function<std::shared_ptr<Prebuilt>()> Prebuild(const CommandRequest& request) const;
+  // Fills in what `request` leaves to the server, at the step it is taken
+  // (before Prebuild, on the simulation thread): a bake's rest positions,
+  // the solid's control positions now. The journal records the filled
+  // request, so a replay bakes the very same shape.
+  void Stamp(CommandRequest& request) const;
+  static void FillBake(const solid::Solid& solid, Bake& bake);
 
   // Whether the loop should take a step now: running, or a Step count left.
   bool WantsStep() const { return !paused_ || steps_remaining_ > 0; }

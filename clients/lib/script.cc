@@ -44,7 +44,8 @@ const std::vector<VerbSpec>& Verbs() {
       {"remove", {"load"}, "load"},
       {"fix", Cat(kRegionKeys, {"name"}), nullptr},
       {"unfix", {"constraint"}, "constraint"},
-      {"paint", Cat(kRegionKeys, {"E", "nu", "density", "damping", "strength", "falloff"}),
+      {"paint", Cat(kRegionKeys, {"E", "nu", "density", "damping", "preset", "yield", "flow",
+                                  "hardening", "strength", "falloff"}),
        nullptr},
       {"drag", {"at", "to", "k", "name"}, nullptr},
       {"curve", {"along", "to", "k", "samples", "name"}, nullptr},
@@ -56,6 +57,7 @@ const std::vector<VerbSpec>& Verbs() {
       {"subdivide", {"cells", "near"}, "cells"},
       {"sharp", {"edges"}, "edges"},
       {"smooth", {"edges"}, "edges"},
+      {"bake", {}, nullptr},
       {"undo", {}, nullptr},
       {"redo", {}, nullptr},
       {"pause", {}, nullptr},
@@ -402,8 +404,31 @@ std::string ParseLine(const std::vector<std::string>& words,
     MaterialPaint* paint = c.mutable_paint_material();
     p.ParseRegion(paint->mutable_region());
     Material* m = paint->mutable_material();
-    if (p.ok() && !p.Has("E") && !p.Has("nu") && !p.Has("density") && !p.Has("damping")) {
-      p.Fail("needs at least one of E=PASCALS, nu=RATIO, density=KG_M3, damping=KG_M3_S");
+    if (p.ok() && !p.Has("E") && !p.Has("nu") && !p.Has("density") && !p.Has("damping") &&
+        !p.Has("preset") && !p.Has("yield") && !p.Has("flow") && !p.Has("hardening")) {
+      p.Fail(
+          "needs at least one of E=PASCALS, nu=RATIO, density=KG_M3, damping=KG_M3_S, "
+          "preset=rubber|clay|wax, yield=STRAIN, flow=PER_SECOND, hardening=RATIO");
+    }
+    if (p.ok() && p.Has("preset")) {
+      const std::string name = absl::AsciiStrToLower(p.Value("preset"));
+      Material::Preset preset = Material::PRESET_NONE;
+      if (name == "rubber") {
+        preset = Material::RUBBER;
+      } else if (name == "clay") {
+        preset = Material::CLAY;
+      } else if (name == "wax") {
+        preset = Material::WAX;
+      } else {
+        p.Fail(absl::StrCat("\"", p.Token("preset"), "\" is not a preset: rubber, clay or wax"));
+      }
+      m->set_preset(preset);
+    }
+    if (p.ok() && p.Has("yield")) {
+      if (auto v = p.Number("yield")) {
+        if (*v < 0 || *v >= 1) p.Fail(absl::StrCat("\"", p.Token("yield"), "\" must be in [0, 1)"));
+        m->set_yield_strain(*v);
+      }
     }
     auto non_negative = [&](const std::string& key, void (Material::*set)(double)) {
       if (!p.ok() || !p.Has(key)) return;
@@ -415,6 +440,8 @@ std::string ParseLine(const std::vector<std::string>& words,
     non_negative("E", &Material::set_young_modulus);
     non_negative("density", &Material::set_density);
     non_negative("damping", &Material::set_damping);
+    non_negative("flow", &Material::set_flow_rate);
+    non_negative("hardening", &Material::set_hardening);
     if (p.ok() && p.Has("nu")) {
       if (auto v = p.Number("nu")) {
         if (*v < 0 || *v >= 0.5) p.Fail(absl::StrCat("\"", p.Token("nu"), "\" must be in [0, 0.5)"));
@@ -565,6 +592,8 @@ std::string ParseLine(const std::vector<std::string>& words,
         r->set_v1(b);
       }
     }
+  } else if (verb == "bake") {
+    c.mutable_edit()->mutable_bake();  // the server fills in the positions
   } else if (verb == "undo") {
     c.mutable_undo();
   } else if (verb == "redo") {

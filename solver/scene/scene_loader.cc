@@ -249,6 +249,13 @@ absl::Status ValidateRegionImpl(const Region& region, absl::string_view field) {
                                                      region.control_cells(i)));
     }
   }
+  for (int i = 0; i < region.control_points_size(); ++i) {
+    if (region.control_points(i) < 0) {
+      return absl::InvalidArgumentError(absl::StrCat(field, ".control_points[", i,
+                                                     "] must be a vertex index >= 0, got ",
+                                                     region.control_points(i)));
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -327,9 +334,10 @@ absl::Status ValidateRegion(const Region& region, std::string_view field) {
 
 absl::Status ValidateNonEmptyRegion(const Region& region, std::string_view field) {
   RETURN_IF_ERROR(ValidateRegion(region, field));
-  if (region.shape_case() == Region::SHAPE_NOT_SET && region.control_cells_size() == 0) {
+  if (region.shape_case() == Region::SHAPE_NOT_SET && region.control_cells_size() == 0 &&
+      region.control_points_size() == 0) {
     return absl::InvalidArgumentError(absl::StrCat(
-        A(field), " is empty: set a box, a sphere or control_cells"));
+        A(field), " is empty: set a box, a sphere, control_cells or control_points"));
   }
   return absl::OkStatus();
 }
@@ -425,20 +433,20 @@ Material WithPreset(const Material& material) {
       preset.set_damping(3000);
       break;
     case Material::CLAY:
-      preset.set_young_modulus(2e5);
+      preset.set_young_modulus(1e6);
       preset.set_poisson_ratio(0.4);
       preset.set_density(1800);
       preset.set_damping(9000);
-      preset.set_yield_strain(0.005);
+      preset.set_yield_strain(0.01);
       preset.set_flow_rate(50);
       preset.set_hardening(0.1);
       break;
     case Material::WAX:
-      preset.set_young_modulus(1e6);
+      preset.set_young_modulus(3e6);
       preset.set_poisson_ratio(0.4);
       preset.set_density(950);
       preset.set_damping(2900);
-      preset.set_yield_strain(0.01);
+      preset.set_yield_strain(0.02);
       preset.set_flow_rate(10);
       preset.set_hardening(0.5);
       break;

@@ -7,10 +7,12 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/build.h"
 #include "solver/scene/inline_mesh.h"
 #include "solver/scene/scene_loader.h"
+#include "solver/sculpt/edit_common.h"
 #include "solver/sculpt/topology.h"
 
 namespace dynsolid::sculpt {
@@ -57,6 +59,34 @@ int32_t NearestBoundaryFace(const mesh::CellComplex& c, const Vec3& p) {
     }
   }
   return best;
+}
+
+// A bake: the same cells and sharp edges over the baked positions (which
+// become both the rest and the current ones). The checks of every edit
+// refuse an inverted cell.
+absl::StatusOr<EditResult> BakeShape(const mesh::CellComplex& rest,
+                                     const std::vector<uint8_t>& sharp, const dynsolid::Bake& b) {
+  const int32_t nv = rest.num_vertices();
+  if (b.rest_positions_size() != 3 * nv) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "rest_positions: ", b.rest_positions_size(), " values for ", nv,
+        " control points (3 each; the server fills them in with the solid's positions)"));
+  }
+  EditResult result;
+  result.mesh = internal::ToInput(rest);
+  double moved = 0;
+  for (int32_t i = 0; i < nv; ++i) {
+    for (int k = 0; k < 3; ++k) result.mesh.vertices(i, k) = b.rest_positions(3 * i + k);
+    moved = std::max(moved, (result.mesh.vertices.row(i) - rest.positions().row(i)).norm());
+  }
+  result.current = result.mesh.vertices;
+  result.vertex_sources = internal::IdentitySources(nv);
+  result.cell_source.resize(rest.num_cells());
+  for (int32_t c = 0; c < rest.num_cells(); ++c) result.cell_source[c] = c;
+  result.summary = absl::StrCat("baked the current shape into the rest shape (",
+                                internal::Count(nv, "control point"), ", moved by up to ",
+                                absl::StrFormat("%.3g", moved), " m)");
+  return internal::Finish("bake", std::move(result), internal::SharpPairs(rest, sharp));
 }
 
 // Ids, then the items nearest the `near` points.
@@ -118,10 +148,30 @@ absl::StatusOr<EditResult> Dispatch(const mesh::CellComplex& rest, const Points&
       if (!r.ok()) return Prefixed(r.status(), "sharp_edges");
       return r;
     }
+    case TopologyEdit::kBake: {
+      absl::StatusOr<EditResult> r = BakeShape(rest, sharp, e.bake());
+      if (!r.ok()) return Prefixed(r.status(), "bake");
+      return r;
+    }
     case TopologyEdit::KIND_NOT_SET:
       break;
   }
   return absl::InvalidArgumentError("edit: no edit kind is set");
+}
+
+// The positions a bake asks for, 3 per control point of `rest`.
+absl::StatusOr<Points> BakedPositions(const mesh::CellComplex& rest, const dynsolid::Bake& b) {
+  const int32_t nv = rest.num_vertices();
+  if (b.rest_positions_size() != 3 * nv) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "edit.bake.rest_positions: ", b.rest_positions_size(), " values for ", nv,
+        " control points (3 each; the server fills them in with the solid's positions)"));
+  }
+  Points p(nv, 3);
+  for (int32_t i = 0; i < nv; ++i) {
+    for (int k = 0; k < 3; ++k) p(i, k) = b.rest_positions(3 * i + k);
+  }
+  return p;
 }
 
 }  // namespace
@@ -135,6 +185,8 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   // nothing decided at rest depends on them; FinishEdit places the new
   // points where the solid is then).
   const mesh::CellComplex& rest = d.control();
+  const bool bake = edit.kind_case() == TopologyEdit::kBake;
+  if (bake) RETURN_IF_ERROR(solid.CanBake());
   ASSIGN_OR_RETURN(EditResult r, Dispatch(rest, rest.positions(), d.control_sharp, edit));
 
   // The edited scene: the new control mesh inline (final positions: no
@@ -155,6 +207,20 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
     e->set_v0(a);
     e->set_v1(b);
   }
+  Points baked;
+  if (bake) {
+    // Traced points follow their material points to their baked rest
+    // positions (the scene names them by rest position).
+    ASSIGN_OR_RETURN(baked, BakedPositions(rest, edit.bake()));
+    for (TracedPoint& tp : *edited.mutable_traced()) {
+      absl::StatusOr<Eigen::Vector3d> x =
+          solid.BakedPosition(Eigen::Vector3d(tp.position().x(), tp.position().y(), tp.position().z()), baked);
+      if (!x.ok()) continue;
+      tp.mutable_position()->set_x(x->x());
+      tp.mutable_position()->set_y(x->y());
+      tp.mutable_position()->set_z(x->z());
+    }
+  }
   out.phases.edit = MsSince(t0);
   auto t_phase = Clock::now();
   absl::StatusOr<scene::Discretization> nd =
@@ -170,7 +236,7 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
   out.phases.discretize = MsSince(t_phase);
   t_phase = Clock::now();
   absl::StatusOr<std::unique_ptr<solid::Solid>> built =
-      solid.BuildRemeshed(edited, *std::move(nd), r.cell_source);
+      solid.BuildRemeshed(edited, *std::move(nd), r.cell_source, bake ? &baked : nullptr);
   if (!built.ok()) {
     return absl::Status(built.status().code(), absl::StrCat("edit: ", built.status().message()));
   }
@@ -198,11 +264,17 @@ absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid
   out.vertices_before = prepared.vertices_before;
   out.vertices_after = prepared.vertices_after;
   out.elements_after = prepared.elements_after;
+  const bool bake = prepared.edit.kind_case() == TopologyEdit::kBake;
   solid::Solid::TopologyTransfer t{r.current, r.vertex_sources, r.cell_source};
+  if (bake) {
+    RETURN_IF_ERROR(solid.CanBake());
+    t.baked = &r.current;
+  }
   absl::StatusOr<std::unique_ptr<solid::Solid>> s =
       solid.CarryOver(std::move(prepared.built), prepared.scene, t, &out.transfer);
   if (!s.ok()) return absl::Status(s.status().code(), absl::StrCat("edit: ", s.status().message()));
   out.solid = *std::move(s);
+  if (bake) out.solid->SetAtRest(r.current);  // at rest in its baked shape
   out.scene = out.transfer.scene;
   out.summary = r.summary;
   out.prepare_milliseconds = prepared.milliseconds;

@@ -465,6 +465,11 @@ class Solid {
     Points current;  // #new control points x 3, metres
     std::vector<std::vector<std::pair<int32_t, double>>> vertex_sources;
     std::vector<int32_t> cell_source;
+    // A bake (the same topology, the rest shape moved to these control
+    // positions): point forces and drags move to where their material
+    // points are baked, pins keep their control points, the velocities go
+    // to zero. Null for a topology edit.
+    const Points* baked = nullptr;
   };
   struct TransferReport {
     std::vector<int64_t> dropped_loads, dropped_constraints;
@@ -499,9 +504,19 @@ class Solid {
   //  - CarryOver: this solid's state (positions, velocities, loads, drags,
   //    constraints, traced points, clock) moved onto `built`. Cheap.
   // Remeshed(...) == CarryOver(BuildRemeshed(...), ...) bit for bit.
+  // `baked` (a bake: the same topology, rest moved to these control
+  // positions): the old elements' materials are found at their baked rest
+  // nodes.
   absl::StatusOr<std::unique_ptr<Solid>> BuildRemeshed(
       const Scene& scene, scene::Discretization discretization,
-      const std::vector<int32_t>& cell_source) const;
+      const std::vector<int32_t>& cell_source, const Points* baked = nullptr) const;
+  // Whether this solid can be baked now: FailedPrecondition naming the
+  // pressure that selects its faces by a box or sphere in rest coordinates.
+  absl::Status CanBake() const;
+  // The rest position, after a bake to control positions `baked`, of the
+  // material point at rest position x now (its control row times baked).
+  absl::StatusOr<Eigen::Vector3d> BakedPosition(const Eigen::Vector3d& x,
+                                                const Points& baked) const;
   absl::StatusOr<std::unique_ptr<Solid>> CarryOver(std::unique_ptr<Solid> built,
                                                    const Scene& scene,
                                                    const TopologyTransfer& transfer,

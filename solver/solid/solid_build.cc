@@ -390,6 +390,12 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
             "constraints.fixed: control cell ", c, " is out of range [0, ", control.num_cells(), ")"));
       }
     }
+    for (int32_t v : r.control_points()) {
+      if (v >= nc) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "constraints.fixed: control point ", v, " is out of range [0, ", nc, ")"));
+      }
+    }
   }
   for (int i = 0; i < scene.loads().pressures_size(); ++i) {
     RETURN_IF_ERROR(im.CheckControlCells(scene.loads().pressures(i).region(),

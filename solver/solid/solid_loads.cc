@@ -147,6 +147,7 @@ std::vector<int32_t> Solid::Impl::SelectControlPoints(const Region& r) const {
   for (int32_t c : r.control_cells()) {
     for (int32_t v : control.cell_vertices(c)) out.push_back(v);
   }
+  for (int32_t v : r.control_points()) out.push_back(v);
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
@@ -169,6 +170,14 @@ absl::Status Solid::Impl::CheckControlCells(const Region& r, std::string_view fi
       return absl::InvalidArgumentError(absl::StrCat(
           A(field), ".control_cells[", i, "] (", r.control_cells(i),
           ") must be less than the number of control cells (", n, ")"));
+    }
+  }
+  const int32_t nv = d->control().num_vertices();
+  for (int i = 0; i < r.control_points_size(); ++i) {
+    if (r.control_points(i) >= nv) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          A(field), ".control_points[", i, "] (", r.control_points(i),
+          ") must be less than the number of control points (", nv, ")"));
     }
   }
   return absl::OkStatus();

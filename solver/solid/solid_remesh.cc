@@ -92,9 +92,20 @@ class CellSamples {
 
 // A region's control cells mapped to the new mesh: every new cell whose
 // source is one of them.
-Region RemapRegion(const Region& r, const std::vector<int32_t>& cell_source) {
-  if (r.control_cells_size() == 0) return r;
+// A region's control cells and control points renumbered for the new mesh:
+// cells through cell_source, points through `point_map` (old point -> new,
+// -1: gone; null: unknown here, the points are left out).
+Region RemapRegion(const Region& r, const std::vector<int32_t>& cell_source,
+                   const std::vector<int32_t>* point_map = nullptr) {
+  if (r.control_cells_size() == 0 && r.control_points_size() == 0) return r;
   Region out = r;
+  out.clear_control_points();
+  for (int32_t old : r.control_points()) {
+    if (point_map != nullptr && old < static_cast<int32_t>(point_map->size()) &&
+        (*point_map)[old] >= 0) {
+      out.add_control_points((*point_map)[old]);
+    }
+  }
   out.clear_control_cells();
   for (size_t c = 0; c < cell_source.size(); ++c) {
     for (int32_t old : r.control_cells()) {
@@ -126,19 +137,43 @@ Scene CleanScene(const Scene& scene, const std::vector<int32_t>& cell_source) {
 
 }  // namespace
 
+absl::Status Solid::CanBake() const {
+  for (const Impl::PressureLoad& l : impl_->pressures) {
+    if (l.msg.region().shape_case() != Region::SHAPE_NOT_SET) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "bake: pressure ", l.id,
+          " selects its faces by a box or sphere at rest, which a bake would move; remove it "
+          "(or give its region by control cells) and bake again"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<Eigen::Vector3d> Solid::BakedPosition(const Eigen::Vector3d& x,
+                                                     const Points& baked) const {
+  ASSIGN_OR_RETURN(const Impl::ControlWeights row, impl_->ControlRow(x));
+  Eigen::Vector3d out = Eigen::Vector3d::Zero();
+  for (const auto& [i, w] : row) out += w * baked.row(i).transpose();
+  return out;
+}
+
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Remeshed(const Scene& scene,
                                                        scene::Discretization discretization,
                                                        const TopologyTransfer& t,
                                                        TransferReport* report) const {
   ASSIGN_OR_RETURN(std::unique_ptr<Solid> built,
-                   BuildRemeshed(scene, std::move(discretization), t.cell_source));
+                   BuildRemeshed(scene, std::move(discretization), t.cell_source, t.baked));
   return CarryOver(std::move(built), scene, t, report);
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
     const Scene& scene, scene::Discretization discretization,
-    const std::vector<int32_t>& cell_source) const {
+    const std::vector<int32_t>& cell_source, const Points* baked) const {
   const Impl& old = *impl_;
+  // A bake keeps every element but moves its rest nodes to A P: the old
+  // elements are found by those (the new solid's rest nodes, bit for bit).
+  const Points baked_nodes = baked != nullptr ? old.node_rows.Multiply(*baked) : Points();
+  const Points& old_nodes = baked != nullptr ? baked_nodes : old.rest_nodes;
   const mesh::CellComplex& control = discretization.control();
   const int32_t old_cells = d_.control().num_cells();
   if (static_cast<int32_t>(cell_source.size()) != control.num_cells()) {
@@ -231,7 +266,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
       for (const auto& [k, e] : old_elements[src]) {
         const int32_t* ids = layout.blocks[k].element_nodes(e);
         by_nodes.try_emplace(nodes_key(k, layout.blocks[k].nodes,
-                                       [&](int i) { return old.rest_nodes.row(ids[i]).data(); }),
+                                       [&](int i) { return old_nodes.row(ids[i]).data(); }),
                              k, e);
       }
     }
@@ -250,7 +285,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
           for (int q = 0; q < table.points; ++q) {
             Eigen::Vector3d p = Eigen::Vector3d::Zero();
             for (int i = 0; i < block.nodes; ++i) {
-              p += table.N(q)[i] * old.rest_nodes.row(ids[i]).transpose();
+              p += table.N(q)[i] * old_nodes.row(ids[i]).transpose();
             }
             by_cell[src].Add(p, array[q]);
           }
@@ -289,6 +324,10 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   if (!im.use_implicit) {
     const std::vector<uint8_t> scene_fixed = im.fixed;
     for (const Impl::FixConstraint& c : old.fixes) {
+      if (baked != nullptr) {
+        for (int32_t i : c.points) im.fixed[i] = 1;  // a bake keeps the points
+        continue;
+      }
       for (int32_t i : im.SelectControlPoints(RemapRegion(c.region, cell_source))) im.fixed[i] = 1;
     }
     im.SetSubsteps(im.substeps, out->h_);
@@ -353,17 +392,31 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   im.next_id = old.next_id;
   im.gravity = old.gravity;
   const bool snap = im.settings.snap_forces_to_quadrature();
+  // A bake moves rest positions: a material point's new one is its control
+  // row times the baked positions.
+  auto moved = [&](const Vec3& x) -> Vec3 {
+    if (t.baked == nullptr) return x;
+    absl::StatusOr<Eigen::Vector3d> b = BakedPosition(V(x), *t.baked);
+    if (!b.ok()) return x;
+    Vec3 out;
+    out.set_x(b->x());
+    out.set_y(b->y());
+    out.set_z(b->z());
+    return out;
+  };
   for (const Impl::PointLoad& l : old.point_loads) {
-    absl::StatusOr<MaterialLocation> at = im.Locate(V(l.msg.position()), snap);
+    PointForce msg = l.msg;
+    *msg.mutable_position() = moved(msg.position());
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(msg.position()), snap);
     if (at.ok()) {
-      im.point_loads.push_back({l.id, l.msg, *at});
+      im.point_loads.push_back({l.id, std::move(msg), *at});
     } else {
       rep.dropped_loads.push_back(l.id);
     }
   }
   for (const Impl::PressureLoad& l : old.pressures) {
     Pressure msg = l.msg;
-    *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source);
+    *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source, nullptr);
     std::vector<int32_t> quads = im.SelectQuads(msg.region());
     if (quads.empty()) {
       rep.dropped_loads.push_back(l.id);
@@ -372,10 +425,14 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     }
   }
   for (const Impl::DragLoad& l : old.drags) {
-    absl::StatusOr<Impl::DragLoad> moved = l.curve ? im.MakeCurve(l.shape) : im.MakeDrag(l.drag);
-    if (moved.ok()) {
-      moved->id = l.id;
-      im.drags.push_back(*std::move(moved));
+    Drag drag = l.drag;
+    CurveDrag shape = l.shape;
+    *drag.mutable_material_point() = moved(drag.material_point());
+    for (Vec3& x : *shape.mutable_material_points()) x = moved(x);
+    absl::StatusOr<Impl::DragLoad> carried = l.curve ? im.MakeCurve(shape) : im.MakeDrag(drag);
+    if (carried.ok()) {
+      carried->id = l.id;
+      im.drags.push_back(*std::move(carried));
     } else {
       rep.dropped_loads.push_back(l.id);
     }
@@ -386,8 +443,23 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     const auto& src = t.vertex_sources[v];
     was_fixed[v] = src.size() == 1 && old.fixed[src[0].first] != 0;
   }
+  // Old control point -> new, for regions given by control points: a
+  // survivor is its only source with weight 1.
+  std::vector<int32_t> point_map(old_nc, -1);
+  for (int32_t v = 0; v < nv; ++v) {
+    const auto& src = t.vertex_sources[v];
+    if (src.size() == 1 && src[0].second == 1.0 && point_map[src[0].first] < 0) {
+      point_map[src[0].first] = v;
+    }
+  }
   for (const Impl::FixConstraint& c : old.fixes) {
-    Region region = RemapRegion(c.region, t.cell_source);
+    Region region;
+    if (t.baked != nullptr) {
+      // The same control points, whatever their new rest positions.
+      for (int32_t i : c.points) region.add_control_points(i);
+    } else {
+      region = RemapRegion(c.region, t.cell_source, &point_map);
+    }
     std::vector<int32_t> points = im.SelectControlPoints(region);
     if (points.empty()) {
       rep.dropped_constraints.push_back(c.id);

@@ -133,11 +133,28 @@ TEST(ScriptTest, EveryVerbBuildsItsCommand) {
   }
 }
 
+TEST(ScriptTest, BakeAndClayPaint) {
+  const Script s = Parse(
+      "bake\npaint sphere=0,0,0,1 preset=clay\npaint cells=3 yield=0.02 flow=20 hardening=0.1\n");
+  ASSERT_EQ(s.lines.size(), 3u);
+  EXPECT_TRUE(s.lines[0].command.edit().has_bake());
+  EXPECT_EQ(s.lines[0].command.edit().bake().rest_positions_size(), 0);
+  EXPECT_EQ(s.lines[1].command.paint_material().material().preset(), Material::CLAY);
+  const Material& m = s.lines[2].command.paint_material().material();
+  EXPECT_EQ(m.yield_strain(), 0.02);
+  EXPECT_EQ(m.flow_rate(), 20);
+  EXPECT_EQ(m.hardening(), 0.1);
+  EXPECT_EQ(Error("paint cells=1 preset=stone\n"),
+            "s.txt:1: paint: \"preset=stone\" is not a preset: rubber, clay or wax");
+  EXPECT_EQ(Error("paint cells=1 yield=2\n"), "s.txt:1: paint: \"yield=2\" must be in [0, 1)");
+}
+
 TEST(ScriptTest, ErrorsNameFileLineVerbAndToken) {
   EXPECT_EQ(Error("forse at=1,2,3 f=0,0,1\n"),
             "s.txt:1: unknown command \"forse\" (commands: force, pressure, gravity, remove, fix, "
             "unfix, paint, drag, curve, move, release, delete, extrude, merge, subdivide, sharp, "
-            "smooth, undo, redo, pause, resume, step, save, wait, wait_until, sleep, snapshot)");
+            "smooth, bake, undo, redo, pause, resume, step, save, wait, wait_until, sleep, "
+            "snapshot)");
   EXPECT_EQ(Error("\n\nforce at=1,2 f=0,0,1\n"),
             "s.txt:3: force: \"at=1,2\" needs 3 numbers, got 2");
   EXPECT_EQ(Error("force at=1,2,3x f=0,0,1\n"),
@@ -185,7 +202,8 @@ TEST(ScriptTest, ErrorsNameFileLineVerbAndToken) {
             "s.txt:1: fix: bad cell index \"-2\" in \"cells=1,-2\" (integers >= 0)");
   EXPECT_EQ(Error("paint sphere=0,0,0,1\n"),
             "s.txt:1: paint: needs at least one of E=PASCALS, nu=RATIO, density=KG_M3, "
-            "damping=KG_M3_S");
+            "damping=KG_M3_S, preset=rubber|clay|wax, yield=STRAIN, flow=PER_SECOND, "
+            "hardening=RATIO");
   EXPECT_EQ(Error("paint sphere=0,0,0,1 nu=0.5\n"),
             "s.txt:1: paint: \"nu=0.5\" must be in [0, 0.5)");
   EXPECT_EQ(Error("paint sphere=0,0,0,1 E=-3\n"), "s.txt:1: paint: \"E=-3\" must be >= 0");
@@ -222,7 +240,7 @@ TEST(ScriptTest, EveryBadLineIsReportedAndGoodLinesDoNotHideThem) {
             "s.txt:2: step: \"x\" must be an integer in [1, 1000000]\n"
             "s.txt:4: unknown command \"foo\" (commands: force, pressure, gravity, remove, fix, "
             "unfix, paint, drag, curve, move, release, delete, extrude, merge, subdivide, sharp, "
-            "smooth, undo, redo, pause, resume, step, save, wait, wait_until, sleep, snapshot)\n"
+            "smooth, bake, undo, redo, pause, resume, step, save, wait, wait_until, sleep, snapshot)\n"
             "s.txt:6: sleep: missing seconds=SECONDS");
   EXPECT_EQ(Error("wait_until\n"), "s.txt:1: wait_until: missing step=N");
   // At most 20 are listed.

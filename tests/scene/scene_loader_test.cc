@@ -69,7 +69,7 @@ const std::map<std::string, SceneFacts>& ExpectedScenes() {
   static const auto* facts = new std::map<std::string, SceneFacts>{
       {"block3", {27, 64, 2}},   {"block4", {64, 125, 2}},  {"chair", {76, 220, 2}},
       {"bridge", {154, 392, -2}}, {"nozzle", {99, 220, 0}}, {"torus", {48, 108, 0}},
-      {"beam", {10, 44, 2}},     {"mixed", {-1, -1, 2}},
+      {"beam", {10, 44, 2}},     {"mixed", {-1, -1, 2}},   {"clay", {48, 100, 2}},
   };
   return *facts;
 }

@@ -237,6 +237,112 @@ TEST(SculptCoreTest, DragTargetsWithinAStepFoldToTheLatestAndReleaseEndsTheDrag)
   EXPECT_TRUE(a.core->solid().load_ids().empty());
 }
 
+// Bake: the shape at the step the command is taken becomes the rest shape
+// (the server stamps it into the command, so the journal replays the same
+// bake), built off the loop while the solid steps on; the velocities are
+// zero, the drag and the pins stay on their points, and with no load the
+// baked solid stays where it was. Undo comes back bit for bit.
+TEST(SculptCoreTest, BakeMakesTheShapeTheRestShapeOffTheLoopAndUndoes) {
+  Session s = Make();
+  const CommandReply d = Send(s, R"(drag { material_point { x: 1.5 y: 1.5 z: 3 }
+                                           target { x: 2.1 y: 1.5 z: 3.3 } stiffness: 2e4 })");
+  ASSERT_EQ(d.code(), 0) << d.message();
+  Steps(s, 400);
+  const std::string before = s.core->solid().SaveState();
+  const int fixed = s.core->solid().build_report().fixed_control_points;
+  ASSERT_GT(fixed, 0);
+
+  CommandRequest req;
+  req.set_client_id("c");
+  req.set_seq(++s.seq);
+  req.mutable_command()->mutable_edit()->mutable_bake();
+  s.core->Stamp(req);
+  const Points shape = s.core->solid().control_positions();
+  ASSERT_EQ(req.command().edit().bake().rest_positions_size(), shape.size());
+  auto job = s.core->Prebuild(req);
+  auto prebuilt = job();
+  Steps(s, 3);  // the live loop goes on while it builds
+  const Points at_apply = s.core->solid().control_positions();
+  CommandReply reply;
+  s.core->Process(req, &reply, prebuilt);
+  ASSERT_EQ(reply.code(), 0) << reply.message();
+  EXPECT_THAT(reply.edit().summary(), HasSubstr("baked the current shape"));
+  EXPECT_EQ(s.core->solid().control_positions(), shape);  // the stamped shape, at rest
+  EXPECT_EQ(s.core->solid().discretization().control().positions(), shape);
+  EXPECT_EQ(s.core->solid().ComputeEnergies().kinetic, 0);
+  EXPECT_EQ(s.core->solid().build_report().fixed_control_points, fixed);
+  ASSERT_EQ(s.core->solid().load_ids().size(), 1u);  // the drag stays
+  EXPECT_TRUE(reply.edit().dropped_loads().empty());
+  EXPECT_TRUE(reply.edit().dropped_constraints().empty());
+
+  // Released, the baked solid has nothing to spring back to.
+  ASSERT_EQ(Send(s, absl::StrCat("remove_load { load_id: ", d.load_id(), " }")).code(), 0);
+  Steps(s, 500);
+  EXPECT_LT((s.core->solid().control_positions() - shape).cwiseAbs().maxCoeff(), 1e-6 * 3);
+
+  // Undo twice (the release, the bake): the solid as it was before the bake.
+  ASSERT_EQ(Send(s, "undo {}").code(), 0);
+  const CommandReply u = Send(s, "undo {}");
+  ASSERT_EQ(u.code(), 0) << u.message();
+  EXPECT_THAT(u.history().what(), HasSubstr("bake"));
+  EXPECT_EQ(s.core->solid().control_positions(), at_apply);  // as it was when applied
+  EXPECT_EQ(s.core->solid().discretization().control().positions(),
+            Make().core->solid().discretization().control().positions());  // the old rest
+  EXPECT_EQ(s.core->solid().load_ids().size(), 1u);
+  (void)before;
+}
+
+TEST(SculptCoreTest, ABakeIsReplayedFromItsJournalRecordToTheSameBits) {
+  Session live = Make();
+  std::vector<persist::JournalRecord> journal;
+  auto send = [&](const std::string& text, bool build) {
+    CommandRequest r;
+    r.set_client_id("j");
+    r.set_seq(++live.seq);
+    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(text, r.mutable_command()));
+    std::shared_ptr<SimCore::Prebuilt> prebuilt;
+    if (build) {
+      live.core->Stamp(r);  // as the live loop does before building
+      prebuilt = live.core->Prebuild(r)();
+      Steps(live, 2);
+    }
+    persist::JournalRecord rec;
+    rec.set_step(live.core->steps());
+    rec.set_client_id("j");
+    rec.set_seq(r.seq());
+    *rec.mutable_command() = r.command();
+    CommandReply reply;
+    live.core->Process(r, &reply, prebuilt);
+    ASSERT_EQ(reply.code(), 0) << reply.message();
+    *rec.mutable_reply() = reply;
+    journal.push_back(rec);
+  };
+  send(R"(drag { material_point { x: 1.5 y: 1.5 z: 3 } target { x: 1.0 y: 1.5 z: 3.4 }
+          stiffness: 2e4 })", false);
+  Steps(live, 150);
+  send("edit { bake {} }", true);
+  Steps(live, 40);
+  send("edit { bake {} }", false);  // inline: the positions at its own step
+  Steps(live, 20);
+  const std::string want = live.core->solid().SaveState();
+  Session replayed = Make();
+  for (const persist::JournalRecord& rec : journal) ASSERT_OK(replayed.core->Replay(rec));
+  while (replayed.core->steps() < live.core->steps()) ASSERT_OK(replayed.core->StepOnce());
+  EXPECT_EQ(replayed.core->solid().SaveState(), want);
+}
+
+TEST(SculptCoreTest, ABakeIsRefusedWhileABoxPressureActsAndChangesNothing) {
+  Session s = Make();
+  ASSERT_EQ(Send(s, R"(add_pressure { region { box { min { x: -1 y: -1 z: 2.9 }
+      max { x: 4 y: 4 z: 3.1 } } } pascals: 100 })").code(), 0);
+  Steps(s, 10);
+  const std::string before = s.core->solid().SaveState();
+  const CommandReply r = Send(s, "edit { bake {} }");
+  EXPECT_EQ(r.code(), static_cast<int>(absl::StatusCode::kFailedPrecondition));
+  EXPECT_THAT(r.message(), HasSubstr("selects its faces by a box or sphere at rest"));
+  EXPECT_EQ(s.core->solid().SaveState(), before);
+}
+
 TEST(SculptCoreTest, SnapshotsAndJournalReplayOfEditsAndUndosReachTheSameBits) {
   Session live = Make();
   std::vector<persist::JournalRecord> journal;

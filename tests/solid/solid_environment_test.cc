@@ -10,6 +10,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -205,6 +206,33 @@ TEST(EnvironmentTest, ASavedStateInContactContinuesBitForBit) {
   }
   EXPECT_TRUE(a->control_positions() == b->control_positions());
   EXPECT_EQ(a->SaveState(), b->SaveState());
+}
+
+TEST(EnvironmentTest, PinsAndContactHoldTogether) {
+  // The block's face x = 0 pinned, its bottom on the floor, gravity pulling
+  // it down and sideways into a ball beside it.
+  std::unique_ptr<Solid> s = testing::MakeSolid(
+      Block("x: 0 y: 0 z: 0",
+            "loads { gravity { x: 6 z: -9.81 } }\n"
+            "constraints { fixed { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 2 z: 2 } } } }\n"
+            "environment { floor { normal { z: 1 } } friction: 0.5 "
+            "obstacles { sphere { center { x: 1.25 y: 0.5 z: 0.5 } radius: 0.2 } } }\n"),
+      2);
+  ASSERT_NE(s, nullptr);
+  const Points rest = s->control_positions();
+  std::vector<int64_t> pinned;
+  for (int64_t i = 0; i < rest.rows(); ++i) {
+    if (std::abs(rest(i, 0)) < 0.01) pinned.push_back(i);
+  }
+  ASSERT_FALSE(pinned.empty());
+  for (int k = 0; k < 1500; ++k) {
+    ASSERT_OK(s->Step());
+    for (int64_t i : pinned) ASSERT_TRUE(s->control_positions().row(i) == rest.row(i));
+  }
+  EXPECT_EQ(s->rollbacks(), 0);
+  EXPECT_GT(s->contact_stats().touching, 0);
+  EXPECT_GT(MinZ(*s), -0.01);
+  EXPECT_LT(MaxX(*s), 1.25);  // held off by the ball, not through it
 }
 
 TEST(EnvironmentTest, BadEnvironmentsAreRefusedNamingTheField) {

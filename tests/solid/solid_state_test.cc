@@ -151,7 +151,7 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   // A version 3 state (versions 3 and 4 put the material samples before
   // the frames, with no section length; version 3 sums bytes with FNV-1a)
   // is still read, and saved again as the current version. Made here from
-  // the version 5 bytes: header, loads and the rest, frames (per kind a
+  // the version 6 bytes: header, loads and the rest, frames (per kind a
   // count and 4 doubles per element), the material section (arrays, then
   // per kind a count and an int32 per element), its length, the checksum.
   ASSERT_EQ(saved[8], static_cast<char>(Solid::kStateFormatVersion));
@@ -174,7 +174,11 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   }
   ASSERT_EQ(at, section_at + section_bytes);
   const size_t frames_at = section_at - frames_bytes;
-  std::string v3 = saved.substr(0, frames_at) + saved.substr(section_at, section_bytes) +
+  // Version 6 put two byte strings before the frames (the environment's
+  // contacts and clay's state: empty here, 8 bytes of length each).
+  ASSERT_EQ(u64(frames_at - 16), 0u);
+  ASSERT_EQ(u64(frames_at - 8), 0u);
+  std::string v3 = saved.substr(0, frames_at - 16) + saved.substr(section_at, section_bytes) +
                    saved.substr(frames_at, frames_bytes) + std::string(8, '\0');
   v3[8] = 3;
   const uint64_t payload = v3.size() - 36 - 8;

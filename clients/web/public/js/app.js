@@ -8,6 +8,11 @@ import { View } from './view.js';
 import { Tools, PARAMS } from './tools.js';
 import * as C from './commands.js';
 import { FIELDS, formatValue } from './colormap.js';
+import { explain } from './explain.js';
+import { Feedback } from './feedback.js';
+import { bindKeys, wheelNudge } from './keys.js';
+import { statusText } from './status.js';
+import * as S from './sizing.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -36,6 +41,9 @@ class App {
       messages: [], watchEnds: 0, reconnects: 0, presses: [],
     };
     this.fps = 0;
+    this.feedback = new Feedback(this.metrics.messages);
+    this.sizing = null;         // {mesh: 'pending' | mesh | null, done, values}
+    this.pointer = null;        // the last pointer position over the canvas (client px)
     this.bindUi();
     this.bindConnection();
     this.bindPointer();
@@ -59,7 +67,12 @@ class App {
     };
     $('refresh').onclick = () => this.refreshSessions();
     $('leave').onclick = () => this.leave();
-    $('close-session').onclick = () => this.closeSession();
+    $('close-session').onclick = () => this.askClose(true);
+    $('close-no').onclick = () => this.askClose(false);
+    $('close-yes').onclick = () => {
+      this.askClose(false);
+      this.closeSession();
+    };
     for (const b of document.querySelectorAll('#tool-buttons button')) {
       b.onclick = () => this.tools.setTool(b.dataset.tool);
     }
@@ -69,23 +82,13 @@ class App {
     $('pause').onclick = () => this.send(C.pause());
     $('resume').onclick = () => this.send(C.resume());
     $('step').onclick = () => this.send(C.step(1));
-    $('reset-camera').onclick = () => this.view.resetCamera();
+    for (const b of document.querySelectorAll('#view-buttons button')) {
+      b.onclick = () => this.look(b.dataset.view);
+    }
     $('field').onchange = () => this.setField($('field').value);
     $('show-control').onchange = () => this.pollOverlays(true);
     $('show-loads').onchange = () => this.refreshMarkers();
-    window.addEventListener('keydown', (e) => {
-      if (e.target.tagName === 'INPUT' && e.target.type !== 'checkbox') return;
-      const k = e.key.toLowerCase();
-      if ((e.ctrlKey || e.metaKey) && k === 'z') {
-        e.preventDefault();
-        this.send(e.shiftKey ? C.redo() : C.undo(), e.shiftKey ? 'redo' : 'undo');
-      } else if ((e.ctrlKey || e.metaKey) && k === 'y') {
-        e.preventDefault();
-        this.send(C.redo(), 'redo');
-      } else if (e.key === 'Escape') {
-        this.tools.cancel();
-      }
-    });
+    bindKeys(this);
     this.onToolChanged();
   }
 
@@ -110,7 +113,7 @@ class App {
   numberParam(key, label, step) {
     const input = document.createElement('input');
     input.type = 'number';
-    input.step = String(step);
+    input.step = String(step === 1 ? 1 : S.stepFor(this.tools.params[key]));
     input.value = String(this.tools.params[key]);
     input.onchange = () => {
       const v = Number(input.value);
@@ -120,6 +123,7 @@ class App {
         return;
       }
       this.tools.params[key] = v;
+      this.tools.touched.add(key);
     };
     return input;
   }
@@ -129,29 +133,63 @@ class App {
     const select = document.createElement('select');
     for (const [value, text] of options) select.add(new Option(text, value));
     select.value = this.tools.params[key];
-    select.onchange = () => { this.tools.params[key] = select.value; };
+    select.onchange = () => {
+      this.tools.params[key] = select.value;
+      this.tools.touched.add(key);
+    };
     return select;
   }
 
-  banner(text, kind = 'info', ms = 6000) {
-    const b = $('banner');
-    b.textContent = text;
-    b.className = kind;
-    b.hidden = false;
-    clearTimeout(this.bannerTimer);
-    if (ms) this.bannerTimer = setTimeout(() => { b.hidden = true; }, ms);
-    this.metrics.messages.push({ kind, text });
-    if (this.metrics.messages.length > 50) this.metrics.messages.shift();
+  banner(text, kind = 'info', ms = 6000, detail = '') {
+    this.feedback.banner(text, kind, ms, detail);
   }
 
   message(text) {
     this.banner(text, 'info', 4000);
   }
 
+  // A refusal in plain words (explain.js), the server's text as details.
   showError(err) {
-    const text = err && err.codeName ? `refused (${err.codeName}): ${err.message}` : String(err.message || err);
-    this.metrics.lastError = text;
-    this.banner(text, 'error', 8000);
+    const e = explain(err);
+    this.metrics.lastError = e.detail || e.text;
+    this.banner(e.hint ? `${e.text} ${e.hint}` : e.text, 'error', 10000, e.detail);
+  }
+
+  // A tool's press that found no solid: said next to the pointer (the
+  // camera stays where it was).
+  noSolid(x, y) {
+    this.feedback.hud('no solid here', x, y, 1500);
+    this.metrics.messages.push({ kind: 'hud', text: 'no solid here' });
+    if (this.metrics.messages.length > 50) this.metrics.messages.shift();
+  }
+
+  // `[`/`]`, shift, the wheel with a modifier: the tool's size or strength,
+  // shown next to the pointer and in the panel.
+  nudge(which, steps) {
+    const a = this.tools.nudge(which, steps);
+    if (!a) return;
+    const input = document.querySelector(`#params [data-param=${a.key}]`);
+    if (input) input.value = String(a.value);
+    const label = PARAMS[this.tools.tool].find((p) => p[0] === a.key)[1];
+    const p = this.pointer || { x: 400, y: 300 };
+    this.feedback.hud(`${label}: ${formatValue(a.value)}`, p.x, p.y);
+    if (this.pointer) this.tools.showCursorAt(p.x, p.y);
+  }
+
+  // A view preset (front, side, top, iso) or 'frame'.
+  look(preset) {
+    this.view.look(preset);
+  }
+
+  // Shows the field a brush paints (the Field select follows).
+  showField(name) {
+    if (!name || this.field === name) return;
+    $('field').value = name;
+    this.setField(name);
+  }
+
+  askClose(show) {
+    $('close-confirm').hidden = !show || !this.session;
   }
 
   // ---- sessions ----
@@ -187,10 +225,10 @@ class App {
     const levels = $('levels').value.trim();
     if (levels !== '') request.levels_override = Number(levels);
     if ($('model-select').value) request.model_override = $('model-select').value;
-    this.banner(`creating ${label || source.builtin_scene || 'scene'}…`, 'info', 0);
+    this.feedback.progress(`creating ${label || source.builtin_scene || 'scene'}: building the solid…`);
     try {
       const s = await this.conn.call('CreateSession', request);
-      this.banner(`created ${s.scene_name}: ${s.stats.cells} cells, ${s.stats.boundary_faces} surface quads`);
+      this.created = `created ${s.scene_name}: ${s.stats.cells} cells, ${s.stats.boundary_faces} surface quads`;
       await this.join({ id: s.id, token: s.token });
     } catch (err) {
       this.showError(err);
@@ -200,12 +238,14 @@ class App {
 
   async join(ref) {
     let info;
+    this.feedback.progress('joining: asking the server…');
     try {
       info = await this.conn.call('GetSession', ref);
     } catch (err) {
       this.showError(err);
       return;
     }
+    this.feedback.progress(`joining ${info.scene_name}: loading the surface…`);
     this.session = { id: ref.id, token: ref.token };
     this.info = info;
     this.conn.setSession(this.session);
@@ -214,9 +254,11 @@ class App {
     this.inspect = { loads: [], constraints: [], mesh: null, meshVersion: -1, positions: null };
     this.metrics.joinedAt = performance.now();
     this.metrics.firstPictureMs = null;
+    this.startSizing();
     this.watch();
     history.replaceState(null, '', `#session=${ref.id}&token=${ref.token}`);
     $('share').textContent = `share: ${location.href}`;
+    $('share').title = location.href;
     $('bake').disabled = false;
     this.refreshSessions();
   }
@@ -229,6 +271,7 @@ class App {
     history.replaceState(null, '', '#');
     $('share').textContent = '';
     $('bake').disabled = true;
+    this.askClose(false);
   }
 
   async closeSession() {
@@ -247,7 +290,40 @@ class App {
   watch() {
     const request = { session: this.session, rate_hz: 60 };
     if (this.field) request[this.field] = true;
+    // The stiffness field until the tools are sized (sizing.js).
+    if (this.sizing && !this.sizing.done) request.stiffness = true;
     this.conn.watch(request);
+  }
+
+  // ---- tools sized to the solid ----
+
+  // After joining: the control mesh (its cell size) and, with the first
+  // keyframe, the surface bounds and the stiffness field.
+  startSizing() {
+    this.tools.touched.clear();
+    this.sizing = { mesh: 'pending', done: false, values: null };
+    const sizing = this.sizing;
+    this.inspectOverlays({ mesh: true, positions: true, loads: false })
+      .then((r) => { sizing.mesh = r.control_mesh || null; }, () => { sizing.mesh = null; })
+      .then(() => this.trySizing());
+  }
+
+  trySizing() {
+    const z = this.sizing;
+    if (!z || z.done || z.mesh === 'pending' || !this.decoder.hasKeyframe) return;
+    const b = S.bounds(this.decoder.positions);
+    if (!b) return;
+    const cell = S.cellSize(z.mesh) || S.cellSizeFromCount(b, (this.info.stats || {}).control_cells || 1);
+    const range = S.valueRange(this.decoder.fields.stiffness);
+    const values = S.sizeTools({ size: b.size, cell, stiffness: range || 1 });
+    if (!range) {
+      for (const key of ['pressure', 'dragStiffness', 'curveStiffness', 'stiffnessValue']) delete values[key];
+    }
+    z.done = true;
+    z.values = { size: b.size, cell, stiffness: range, ...values };
+    this.tools.applySizing(values);
+    this.onToolChanged();
+    if (this.field !== 'stiffness') this.watch();
   }
 
   setField(name) {
@@ -332,6 +408,15 @@ class App {
   bindPointer() {
     const canvas = this.view.canvas;
     canvas.addEventListener('pointerdown', (e) => {
+      this.pointer = { x: e.clientX, y: e.clientY };
+      // A tool's press off the solid: nothing moves (the orbit controls
+      // never see it), and the person is told.
+      if (this.tools.missesSolid(e)) {
+        e.stopImmediatePropagation();
+        this.metrics.presses.push({ x: e.clientX, y: e.clientY, button: e.button, tool: this.tools.tool, wants: false });
+        this.noSolid(e.clientX, e.clientY);
+        return;
+      }
       const wants = this.tools.wantsPress(e);
       this.metrics.presses.push({ x: e.clientX, y: e.clientY, button: e.button, tool: this.tools.tool, wants });
       if (this.metrics.presses.length > 20) this.metrics.presses.shift();
@@ -340,7 +425,10 @@ class App {
       canvas.setPointerCapture(e.pointerId);
       this.tools.down(e);
     });
-    canvas.addEventListener('pointermove', (e) => this.tools.move(e));
+    canvas.addEventListener('pointermove', (e) => {
+      this.pointer = { x: e.clientX, y: e.clientY };
+      this.tools.move(e);
+    });
     const up = (e) => {
       if (canvas.hasPointerCapture && canvas.hasPointerCapture(e.pointerId)) {
         canvas.releasePointerCapture(e.pointerId);
@@ -351,7 +439,10 @@ class App {
     canvas.addEventListener('pointerup', up);
     canvas.addEventListener('pointercancel', up);
     canvas.addEventListener('wheel', (e) => {
-      if (this.tools.wheel(e)) e.preventDefault();
+      if (wheelNudge(this, e) || this.tools.wheel(e)) {
+        e.preventDefault();
+        e.stopImmediatePropagation();  // no zoom
+      }
     }, { passive: false });
     canvas.addEventListener('contextmenu', (e) => e.preventDefault());
   }
@@ -368,7 +459,9 @@ class App {
       this.metrics.framesRendered++;
       if (this.metrics.firstPictureMs === null && this.metrics.joinedAt !== null) {
         this.metrics.firstPictureMs = performance.now() - this.metrics.joinedAt;
+        this.ready();
       }
+      if (this.sizing && !this.sizing.done) this.trySizing();
       const now = performance.now();
       for (const rt of this.tools.framesShown(this.decoder.step, now)) {
         this.metrics.dragRoundTrips.push(rt);
@@ -376,6 +469,14 @@ class App {
       this.updateLegend();
     }
     if (this.view.render()) this.countFps(t);
+  }
+
+  // The first picture after joining: the progress banner says so.
+  ready() {
+    if (!this.feedback.inProgress) return;
+    const what = this.created || `joined ${(this.info && this.info.scene_name) || 'the session'}`;
+    this.created = null;
+    this.banner(`${what}; drawn in ${this.metrics.firstPictureMs.toFixed(0)} ms`, 'info', 4000);
   }
 
   // Frames drawn per second, and the intervals between drawn frames while
@@ -425,35 +526,13 @@ class App {
   }
 
   renderStatus() {
-    const parts = [];
-    if (!this.conn.open) parts.push('gateway: disconnected');
-    if (this.session) {
-      const s = this.stats;
-      const info = this.info || {};
-      parts.push(`${info.scene_name || '?'} ${this.session.id.slice(0, 8)}`);
-      const st = info.stats || {};
-      if (st.model) {
-        parts.push(`${st.model} / ${st.integrator}${st.substeps > 1 ? ` ×${st.substeps}` : ''}`);
-      }
-      if (s) {
-        const rtf = s.steps_per_second * (s.time_step || 0);
-        parts.push(`step ${s.step}${s.paused ? ' (paused)' : ''}`);
-        parts.push(`${(s.steps_per_second || 0).toFixed(0)} steps/s`);
-        parts.push(`real time ×${rtf.toFixed(2)}`);
-        parts.push(`step ${(s.step_ms_median || 0).toFixed(1)} ms`);
-      } else if (this.reconnecting) {
-        parts.push('server unavailable');
-      }
-      const lat = this.conn.latencyMedian();
-      parts.push(`command ${lat === null ? '–' : lat.toFixed(0) + ' ms'}`);
-      const idle = this.lastDrawTime === undefined || performance.now() - this.lastDrawTime > 1000;
-      parts.push(idle ? 'idle (nothing moved)' : `${this.fps.toFixed(0)} fps`);
-      parts.push(`${this.metrics.skipped} skipped`);
-      parts.push(`${this.decoder.vertexCount} vertices`);
-    } else {
-      parts.push('no session: create one or join one');
-    }
-    $('status').textContent = parts.join(' · ');
+    const idle = this.lastDrawTime === undefined || performance.now() - this.lastDrawTime > 1000;
+    const t = statusText({ connected: this.conn.open, session: this.session, info: this.info,
+      stats: this.stats, reconnecting: this.reconnecting, latency: this.conn.latencyMedian(), idle,
+      fps: this.fps, skipped: this.metrics.skipped, vertices: this.decoder.vertexCount });
+    const el = $('status');
+    el.textContent = t.short;
+    el.title = t.full;
   }
 
   // Whether the control mesh held is not the current topology's.

@@ -3,9 +3,12 @@
 // tool's command; drags, pressure and curves last while the button is held.
 
 import * as C from './commands.js';
+import { adjust } from './sizing.js';
 
 // Parameters per tool: [key, label, default, step], or for a choice
-// [key, label, default, [[value, text], ...]].
+// [key, label, default, [[value, text], ...]]. The defaults here hold until
+// a session's solid is measured: then sizing.js sets the sized ones (radius,
+// pressure, distances, stiffnesses) for that solid.
 export const PARAMS = {
   drag: [['dragStiffness', 'stiffness (N/m)', 5e4, 1e4]],
   inflate: [['pressure', 'pressure (Pa)', 3000, 500], ['radius', 'radius (m)', 0.8, 0.1]],
@@ -25,6 +28,9 @@ export const PARAMS = {
 const MOVE_INTERVAL_MS = 1000 / 120;  // at most 120 target updates a second
 const DAB_INTERVAL_MS = 40;
 const BRUSHES = ['stiffness', 'mass', 'material'];
+// The field a brush paints, shown while painting (the material brush's
+// presets change the stiffness).
+const PAINTED_FIELD = { stiffness: 'stiffness', mass: 'mass', material: 'stiffness' };
 
 export class Tools {
   constructor(app) {
@@ -36,6 +42,30 @@ export class Tools {
     this.curvePoints = [];    // [{material, point}] picked for a curve
     this.mergeFirst = null;   // {face, cell}
     this.roundTrips = [];     // drag round trips waiting for their frame
+    this.touched = new Set(); // parameters the person set since joining (sizing leaves them)
+  }
+
+  // Sets the sized defaults ({key: value}) the person has not set since
+  // joining; returns the keys set.
+  applySizing(sized) {
+    const set = [];
+    for (const [k, v] of Object.entries(sized)) {
+      if (this.touched.has(k) || !(k in this.params)) continue;
+      this.params[k] = v;
+      set.push(k);
+    }
+    return set;
+  }
+
+  // `[`/`]` (which = 'size'), with shift ('strength'), and the wheel with
+  // a modifier: the tool's knob scaled by `steps` (sizing.js adjust);
+  // returns {key, value} or null.
+  nudge(which, steps) {
+    const a = adjust(this.params, this.tool, which, steps);
+    if (!a) return null;
+    this.params[a.key] = a.value;
+    this.touched.add(a.key);
+    return a;
   }
 
   get view() { return this.app.view; }
@@ -65,7 +95,7 @@ export class Tools {
     const ray = this.view.ray(clientX, clientY);
     const reply = await this.conn.call('Pick', { session: this.app.session, origin: ray.origin,
       direction: ray.direction });
-    if (!reply.hit) this.app.message(`${this.tool}: the server found no solid under the cursor`);
+    if (!reply.hit) this.app.noSolid(clientX, clientY);
     return reply.hit ? reply : null;
   }
 
@@ -79,9 +109,16 @@ export class Tools {
     return { x: q.x + depth * d.x, y: q.y + depth * d.y, z: q.z + depth * d.z };
   }
 
+  // Whether a press is a tool's left press that misses the solid: it does
+  // nothing (no orbit) and says so. Alt+left orbits in any tool.
+  missesSolid(e) {
+    return this.tool !== 'view' && Boolean(this.app.session) && e.button === 0 && !e.altKey &&
+      !this.wantsPress(e);
+  }
+
   // Whether a press at (x, y) starts this tool (else the view orbits).
   wantsPress(e) {
-    if (this.tool === 'view' || !this.app.session || e.button !== 0) return false;
+    if (this.tool === 'view' || !this.app.session || e.button !== 0 || e.altKey) return false;
     if (this.tool === 'curve' && this.curveHandleAt(e) >= 0) return true;
     return this.view.localHit(e.clientX, e.clientY) !== null;
   }
@@ -113,13 +150,16 @@ export class Tools {
 
   move(e) {
     const press = this.active;
-    if (!press) {
-      const hit = this.tool !== 'view' && this.app.session ? this.view.localHit(e.clientX, e.clientY) : null;
-      this.view.showCursor(hit && hit.point, this.brushRadius());
-      return;
-    }
+    // The disc follows the pointer, also along a brush's stroke.
+    if (!press || BRUSHES.includes(this.tool)) this.showCursorAt(e.clientX, e.clientY);
+    if (!press) return;
     press.last = e;
     if (press.onMove) press.onMove(e);
+  }
+
+  showCursorAt(x, y) {
+    const hit = this.tool !== 'view' && this.app.session ? this.view.localHit(x, y) : null;
+    this.view.showCursor(hit, this.brushRadius());
   }
 
   wheel(e) {
@@ -215,6 +255,7 @@ export class Tools {
       }
     };
     press.onMove = () => { moved = true; };
+    this.app.showField(PAINTED_FIELD[tool]);
     await once(press.x, press.y);
     while (!press.done) {
       await new Promise((r) => setTimeout(r, DAB_INTERVAL_MS));

@@ -7,6 +7,11 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { colorize, fieldRange } from './colormap.js';
+import { vertexQuads, creasedNormals, matcapPixels } from './shading.js';
+import { BrushCursor } from './cursor.js';
+import { PRESETS, frameSphere, aboveGround } from './camera.js';
+
+const SURFACE_COLOR = 0xd8cbb6;
 
 // Whether WebGL runs on the CPU (SwiftShader, llvmpipe).
 function softwareRenderer() {
@@ -41,19 +46,19 @@ export class View {
     // The scenes are z-up (gravity along -z, the ground at z = 0).
     this.camera.up.set(0, 0, 1);
     this.camera.position.set(6, -8, 5);
-    this.scene.add(new THREE.HemisphereLight(0xdde6ff, 0x30302a, 1.2));
-    const key = new THREE.DirectionalLight(0xffffff, 1.8);
-    key.position.set(1, 1.5, 1);  // camera space: right, above, behind
-    this.camera.add(key);
     this.scene.add(this.camera);
 
     // The boundary is closed and its quads face outward: front faces only.
-    // A software renderer gets the cheaper Lambert shading (twice the frame
-    // rate on SwiftShader, bench/reports/viewer).
-    this.surfaceMaterial = this.software
-      ? new THREE.MeshLambertMaterial({ color: 0xc9b8a0, side: THREE.FrontSide })
-      : new THREE.MeshStandardMaterial({ color: 0xc9b8a0, roughness: 0.55, metalness: 0.05,
-        side: THREE.FrontSide });
+    // A matcap (shading.js: hemisphere plus key light painted on a sphere)
+    // reads the same in software WebGL as on a GPU, with no lights to
+    // compute, and creased normals keep sharp edges free of dark bands.
+    const matcap = new THREE.DataTexture(matcapPixels(128), 128, 128);
+    matcap.colorSpace = THREE.SRGBColorSpace;
+    matcap.needsUpdate = true;
+    // Pushed back a little in depth: control edges lying on the surface
+    // (flat faces) draw in front of it.
+    this.surfaceMaterial = new THREE.MeshMatcapMaterial({ color: SURFACE_COLOR, matcap, side: THREE.FrontSide,
+      polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 2 });
     this.mesh = null;
     this.geometry = null;
     this.overlay = new THREE.Group();
@@ -61,11 +66,10 @@ export class View {
     this.controlLines = null;
     this.markers = new THREE.Group();
     this.scene.add(this.markers);
-    this.cursor = new THREE.Mesh(new THREE.SphereGeometry(1, 24, 12),
-      new THREE.MeshBasicMaterial({ color: 0xffe070, wireframe: true, transparent: true, opacity: 0.5 }));
-    this.cursor.visible = false;
-    this.scene.add(this.cursor);
+    this.cursor = new BrushCursor();
+    this.scene.add(this.cursor.group);
     this.grid = null;
+    this.groundZ = null;        // the ground plane's height (the solid's lowest point when framed)
 
     this.raycaster = new THREE.Raycaster();
     this.field = null;          // the coloured field's name, or null
@@ -83,8 +87,25 @@ export class View {
   attachControls() {
     this.controls = new OrbitControls(this.camera, this.canvas);
     this.controls.enableDamping = false;
-    this.controls.addEventListener('change', () => { this.needsRender = true; });
-    this.controls.mouseButtons = { LEFT: THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.PAN, RIGHT: THREE.MOUSE.PAN };
+    this.controls.addEventListener('change', () => {
+      this.keepAboveGround();
+      this.needsRender = true;
+    });
+    // Middle orbits too, so a tool's left button never has to.
+    this.controls.mouseButtons = { LEFT: THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.ROTATE, RIGHT: THREE.MOUSE.PAN };
+  }
+
+  // The orbit stays above the ground plane (camera.js aboveGround).
+  keepAboveGround() {
+    if (this.groundZ === null || !this.controls) return;
+    const r = this.geometry && this.geometry.boundingSphere ? this.geometry.boundingSphere.radius : 1;
+    const c = this.camera.position;
+    const t = this.controls.target;
+    const m = aboveGround(c, t, this.groundZ, 0.03 * r);
+    if (!m.changed) return;
+    c.set(m.eye.x, m.eye.y, m.eye.z);
+    t.set(m.target.x, m.target.y, m.target.z);
+    this.camera.lookAt(t);
   }
 
   resize() {
@@ -96,45 +117,61 @@ export class View {
     this.needsRender = true;
   }
 
-  // Updates the surface from a SurfaceDecoder after a frame.
+  // Updates the surface from a SurfaceDecoder after a frame. The mesh has
+  // one vertex per quad corner (4 per quad), so a vertex on a sharp edge
+  // gets a normal per side (shading.js creasedNormals).
   updateSurface(decoder) {
     const n = decoder.vertexCount;
     // Several frames may have arrived since the last draw: rebuild on any
     // topology change among them, and copy every position.
     const topology = decoder.topologySerial !== this.topologySerial || !this.geometry ||
-      this.geometry.getAttribute('position').count !== n;
+      this.vertexCount !== n;
     this.topologySerial = decoder.topologySerial;
-    if (topology) {
-      if (this.mesh) {
-        this.scene.remove(this.mesh);
-        this.geometry.dispose();
-      }
-      this.geometry = new THREE.BufferGeometry();
-      this.geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3 * n), 3));
-      this.geometry.setAttribute('color', new THREE.BufferAttribute(new Float32Array(3 * n), 3));
-      const q = decoder.quads;
-      const index = new Uint32Array((q.length / 4) * 6);
-      for (let i = 0, j = 0; i < q.length; i += 4) {
-        index[j++] = q[i]; index[j++] = q[i + 1]; index[j++] = q[i + 2];
-        index[j++] = q[i]; index[j++] = q[i + 2]; index[j++] = q[i + 3];
-      }
-      this.geometry.setIndex(new THREE.BufferAttribute(index, 1));
-      this.mesh = new THREE.Mesh(this.geometry, this.surfaceMaterial);
-      this.scene.add(this.mesh);
-    }
-    const pos = this.geometry.getAttribute('position');
+    if (topology) this.rebuildMesh(decoder.quads, n);
+    const q = this.quads;
     const p = decoder.positions;
+    const pos = this.geometry.getAttribute('position');
     const arr = pos.array;
-    for (let i = 0; i < 3 * n; ++i) arr[i] = p[i];
+    for (let k = 0; k < q.length; ++k) {
+      const v = 3 * q[k];
+      arr[3 * k] = p[v]; arr[3 * k + 1] = p[v + 1]; arr[3 * k + 2] = p[v + 2];
+    }
     pos.needsUpdate = true;
+    const normal = this.geometry.getAttribute('normal');
+    creasedNormals(p, q, this.adjacency, normal.array, this.scratch);
+    normal.needsUpdate = true;
     this.needsRender = true;
-    this.geometry.computeVertexNormals();
     this.geometry.computeBoundingSphere();  // ray casts test it first
     this.updateColors(decoder);
     if (!this.framed && n > 0) {
       this.resetCamera();
       this.framed = true;
     }
+  }
+
+  rebuildMesh(quads, n) {
+    if (this.mesh) {
+      this.scene.remove(this.mesh);
+      this.geometry.dispose();
+    }
+    this.quads = quads;
+    this.vertexCount = n;
+    this.adjacency = vertexQuads(quads, n);
+    const corners = quads.length;
+    this.scratch = { area: new Float32Array(3 * (corners >> 2)), unit: new Float32Array(3 * (corners >> 2)) };
+    this.vertexColors = new Float32Array(3 * n);
+    this.geometry = new THREE.BufferGeometry();
+    this.geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3 * corners), 3));
+    this.geometry.setAttribute('normal', new THREE.BufferAttribute(new Float32Array(3 * corners), 3));
+    this.geometry.setAttribute('color', new THREE.BufferAttribute(new Float32Array(3 * corners), 3));
+    const index = new Uint32Array((corners / 4) * 6);
+    for (let i = 0, j = 0; i < corners; i += 4) {
+      index[j++] = i; index[j++] = i + 1; index[j++] = i + 2;
+      index[j++] = i; index[j++] = i + 2; index[j++] = i + 3;
+    }
+    this.geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    this.mesh = new THREE.Mesh(this.geometry, this.surfaceMaterial);
+    this.scene.add(this.mesh);
   }
 
   setField(name) {
@@ -147,7 +184,7 @@ export class View {
     const useColors = Boolean(values && values.length === decoder.vertexCount);
     if (this.surfaceMaterial.vertexColors !== useColors) {
       this.surfaceMaterial.vertexColors = useColors;
-      this.surfaceMaterial.color.set(useColors ? 0xffffff : 0xc9b8a0);
+      this.surfaceMaterial.color.set(useColors ? 0xffffff : SURFACE_COLOR);
       this.surfaceMaterial.needsUpdate = true;
     }
     if (!useColors) {
@@ -155,36 +192,59 @@ export class View {
       return;
     }
     this.range = fieldRange(this.field, values);
+    colorize(values, this.range, this.vertexColors);
     const color = this.geometry.getAttribute('color');
-    colorize(values, this.range, color.array);
+    const out = color.array;
+    const vc = this.vertexColors;
+    const q = this.quads;
+    for (let k = 0; k < q.length; ++k) {
+      const v = 3 * q[k];
+      out[3 * k] = vc[v]; out[3 * k + 1] = vc[v + 1]; out[3 * k + 2] = vc[v + 2];
+    }
     color.needsUpdate = true;
   }
 
+  // Frames the solid from the iso direction, and puts the ground grid
+  // under it (the orbit stays above that plane).
   resetCamera() {
     if (!this.geometry || !this.geometry.boundingSphere) return;
-    const s = this.geometry.boundingSphere;
-    const c = s.center;
-    const r = Math.max(s.radius, 1e-3);
-    const d = r / Math.sin((this.camera.fov * Math.PI) / 360) * 1.15;
-    const dir = new THREE.Vector3(0.62, -0.95, 0.55).normalize();
-    this.camera.position.copy(c).addScaledVector(dir, d);
-    this.camera.near = d / 100;
-    this.camera.far = d * 100;
-    this.camera.updateProjectionMatrix();
-    this.needsRender = true;
-    if (this.controls) {
-      this.controls.target.copy(c);
-      this.controls.update();
-    } else {
-      this.camera.lookAt(c);
-    }
-    if (this.grid) this.scene.remove(this.grid);
     this.geometry.computeBoundingBox();
     const box = this.geometry.boundingBox;
+    const r = Math.max(this.geometry.boundingSphere.radius, 1e-3);
+    this.groundZ = box.min.z;
+    if (this.grid) this.scene.remove(this.grid);
+    const c = this.geometry.boundingSphere.center;
     this.grid = new THREE.GridHelper(r * 6, 12, 0x3a4150, 0x2c323c);
     this.grid.rotation.x = Math.PI / 2;  // the xy plane, under the solid
     this.grid.position.set(c.x, c.y, box.min.z - 1e-3 * r);
     this.scene.add(this.grid);
+    this.look('iso');
+  }
+
+  // A view preset (camera.js PRESETS: front, side, top, iso), or 'frame':
+  // the solid framed from where the camera looks now.
+  look(preset) {
+    if (!this.geometry || !this.geometry.boundingSphere) return false;
+    const s = this.geometry.boundingSphere;
+    let dir = PRESETS[preset];
+    if (!dir) {
+      const d = new THREE.Vector3().subVectors(this.camera.position,
+        this.controls ? this.controls.target : s.center).normalize();
+      dir = { x: d.x, y: d.y, z: d.z };
+    }
+    const f = frameSphere(s.center, s.radius, dir, this.camera.fov, this.camera.aspect);
+    this.camera.position.set(f.eye.x, f.eye.y, f.eye.z);
+    this.camera.near = f.distance / 100;
+    this.camera.far = f.distance * 100;
+    this.camera.updateProjectionMatrix();
+    if (this.controls) {
+      this.controls.target.set(f.target.x, f.target.y, f.target.z);
+      this.controls.update();
+    } else {
+      this.camera.lookAt(s.center);
+    }
+    this.needsRender = true;
+    return true;
   }
 
   // The ray under a pointer at client coordinates: {origin, direction}.
@@ -207,7 +267,8 @@ export class View {
     const hits = this.raycaster.intersectObject(this.mesh, false);
     if (!hits.length) return null;
     const h = hits[0];
-    return { point: h.point.clone(), distance: h.distance };
+    const n = h.face ? h.face.normal : new THREE.Vector3(0, 0, 1);
+    return { point: h.point.clone(), distance: h.distance, normal: { x: n.x, y: n.y, z: n.z } };
   }
 
   viewDirection() {
@@ -224,15 +285,18 @@ export class View {
     return { x: rect.left + ((v.x + 1) / 2) * rect.width, y: rect.top + ((1 - v.y) / 2) * rect.height };
   }
 
-  showCursor(point, radius) {
+  // The brush disc at a local hit ({point, normal}) with the brush's
+  // radius; null hides it.
+  showCursor(hit, radius) {
     this.needsRender = true;
-    if (!point) {
-      this.cursor.visible = false;
+    if (!hit) {
+      this.cursor.hide();
       return;
     }
-    this.cursor.visible = true;
-    this.cursor.position.copy(point);
-    this.cursor.scale.setScalar(Math.max(radius, 1e-4));
+    // The centre dot: about 8 pixels across at the hit's distance.
+    const h = this.canvas.clientHeight || 600;
+    const perPixel = (2 * (hit.distance || 1) * Math.tan((this.camera.fov * Math.PI) / 360)) / h;
+    this.cursor.place(hit.point, hit.normal || { x: 0, y: 0, z: 1 }, radius, 4 * perPixel);
   }
 
   // The control mesh overlay from Inspect: control_mesh (edges) and
@@ -241,7 +305,7 @@ export class View {
     this.needsRender = true;
     if (this.controlLines) {
       this.overlay.remove(this.controlLines);
-      this.controlLines.geometry.dispose();
+      this.controlGeometry.dispose();
       this.controlLines = null;
     }
     if (!visible || !mesh || !positions) return;
@@ -254,12 +318,19 @@ export class View {
       const s = sharp[i >> 1];
       col[3 * i] = s ? 1.0 : 0.45; col[3 * i + 1] = s ? 0.35 : 0.85; col[3 * i + 2] = s ? 0.3 : 1.0;
     }
+    // Drawn twice: edges in front of the surface solid (depth-tested),
+    // edges behind it faint (seen through), so front and back never tangle.
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.BufferAttribute(arr, 3));
     g.setAttribute('color', new THREE.BufferAttribute(col, 3));
-    this.controlLines = new THREE.LineSegments(g, new THREE.LineBasicMaterial({
-      vertexColors: true, depthTest: false, transparent: true, opacity: 0.8 }));
-    this.controlLines.renderOrder = 2;
+    const front = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ vertexColors: true }));
+    front.renderOrder = 2;
+    const behind = new THREE.LineSegments(g, new THREE.LineBasicMaterial({
+      vertexColors: true, depthTest: false, depthWrite: false, transparent: true, opacity: 0.16 }));
+    behind.renderOrder = 1;
+    this.controlLines = new THREE.Group();
+    this.controlLines.add(front, behind);
+    this.controlGeometry = g;
     this.overlay.add(this.controlLines);
   }
 

@@ -142,6 +142,8 @@ test('clay on a local-frame session: the server\'s refusal shown as is', async (
   await page.mouse.click(a.x, a.y + 4);
   await until(async () => /refused \(INVALID_ARGUMENT\): .*COROTATIONAL/.test(await banner()),
     'the refusal on the page', 60000);
+  // In plain words first, with what to do.
+  assert.match(await banner(), /^This session's material model cannot hold clay\. Create the session with Model: corotational/);
   await shot('03_refused');
   await page.selectOption('#model-select', '');
 });

@@ -220,6 +220,7 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
     throw new Error(`${e.message}; messages ${JSON.stringify(m)}; log ${JSON.stringify(await log())}`);
   });
   assert.match(await banner(), /refused \(\w+\): .*merge/i);
+  assert.match(await banner(), /^(Merge|Those|That)/, 'a plain sentence first');
   assert.equal((await stats()).control_cells, cells, 'nothing changed');
   // The facing sides x = 1 and x = 2 of the upper layer: look at each from
   // the gap between the columns (as a person would orbit there).
@@ -262,7 +263,7 @@ test('merge: a refusal shows the server\'s text; two extruded columns joined by 
   await page.click('#resume');
   await until(async () => !(await stats()).paused, 'running again');
   await caughtUp();
-  await page.click('#reset-camera');
+  await page.click('#view-buttons [data-view=iso]');
   await sleep(500);
   await shot('04_handle');
 });

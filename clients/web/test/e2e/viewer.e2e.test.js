@@ -25,7 +25,7 @@ const metrics = (p) => p.evaluate(() => {
     frames: a.metrics.framesReceived, rendered: a.metrics.framesRendered, reconnects: a.metrics.reconnects,
     lastError: a.metrics.lastError, messages: a.metrics.messages.map((m) => m.text),
     banner: document.getElementById('banner').hidden ? '' : document.getElementById('banner').textContent,
-    status: document.getElementById('status').textContent, session: a.session, presses: a.metrics.presses,
+    status: document.getElementById('status').title, session: a.session, presses: a.metrics.presses,
     camera: a.view.camera.position.toArray(),
     range: a.view.range, legend: document.getElementById('legend-max').textContent };
 });
@@ -79,7 +79,9 @@ test('a second session with the local-frame model from the picker; closed from t
   const s = await grpc.call('GetSession', other.session);
   assert.equal(s.stats.model, 'local_frame');
   await until(async () => /local_frame \//.test((await metrics(page)).status), 'the status line naming it');
+  // Close asks first (the session ends for everyone on its link).
   await page.click('#close-session');
+  await page.click('#close-yes');
   await until(async () => !(await grpc.call('ListSessions', {})).sessions.some((x) => x.id === other.session.id),
     'the session closed');
   // Back to block3's session by its link.
@@ -98,6 +100,8 @@ test('a scene file with an error is refused with the server\'s message and nothi
     buffer: Buffer.from('name: "broken"\nmesh { block { nx: 0 } }\n') });
   await until(async () => /refused/.test((await metrics(page)).banner), 'the refusal on the page');
   const m = await metrics(page);
+  // A plain sentence, then the server's own words.
+  assert.match(m.banner, /^The scene file has an error; nothing was created\./);
   assert.match(m.banner, /INVALID_ARGUMENT/);
   assert.match(m.banner, /scene_text|nx/);
   assert.equal((await grpc.call('ListSessions', {})).sessions.length, before);

@@ -17,10 +17,11 @@ inline Eigen::Vector3d V(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 // The default damping ratio of the normal spring (scene.proto Environment).
 constexpr double kDefaultDampingRatio = 0.5;
-// kappa = kStiffnessFactor * E / l (the header); the contact's highest
+// The default stiffness (scene.proto Environment.stiffness), times E / L;
+// the contact's highest
 // frequency times the sub-step at most kStepFrequency; the margin on the
 // power iteration's estimate (it converges from below).
-constexpr double kStiffnessFactor = 8;
+constexpr double kDefaultStiffness = 10;
 constexpr double kStepFrequency = 0.6;
 constexpr double kEstimateMargin = 1.25;
 // A touch ends when its vertex is this far (times the vertex spacing) above
@@ -79,6 +80,11 @@ absl::Status ObstacleContact::Validate(const Environment& env, std::string_view 
     return absl::InvalidArgumentError(
         absl::StrCat(f, ".friction must be >= 0 (0: frictionless), got ", env.friction()));
   }
+  if (!(env.stiffness() >= 0 && std::isfinite(env.stiffness()))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".stiffness must be >= 0 (a multiple of E / L; 0: the default ", kDefaultStiffness,
+        "), got ", env.stiffness()));
+  }
   if (!(env.damping_ratio() >= 0 && env.damping_ratio() <= 1)) {
     return absl::InvalidArgumentError(absl::StrCat(
         f, ".damping_ratio must be in [0, 1] (0: the default ", kDefaultDampingRatio, "), got ",
@@ -114,6 +120,7 @@ absl::StatusOr<std::unique_ptr<ObstacleContact>> ObstacleContact::Create(
   }
   c->friction_ = env.friction();
   c->damping_ratio_ = env.damping_ratio() > 0 ? env.damping_ratio() : kDefaultDampingRatio;
+  c->stiffness_ = env.stiffness() > 0 ? env.stiffness() : kDefaultStiffness;
   c->BuildGroups(surface);
   return c;
 }
@@ -137,6 +144,8 @@ void ObstacleContact::BuildGroups(const SurfaceInput& s) {
     if (std::abs(sum - 1.0) > 1e-9) convex_rows_ = false;
     row_start_.push_back(static_cast<int64_t>(row_col_.size()));
   }
+  // The solid's size: the largest side of its rest surface's box.
+  if (nv > 0) extent_ = (s.rest->colwise().maxCoeff() - s.rest->colwise().minCoeff()).maxCoeff();
   // Areas: a quarter of each quad's (a triangle's third to each corner).
   area_.assign(nv, 0.0);
   std::vector<int32_t> vertex_group(nv, -1);
@@ -183,24 +192,45 @@ void ObstacleContact::BuildGroups(const SurfaceInput& s) {
 }
 
 int ObstacleContact::Calibrate(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& mt_rows,
-                               double young, double h, int max_substeps) {
+                               double young, double h, int substeps, int max_substeps) {
   const Eigen::SparseMatrix<double> mt = mt_rows;
-  // K1 = S^T diag(area) S, the contact stiffness per unit kappa with every
-  // surface vertex in contact along one axis (the same for each axis).
   const int64_t nc = controls_;
-  std::vector<Eigen::Triplet<double>> t;
   const int64_t nv = static_cast<int64_t>(area_.size());
-  double total_area = 0;
+  // Each vertex's share of stiffness, shaped by the mass behind it: the
+  // least, over the control points its row names, of the point's (lumped)
+  // mass over the weight all vertices lean on it with. Then the contact
+  // frequency is about the same everywhere, and no light corner limits
+  // the rest (header: the Gershgorin bound of the lumped system).
+  std::vector<double> lumped(nc, 0.0), lean(nc, 0.0);
+  for (int64_t i = 0; i < nc; ++i) {
+    for (Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>::InnerIterator it(mt_rows, i); it; ++it) {
+      lumped[i] += it.value();
+    }
+  }
+  for (int64_t k = 0; k < static_cast<int64_t>(row_col_.size()); ++k) lean[row_col_[k]] += std::abs(row_val_[k]);
+  weight_.assign(nv, 0.0);
+  double total_area = 0, total_weight = 0;
+  std::vector<Eigen::Triplet<double>> t;
   for (int64_t v = 0; v < nv; ++v) {
+    double w = INFINITY;
+    for (int64_t i = row_start_[v]; i < row_start_[v + 1]; ++i) {
+      const int32_t c = row_col_[i];
+      if (lean[c] > 0) w = std::min(w, std::max(0.0, lumped[c]) / lean[c]);
+    }
+    weight_[v] = std::isfinite(w) ? w : 0.0;
     total_area += area_[v];
+    total_weight += weight_[v];
     for (int64_t i = row_start_[v]; i < row_start_[v + 1]; ++i) {
       for (int64_t j = row_start_[v]; j < row_start_[v + 1]; ++j) {
-        t.emplace_back(row_col_[i], row_col_[j], area_[v] * row_val_[i] * row_val_[j]);
+        t.emplace_back(row_col_[i], row_col_[j], weight_[v] * row_val_[i] * row_val_[j]);
       }
     }
   }
   spacing_ = nv > 0 ? std::sqrt(total_area / static_cast<double>(nv)) : 0.0;
   release_ = kReleaseBand * spacing_;
+  // K1 = S^T diag(w) S: the contact stiffness per unit scale with every
+  // vertex in contact along one axis; lambda its largest frequency squared
+  // against Mt (power iteration, from below: times a margin).
   Eigen::SparseMatrix<double> k1(nc, nc);
   k1.setFromTriplets(t.begin(), t.end());
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> mass(mt);
@@ -223,15 +253,20 @@ int ObstacleContact::Calibrate(const Eigen::SparseMatrix<double, Eigen::RowMajor
   }
   lambda *= kEstimateMargin;
   min_substeps_ = 1;
-  kappa_ = 0;
+  scale_ = 0;
   omega_ = 0;
-  if (!(lambda > 0) || !(spacing_ > 0) || !(young > 0)) return min_substeps_;
-  const double target = kStiffnessFactor * young / spacing_;
-  const double needed = std::ceil(h * std::sqrt(target * lambda) / kStepFrequency);
-  min_substeps_ = static_cast<int>(std::clamp(needed, 1.0, static_cast<double>(max_substeps)));
-  const double limit = kStepFrequency * min_substeps_ / h;
-  kappa_ = std::min(target, limit * limit / lambda);
-  omega_ = std::sqrt(kappa_ * lambda);
+  kappa_ = 0;
+  if (!(lambda > 0) || !(total_weight > 0) || !(extent_ > 0) || !(young > 0)) return min_substeps_;
+  // The stiffest the sub-step allows: omega_c h_sub = kStepFrequency. The
+  // sub-steps rise (from the solid's own) only when that is below the
+  // target kStiffnessFactor E / L per square metre, summed over the surface.
+  const double target = stiffness_ * young / extent_ * total_area;
+  const double needed = std::ceil(h * std::sqrt(lambda * target / total_weight) / kStepFrequency);
+  min_substeps_ = static_cast<int>(
+      std::clamp(std::max(needed, static_cast<double>(substeps)), 1.0, static_cast<double>(max_substeps)));
+  omega_ = kStepFrequency * min_substeps_ / h;
+  scale_ = omega_ * omega_ / lambda;
+  kappa_ = scale_ * total_weight / total_area;
   return min_substeps_;
 }
 
@@ -424,7 +459,7 @@ void ObstacleContact::AddForces(const Points& p, const Points& prev, double h, P
     const Eigen::Vector3d v = (x - VertexAt(t.vertex, prev)) / h;
     const double depth = t.offset - t.normal.dot(x);
     max_depth_ = std::max(max_depth_, depth);
-    const double kn = kappa_ * area_[t.vertex];
+    const double kn = scale_ * weight_[t.vertex];
     const double cn = omega_ > 0 ? 2.0 * zeta * kn / omega_ : 0.0;
     const double vn = t.normal.dot(v);
     // (Within the release band above the plane, depth < 0: no force, but

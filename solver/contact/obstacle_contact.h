@@ -9,30 +9,35 @@
 //
 //   depth d = o - n . x  (> 0 inside),  f_N = max(0, k_n d - c_n n . v),
 //
-// k_n = kappa a_n (a_n the vertex's share of the rest surface area), c_n =
-// 2 zeta k_n / omega_c, and Coulomb friction as a stick spring of the same
-// stiffness to an anchor on the plane: f_T = -k_n (x - a)_T - c_n v_T,
-// capped at mu f_N; past the cap the vertex slides and its anchor follows
-// (docs/model.md "Contact"). A touch ends when its vertex rises a hundredth
-// of the vertex spacing above its plane (no force above the plane: no
-// adhesion), so that a vertex trembling on the floor keeps its anchor. The control forces are S^T f. The entry plane
+// k_n the vertex's stiffness (below), c_n = 2 zeta k_n / omega_c, and
+// Coulomb friction as a stick spring of the same stiffness to an anchor
+// on the plane: f_T = -k_n (x - a)_T - c_n v_T, capped at mu f_N; past the
+// cap the vertex slides and its anchor follows (docs/model.md "Contact").
+// A touch ends when its vertex rises a hundredth of the vertex spacing
+// above its plane (no force above the plane: no adhesion), so that a
+// vertex trembling on the floor keeps its anchor. The control forces are
+// S^T f. The entry plane
 // is fixed when the contact starts: for the floor its plane, for a box the
 // face the vertex's path over the sub-step crossed first (so a vertex
 // moving fast enough to reach the far side of a box within one sub-step is
 // still pushed back the way it came: no tunnelling), for a ball the
 // tangent plane at the point nearest the vertex (found again each time).
 //
-// Stiffness: kappa = 8 E / l per unit area (E the solid's mean Young's
-// modulus, l the surface's vertex spacing): a layer about an eighth of a
-// fine cell thick as stiff as the solid, so that an impact that squashes the
-// solid's own cells sinks into the floor by a fraction of that. Its highest
-// frequency with every surface vertex in contact, omega_c = sqrt(kappa
-// lambda) (lambda the largest eigenvalue of (S^T diag(a) S) u = lambda Mt u,
-// by power iteration at build), must stay below 0.6 / h_sub for the
-// explicit force (central differences, and backward Euler's, which takes
-// contact explicitly) with its damping to be stable: the solid takes the
-// sub-steps that asks for (min_substeps), up to solver.max_substeps, past
-// which kappa is lowered to fit.
+// Stiffness: the stiffest the sub-step carries. Each vertex's stiffness is
+// k_n = scale w_n, w_n the least, over the control points of its row, of a
+// point's lumped mass over the weight all vertices lean on it with (so
+// that, by Gershgorin on the lumped system, no light corner of the surface
+// limits the rest), and scale puts the contact's highest frequency with
+// every vertex in contact, omega_c = sqrt(scale lambda) (lambda the
+// largest eigenvalue of (S^T diag(w) S) u = lambda Mt u, by power
+// iteration at build), at 0.6 / h_sub: stable for the explicit force
+// (central differences, and backward Euler's, which takes contact
+// explicitly) with its damping. The solid's own sub-steps set h_sub; they
+// rise only when the total stiffness would stay below `stiffness` E / L
+// per square metre of surface (scene.proto Environment.stiffness, default
+// 10; E the mean Young's modulus, L the solid's size): an impact at speed
+// v sinks about 2.4 v L / (stiffness c), c = sqrt(E / rho) (measured on a
+// dropped block).
 //
 // Culling: the vertices are grouped by control cell; a group is looked at
 // only when the box around its control points (at the sub-step's start and
@@ -98,10 +103,12 @@ class ObstacleContact {
   static absl::Status Validate(const Environment& env, std::string_view field);
 
   // Sets the penalty stiffness for a solid of mean Young's modulus `young`
-  // (Pa) and control mass matrix mt stepped by h (seconds), as the header
-  // says, and returns the sub-steps it needs (1..max_substeps).
+  // (Pa) and control mass matrix mt stepped by h (seconds) in `substeps`
+  // sub-steps, as the header says, and returns the sub-steps it needs
+  // (at least `substeps`, at most max_substeps).
   int Calibrate(const Eigen::SparseMatrix<double, Eigen::RowMajor, int32_t>& mt, double young,
-                double h, int max_substeps);
+                double h, int substeps, int max_substeps);
+  // The mean stiffness per square metre of surface, N/m^3.
   double kappa() const { return kappa_; }
   int min_substeps() const { return min_substeps_; }
 
@@ -142,18 +149,19 @@ class ObstacleContact {
   bool Holds(Touch& t, const Eigen::Vector3d& x) const;
 
   std::vector<Shape> obstacles_;
-  double friction_ = 0, damping_ratio_ = 0.5;
+  double friction_ = 0, damping_ratio_ = 0.5, stiffness_ = 10;
   // Surface rows in CSR form.
   std::vector<int64_t> row_start_;
   std::vector<int32_t> row_col_;
   std::vector<double> row_val_;
-  std::vector<double> area_;  // per vertex, m^2
+  std::vector<double> area_;    // per vertex, m^2
+  std::vector<double> weight_;  // per vertex: its stiffness per unit scale_ (kg)
   // Groups: their vertices and control points (CSR).
   std::vector<int64_t> group_vertex_start_, group_point_start_;
   std::vector<int32_t> group_vertex_, group_point_;
   bool convex_rows_ = true;  // every row a convex combination: culling is exact
   int64_t controls_ = 0;
-  double kappa_ = 0, omega_ = 0, spacing_ = 0, release_ = 0;
+  double kappa_ = 0, omega_ = 0, scale_ = 0, spacing_ = 0, release_ = 0, extent_ = 0;
   int min_substeps_ = 1;
   std::vector<Touch> touches_;  // ascending (vertex, obstacle)
   std::vector<Touch> next_;     // scratch

@@ -645,7 +645,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
       samples += static_cast<int64_t>(array.size());
     }
     young /= std::max<int64_t>(1, samples);
-    im.environment->Calibrate(im.mt, young, s->h_, im.settings.max_substeps());
+    im.environment->Calibrate(im.mt, young, s->h_, im.substeps, im.settings.max_substeps());
     im.substeps = std::max(im.substeps, im.environment->min_substeps());
     rep.contact_kappa = im.environment->kappa();
   }

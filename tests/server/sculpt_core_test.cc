@@ -237,6 +237,18 @@ TEST(SculptCoreTest, DragTargetsWithinAStepFoldToTheLatestAndReleaseEndsTheDrag)
   EXPECT_TRUE(a.core->solid().load_ids().empty());
 }
 
+// A fresh block3 session given `journal` and stepped to `steps`: its state.
+std::string ReplayedState(const std::vector<persist::JournalRecord>& journal, int64_t steps) {
+  Session replayed = Make();
+  for (const persist::JournalRecord& rec : journal) {
+    if (!replayed.core->Replay(rec).ok()) return "replay failed";
+  }
+  while (replayed.core->steps() < steps) {
+    if (!replayed.core->StepOnce().ok()) return "step failed";
+  }
+  return replayed.core->solid().SaveState();
+}
+
 // Bake: the shape at the step the command is taken becomes the rest shape
 // (the server stamps it into the command, so the journal replays the same
 // bake), built off the loop while the solid steps on; the velocities are
@@ -325,10 +337,7 @@ TEST(SculptCoreTest, ABakeIsReplayedFromItsJournalRecordToTheSameBits) {
   send("edit { bake {} }", false);  // inline: the positions at its own step
   Steps(live, 20);
   const std::string want = live.core->solid().SaveState();
-  Session replayed = Make();
-  for (const persist::JournalRecord& rec : journal) ASSERT_OK(replayed.core->Replay(rec));
-  while (replayed.core->steps() < live.core->steps()) ASSERT_OK(replayed.core->StepOnce());
-  EXPECT_EQ(replayed.core->solid().SaveState(), want);
+  EXPECT_EQ(ReplayedState(journal, live.core->steps()), want);
 }
 
 TEST(SculptCoreTest, ABakeIsRefusedWhileABoxPressureActsAndChangesNothing) {
@@ -381,10 +390,7 @@ TEST(SculptCoreTest, SnapshotsAndJournalReplayOfEditsAndUndosReachTheSameBits) {
   const std::string want = live.core->solid().SaveState();
 
   // Replay from the start.
-  Session replayed = Make();
-  for (const persist::JournalRecord& rec : journal) ASSERT_OK(replayed.core->Replay(rec));
-  while (replayed.core->steps() < live.core->steps()) ASSERT_OK(replayed.core->StepOnce());
-  EXPECT_EQ(replayed.core->solid().SaveState(), want);
+  EXPECT_EQ(ReplayedState(journal, live.core->steps()), want);
 
   // Recover from the snapshot, then replay what followed it.
   Session recovered = Make();

@@ -50,13 +50,12 @@ struct Settle {
 Settle DragAndRelease(Solid& s, double after) {
   const Solid::Bounds b = s.SurfaceBounds();
   const double size = (b.max - b.min).maxCoeff();
-  const Points x = s.SurfacePositions();
-  int64_t top = 0;
-  for (int64_t i = 1; i < x.rows(); ++i) {
-    if (x(i, 2) > x(top, 2)) top = i;
+  // The rest centroid of the highest control cell (inside the solid).
+  const mesh::CellComplex& control = s.discretization().control();
+  Eigen::Vector3d at = control.CellCentroid(0);
+  for (int32_t c = 1; c < control.num_cells(); ++c) {
+    if (control.CellCentroid(c).z() > at.z()) at = control.CellCentroid(c);
   }
-  // A material point just inside the surface under the top vertex.
-  const Eigen::Vector3d at = x.row(top).transpose() - Eigen::Vector3d(0, 0, 1e-3 * size);
   Drag drag;
   *drag.mutable_material_point() = ToVec3(at);
   *drag.mutable_target() = ToVec3(at + Eigen::Vector3d(0.1 * size, 0, 0));

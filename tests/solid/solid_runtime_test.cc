@@ -639,7 +639,7 @@ TEST(SolidRuntimeTest, InvalidCallsAreRejectedAndChangeNothing) {
   add("zero pressure", s->AddPressure(Parse<Pressure>("region { sphere { radius: 1 } }")).status(),
       kInvalid, "pressure.pascals must be non-zero");
   add("empty pressure region", s->AddPressure(Parse<Pressure>("pascals: 3")).status(), kInvalid,
-      "pressure.region is empty: set a box, a sphere or control_cells");
+      "pressure.region is empty: set a box, a sphere, control_cells or control_points");
   add("no face", s->AddPressure(Parse<Pressure>(
           "region { sphere { center { x: 0.5 } radius: 0.01 } } pascals: 3")).status(),
       kInvalid, "pressure.region selects no boundary face");

@@ -126,7 +126,7 @@ def scene_text(source_dir):
     per control cell, about 70 times stiffer in bending. Otherwise the scene
     itself."""
     text = open(os.path.join(source_dir, "scenes", "block3.textproto")).read()
-    for old, new in (("density: 1000 damping: 2000", "density: 100 damping: 1100"),
+    for old, new in (("density: 1000 damping: 3000", "density: 100 damping: 1100"),
                      ("model: COROTATIONAL\n  corotation: CONTROL_CELL\n", "model: LOCAL_FRAME\n")):
         if old not in text:
             fail("scenes/block3.textproto: no \"%s\" to change" % old)

@@ -85,21 +85,22 @@ F="$S/frames"
   "$F/pinned.obj:before sculpting" "$F/dragged.obj:extruded, joined, dragged" \
   "$F/bent.obj:bent by a curve" "$F/sculpted.obj:refined, cut, painted" >&2
 
-/usr/bin/python3 scripts/render_frames.py "$OUT/clay.png" \
+/usr/bin/python3 scripts/render_frames.py "$OUT/clay.png" --floor=0 \
   "$D/frames/before.obj:clay at rest" "$D/frames/during.obj:pulled by a drag" \
   "$D/frames/after.obj:released: the shape stays" "$D/frames/baked.obj:baked, 0.5 s on" >&2
 SET_LINE=$(/usr/bin/python3 scripts/shape_change.py "$D/frames/before.obj" "$D/frames/after.obj" \
   "permanent set after the drag was released")
 BAKED_LINE=$(/usr/bin/python3 scripts/shape_change.py "$D/frames/after.obj" "$D/frames/baked.obj" \
-  "moved in the 0.5 s after the bake")
+  "moved in the 0.5 s after the bake (gravity sagging the new rest shape)")
 
-# The drop: a rubber block released 2 m above a floor comes to rest on it.
+# The drop: a rubber block released 2 m above a floor comes to rest on it
+# (frames every 0.3 s; the first after 0.3 s of falling).
 DROP="$OUT/drop"
 rm -rf "$DROP"
 "$BIN/solver/tools/dynsolid-sim" --scene clients/scripts/drop_block.textproto --steps 3000 \
   --frames 300 --out "$DROP" > /dev/null
-/usr/bin/python3 scripts/render_frames.py "$OUT/drop.png" \
-  "$DROP/frames/frame_000000.obj:released at 2 m" "$DROP/frames/frame_000600.obj:0.6 s" \
+/usr/bin/python3 scripts/render_frames.py "$OUT/drop.png" --floor=0 \
+  "$DROP/frames/frame_000300.obj:0.3 s: falling" "$DROP/frames/frame_000600.obj:0.6 s" \
   "$DROP/frames/frame_000900.obj:0.9 s" "$DROP/frames/frame_003000.obj:3 s: at rest" >&2
 DROP_LINE=$(/usr/bin/python3 - "$DROP/frames/frame_003000.obj" "$DROP/trace.csv" <<'PY'
 import csv, sys

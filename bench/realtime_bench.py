@@ -73,10 +73,13 @@ def scene_text(name):
         text = f.read()
     if name == "block3+floor+clay":
         text = text.replace('name: "block3"', 'name: "block3_floor_clay"')
-        text += ("environment { floor { normal { z: 1 } } friction: 0.8 }\n"
-                 "materials { regions { region { box { min { x: -1 y: -1 z: 2 } "
-                 "max { x: 4 y: 4 z: 4 } } } material { preset: CLAY young_modulus: 1e5 "
-                 "density: 1000 damping: 3000 } } }\n")
+        base = "  base { young_modulus: 1e5 poisson_ratio: 0.3 density: 1000 damping: 3000 }\n"
+        if base not in text:
+            fail("scenes/block3.textproto: no %r to add the clay region after" % base)
+        text = text.replace(base, base + (
+            "  regions { region { box { min { x: -1 y: -1 z: 2 } max { x: 4 y: 4 z: 4 } } }\n"
+            "    material { preset: CLAY young_modulus: 1e5 density: 1000 damping: 3000 } }\n"))
+        text += "environment { floor { normal { z: 1 } } friction: 0.8 }\n"
     return text
 
 

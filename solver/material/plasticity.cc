@@ -63,6 +63,19 @@ FlowLaw FlowLawOf(const Material& m) {
 CellPlasticity::CellPlasticity(std::vector<FlowLaw> laws) : laws_(std::move(laws)) {
   alpha_.assign(laws_.size(), 0.0);
   dissipation_.assign(laws_.size(), 0.0);
+  UpdateActive();
+}
+
+void CellPlasticity::UpdateActive() {
+  active_.assign(laws_.size(), 0);
+  for (size_t c = 0; c < laws_.size(); ++c) {
+    bool moved = alpha_[c] > 0;
+    if (!moved && !offsets_.empty() && c < first_.size()) {
+      const double* up = offsets_.data() + 3 * static_cast<int64_t>(first_[c]);
+      for (int e = 0; e < 3 * size_[c] && !moved; ++e) moved = up[e] != 0;
+    }
+    active_[c] = laws_[c].yield > 0 || moved;
+  }
 }
 
 bool CellPlasticity::any_yields() const {
@@ -93,6 +106,7 @@ void CellPlasticity::Attach(models::CellCorotation& model) {
   }
   entries_ = model.support_entries();
   if (offsets_.size() != static_cast<size_t>(3 * entries_)) offsets_.assign(3 * entries_, 0.0);
+  UpdateActive();
   model.set_flow(this);
 }
 
@@ -198,6 +212,12 @@ void CellPlasticity::set_state(State s) {
   offsets_ = std::move(s.offsets);
   alpha_ = std::move(s.alpha);
   dissipation_ = std::move(s.dissipation);
+  UpdateActive();
+}
+
+void CellPlasticity::set_laws(std::vector<FlowLaw> laws) {
+  laws_ = std::move(laws);
+  UpdateActive();
 }
 
 void CellPlasticity::Checkpoint() {
@@ -210,6 +230,8 @@ void CellPlasticity::Rollback() {
   offsets_ = checkpoint_.offsets;
   alpha_ = checkpoint_.alpha;
   dissipation_ = checkpoint_.dissipation;
+  // (active_ only grows with a flow, and only where a law yields: a cell
+  // active before the step is active after it.)
 }
 
 }  // namespace dynsolid::material

@@ -68,12 +68,13 @@ class CellPlasticity : public models::CellFlow {
   // CellFlow.
   const double* offsets() const override { return offsets_.empty() ? nullptr : offsets_.data(); }
   bool flowing() const override { return dt_ > 0; }
+  bool plastic(int32_t cell) const override { return active_[cell] != 0; }
   void Flow(int32_t cell, const double* u, const double* ku) override;
 
   bool any_yields() const;
   const std::vector<FlowLaw>& laws() const { return laws_; }
   // New laws (a paint): same count.
-  void set_laws(std::vector<FlowLaw> laws) { laws_ = std::move(laws); }
+  void set_laws(std::vector<FlowLaw> laws);
   double alpha(int32_t cell) const { return alpha_.empty() ? 0.0 : alpha_[cell]; }
   // The plastic dissipation so far, J (per cell, summed in cell order).
   double dissipation() const;
@@ -110,6 +111,9 @@ class CellPlasticity : public models::CellFlow {
   int64_t entries_ = 0;
   std::vector<double> offsets_;         // empty until the first flow
   std::vector<double> alpha_, dissipation_;
+  // Per cell: its law yields or it has flowed (offsets not all zero).
+  std::vector<uint8_t> active_;
+  void UpdateActive();
   double dt_ = 0;
   State checkpoint_;
 };

@@ -162,7 +162,8 @@ Eigen::Matrix3d CellCorotation::FrameOf(const CellData& c, const Points& p,
     const Eigen::Vector3d x = p.row(support[a]).transpose() - centre;
     f += x * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
   }
-  if (const double* offsets = flow_ != nullptr ? flow_->offsets() : nullptr) {
+  const int32_t cell = static_cast<int32_t>(&c - cells_.data());
+  if (const double* offsets = flow_ != nullptr && flow_->plastic(cell) ? flow_->offsets() : nullptr) {
     // Relative to the plastic rest shape: F F_p^-1 (CellFlow).
     const double* u = offsets + 3 * static_cast<int64_t>(c.first);
     Eigen::Matrix3d fp = Eigen::Matrix3d::Identity();
@@ -228,7 +229,7 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
           s.u(3 * a + 1, j) = linear ? local.y() : local.y() - rest[3 * a + 1];
           s.u(3 * a + 2, j) = linear ? local.z() : local.z() - rest[3 * a + 2];
         }
-        if (plastic != nullptr && !linear) {
+        if (plastic != nullptr && !linear && flow_->plastic(cell)) {
           const double* up = plastic + 3 * static_cast<int64_t>(c.first);
           for (int e = 0; e < 3 * c.size; ++e) s.u(e, j) -= up[e];
         }
@@ -243,7 +244,9 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
           const Eigen::Vector3d f = r * s.y.col(j).segment<3>(3 * a);
           s.f.row(support[a]) += f.transpose();
         }
-        if (flowing) flow_->Flow(b.cells[j], s.u.col(j).data(), s.y.col(j).data());
+        if (flowing && flow_->plastic(b.cells[j])) {
+          flow_->Flow(b.cells[j], s.u.col(j).data(), s.y.col(j).data());
+        }
       }
     }
   });

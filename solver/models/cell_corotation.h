@@ -78,6 +78,9 @@ class CellFlow {
   virtual const double* offsets() const = 0;
   // Whether this pass flows (a flow step is armed).
   virtual bool flowing() const = 0;
+  // Whether cell `cell` may differ from elastic: its material yields or its
+  // offsets are not all zero (the others skip the plastic frame and offsets).
+  virtual bool plastic(int32_t cell) const = 0;
   // Cell `cell`'s elastic local displacement u and K_c u (3 S each).
   virtual void Flow(int32_t cell, const double* u, const double* ku) = 0;
 };

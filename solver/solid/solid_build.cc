@@ -293,20 +293,6 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   ConfigureLinearized();
 }
 
-std::vector<material::FlowLaw> Solid::Impl::SceneFlowLaws(const Scene& scene) const {
-  const mesh::CellComplex& control = d->control();
-  std::vector<material::FlowLaw> laws(control.num_cells());
-  for (int32_t c = 0; c < control.num_cells(); ++c) {
-    const Eigen::Vector3d x = control.CellCentroid(c);
-    const Material* m = &scene.materials().base();
-    for (const MaterialRegion& r : scene.materials().regions()) {
-      if (InRegion(r.region(), x, c)) m = &r.material();
-    }
-    laws[c] = material::FlowLawOf(scene::ResolvedMaterial(*m));
-  }
-  return laws;
-}
-
 std::optional<Solid::Impl::RetiredMaterial> Solid::Impl::TakeRetired(
     const std::function<bool(const models::ElementLayout&)>& is_it) const {
   std::lock_guard<std::mutex> lock(retired_mu);
@@ -476,18 +462,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
   s->total_mass_ = SumOfValues(im.mt);
-  // Clay: the cells' flow laws, when some material yields (the scene's
-  // rules refused it for models without control-cell frames).
-  if (std::vector<material::FlowLaw> laws = im.SceneFlowLaws(scene);
-      std::any_of(laws.begin(), laws.end(), [](const material::FlowLaw& l) { return l.yield > 0; })) {
-    if (im.cell_model == nullptr) {
-      return absl::InvalidArgumentError(
-          "materials: a material that yields needs solver.model COROTATIONAL and "
-          "solver.corotation CONTROL_CELL");
-    }
-    im.plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
-    im.plasticity->Attach(*im.cell_model);
-  }
+  RETURN_IF_ERROR(im.MakePlasticity(scene));  // clay, when some material yields
 
   // Constraints: the scene's fixed regions, held at rest.
   im.fix_count.assign(nc, 0);
@@ -539,18 +514,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   im.gravity = V(scene.loads().gravity());
-  // The environment (floor, obstacles): grouped by control cell for its
-  // culling; calibrated below, once the sub-step is known.
-  {
-    const std::vector<int32_t>& to_control = s->d_.hierarchy.control_cell;
-    std::vector<int32_t> quad_group(im.quad_cell.size());
-    for (size_t q = 0; q < im.quad_cell.size(); ++q) {
-      quad_group[q] = to_control.empty() ? im.quad_cell[q] : to_control[im.quad_cell[q]];
-    }
-    const contact::SurfaceInput input{&im.surface_rows, &s->surface_.quads, &quad_group,
-                                      &im.surface_rest};
-    ASSIGN_OR_RETURN(im.environment, contact::ObstacleContact::Create(scene.environment(), input));
-  }
+  // The environment (floor, obstacles), calibrated below once the sub-step
+  // is known.
+  RETURN_IF_ERROR(im.MakeEnvironment(scene, s->surface_));
   im.RebuildConstantLoads();
   im.RebuildPressure();
   rep.point_forces = static_cast<int32_t>(im.point_loads.size());
@@ -635,20 +601,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     // (The per-cell corotation made these partials already: counted there.)
     if (im.cell_model == nullptr) rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
   }
-  if (im.environment != nullptr) {
-    // The contact's stiffness for the solid's mean modulus, and the
-    // sub-steps it needs (either integrator).
-    double young = 0;
-    int64_t samples = 0;
-    for (const auto& array : im.layout->materials) {
-      for (const models::MaterialPoint& m : array) young += m.young;
-      samples += static_cast<int64_t>(array.size());
-    }
-    young /= std::max<int64_t>(1, samples);
-    im.environment->Calibrate(im.mt, young, s->h_, im.substeps, im.settings.max_substeps());
-    im.substeps = std::max(im.substeps, im.environment->min_substeps());
-    rep.contact_kappa = im.environment->kappa();
-  }
+  rep.contact_kappa = im.CalibrateEnvironment(s->h_);  // may raise the sub-steps
   if (!im.use_implicit && im.substeps > im.settings.max_substeps()) {
     return absl::InvalidArgumentError(absl::StrCat(
         "solver.time_step: ", s->h_, " s needs ", im.substeps,

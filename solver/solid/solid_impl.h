@@ -388,6 +388,21 @@ struct Solid::Impl {
   // The scene's flow law per control cell (the material at its rest
   // centroid, as the material regions give it).
   std::vector<material::FlowLaw> SceneFlowLaws(const Scene& scene) const;
+  // The parts a build makes (solid_parts.cc): clay when some material of
+  // the scene yields (InvalidArgument without control-cell frames), and
+  // the environment over `surface` (its errors name the field); then the
+  // environment's stiffness for the sub-step h / substeps, raising the
+  // sub-steps where it must. Returns its mean stiffness (N/m^3, 0: none).
+  absl::Status MakePlasticity(const Scene& scene);
+  absl::Status MakeEnvironment(const Scene& scene, const Solid::Surface& surface);
+  double CalibrateEnvironment(double h);
+  // A saved state's environment and clay sections, checked against this
+  // solid (nothing changes), and installed.
+  absl::Status ParseParts(std::string_view environment, std::string_view clay,
+                          std::vector<contact::ObstacleContact::Touch>& touches,
+                          std::optional<material::CellPlasticity::State>& plastic) const;
+  void InstallParts(std::vector<contact::ObstacleContact::Touch> touches,
+                    std::optional<material::CellPlasticity::State> plastic);
 
   // pressure = the follower loads (pressures, drags) and the environment's
   // contact forces at p, with the velocity from prev over one sub-step.

@@ -528,34 +528,15 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
       saved_pressure != (!(pressures.empty() && drags.empty()) || im.environment != nullptr)) {
     r.Fail("follower forces without pressures, drags or an environment");
   }
+  // Version 6: the environment's contacts and clay's state.
   std::vector<contact::ObstacleContact::Touch> touches;
-  if (version >= 6) {
-    const std::string env = r.Bytes("environment");
-    if (r.ok() && im.environment == nullptr && !env.empty()) {
-      r.Fail("environment contacts for a scene without an environment");
-    } else if (r.ok() && im.environment != nullptr) {
-      absl::StatusOr<std::vector<contact::ObstacleContact::Touch>> parsed =
-          im.environment->ParseState(env);
-      if (!parsed.ok()) {
-        r.Fail(std::string(parsed.status().message()));
-      } else {
-        touches = *std::move(parsed);
-      }
-    }
-  }
-  // Clay: none in the bytes (no material yielded then), or its state.
   std::optional<material::CellPlasticity::State> plastic;
   if (version >= 6 && r.ok()) {
-    const std::string bytes = r.Bytes("plasticity");
-    if (r.ok() && !bytes.empty() && im.cell_model == nullptr) {
-      r.Fail("plastic state for a solid without control-cell frames");
-    } else if (r.ok() && !bytes.empty()) {
-      absl::StatusOr<material::CellPlasticity::State> parsed = material::CellPlasticity::ParseState(
-          bytes, im.cell_model->cells(), im.cell_model->support_entries());
-      if (!parsed.ok()) {
-        r.Fail(std::string(parsed.status().message()));
-      } else {
-        plastic = *std::move(parsed);
+    const std::string env = r.Bytes("environment");
+    const std::string clay = r.Bytes("plasticity");
+    if (r.ok()) {
+      if (absl::Status st = im.ParseParts(env, clay, touches, plastic); !st.ok()) {
+        r.Fail(std::string(st.message()));
       }
     }
   }
@@ -773,24 +754,7 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   im.pressures = std::move(s.pressures);
   im.fixes = std::move(s.fixes);
   im.drags = std::move(s.drags);
-  if (im.environment != nullptr) im.environment->set_touches(std::move(s.touches));
-  if (s.plastic.has_value()) {
-    if (im.plasticity == nullptr) {
-      im.plasticity = std::make_unique<material::CellPlasticity>(s.plastic->laws);
-      im.plasticity->Attach(*im.cell_model);
-    }
-    im.plasticity->set_state(*std::move(s.plastic));
-  } else if (im.plasticity != nullptr) {
-    // A state from before the first clay was painted: elastic again.
-    im.cell_model->set_flow(nullptr);
-    {
-      std::lock_guard<std::mutex> lock(im.retired_mu);
-      if (im.retired.has_value() && im.retired->build.cell_model != nullptr) {
-        im.retired->build.cell_model->set_flow(nullptr);
-      }
-    }
-    im.plasticity.reset();
-  }
+  im.InstallParts(std::move(s.touches), std::move(s.plastic));
   im.fix_count = std::move(s.fix_count);
   im.next_id = s.next_id;
   im.gravity = s.gravity;

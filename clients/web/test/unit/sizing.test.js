@@ -12,15 +12,15 @@ const CHAIR = { size: 1.2, cell: 0.1, stiffness: { min: 3e6, max: 2e7 } };
 // 1.8 p r / E: the default inflate's indent as a share of the radius.
 const indentShare = (t, E) => (1.8 * t.pressure * t.radius) / E / t.radius;
 
-test('block3: a 0.75 m brush, 2 kPa, a one-metre extrude, springs like the old defaults', () => {
+test('block3: a 0.75 m brush, 1 kPa, a one-metre extrude, springs like the old defaults', () => {
   const t = S.sizeTools(BLOCK3);
-  assert.deepEqual(t, { radius: 0.75, pinRadius: 0.75, pressure: 2000, extrudeDistance: 1,
+  assert.deepEqual(t, { radius: 0.75, pinRadius: 0.75, pressure: 1000, extrudeDistance: 1,
     dragStiffness: 5e4, curveStiffness: 2e4, stiffnessValue: 1e6, massValue: 5000 });
 });
 
-test('the chair: a 15 cm brush, 60 kPa, a 10 cm extrude, springs for 3 MPa', () => {
+test('the chair: a 15 cm brush, 30 kPa, a 10 cm extrude, springs for 3 MPa', () => {
   const t = S.sizeTools(CHAIR);
-  assert.deepEqual(t, { radius: 0.15, pinRadius: 0.15, pressure: 6e4, extrudeDistance: 0.1,
+  assert.deepEqual(t, { radius: 0.15, pinRadius: 0.15, pressure: 3e4, extrudeDistance: 0.1,
     dragStiffness: 1.5e5, curveStiffness: 6e4, stiffnessValue: 3e7, massValue: 5000 });
 });
 

@@ -1,0 +1,119 @@
+// The solid's parts with state of their own, as the solid makes, saves and
+// restores them: clay (material/plasticity.h) and the environment
+// (contact/obstacle_contact.h). Each part keeps its own state; the solid
+// only builds it, hands it positions and forces, and carries its bytes.
+#include <algorithm>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
+#include "solver/solid/solid.h"
+#include "solver/solid/solid_impl.h"
+
+namespace dynsolid::solid {
+
+std::vector<material::FlowLaw> Solid::Impl::SceneFlowLaws(const Scene& scene) const {
+  const mesh::CellComplex& control = d->control();
+  std::vector<material::FlowLaw> laws(control.num_cells());
+  for (int32_t c = 0; c < control.num_cells(); ++c) {
+    const Eigen::Vector3d x = control.CellCentroid(c);
+    const Material* m = &scene.materials().base();
+    for (const MaterialRegion& r : scene.materials().regions()) {
+      if (InRegion(r.region(), x, c)) m = &r.material();
+    }
+    laws[c] = material::FlowLawOf(scene::ResolvedMaterial(*m));
+  }
+  return laws;
+}
+
+absl::Status Solid::Impl::MakePlasticity(const Scene& scene) {
+  std::vector<material::FlowLaw> laws = SceneFlowLaws(scene);
+  if (std::none_of(laws.begin(), laws.end(), [](const material::FlowLaw& l) { return l.yield > 0; })) {
+    return absl::OkStatus();
+  }
+  // (The scene's rules refuse it first, naming the field.)
+  if (cell_model == nullptr) {
+    return absl::InvalidArgumentError(
+        "materials: a material that yields needs solver.model COROTATIONAL and "
+        "solver.corotation CONTROL_CELL");
+  }
+  plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
+  plasticity->Attach(*cell_model);
+  return absl::OkStatus();
+}
+
+absl::Status Solid::Impl::MakeEnvironment(const Scene& scene, const Solid::Surface& surface) {
+  // Grouped by control cell, for the environment's culling.
+  const std::vector<int32_t>& to_control = d->hierarchy.control_cell;
+  std::vector<int32_t> quad_group(quad_cell.size());
+  for (size_t q = 0; q < quad_cell.size(); ++q) {
+    quad_group[q] = to_control.empty() ? quad_cell[q] : to_control[quad_cell[q]];
+  }
+  const contact::SurfaceInput input{&surface_rows, &surface.quads, &quad_group, &surface_rest};
+  ASSIGN_OR_RETURN(environment, contact::ObstacleContact::Create(scene.environment(), input));
+  return absl::OkStatus();
+}
+
+double Solid::Impl::CalibrateEnvironment(double h) {
+  if (environment == nullptr) return 0;
+  // The solid's mean modulus over its material samples.
+  double young = 0;
+  int64_t samples = 0;
+  for (const auto& array : layout->materials) {
+    for (const models::MaterialPoint& m : array) young += m.young;
+    samples += static_cast<int64_t>(array.size());
+  }
+  young /= std::max<int64_t>(1, samples);
+  environment->Calibrate(mt, young, h, substeps, settings.max_substeps());
+  substeps = std::max(substeps, environment->min_substeps());
+  return environment->kappa();
+}
+
+absl::Status Solid::Impl::ParseParts(
+    std::string_view env, std::string_view clay,
+    std::vector<contact::ObstacleContact::Touch>& touches,
+    std::optional<material::CellPlasticity::State>& plastic) const {
+  if (environment == nullptr && !env.empty()) {
+    return absl::DataLossError("environment contacts for a scene without an environment");
+  }
+  if (environment != nullptr) {
+    ASSIGN_OR_RETURN(touches, environment->ParseState(env));
+  }
+  // Clay: none in the bytes (no material yielded then), or its state.
+  if (clay.empty()) return absl::OkStatus();
+  if (cell_model == nullptr) {
+    return absl::DataLossError("plastic state for a solid without control-cell frames");
+  }
+  ASSIGN_OR_RETURN(plastic, material::CellPlasticity::ParseState(clay, cell_model->cells(),
+                                                                  cell_model->support_entries()));
+  return absl::OkStatus();
+}
+
+void Solid::Impl::InstallParts(std::vector<contact::ObstacleContact::Touch> touches,
+                               std::optional<material::CellPlasticity::State> plastic) {
+  if (environment != nullptr) environment->set_touches(std::move(touches));
+  if (plastic.has_value()) {
+    if (plasticity == nullptr) {
+      plasticity = std::make_unique<material::CellPlasticity>(plastic->laws);
+      plasticity->Attach(*cell_model);
+    }
+    plasticity->set_state(*std::move(plastic));
+    return;
+  }
+  if (plasticity == nullptr) return;
+  // A state from before the first clay was painted: elastic again (and no
+  // model, the retired one included, keeps a hook into the part).
+  cell_model->set_flow(nullptr);
+  {
+    std::lock_guard<std::mutex> lock(retired_mu);
+    if (retired.has_value() && retired->build.cell_model != nullptr) {
+      retired->build.cell_model->set_flow(nullptr);
+    }
+  }
+  plasticity.reset();
+}
+
+}  // namespace dynsolid::solid

@@ -278,15 +278,20 @@ Eigen::Vector3d ObstacleContact::VertexAt(int32_t v, const Points& p) const {
   return x;
 }
 
-bool ObstacleContact::GroupMayTouch(int32_t g, int32_t o, const Points& p,
-                                    const Points& prev) const {
-  if (!convex_rows_) return true;
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+void ObstacleContact::GroupBox(int32_t g, const Points& p, const Points& prev,
+                               Eigen::Vector3d& lo, Eigen::Vector3d& hi) const {
+  lo = Eigen::Vector3d::Constant(INFINITY);
+  hi = -lo;
   for (int64_t k = group_point_start_[g]; k < group_point_start_[g + 1]; ++k) {
     const int32_t i = group_point_[k];
     lo = lo.cwiseMin(p.row(i).transpose()).cwiseMin(prev.row(i).transpose());
     hi = hi.cwiseMax(p.row(i).transpose()).cwiseMax(prev.row(i).transpose());
   }
+}
+
+bool ObstacleContact::BoxMayTouch(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                                  int32_t o) const {
+  if (!convex_rows_) return true;
   const Shape& ob = obstacles_[o];
   switch (ob.kind) {
     case Shape::kPlane: {
@@ -430,9 +435,13 @@ void ObstacleContact::AddForces(const Points& p, const Points& prev, double h, P
   const size_t held = next_.size();
   groups_checked_ = 0;
   const int32_t groups = static_cast<int32_t>(group_vertex_start_.size()) - 1;
+  Eigen::Vector3d lo, hi;
   for (int32_t g = 0; g < groups; ++g) {
+    // The box around the group's control points at the sub-step's start
+    // and end (once, for every obstacle).
+    if (convex_rows_) GroupBox(g, p, prev, lo, hi);
     for (size_t o = 0; o < no; ++o) {
-      if (!GroupMayTouch(g, static_cast<int32_t>(o), p, prev)) continue;
+      if (!BoxMayTouch(lo, hi, static_cast<int32_t>(o))) continue;
       ++groups_checked_;
       for (int64_t k = group_vertex_start_[g]; k < group_vertex_start_[g + 1]; ++k) {
         const int32_t v = group_vertex_[k];

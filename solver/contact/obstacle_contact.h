@@ -139,7 +139,11 @@ class ObstacleContact {
  private:
   ObstacleContact() = default;
   void BuildGroups(const SurfaceInput& s);
-  bool GroupMayTouch(int32_t group, int32_t obstacle, const Points& p, const Points& prev) const;
+  // The box around group g's control points at p and prev, and whether a
+  // box can reach obstacle o (always, when culling is not exact).
+  void GroupBox(int32_t g, const Points& p, const Points& prev, Eigen::Vector3d& lo,
+                Eigen::Vector3d& hi) const;
+  bool BoxMayTouch(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int32_t o) const;
   Eigen::Vector3d VertexAt(int32_t v, const Points& p) const;
   // A new touch of vertex v (at x, from x_prev) with obstacle o, if it is
   // inside it or its path crossed it.

@@ -229,7 +229,7 @@ double CellCorotation::Run(const Points& x, Points& g, Mode mode, std::vector<Sc
           s.u(3 * a + 1, j) = linear ? local.y() : local.y() - rest[3 * a + 1];
           s.u(3 * a + 2, j) = linear ? local.z() : local.z() - rest[3 * a + 2];
         }
-        if (plastic != nullptr && !linear && flow_->plastic(cell)) {
+        if (plastic != nullptr && flow_->plastic(cell)) {  // (null when linear)
           const double* up = plastic + 3 * static_cast<int64_t>(c.first);
           for (int e = 0; e < 3 * c.size; ++e) s.u(e, j) -= up[e];
         }

@@ -159,21 +159,6 @@ absl::StatusOr<EditResult> Dispatch(const mesh::CellComplex& rest, const Points&
   return absl::InvalidArgumentError("edit: no edit kind is set");
 }
 
-// The positions a bake asks for, 3 per control point of `rest`.
-absl::StatusOr<Points> BakedPositions(const mesh::CellComplex& rest, const dynsolid::Bake& b) {
-  const int32_t nv = rest.num_vertices();
-  if (b.rest_positions_size() != 3 * nv) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "edit.bake.rest_positions: ", b.rest_positions_size(), " values for ", nv,
-        " control points (3 each; the server fills them in with the solid's positions)"));
-  }
-  Points p(nv, 3);
-  for (int32_t i = 0; i < nv; ++i) {
-    for (int k = 0; k < 3; ++k) p(i, k) = b.rest_positions(3 * i + k);
-  }
-  return p;
-}
-
 }  // namespace
 
 absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid& solid,
@@ -207,11 +192,11 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
     e->set_v0(a);
     e->set_v1(b);
   }
-  Points baked;
+  // A bake's positions: its result's (BakeShape checked their count).
+  const Points& baked = r.current;
   if (bake) {
     // Traced points follow their material points to their baked rest
     // positions (the scene names them by rest position).
-    ASSIGN_OR_RETURN(baked, BakedPositions(rest, edit.bake()));
     for (TracedPoint& tp : *edited.mutable_traced()) {
       absl::StatusOr<Eigen::Vector3d> x =
           solid.BakedPosition(Eigen::Vector3d(tp.position().x(), tp.position().y(), tp.position().z()), baked);

@@ -64,6 +64,19 @@ Built Build(dynsolid::Scene scene) {
   Run& r = b.r;
   scene.mutable_solver()->set_model(dynsolid::SolverSettings::LOCAL_FRAME);
   scene.mutable_solver()->set_integrator(dynsolid::SolverSettings::CENTRAL_DIFFERENCE);
+  // The paper's model is elastic: clay (the chair's back, the clay scene)
+  // is stepped with its moduli and no yield (the local-frame model refuses
+  // a material that yields).
+  auto elastic = [](dynsolid::Material* m) {
+    *m = dynsolid::scene::WithPreset(*m);
+    m->clear_yield_strain();
+    m->clear_flow_rate();
+    m->clear_hardening();
+  };
+  elastic(scene.mutable_materials()->mutable_base());
+  for (dynsolid::MaterialRegion& region : *scene.mutable_materials()->mutable_regions()) {
+    elastic(region.mutable_material());
+  }
   auto d = dynsolid::scene::BuildDiscretization(scene, dynsolid::scene::BuiltinSceneDir(),
                                                 std::nullopt);
   if (!d.ok()) {

@@ -6,11 +6,16 @@ independent reader. Run with Debian's /usr/bin/python3 (python3-meshio).
 
     read_vtu.py FILE [--points N] [--point-sum S] [--cells TYPE=N,...] [--cell-data NAME,...]
                      [--point-data NAME,...] [--cell-data-sum NAME=VALUE,...]
-                     [--point-data-sum NAME=VALUE,...]
+                     [--point-data-sum NAME=VALUE,...] [--expect-arrays JSON_FILE]
 
 Prints {"points": N, "cells": {type: count}, "cell_data": {name: [shape,
 sum]}, "point_data": {...}} and exits 1 (with the reasons on stderr) when an
 expectation fails, 2 when meshio is missing or cannot read the file.
+
+--expect-arrays names a JSON file {"points": [[x, y, z], ...], "point_data":
+{name: [values]}, "faces": [[i, j, k, ...], ...]} that the file must hold
+exactly: points as float64, point data as float32 (as PLY stores them), and
+the cells, block by block in file order, as those faces.
 """
 import argparse
 import json
@@ -36,6 +41,33 @@ def names(text):
     return [n for n in (text or "").split(",") if n]
 
 
+def compare_arrays(mesh, expect_file):
+    with open(expect_file) as f:
+        expect = json.load(f)
+    errors = []
+    points = numpy.asarray(mesh.points, dtype=numpy.float64)
+    want = numpy.asarray(expect["points"], dtype=numpy.float64)
+    if points.shape != want.shape:
+        errors.append(f"points: shape {points.shape}, expected {want.shape}")
+    elif not numpy.array_equal(points, want):
+        i = int(numpy.argwhere(points != want)[0][0])
+        errors.append(f"point {i} is {points[i].tolist()}, expected {want[i].tolist()}")
+    for name, values in expect.get("point_data", {}).items():
+        if name not in mesh.point_data:
+            errors.append(f"point data '{name}' missing (have {sorted(mesh.point_data)})")
+            continue
+        got = numpy.asarray(mesh.point_data[name])
+        want = numpy.asarray(values, dtype=numpy.float32)
+        if got.dtype != numpy.float32:
+            errors.append(f"point data '{name}' is {got.dtype}, expected float32")
+        elif got.shape != want.shape or not numpy.array_equal(got, want):
+            errors.append(f"point data '{name}' is {got.tolist()}, expected {want.tolist()}")
+    faces = [list(map(int, row)) for block in mesh.cells for row in block.data]
+    if faces != expect.get("faces", faces):
+        errors.append(f"faces are {faces}, expected {expect['faces']}")
+    return errors
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("file")
@@ -46,6 +78,7 @@ def main():
     parser.add_argument("--point-data")
     parser.add_argument("--cell-data-sum")
     parser.add_argument("--point-data-sum")
+    parser.add_argument("--expect-arrays")
     args = parser.parse_args()
 
     try:
@@ -101,6 +134,8 @@ def main():
         got = point_data.get(name, [None, None])[1]
         if got is None or abs(got - float(value)) > 1e-6 * max(1.0, abs(float(value))):
             errors.append(f"point data '{name}' sum: expected {value}, got {got}")
+    if args.expect_arrays:
+        errors += compare_arrays(mesh, args.expect_arrays)
     if errors:
         for e in errors:
             print(f"read_vtu.py: {e}", file=sys.stderr)

@@ -60,37 +60,61 @@ FlowLaw FlowLawOf(const Material& m) {
   return law;
 }
 
-CellPlasticity::CellPlasticity(std::vector<FlowLaw> laws) : laws_(std::move(laws)) {
-  alpha_.assign(laws_.size(), 0.0);
-  dissipation_.assign(laws_.size(), 0.0);
-  UpdateActive();
-}
+Plasticity::Plasticity(std::vector<FlowLaw> laws) : laws_(std::move(laws)) {}
 
-void CellPlasticity::UpdateActive() {
-  active_.assign(laws_.size(), 0);
-  for (size_t c = 0; c < laws_.size(); ++c) {
-    bool moved = alpha_[c] > 0;
-    if (!moved && !offsets_.empty() && c < first_.size()) {
-      const double* up = offsets_.data() + 3 * static_cast<int64_t>(first_[c]);
-      for (int e = 0; e < 3 * size_[c] && !moved; ++e) moved = up[e] != 0;
+void Plasticity::UpdateActive() {
+  const size_t units = first_.size();
+  active_.assign(units, 0);
+  for (size_t u = 0; u < units; ++u) {
+    bool moved = alpha_[u] > 0;
+    if (!moved && !offsets_.empty()) {
+      const double* up = offsets_.data() + 3 * static_cast<int64_t>(first_[u]);
+      for (int e = 0; e < 3 * size_[u] && !moved; ++e) moved = up[e] != 0;
     }
-    active_[c] = laws_[c].yield > 0 || moved;
+    active_[u] = laws_[unit_cell_[u]].yield > 0 || moved;
   }
 }
 
-bool CellPlasticity::any_yields() const {
+void Plasticity::SizeUnits(int64_t entries) {
+  const size_t units = first_.size();
+  entries_ = entries;
+  if (alpha_.size() != units || offsets_.size() != static_cast<size_t>(3 * entries)) {
+    offsets_.assign(3 * entries, 0.0);
+    alpha_.assign(units, 0.0);
+    dissipation_.assign(units, 0.0);
+  }
+  UpdateActive();
+}
+
+bool Plasticity::any_yields() const {
   return std::any_of(laws_.begin(), laws_.end(), [](const FlowLaw& l) { return l.yield > 0; });
 }
 
-void CellPlasticity::Attach(models::CellCorotation& model) {
+Plasticity::Units Plasticity::UnitsOf(const models::CellCorotation& model) {
+  return {model.cells(), model.support_entries()};
+}
+
+Plasticity::Units Plasticity::UnitsOf(const models::ElementLayout& layout) {
+  Units out;
+  for (const models::ElementBlock& block : layout.blocks) {
+    out.units += block.size();
+    out.entries += static_cast<int64_t>(block.size()) * block.nodes;
+  }
+  return out;
+}
+
+void Plasticity::Attach(models::CellCorotation& model) {
   const int32_t cells = model.cells();
   first_.resize(cells);
   size_.resize(cells);
+  unit_cell_.resize(cells);
   scale_.assign(cells, 0.0);
+  base_ = {0, 0, 0};
   std::vector<double> u;
   for (int32_t c = 0; c < cells; ++c) {
     first_[c] = model.support_first(c);
     size_[c] = model.support_size(c);
+    unit_cell_[c] = c;
     // Twice the energy of a unit uniaxial stress along each axis, averaged.
     const double* x = model.rest_local(c);
     const double nu = laws_[c].poisson;
@@ -104,47 +128,95 @@ void CellPlasticity::Attach(models::CellCorotation& model) {
     }
     scale_[c] = sum / 3.0;
   }
-  entries_ = model.support_entries();
-  if (offsets_.size() != static_cast<size_t>(3 * entries_)) offsets_.assign(3 * entries_, 0.0);
-  UpdateActive();
+  SizeUnits(model.support_entries());
   model.set_flow(this);
 }
 
-void CellPlasticity::Flow(int32_t cell, const double* u, const double* ku) {
-  const FlowLaw& law = laws_[cell];
-  if (!(law.yield > 0) || !(scale_[cell] > 0)) return;
-  const int n = 3 * size_[cell];
+void Plasticity::Attach(models::CorotationalModel& model,
+                        const std::vector<int32_t>& control_cell) {
+  const models::ElementLayout& layout = model.layout();
+  const Units units = UnitsOf(layout);
+  first_.resize(units.units);
+  size_.resize(units.units);
+  unit_cell_.resize(units.units);
+  scale_.assign(units.units, 0.0);
+  int32_t unit = 0;
+  int64_t entry = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const models::ElementBlock& block = layout.blocks[kind];
+    base_[kind] = unit;
+    for (int32_t e = 0; e < block.size(); ++e, ++unit) {
+      first_[unit] = static_cast<int32_t>(entry);
+      size_[unit] = block.nodes;
+      entry += block.nodes;
+      const int32_t cell = block.cell[e];
+      unit_cell_[unit] = control_cell.empty() ? cell : control_cell[cell];
+      // E V: the group's mean sampled modulus times its rest volume.
+      const models::ElementGroup& g = block.groups[block.group[e]];
+      const std::vector<models::MaterialPoint>& samples = layout.materials[g.material];
+      double young = 0;
+      for (const models::MaterialPoint& m : samples) young += m.young;
+      if (!samples.empty()) young /= static_cast<double>(samples.size());
+      scale_[unit] = young * std::abs(g.shape_volume);
+    }
+  }
+  SizeUnits(units.entries);
+  model.set_flow(this);
+}
+
+void Plasticity::FlowUnit(int32_t unit, const double* u, const double* ku) {
+  const FlowLaw& law = laws_[unit_cell_[unit]];
+  if (!(law.yield > 0) || !(scale_[unit] > 0)) return;
+  const int n = 3 * size_[unit];
   double twice_w = 0;
   for (int e = 0; e < n; ++e) twice_w += u[e] * ku[e];
   if (!(twice_w > 0)) return;
-  const double eps = std::sqrt(twice_w / scale_[cell]);
-  const double y = law.yield + law.hardening * alpha_[cell];
+  const double eps = std::sqrt(twice_w / scale_[unit]);
+  const double y = law.yield + law.hardening * alpha_[unit];
   if (!(eps > y)) return;
   // The return to the yield surface with linear hardening: eps - d = y +
   // hardening d for the plastic strain increment d = lambda eps, all of it
   // when the rate and step allow, else the fraction rate * dt.
   const double lambda = (1.0 - y / eps) / (1.0 + law.hardening) * std::min(1.0, law.rate * dt_);
-  double* up = offsets_.data() + 3 * static_cast<int64_t>(first_[cell]);
+  double* up = offsets_.data() + 3 * static_cast<int64_t>(first_[unit]);
   for (int e = 0; e < n; ++e) up[e] += lambda * u[e];
-  alpha_[cell] += lambda * eps;
-  dissipation_[cell] += lambda * twice_w;
+  alpha_[unit] += lambda * eps;
+  dissipation_[unit] += lambda * twice_w;
 }
 
-double CellPlasticity::dissipation() const {
+double Plasticity::alpha(int32_t cell) const {
+  double out = 0;
+  for (size_t u = 0; u < alpha_.size(); ++u) {
+    if (unit_cell_[u] == cell) out = std::max(out, alpha_[u]);
+  }
+  return out;
+}
+
+double Plasticity::max_alpha() const {
+  double out = 0;
+  for (double a : alpha_) out = std::max(out, a);
+  return out;
+}
+
+double Plasticity::dissipation() const {
   double sum = 0;
   for (double d : dissipation_) sum += d;
   return sum;
 }
 
-int32_t CellPlasticity::yielded_cells() const {
-  return static_cast<int32_t>(std::count_if(alpha_.begin(), alpha_.end(), [](double a) { return a > 0; }));
+int32_t Plasticity::yielded_cells() const {
+  std::vector<uint8_t> yielded(laws_.size(), 0);
+  for (size_t u = 0; u < alpha_.size(); ++u) {
+    if (alpha_[u] > 0) yielded[unit_cell_[u]] = 1;
+  }
+  return static_cast<int32_t>(std::count(yielded.begin(), yielded.end(), 1));
 }
 
-Points CellPlasticity::RestDisplacement(const models::CellCorotation& model,
-                                        int64_t controls) const {
+Points Plasticity::RestDisplacement(const models::CellCorotation& model,
+                                    int64_t controls) const {
   Points sum = Points::Zero(controls, 3);
   std::vector<double> count(controls, 0.0);
-  if (offsets_.empty()) return sum;
+  if (offsets_.empty() || static_cast<int64_t>(first_.size()) != model.cells()) return sum;
   for (int32_t c = 0; c < model.cells(); ++c) {
     const int32_t* support = model.support(c);
     const double* up = offsets_.data() + 3 * static_cast<int64_t>(model.support_first(c));
@@ -159,7 +231,7 @@ Points CellPlasticity::RestDisplacement(const models::CellCorotation& model,
   return sum;
 }
 
-std::string CellPlasticity::SaveState() const {
+std::string Plasticity::SaveState() const {
   std::string out(kStateMagic, 4);
   Put<uint64_t>(out, laws_.size());
   for (const FlowLaw& l : laws_) {
@@ -174,8 +246,8 @@ std::string CellPlasticity::SaveState() const {
   return out;
 }
 
-absl::StatusOr<CellPlasticity::State> CellPlasticity::ParseState(std::string_view bytes,
-                                                                int32_t cells, int64_t entries) {
+absl::StatusOr<Plasticity::State> Plasticity::ParseState(std::string_view bytes, int32_t cells,
+                                                        Units units) {
   auto fail = [](const std::string& what) {
     return absl::DataLossError(absl::StrCat("plasticity state: ", what));
   };
@@ -198,16 +270,18 @@ absl::StatusOr<CellPlasticity::State> CellPlasticity::ParseState(std::string_vie
       return fail("a flow law out of range");
     }
   }
-  if (!r.Doubles(s.offsets, 3 * static_cast<uint64_t>(entries))) {
+  if (!r.Doubles(s.offsets, 3 * static_cast<uint64_t>(units.entries))) {
     return fail("offsets: wrong count or non-finite");
   }
-  if (!r.Doubles(s.alpha, n)) return fail("plastic strains: wrong count or non-finite");
-  if (!r.Doubles(s.dissipation, n)) return fail("dissipation: wrong count or non-finite");
+  if (!r.Doubles(s.alpha, units.units)) return fail("plastic strains: wrong count or non-finite");
+  if (!r.Doubles(s.dissipation, units.units)) {
+    return fail("dissipation: wrong count or non-finite");
+  }
   if (!r.at_end()) return fail("bytes after the end");
   return s;
 }
 
-void CellPlasticity::set_state(State s) {
+void Plasticity::set_state(State s) {
   laws_ = std::move(s.laws);
   offsets_ = std::move(s.offsets);
   alpha_ = std::move(s.alpha);
@@ -215,18 +289,18 @@ void CellPlasticity::set_state(State s) {
   UpdateActive();
 }
 
-void CellPlasticity::set_laws(std::vector<FlowLaw> laws) {
+void Plasticity::set_laws(std::vector<FlowLaw> laws) {
   laws_ = std::move(laws);
   UpdateActive();
 }
 
-void CellPlasticity::Checkpoint() {
+void Plasticity::Checkpoint() {
   checkpoint_.offsets = offsets_;
   checkpoint_.alpha = alpha_;
   checkpoint_.dissipation = dissipation_;
 }
 
-void CellPlasticity::Rollback() {
+void Plasticity::Rollback() {
   offsets_ = checkpoint_.offsets;
   alpha_ = checkpoint_.alpha;
   dissipation_ = checkpoint_.dissipation;

@@ -155,6 +155,19 @@ Eigen::MatrixXd IntegrateGroup(const fem::KindTable& table, const ElementGroup& 
   return 0.5 * (k + k.transpose()).eval();
 }
 
+// F F_p^-1 (ElementFlow): the deformation gradient at the centre relative
+// to the element's plastic rest shape, F_p = I + sum_i u_pi G_i^T for the
+// offsets u_p (n x 3, node-major) and the centre gradients G (n x 3).
+template <typename Gradient>
+Eigen::Matrix3d ElasticGradient(const Eigen::Matrix3d& f, int n, const double* up,
+                                const Gradient& g) {
+  Eigen::Matrix3d fp = Eigen::Matrix3d::Identity();
+  for (int i = 0; i < n; ++i) {
+    fp += Eigen::Vector3d(up[3 * i], up[3 * i + 1], up[3 * i + 2]) * g.row(i);
+  }
+  return f * fp.inverse();
+}
+
 }  // namespace
 
 CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& rest,
@@ -285,8 +298,12 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
   subtract_rest = subtract_rest || update != nullptr;
   using NodeBlock = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor, fem::kCubicNodes, 3>;
   using NodeMap = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
+  using NodeMapConst = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>;
   NodeBlock pos, x0;
   std::array<Eigen::Matrix3d, kBatch> rot;
+  // Per element of the batch: its plastic offsets (null: elastic).
+  std::array<const double*, kBatch> plastic;
+  const bool flowing = update != nullptr && flow_ != nullptr && flow_->flowing();
   ClearPartRows(schedule_, part, w.g);
   w.energy = 0;
   for (size_t bi = schedule_.part_start[part]; bi < schedule_.part_start[part + 1]; ++bi) {
@@ -304,8 +321,9 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
       if (pooled) grp = &block.groups[block.group[e]];
+      plastic[b] = subtract_rest && flow_ != nullptr ? flow_->offsets(batch.kind, e) : nullptr;
 #ifdef DYNSOLID_COROT_AVX2
-      {
+      if (plastic[b] == nullptr) {
         // (Read only without `update`; set either way, which GCC can see.)
         const Eigen::Matrix3d r_in = update == nullptr
                                          ? frames_[batch.kind][e].toRotationMatrix()
@@ -320,7 +338,8 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       for (int i = 0; i < n; ++i) pos.row(i) = x.row(ids[i]);
       if (update != nullptr) {
         // Deformation gradient at the centre, then its rotation R_e.
-        const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp->centre_gradient);
+        Eigen::Matrix3d f = pos.transpose().lazyProduct(grp->centre_gradient);
+        if (plastic[b] != nullptr) f = ElasticGradient(f, n, plastic[b], grp->centre_gradient);
         Eigen::Quaterniond& q = (*update)[batch.kind][e];
         ExtractRotation(f, q, kRotationIterations, &rot[b]);
       } else {
@@ -337,6 +356,7 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
         const Eigen::RowVector3d x0bar = x0.colwise().mean();
         x0.rowwise() -= x0bar;
         ub -= x0;
+        if (plastic[b] != nullptr) ub -= NodeMapConst(plastic[b], n, 3);
       }
     }
     // y = K u (K pre-packed; rows padded to the panel height), in float
@@ -379,6 +399,9 @@ void CorotationalModel::RunBatches(int part, const Points& x, Frames* update, Wo
       w.energy += 0.5 * u.col(b).dot(y.col(b));
       const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
+      if (flowing && plastic[b] != nullptr) {
+        flow_->Flow(batch.kind, e, u.col(b).data(), y.col(b).data());
+      }
 #ifdef DYNSOLID_COROT_AVX2
       RotateBackAvx2(n, rot[b], y.col(b).data(), ids, w.g.data());
       continue;
@@ -419,13 +442,19 @@ void CorotationalModel::FrameBatches(int part, const Points& d) {
       const int32_t e = schedule_.order[batch.kind][batch.first + b];
       const int32_t* ids = block.element_nodes(e);
       const ElementGroup& grp = block.groups[block.group[e]];
+      const double* up = flow_ != nullptr ? flow_->offsets(batch.kind, e) : nullptr;
       // As RunBatches with `update`: the same sums, the same bits.
+      Eigen::Matrix3d f;
 #ifdef DYNSOLID_COROT_AVX2
-      const Eigen::Matrix3d f = CentreGradientAvx2(n, d.data(), ids, grp.centre_gradient.data());
-#else
-      for (int i = 0; i < n; ++i) pos.row(i) = d.row(ids[i]);
-      const Eigen::Matrix3d f = pos.transpose().lazyProduct(grp.centre_gradient);
+      if (up == nullptr) {
+        f = CentreGradientAvx2(n, d.data(), ids, grp.centre_gradient.data());
+      } else
 #endif
+      {
+        for (int i = 0; i < n; ++i) pos.row(i) = d.row(ids[i]);
+        f = pos.transpose().lazyProduct(grp.centre_gradient);
+        if (up != nullptr) f = ElasticGradient(f, n, up, grp.centre_gradient);
+      }
       ExtractRotation(f, frames_[batch.kind][e], kRotationIterations);
     }
   }

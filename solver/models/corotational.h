@@ -52,6 +52,28 @@
 
 namespace dynsolid::models {
 
+// Plasticity's hook into the per-element corotation (material/plasticity.h
+// implements it, as it does cell_corotation.h's CellFlow): each element's
+// rest shape moved by offsets u_p (3 per node, node-major, rest frame):
+//
+//   u_e = R_e^T (d - dbar) - (x0 - x0bar) - u_p,   R_e = rotation of F F_p^-1,
+//   F_p = I + sum_i u_pi G_centre_i^T,
+//
+// so that the plastically deformed rest shape, moved rigidly, carries no
+// force. A pass that finds frames (Forces) calls Flow for each plastic
+// element after its product, on the pool's threads, when flowing(): Flow
+// may change that element's offsets only.
+class ElementFlow {
+ public:
+  virtual ~ElementFlow() = default;
+  // Element `element` of kind block `kind`'s offsets (3 n values); null:
+  // the element is elastic (its material never yields and it never flowed).
+  virtual const double* offsets(int kind, int32_t element) const = 0;
+  virtual bool flowing() const = 0;
+  // The element's elastic local displacement u and K u (3 n each).
+  virtual void Flow(int kind, int32_t element, const double* u, const double* ku) = 0;
+};
+
 class CorotationalModel final : public InternalForceModel {
  public:
   // `layout` and `pool` must outlive the model; `rest` (#nodes by 3, metres:
@@ -131,6 +153,10 @@ class CorotationalModel final : public InternalForceModel {
   int64_t shared_matrix_bytes() const;
   int64_t per_element_bytes() const;
 
+  // The plastic flow hook (null: elastic; the default).
+  void set_flow(ElementFlow* flow) { flow_ = flow; }
+  const ElementLayout& layout() const { return layout_; }
+
  private:
   struct Workspace {
     Points g;
@@ -157,6 +183,7 @@ class CorotationalModel final : public InternalForceModel {
 
   const ElementLayout& layout_;
   WorkerPool* pool_;
+  ElementFlow* flow_ = nullptr;
   Points rest_;
   int32_t num_nodes_;
   // packed_[kind][group]: 3n x 3n.

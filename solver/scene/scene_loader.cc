@@ -519,14 +519,13 @@ absl::Status ValidatePlasticModel(const Scene& scene) {
   }
   if (field.empty()) return absl::OkStatus();
   const SolverSettings s = ResolvedSolverSettings(scene.solver());
-  if (s.model() != SolverSettings::COROTATIONAL || s.corotation() != SolverSettings::CONTROL_CELL) {
+  if (s.model() != SolverSettings::COROTATIONAL) {
     return absl::InvalidArgumentError(absl::StrCat(
-        field, ".yield_strain: a material that yields (clay) needs solver.model COROTATIONAL and "
-               "solver.corotation CONTROL_CELL; this scene asks for ",
-        SolverSettings::Model_Name(s.model()), " with ",
-        SolverSettings::Corotation_Name(s.corotation()),
-        " (the paper's local-frame model and the per-element frames do not carry plastic "
-        "flow yet)"));
+        field, ".yield_strain: a material that yields (clay) needs solver.model COROTATIONAL "
+               "(with either solver.corotation); this scene asks for ",
+        SolverSettings::Model_Name(s.model()),
+        " (the paper's local-frame model measures deformation against the rest shape "
+        "through frames of its own and does not carry plastic flow)"));
   }
   return absl::OkStatus();
 }

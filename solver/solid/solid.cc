@@ -530,12 +530,12 @@ int Solid::threads() const { return impl_->pool->size(); }
 
 Solid::PlasticStats Solid::plastic_stats() const {
   PlasticStats out;
-  const material::CellPlasticity* pl = impl_->plasticity.get();
+  const material::Plasticity* pl = impl_->plasticity.get();
   if (pl == nullptr) return out;
-  for (size_t c = 0; c < pl->laws().size(); ++c) {
-    if (pl->laws()[c].yield > 0) ++out.cells;
-    out.max_strain = std::max(out.max_strain, pl->alpha(static_cast<int32_t>(c)));
+  for (const material::FlowLaw& law : pl->laws()) {
+    if (law.yield > 0) ++out.cells;
   }
+  out.max_strain = pl->max_alpha();
   out.yielded = pl->yielded_cells();
   out.dissipation = pl->dissipation();
   return out;

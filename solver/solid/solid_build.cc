@@ -283,13 +283,7 @@ void Solid::Impl::InstallMaterial(MaterialBuild b) {
   if (b.geometry != nullptr) cell_geometry = std::move(b.geometry);
   has_damping = b.has_damping;
   ++contact.epoch;  // the contact stiffness depends on the material
-  if (cell_model != nullptr) {
-    if (plasticity != nullptr) {
-      plasticity->Attach(*cell_model);
-    } else {
-      cell_model->set_flow(nullptr);
-    }
-  }
+  AttachPlasticity();
   ConfigureLinearized();
 }
 

@@ -381,15 +381,21 @@ struct Solid::Impl {
   // like the pressure's, so they ride in f_press (work counted
   // trapezoidally in the ledger): PositionForces adds them.
   std::unique_ptr<contact::ObstacleContact> environment;
-  // ---- Clay: plastic flow per control cell (solver/material/
-  // plasticity.h), a part with its own state; null when no material of the
-  // scene yields. Hooked into cell_model (Attach) whenever that changes.
-  std::unique_ptr<material::CellPlasticity> plasticity;
+  // ---- Clay: plastic flow per control cell or per element (solver/
+  // material/plasticity.h), a part with its own state; null when no
+  // material of the scene yields. Hooked into cell_model, or the
+  // per-element corotational model, whenever that changes
+  // (AttachPlasticity).
+  std::unique_ptr<material::Plasticity> plasticity;
+  // Hooks clay into the model in use (or unhooks every model without it).
+  void AttachPlasticity();
+  // The flow units of the model in use (control cells or elements).
+  material::Plasticity::Units PlasticUnits() const;
   // The scene's flow law per control cell (the material at its rest
   // centroid, as the material regions give it).
   std::vector<material::FlowLaw> SceneFlowLaws(const Scene& scene) const;
   // The parts a build makes (solid_parts.cc): clay when some material of
-  // the scene yields (InvalidArgument without control-cell frames), and
+  // the scene yields (InvalidArgument without corotational frames), and
   // the environment over `surface` (its errors name the field); then the
   // environment's stiffness for the sub-step h / substeps, raising the
   // sub-steps where it must. Returns its mean stiffness (N/m^3, 0: none).
@@ -400,9 +406,9 @@ struct Solid::Impl {
   // solid (nothing changes), and installed.
   absl::Status ParseParts(std::string_view environment, std::string_view clay,
                           std::vector<contact::ObstacleContact::Touch>& touches,
-                          std::optional<material::CellPlasticity::State>& plastic) const;
+                          std::optional<material::Plasticity::State>& plastic) const;
   void InstallParts(std::vector<contact::ObstacleContact::Touch> touches,
-                    std::optional<material::CellPlasticity::State> plastic);
+                    std::optional<material::Plasticity::State> plastic);
 
   // pressure = the follower loads (pressures, drags) and the environment's
   // contact forces at p, with the velocity from prev over one sub-step.
@@ -692,7 +698,7 @@ class Solid::PreparedState {
   std::vector<int32_t> fix_count;
   std::vector<Impl::DragLoad> drags;
   std::vector<contact::ObstacleContact::Touch> touches;  // the environment's
-  std::optional<material::CellPlasticity::State> plastic;  // clay's
+  std::optional<material::Plasticity::State> plastic;  // clay's
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
   bool taken_back = false;             // build is Impl::retired's

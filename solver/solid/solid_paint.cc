@@ -108,10 +108,11 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
     out->laws = PaintedLaws(paint, target, std::move(now), d_.control());
     const bool yields = std::any_of(out->laws.begin(), out->laws.end(),
                                     [](const material::FlowLaw& l) { return l.yield > 0; });
-    if (yields && im.cell_model == nullptr) {
+    if (yields && im.cell_model == nullptr && im.corotational == nullptr) {
       return absl::InvalidArgumentError(
           "paint.material.yield_strain: painting clay (a material that yields) needs "
-          "solver.model COROTATIONAL and solver.corotation CONTROL_CELL");
+          "solver.model COROTATIONAL (the paper's local-frame model does not carry plastic "
+          "flow)");
     }
   }
   int64_t touched = 0;
@@ -259,7 +260,7 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   build.model->set_pool(*im.pool);
   if (p->paints_flow && im.plasticity == nullptr) {
     // The first clay on this solid: its part, attached by InstallMaterial.
-    im.plasticity = std::make_unique<material::CellPlasticity>(p->laws);
+    im.plasticity = std::make_unique<material::Plasticity>(p->laws);
   } else if (p->paints_flow) {
     im.plasticity->set_laws(p->laws);
   }

@@ -35,14 +35,32 @@ absl::Status Solid::Impl::MakePlasticity(const Scene& scene) {
     return absl::OkStatus();
   }
   // (The scene's rules refuse it first, naming the field.)
-  if (cell_model == nullptr) {
+  if (cell_model == nullptr && corotational == nullptr) {
     return absl::InvalidArgumentError(
-        "materials: a material that yields needs solver.model COROTATIONAL and "
-        "solver.corotation CONTROL_CELL");
+        "materials: a material that yields needs solver.model COROTATIONAL");
   }
-  plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
-  plasticity->Attach(*cell_model);
+  plasticity = std::make_unique<material::Plasticity>(std::move(laws));
+  AttachPlasticity();
   return absl::OkStatus();
+}
+
+void Solid::Impl::AttachPlasticity() {
+  if (plasticity == nullptr) {
+    if (cell_model != nullptr) cell_model->set_flow(nullptr);
+    if (corotational != nullptr) corotational->set_flow(nullptr);
+    return;
+  }
+  if (cell_model != nullptr) {
+    plasticity->Attach(*cell_model);
+  } else if (corotational != nullptr) {
+    plasticity->Attach(*corotational, d->hierarchy.control_cell);
+  }
+}
+
+material::Plasticity::Units Solid::Impl::PlasticUnits() const {
+  if (cell_model != nullptr) return material::Plasticity::UnitsOf(*cell_model);
+  if (corotational != nullptr) return material::Plasticity::UnitsOf(*layout);
+  return {};
 }
 
 absl::Status Solid::Impl::MakeEnvironment(const Scene& scene, const Solid::Surface& surface) {
@@ -75,7 +93,7 @@ double Solid::Impl::CalibrateEnvironment(double h) {
 absl::Status Solid::Impl::ParseParts(
     std::string_view env, std::string_view clay,
     std::vector<contact::ObstacleContact::Touch>& touches,
-    std::optional<material::CellPlasticity::State>& plastic) const {
+    std::optional<material::Plasticity::State>& plastic) const {
   if (environment == nullptr && !env.empty()) {
     return absl::DataLossError("environment contacts for a scene without an environment");
   }
@@ -84,21 +102,21 @@ absl::Status Solid::Impl::ParseParts(
   }
   // Clay: none in the bytes (no material yielded then), or its state.
   if (clay.empty()) return absl::OkStatus();
-  if (cell_model == nullptr) {
-    return absl::DataLossError("plastic state for a solid without control-cell frames");
+  if (cell_model == nullptr && corotational == nullptr) {
+    return absl::DataLossError("plastic state for a solid without corotational frames");
   }
-  ASSIGN_OR_RETURN(plastic, material::CellPlasticity::ParseState(clay, cell_model->cells(),
-                                                                  cell_model->support_entries()));
+  ASSIGN_OR_RETURN(plastic, material::Plasticity::ParseState(clay, d->control().num_cells(),
+                                                              PlasticUnits()));
   return absl::OkStatus();
 }
 
 void Solid::Impl::InstallParts(std::vector<contact::ObstacleContact::Touch> touches,
-                               std::optional<material::CellPlasticity::State> plastic) {
+                               std::optional<material::Plasticity::State> plastic) {
   if (environment != nullptr) environment->set_touches(std::move(touches));
   if (plastic.has_value()) {
     if (plasticity == nullptr) {
-      plasticity = std::make_unique<material::CellPlasticity>(plastic->laws);
-      plasticity->Attach(*cell_model);
+      plasticity = std::make_unique<material::Plasticity>(plastic->laws);
+      AttachPlasticity();
     }
     plasticity->set_state(*std::move(plastic));
     return;
@@ -106,14 +124,17 @@ void Solid::Impl::InstallParts(std::vector<contact::ObstacleContact::Touch> touc
   if (plasticity == nullptr) return;
   // A state from before the first clay was painted: elastic again (and no
   // model, the retired one included, keeps a hook into the part).
-  cell_model->set_flow(nullptr);
+  plasticity.reset();
+  AttachPlasticity();
   {
     std::lock_guard<std::mutex> lock(retired_mu);
     if (retired.has_value() && retired->build.cell_model != nullptr) {
       retired->build.cell_model->set_flow(nullptr);
     }
+    if (retired.has_value() && retired->build.corotational != nullptr) {
+      retired->build.corotational->set_flow(nullptr);
+    }
   }
-  plasticity.reset();
 }
 
 }  // namespace dynsolid::solid

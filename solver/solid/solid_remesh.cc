@@ -371,7 +371,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   // Clay: each cell keeps the flow law of the cell it comes from (new
   // cells the scene's). Its plastic offsets are not carried: a topology
   // edit rebuilds the rest shape from the control mesh (docs/sculpt.md).
-  if (old.plasticity != nullptr && im.cell_model != nullptr) {
+  if (old.plasticity != nullptr && (im.cell_model != nullptr || im.corotational != nullptr)) {
     std::vector<material::FlowLaw> laws =
         im.plasticity != nullptr ? im.plasticity->laws()
                                  : std::vector<material::FlowLaw>(control.num_cells());
@@ -381,8 +381,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
       if (src >= 0 && src < static_cast<int32_t>(was.size())) laws[c] = was[src];
     }
     if (im.plasticity == nullptr) {
-      im.plasticity = std::make_unique<material::CellPlasticity>(std::move(laws));
-      im.plasticity->Attach(*im.cell_model);
+      im.plasticity = std::make_unique<material::Plasticity>(std::move(laws));
+      im.AttachPlasticity();
     } else {
       im.plasticity->set_laws(std::move(laws));
     }

@@ -530,7 +530,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   }
   // Version 6: the environment's contacts and clay's state.
   std::vector<contact::ObstacleContact::Touch> touches;
-  std::optional<material::CellPlasticity::State> plastic;
+  std::optional<material::Plasticity::State> plastic;
   if (version >= 6 && r.ok()) {
     const std::string env = r.Bytes("environment");
     const std::string clay = r.Bytes("plasticity");

@@ -3,8 +3,9 @@
 // 10 %); below yield it returns to its rest shape; rigid spins and
 // translations never yield; the plastic dissipation never decreases; a
 // saved state continues bit for bit, for any thread count; presets and
-// paint; materials that yield are refused for models without control-cell
-// frames, naming the field.
+// paint. Each with a frame per control cell and a frame per element.
+// Materials that yield are refused for the local-frame model, naming the
+// field.
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -30,6 +31,9 @@ constexpr double kLength = 4.0;
 
 // A 4 m bar along x (0.5 x 0.5 m), 8 x 2 x 2 cells at one level; traced
 // points at a quarter and three quarters of its length.
+// The corotation the tests run with (the suite's parameter).
+std::string g_corotation = "CONTROL_CELL";
+
 std::string Bar(const std::string& material, const std::string& extra = "") {
   return absl::StrCat(R"pb(
     name: "bar"
@@ -39,7 +43,8 @@ std::string Bar(const std::string& material, const std::string& extra = "") {
                       material, R"pb( } }
     traced { name: "a" position { x: 1 } }
     traced { name: "b" position { x: 3 } }
-    solver { model: COROTATIONAL corotation: CONTROL_CELL time_step: 1e-3 }
+    solver { model: COROTATIONAL corotation: )pb",
+                      g_corotation, R"pb( time_step: 1e-3 }
   )pb",
                       extra);
 }
@@ -92,7 +97,12 @@ double StretchHoldRelease(Solid& s, double strain, double hold, double settle) {
   return Gauge(s) / rest - 1.0;
 }
 
-TEST(PlasticityTest, ABarPulledToTwiceItsYieldStrainKeepsThePredictedSet) {
+class PlasticityTest : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override { g_corotation = GetParam(); }
+};
+
+TEST_P(PlasticityTest, ABarPulledToTwiceItsYieldStrainKeepsThePredictedSet) {
   for (double hardening : {0.0, 0.5}) {
     SCOPED_TRACE(absl::StrCat("hardening ", hardening));
     const double yield = 0.01;
@@ -114,7 +124,7 @@ TEST(PlasticityTest, ABarPulledToTwiceItsYieldStrainKeepsThePredictedSet) {
   }
 }
 
-TEST(PlasticityTest, ABarPulledBelowYieldReturnsToItsRestShape) {
+TEST_P(PlasticityTest, ABarPulledBelowYieldReturnsToItsRestShape) {
   std::unique_ptr<Solid> s = testing::MakeSolid(Bar(Clay(0.01, 0)), 2);
   ASSERT_NE(s, nullptr);
   const Points rest = s->control_positions();
@@ -127,7 +137,7 @@ TEST(PlasticityTest, ABarPulledBelowYieldReturnsToItsRestShape) {
   EXPECT_LT((s->control_positions() - rest).cwiseAbs().maxCoeff(), 1e-3 * kLength);
 }
 
-TEST(PlasticityTest, RigidSpinsAndTranslationsNeverYield) {
+TEST_P(PlasticityTest, RigidSpinsAndTranslationsNeverYield) {
   // Turned through 2 rad about a skew axis and moved, then thrown at 3 m/s
   // while spinning at 0.5 rad/s (centrifugal strain about 5e-4, under the
   // yield strain of 0.01): no cell may yield.
@@ -153,7 +163,7 @@ TEST(PlasticityTest, RigidSpinsAndTranslationsNeverYield) {
   EXPECT_EQ(spun->plastic_stats().dissipation, 0);
 }
 
-TEST(PlasticityTest, DissipationNeverDecreasesAndEnergyIsLost) {
+TEST_P(PlasticityTest, DissipationNeverDecreasesAndEnergyIsLost) {
   std::unique_ptr<Solid> s = testing::MakeSolid(Bar(Clay(0.005, 0.2)), 2);
   ASSERT_NE(s, nullptr);
   Points p = s->control_positions();
@@ -184,7 +194,7 @@ Points BentAndStepped(int threads, std::string* saved, int split) {
   return s->control_positions();
 }
 
-TEST(PlasticityTest, TheSameBitsForAnyThreadCountAndFromASavedState) {
+TEST_P(PlasticityTest, TheSameBitsForAnyThreadCountAndFromASavedState) {
   std::string saved;
   const Points one = BentAndStepped(1, &saved, 150);
   const Points three = BentAndStepped(3, nullptr, 0);
@@ -198,7 +208,7 @@ TEST(PlasticityTest, TheSameBitsForAnyThreadCountAndFromASavedState) {
   EXPECT_TRUE(s->control_positions() == one);
 }
 
-TEST(PlasticityTest, BackwardEulerFlowsTooAndKeepsTheSet) {
+TEST_P(PlasticityTest, BackwardEulerFlowsTooAndKeepsTheSet) {
   std::string text = Bar(Clay(0.01, 0));
   text.replace(text.find("time_step: 1e-3"), 15, "time_step: 1e-3 integrator: BACKWARD_EULER");
   std::unique_ptr<Solid> s = testing::MakeSolid(text, 2);
@@ -209,7 +219,7 @@ TEST(PlasticityTest, BackwardEulerFlowsTooAndKeepsTheSet) {
   EXPECT_NEAR(set, 0.01, 0.001);
 }
 
-TEST(PlasticityTest, APaintedClayRegionYieldsAndAnUndoOfThePaintIsElasticAgain) {
+TEST_P(PlasticityTest, APaintedClayRegionYieldsAndAnUndoOfThePaintIsElasticAgain) {
   std::unique_ptr<Solid> s =
       testing::MakeSolid(Bar("young_modulus: 1e5 poisson_ratio: 0.3 damping: 20000"), 2);
   ASSERT_NE(s, nullptr);
@@ -238,7 +248,7 @@ TEST(PlasticityTest, APaintedClayRegionYieldsAndAnUndoOfThePaintIsElasticAgain) 
   EXPECT_EQ(after.cells, 0);
 }
 
-TEST(PlasticityTest, PresetsResolveAndYieldingNeedsControlCellFrames) {
+TEST(PlasticityPresetTest, PresetsResolveAndTheLocalFrameModelIsRefused) {
   Material clay;
   clay.set_preset(Material::CLAY);
   const Material m = scene::ResolvedMaterial(clay);
@@ -256,13 +266,14 @@ TEST(PlasticityTest, PresetsResolveAndYieldingNeedsControlCellFrames) {
     name: "x"
     mesh { block { nx: 1 ny: 1 nz: 1 } }
     materials { base { preset: CLAY } }
-    solver { model: COROTATIONAL }
+    solver { model: LOCAL_FRAME }
   )pb");
   const absl::StatusOr<Scene> scene = scene::ParseScene(text, "test");
   ASSERT_FALSE(scene.ok());
   EXPECT_THAT(std::string(scene.status().message()),
               HasSubstr("materials.base.yield_strain: a material that yields (clay) needs "
-                        "solver.model COROTATIONAL and solver.corotation CONTROL_CELL"));
+                        "solver.model COROTATIONAL (with either solver.corotation); this "
+                        "scene asks for LOCAL_FRAME"));
   const absl::StatusOr<Scene> bad = scene::ParseScene(
       "name: \"x\" mesh { block { nx: 1 ny: 1 nz: 1 } } "
       "materials { base { yield_strain: -0.1 } }",
@@ -271,6 +282,12 @@ TEST(PlasticityTest, PresetsResolveAndYieldingNeedsControlCellFrames) {
   EXPECT_THAT(std::string(bad.status().message()),
               HasSubstr("materials.base.yield_strain must be in [0, 1)"));
 }
+
+INSTANTIATE_TEST_SUITE_P(Corotation, PlasticityTest,
+                         ::testing::Values("CONTROL_CELL", "ELEMENT"),
+                         [](const ::testing::TestParamInfo<std::string>& info) {
+                           return info.param;
+                         });
 
 }  // namespace
 }  // namespace dynsolid::solid

@@ -29,8 +29,9 @@ if [ "$major" -lt 18 ]; then
   exit 1
 fi
 
-# npm ci only when the lock file changed since the last install.
-WEB=clients/web
+# npm ci only when the lock file changed since the last install (also for
+# tests/io/gltf, the glTF validator of the io tests).
+for WEB in clients/web tests/io/gltf; do
 STAMP=$WEB/node_modules/.dynsolid-lock.sha256
 want=$(sha256sum "$WEB/package-lock.json" | cut -d' ' -f1)
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
@@ -38,3 +39,4 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
   (cd "$WEB" && npm ci --no-audit --no-fund --loglevel=error)
   echo "$want" > "$STAMP"
 fi
+done

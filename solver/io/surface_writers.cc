@@ -1,5 +1,6 @@
 #include "solver/io/surface_writers.h"
 
+#include <Eigen/Geometry>
 #include <bit>
 #include <charconv>
 #include <cmath>
@@ -9,8 +10,6 @@
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 #include "solver/common/status_macros.h"
 #include "solver/io/text_file.h"
@@ -23,8 +22,8 @@ absl::Status CheckSurface(const mesh::BoundarySurface& s, const SurfaceRules& ru
   const mesh::Csr& f = s.faces;
   if (f.offsets.empty() || f.offsets.front() != 0 ||
       static_cast<size_t>(f.offsets.back()) != f.items.size()) {
-    return absl::InvalidArgumentError(Cat(
-        "surface faces are malformed: offsets must start at 0 and end at ", f.items.size()));
+    return absl::InvalidArgumentError(
+        Cat("surface faces are malformed: offsets must start at 0 and end at ", f.items.size()));
   }
   for (int32_t r = 0; r < f.rows(); ++r) {
     const int32_t n = f.row_size(r);
@@ -50,9 +49,12 @@ absl::Status CheckSurface(const mesh::BoundarySurface& s, const SurfaceRules& ru
         const double x = s.positions(i, k);
         const char axis = static_cast<char>('x' + k);
         if (!std::isfinite(x)) {
-          return absl::InvalidArgumentError(
-              Cat("surface vertex ", i, " has a non-finite coordinate ", axis, " (",
-                  std::isnan(x) ? "nan" : x > 0 ? "inf" : "-inf", ")"));
+          return absl::InvalidArgumentError(Cat("surface vertex ", i,
+                                                " has a non-finite coordinate ", axis, " (",
+                                                std::isnan(x) ? "nan"
+                                                : x > 0       ? "inf"
+                                                              : "-inf",
+                                                ")"));
         }
         if (rules.float32_positions && std::abs(x) > kFloatMax) {
           return absl::InvalidArgumentError(Cat("surface vertex ", i, " has coordinate ", axis,
@@ -78,8 +80,9 @@ absl::Status CheckSurface(const mesh::BoundarySurface& s, const SurfaceRules& ru
 
 absl::Status WithPath(const std::string& path, const absl::Status& status) {
   if (status.ok()) return status;
-  return absl::Status(status.code(),
-                      Cat(path, ": ", std::string(status.message().data(), status.message().size())));
+  return absl::Status(
+      status.code(),
+      Cat(path, ": ", std::string(status.message().data(), status.message().size())));
 }
 
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
@@ -146,8 +149,7 @@ void PutInt(std::string& out, int64_t v) {
 
 // The PLY header of WritePly and WritePlyBinary; `format` is "ascii" or
 // "binary_little_endian".
-void PutPlyHeader(std::string& out, const mesh::BoundarySurface& surface,
-                  std::string_view format) {
+void PutPlyHeader(std::string& out, const mesh::BoundarySurface& surface, std::string_view format) {
   out.append("ply\nformat ").append(format).append(" 1.0\ncomment dynsolid boundary surface\n");
   out.append("element vertex ");
   PutInt(out, surface.positions.rows());
@@ -273,9 +275,8 @@ absl::Status WritePlyBinary(const std::string& path, const mesh::BoundarySurface
 }
 
 absl::Status StlBinaryBytes(const mesh::BoundarySurface& surface, std::string* out) {
-  RETURN_IF_ERROR(
-      CheckSurface(surface, {.need_faces = true, .finite_positions = true,
-                             .float32_positions = true}));
+  RETURN_IF_ERROR(CheckSurface(
+      surface, {.need_faces = true, .finite_positions = true, .float32_positions = true}));
   const int64_t triangles = internal::FanTriangleCount(surface);
   if (triangles > static_cast<int64_t>(UINT32_MAX)) {
     return absl::InvalidArgumentError(

@@ -69,9 +69,9 @@ namespace internal {
 // Shared by the surface writers (here and gltf_writer.cc); not public API.
 struct SurfaceRules {
   size_t max_face_size = SIZE_MAX;
-  bool need_faces = false;          // refuse a surface without faces
-  bool finite_positions = false;    // refuse NaN / infinite coordinates
-  bool float32_positions = false;   // refuse coordinates beyond float32
+  bool need_faces = false;         // refuse a surface without faces
+  bool finite_positions = false;   // refuse NaN / infinite coordinates
+  bool float32_positions = false;  // refuse coordinates beyond float32
 };
 // OK or InvalidArgument("surface ...") naming the face, vertex or field.
 absl::Status CheckSurface(const mesh::BoundarySurface& surface, const SurfaceRules& rules);

@@ -22,7 +22,8 @@ namespace dynsolid::io::testing {
 
 // The boundary of one cube of edge `h` at [0, h]^3 (6 quads, 8 vertices).
 inline mesh::BoundarySurface CubeSurface(double h) {
-  absl::StatusOr<mesh::CellComplex> cube = mesh::CellComplex::FromInput(dynsolid::testing::Grid(1, 1, 1, h));
+  absl::StatusOr<mesh::CellComplex> cube =
+      mesh::CellComplex::FromInput(dynsolid::testing::Grid(1, 1, 1, h));
   EXPECT_TRUE(cube.ok()) << cube.status();
   return cube.ok() ? mesh::ExtractBoundary(*cube) : mesh::BoundarySurface{};
 }
@@ -36,7 +37,8 @@ struct SubdividedBlock {
 
 inline SubdividedBlock SubdividedBlockSurface(int levels) {
   SubdividedBlock b;
-  absl::StatusOr<mesh::CellComplex> block = mesh::CellComplex::FromInput(dynsolid::testing::Grid(2, 2, 2));
+  absl::StatusOr<mesh::CellComplex> block =
+      mesh::CellComplex::FromInput(dynsolid::testing::Grid(2, 2, 2));
   EXPECT_TRUE(block.ok()) << block.status();
   if (!block.ok()) return b;
   auto control = std::make_shared<const mesh::CellComplex>(*std::move(block));

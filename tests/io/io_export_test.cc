@@ -22,9 +22,9 @@ namespace dynsolid::io {
 namespace {
 
 using ::dynsolid::testing::StatusIs;
-using ::testing::HasSubstr;
 using testing::F32At;
 using testing::F64At;
+using ::testing::HasSubstr;
 using testing::ReadTextFile;
 using testing::RunMeshio;
 using testing::ScopedTempDir;
@@ -81,8 +81,8 @@ Eigen::Vector3d FloatPosition(const mesh::BoundarySurface& s, int32_t v) {
 // order (positions as float32), unit normals from the winding, pointing
 // away from `centre` (the surfaces here are convex), attribute 0. Returns
 // the enclosed volume (divergence theorem over the file's triangles).
-double CheckStlTriangles(const std::vector<StlTriangle>& triangles,
-                         const mesh::BoundarySurface& s, const Eigen::Vector3d& centre) {
+double CheckStlTriangles(const std::vector<StlTriangle>& triangles, const mesh::BoundarySurface& s,
+                         const Eigen::Vector3d& centre) {
   size_t t = 0;
   double six_v = 0.0;
   for (int32_t f = 0; f < s.faces.rows(); ++f) {
@@ -99,8 +99,8 @@ double CheckStlTriangles(const std::vector<StlTriangle>& triangles,
       EXPECT_NEAR(tri.normal.norm(), 1.0, 1e-6) << "triangle " << t << ": normal not unit";
       const Eigen::Vector3d winding = (tri.v[1] - tri.v[0]).cross(tri.v[2] - tri.v[0]).normalized();
       EXPECT_GT(tri.normal.dot(winding), 1.0 - 1e-5)
-          << "triangle " << t << ": normal " << tri.normal.transpose()
-          << " is not its winding's " << winding.transpose();
+          << "triangle " << t << ": normal " << tri.normal.transpose() << " is not its winding's "
+          << winding.transpose();
       const Eigen::Vector3d middle = (tri.v[0] + tri.v[1] + tri.v[2]) / 3.0;
       EXPECT_GT(tri.normal.dot(middle - centre), 0.0)
           << "triangle " << t << " at " << middle.transpose() << ": normal "
@@ -157,9 +157,9 @@ TEST(StlWriterTest, SubdividedBlockIsClosedAndOutward) {
   EXPECT_NEAR(volume, block.cell_volume, 1e-3 * block.cell_volume)
       << "the surface encloses the fine cells (their curved faces fanned otherwise)";
   EXPECT_LT(volume, 8.0) << "subdivision rounds the 2x2x2 block";
-  const testing::CommandResult r = RunMeshio(
-      path, "--points " + std::to_string(s.positions.rows()) +
-                " --cells triangle=" + std::to_string(testing::FanTriangles(s)));
+  const testing::CommandResult r =
+      RunMeshio(path, "--points " + std::to_string(s.positions.rows()) +
+                          " --cells triangle=" + std::to_string(testing::FanTriangles(s)));
   EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
 }
 
@@ -341,8 +341,8 @@ TEST(SurfaceWritersTest, BinaryWritersRefuseBadSurfaces) {
   {
     mesh::BoundarySurface s = cube;
     s.positions(4, 0) = 1e300;
-    cases.push_back({"float32", s, "surface vertex 4 has coordinate x = 1e+300, beyond float32",
-                     true, false});
+    cases.push_back(
+        {"float32", s, "surface vertex 4 has coordinate x = 1e+300, beyond float32", true, false});
   }
   {
     mesh::BoundarySurface s = cube;

@@ -1,0 +1,323 @@
+#include "solver/io/gltf_writer.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "solver/common/json_writer.h"
+#include "solver/common/status_macros.h"
+#include "solver/io/surface_writers.h"
+#include "solver/io/text_file.h"
+
+namespace dynsolid::io {
+namespace {
+
+using internal::AppendF32;
+using internal::AppendU32;
+using internal::Cat;
+
+// glTF constants.
+constexpr uint32_t kGlbMagic = 0x46546C67;   // "glTF"
+constexpr uint32_t kChunkJson = 0x4E4F534A;  // "JSON"
+constexpr uint32_t kChunkBin = 0x004E4942;   // "BIN\0"
+constexpr int kFloat = 5126;
+constexpr int kUnsignedInt = 5125;
+constexpr int kArrayBuffer = 34962;
+constexpr int kElementArrayBuffer = 34963;
+constexpr int kTriangles = 4;
+
+// viridis in sRGB (the web viewer's stops, clients/web/public/js/colormap.js).
+constexpr float kViridisStops[][3] = {
+    {0.267f, 0.005f, 0.329f}, {0.283f, 0.141f, 0.458f}, {0.254f, 0.265f, 0.530f},
+    {0.207f, 0.372f, 0.553f}, {0.164f, 0.471f, 0.558f}, {0.128f, 0.567f, 0.551f},
+    {0.135f, 0.659f, 0.518f}, {0.267f, 0.749f, 0.441f}, {0.478f, 0.821f, 0.318f},
+    {0.741f, 0.873f, 0.150f}, {0.993f, 0.906f, 0.144f},
+};
+
+double SrgbToLinear(double c) {
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+
+// JSON numbers: shortest text that reads back to the same double. A float
+// is written as the double it is exactly (so a reader comparing in double
+// or in float32 gets the stored value back).
+void JsonNumber(std::string& out, double v) {
+  char tmp[32];
+  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
+  out.append(tmp, r.ptr);
+}
+void JsonInt(std::string& out, int64_t v) {
+  char tmp[24];
+  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
+  out.append(tmp, r.ptr);
+}
+void JsonVec3(std::string& out, const float v[3]) {
+  out.push_back('[');
+  for (int k = 0; k < 3; ++k) {
+    if (k > 0) out.push_back(',');
+    JsonNumber(out, static_cast<double>(v[k]));
+  }
+  out.push_back(']');
+}
+
+struct View {
+  size_t offset = 0;
+  size_t length = 0;
+  int target = 0;
+};
+
+// The scalar each vertex is coloured by: the value, or the magnitude of a
+// field of several components.
+absl::Status ColourScalars(const mesh::BoundarySurface& surface, const std::string& name,
+                           std::vector<double>& scalars, const mesh::VertexField** found) {
+  const mesh::VertexField* field = nullptr;
+  for (const mesh::VertexField& f : surface.fields) {
+    if (f.name == name) field = &f;
+  }
+  if (field == nullptr) {
+    std::string have;
+    for (const mesh::VertexField& f : surface.fields) have += (have.empty() ? "" : ", ") + f.name;
+    return absl::InvalidArgumentError(Cat("colour field '", name, "' is not on the surface (",
+                                          have.empty() ? "it has no fields" : "it has: " + have,
+                                          ")"));
+  }
+  const int64_t nv = surface.positions.rows();
+  const int c = field->components;
+  scalars.resize(static_cast<size_t>(nv));
+  for (int64_t i = 0; i < nv; ++i) {
+    double sum2 = 0.0;
+    for (int k = 0; k < c; ++k) {
+      const double x = field->values[i * c + k];
+      if (!std::isfinite(x)) {
+        return absl::InvalidArgumentError(Cat("colour field '", name, "' is not finite at vertex ",
+                                              i,
+                                              c > 1 ? Cat(" (component ", k, ")") : std::string()));
+      }
+      sum2 += x * x;
+    }
+    scalars[i] = c == 1 ? field->values[i] : std::sqrt(sum2);
+  }
+  *found = field;
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+std::array<float, 3> ViridisLinearRgb(double t) {
+  if (!(t > 0.0)) t = 0.0;  // also NaN
+  if (t > 1.0) t = 1.0;
+  constexpr int kLast = static_cast<int>(std::size(kViridisStops)) - 1;
+  const double x = t * kLast;
+  const int i = std::min(static_cast<int>(x), kLast - 1);
+  const double f = x - i;
+  std::array<float, 3> rgb;
+  for (int k = 0; k < 3; ++k) {
+    const double a = kViridisStops[i][k];
+    const double b = kViridisStops[i + 1][k];
+    rgb[k] = static_cast<float>(SrgbToLinear(a + f * (b - a)));
+  }
+  return rgb;
+}
+
+absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& options,
+                      std::string* out) {
+  RETURN_IF_ERROR(internal::CheckSurface(
+      surface, {.need_faces = true, .finite_positions = true, .float32_positions = true}));
+  const Points& p = surface.positions;
+  const int64_t nv = p.rows();
+  const int64_t nt = internal::FanTriangleCount(surface);
+
+  std::vector<double> scalars;
+  const mesh::VertexField* colour = nullptr;
+  if (!options.color_field.empty()) {
+    RETURN_IF_ERROR(ColourScalars(surface, options.color_field, scalars, &colour));
+  }
+
+  // Sizes first: GLB lengths are uint32.
+  const size_t vec3_bytes = 12 * static_cast<size_t>(nv);
+  const size_t index_bytes = 12 * static_cast<size_t>(nt);
+  const size_t bin_bytes = (colour != nullptr ? 3 : 2) * vec3_bytes + index_bytes;
+  // The JSON is a few kilobytes; 64 KiB is a generous bound for the check.
+  if (bin_bytes + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(Cat("surface of ", nv, " vertices and ", nt,
+                                          " triangles needs ", bin_bytes,
+                                          " bytes of buffer: beyond GLB's 4 GiB"));
+  }
+
+  // Vertex normals: the sum over the vertex's fan triangles of their
+  // (b - a) x (c - a), i.e. normals weighted by area.
+  Points normals = Points::Zero(nv, 3);
+  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
+    const auto loop = surface.faces.row(r);
+    const Eigen::Vector3d a = p.row(loop[0]).transpose();
+    for (size_t i = 1; i + 1 < loop.size(); ++i) {
+      const Eigen::Vector3d b = p.row(loop[i]).transpose();
+      const Eigen::Vector3d c = p.row(loop[i + 1]).transpose();
+      const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+      normals.row(loop[0]) += n;
+      normals.row(loop[i]) += n;
+      normals.row(loop[i + 1]) += n;
+    }
+  }
+
+  // BIN chunk: positions, normals, colours, indices (all 4-byte multiples).
+  std::string bin;
+  bin.reserve(bin_bytes);
+  float lo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                 std::numeric_limits<float>::max()};
+  float hi[3] = {-lo[0], -lo[1], -lo[2]};
+  std::vector<View> views;
+  views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+  for (int64_t i = 0; i < nv; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const float x = static_cast<float>(p(i, k));
+      lo[k] = std::min(lo[k], x);
+      hi[k] = std::max(hi[k], x);
+      AppendF32(bin, x);
+    }
+  }
+  views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+  for (int64_t i = 0; i < nv; ++i) {
+    Eigen::Vector3d n = normals.row(i).transpose();
+    const double length = n.norm();
+    // A vertex on no face or only on degenerate triangles has no normal;
+    // glTF requires unit normals, so it gets +z.
+    n = length > 0.0 && std::isfinite(length) ? Eigen::Vector3d(n / length)
+                                              : Eigen::Vector3d::UnitZ();
+    for (int k = 0; k < 3; ++k) AppendF32(bin, static_cast<float>(n[k]));
+  }
+  double range[2] = {0.0, 0.0};
+  if (colour != nullptr) {
+    range[0] = *std::min_element(scalars.begin(), scalars.end());
+    range[1] = *std::max_element(scalars.begin(), scalars.end());
+    const double span = range[1] - range[0];
+    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+    for (int64_t i = 0; i < nv; ++i) {
+      const double t = span > 0.0 ? (scalars[i] - range[0]) / span : 0.5;
+      for (float c : ViridisLinearRgb(t)) AppendF32(bin, c);
+    }
+  }
+  views.push_back({bin.size(), index_bytes, kElementArrayBuffer});
+  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
+    const auto loop = surface.faces.row(r);
+    for (size_t i = 1; i + 1 < loop.size(); ++i) {
+      AppendU32(bin, static_cast<uint32_t>(loop[0]));
+      AppendU32(bin, static_cast<uint32_t>(loop[i]));
+      AppendU32(bin, static_cast<uint32_t>(loop[i + 1]));
+    }
+  }
+  while (bin.size() % 4 != 0) bin.push_back('\0');  // (already aligned)
+
+  // JSON chunk. Accessors follow the views: 0 POSITION, 1 NORMAL,
+  // [2 COLOR_0], then the indices.
+  const int index_accessor = colour != nullptr ? 3 : 2;
+  std::string j;
+  j += "{\"asset\":{\"version\":\"2.0\",\"generator\":";
+  j += JsonWriter::Quote(options.generator);
+  j += "},\"scene\":0,\"scenes\":[{\"name\":\"dynsolid\",\"nodes\":[0]}],";
+  j += "\"nodes\":[{\"name\":\"boundary surface\",\"mesh\":0";
+  if (options.z_up) {
+    // -90 degrees about x: +z (the scenes' up) becomes +y (glTF's up).
+    const double h = std::sqrt(0.5);
+    j += ",\"rotation\":[";
+    JsonNumber(j, -h);
+    j += ",0,0,";
+    JsonNumber(j, h);
+    j += "]";
+  }
+  j += "}],\"materials\":[{\"name\":\"dynsolid surface\",\"pbrMetallicRoughness\":{";
+  j += colour != nullptr ? "\"baseColorFactor\":[1,1,1,1]" : "\"baseColorFactor\":[0.8,0.8,0.8,1]";
+  j += ",\"metallicFactor\":0,\"roughnessFactor\":0.7}}],";
+  j += "\"meshes\":[{\"name\":\"boundary surface\",\"primitives\":[{\"attributes\":{";
+  j += "\"POSITION\":0,\"NORMAL\":1";
+  if (colour != nullptr) j += ",\"COLOR_0\":2";
+  j += "},\"indices\":";
+  JsonInt(j, index_accessor);
+  j += ",\"material\":0,\"mode\":";
+  JsonInt(j, kTriangles);
+  j += "}]";
+  if (colour != nullptr) {
+    j += ",\"extras\":{\"color_field\":";
+    j += JsonWriter::Quote(colour->name);
+    j += ",\"color_field_components\":";
+    JsonInt(j, colour->components);
+    j += ",\"color_range\":[";
+    JsonNumber(j, range[0]);
+    j += ",";
+    JsonNumber(j, range[1]);
+    j += "],\"colormap\":\"viridis\"}";
+  }
+  j += "}],\"accessors\":[";
+  auto accessor = [&](int view, int component_type, int64_t count, const char* type) {
+    j += "{\"bufferView\":";
+    JsonInt(j, view);
+    j += ",\"componentType\":";
+    JsonInt(j, component_type);
+    j += ",\"count\":";
+    JsonInt(j, count);
+    j += ",\"type\":\"";
+    j += type;
+    j += "\"";
+  };
+  accessor(0, kFloat, nv, "VEC3");
+  j += ",\"min\":";
+  JsonVec3(j, lo);
+  j += ",\"max\":";
+  JsonVec3(j, hi);
+  j += "},";
+  accessor(1, kFloat, nv, "VEC3");
+  j += "},";
+  if (colour != nullptr) {
+    accessor(2, kFloat, nv, "VEC3");
+    j += "},";
+  }
+  accessor(index_accessor, kUnsignedInt, 3 * nt, "SCALAR");
+  j += "}],\"bufferViews\":[";
+  for (size_t v = 0; v < views.size(); ++v) {
+    if (v > 0) j += ",";
+    j += "{\"buffer\":0,\"byteOffset\":";
+    JsonInt(j, static_cast<int64_t>(views[v].offset));
+    j += ",\"byteLength\":";
+    JsonInt(j, static_cast<int64_t>(views[v].length));
+    j += ",\"target\":";
+    JsonInt(j, views[v].target);
+    j += "}";
+  }
+  j += "],\"buffers\":[{\"byteLength\":";
+  JsonInt(j, static_cast<int64_t>(bin.size()));
+  j += "}]}";
+  while (j.size() % 4 != 0) j.push_back(' ');
+
+  const size_t total = 12 + 8 + j.size() + 8 + bin.size();
+  if (total > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(
+        Cat("surface needs a GLB of ", total, " bytes: beyond GLB's 4 GiB"));
+  }
+  std::string& o = *out;
+  o.reserve(o.size() + total);
+  AppendU32(o, kGlbMagic);
+  AppendU32(o, 2);
+  AppendU32(o, static_cast<uint32_t>(total));
+  AppendU32(o, static_cast<uint32_t>(j.size()));
+  AppendU32(o, kChunkJson);
+  o += j;
+  AppendU32(o, static_cast<uint32_t>(bin.size()));
+  AppendU32(o, kChunkBin);
+  o += bin;
+  return absl::OkStatus();
+}
+
+absl::Status WriteGlb(const std::string& path, const mesh::BoundarySurface& surface,
+                      const GlbOptions& options) {
+  std::string bytes;
+  RETURN_IF_ERROR(internal::WithPath(path, GlbBytes(surface, options, &bytes)));
+  return internal::WriteFileBytes(path, bytes);
+}
+
+}  // namespace dynsolid::io

@@ -5,12 +5,18 @@
 //
 //   node gateway/main.js --server 127.0.0.1:50051 [--listen 127.0.0.1:8080]
 //                        [--tls_ca ROOTS.pem] [--allow_origin ORIGINS]
-//                        [--access_token_file FILE] [limits]
+//                        [--access_token_file FILE]
+//                        [--tls_cert CERT.pem --tls_key KEY.pem] [limits]
 //
-// Prints "listening on http://HOST:PORT/" on stdout once it serves (port 0:
-// a free one). What it lets in: guard.js and README.md "Doors".
+// Prints "listening on http://HOST:PORT/" (https:// with --tls_cert) on
+// stdout once it serves (port 0: a free one). What it lets in: guard.js and
+// README.md "Doors".
 
 import http from 'node:http';
+import https from 'node:https';
+import tls from 'node:tls';
+import crypto from 'node:crypto';
+import net from 'node:net';
 import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -18,18 +24,26 @@ import { WebSocketServer } from 'ws';
 import { loadService, DEFAULT_PROTO_ROOT, grpc } from './grpc.js';
 import { Router } from './router.js';
 import { Bridge, DEFAULT_LIMITS } from './bridge.js';
-import { upgradeRefusal, parseOriginList, requestPath, isLoopback } from './guard.js';
+import { upgradeRefusal, parseOriginList, requestPath, exposureRefusal, exposureWarning } from './guard.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..');
 
-const USAGE = `usage: node gateway/main.js --server HOST:PORT [--listen HOST:PORT] [--proto DIR]
-  --listen HOST:PORT             where pages connect (default 127.0.0.1:8080; port 0: a free one)
-  --tls_ca ROOTS.pem             call the servers over TLS with these roots
-  --create SCENE [--levels N]    open a session on a built-in scene and print its URL
-  --allow_origin ORIGINS         comma-separated origins (http://host:port) whose pages may
+const USAGE = `usage: node gateway/main.js [--server HOST:PORT] [--listen HOST:PORT] [flags]
+  --server HOST:PORT             dynsolid-server (default 127.0.0.1:50051)
+  --listen HOST:PORT             where pages connect (default 127.0.0.1:8080; port 0: a free one).
+                                 Beyond loopback it needs --access_token_file or --tls_cert/--tls_key
+                                 (better both): with neither it refuses to start
+  --tls_cert CERT.pem            serve pages over HTTPS and WSS with this certificate (PEM, may
+  --tls_key KEY.pem              hold the chain) and its unencrypted private key; both or neither
+                                 (default neither: plain HTTP and WS)
+  --access_token_file FILE       pages must carry ?access=<the file's first line, 16+ characters>
+                                 (default none)
+  --allow_origin ORIGINS         comma-separated origins (http(s)://host:port) whose pages may
                                  connect besides the gateway's own (default none)
-  --access_token_file FILE       pages must carry ?access=<the file's first line> (default none)
+  --tls_ca ROOTS.pem             call the servers over TLS with these roots (default plaintext)
+  --proto DIR                    the .proto files (default ${DEFAULT_PROTO_ROOT})
+  --create SCENE [--levels N]    open a session on a built-in scene and print its URL (default none)
   --max_message_bytes N          a page's largest message (default ${DEFAULT_LIMITS.maxMessageBytes})
   --max_messages_per_second N    a page's sustained message rate (default ${DEFAULT_LIMITS.rate})
   --message_burst N              messages a page may send at once above it (default ${DEFAULT_LIMITS.burst})`;
@@ -41,7 +55,7 @@ function fail(message) {
 
 function parseArgs(argv) {
   const args = { server: '127.0.0.1:50051', listen: '127.0.0.1:8080', proto: DEFAULT_PROTO_ROOT,
-    create: '', levels: '', tls_ca: '', allow_origin: '', access_token_file: '',
+    create: '', levels: '', tls_ca: '', tls_cert: '', tls_key: '', allow_origin: '', access_token_file: '',
     max_message_bytes: String(DEFAULT_LIMITS.maxMessageBytes),
     max_messages_per_second: String(DEFAULT_LIMITS.rate), message_burst: String(DEFAULT_LIMITS.burst) };
   for (let i = 0; i < argv.length; ++i) {
@@ -98,6 +112,53 @@ function doorsOf(args) {
   const limits = { maxMessageBytes: positive(args, 'max_message_bytes'),
     rate: positive(args, 'max_messages_per_second'), burst: positive(args, 'message_burst') };
   return { allowOrigins, accessToken, limits };
+}
+
+// --tls_cert and --tls_key as https.createServer's {cert, key}, or null
+// without them. Both or neither. Each file is read and checked here, so a
+// missing, unreadable or invalid one, or a key that is not the
+// certificate's, is said at start with its path and why (exit 2).
+function tlsOf(args, log) {
+  const { tls_cert: certFile, tls_key: keyFile } = args;
+  if (!certFile && !keyFile) return null;
+  if (!keyFile) fail(`--tls_cert ${certFile} needs --tls_key KEY.pem (the certificate's private key) as well`);
+  if (!certFile) fail(`--tls_key ${keyFile} needs --tls_cert CERT.pem (its certificate) as well`);
+  const read = (flag, file) => {
+    try {
+      return fs.readFileSync(file);
+    } catch (e) {
+      return fail(`cannot read --${flag} ${file}: ${e.message}`);
+    }
+  };
+  const cert = read('tls_cert', certFile);
+  const key = read('tls_key', keyFile);
+  let certificate;
+  let privateKey;
+  try {
+    certificate = new crypto.X509Certificate(cert);
+  } catch (e) {
+    fail(`--tls_cert ${certFile} is not a PEM certificate: ${e.message}`);
+  }
+  try {
+    privateKey = crypto.createPrivateKey(key);
+  } catch (e) {
+    if (/-----BEGIN [A-Z ]*ENCRYPTED/.test(key.toString('latin1'))) {
+      fail(`--tls_key ${keyFile} is encrypted; give the gateway an unencrypted copy (openssl pkey -in ${keyFile} -out KEY.pem)`);
+    }
+    fail(`--tls_key ${keyFile} is not a PEM private key: ${e.message}`);
+  }
+  if (!certificate.checkPrivateKey(privateKey)) {
+    fail(`--tls_key ${keyFile} is not the private key of --tls_cert ${certFile}`);
+  }
+  try {
+    tls.createSecureContext({ cert, key });
+  } catch (e) {
+    fail(`--tls_cert ${certFile} with --tls_key ${keyFile}: ${e.message}`);
+  }
+  if (Date.parse(certificate.validTo) < Date.now()) {
+    log(`--tls_cert ${certFile} expired on ${certificate.validTo}: browsers will refuse it`);
+  }
+  return { cert, key };
 }
 
 // URL prefix -> folder. Only these are served; nothing outside them.
@@ -219,6 +280,19 @@ function createSession(router, args, base, log, attempt = 0) {
 
 function main() {
   const args = parseArgs(process.argv.slice(2));
+  // The flags about this gateway's own doors first: a mistake there is said
+  // before anything is loaded.
+  const doors = doorsOf(args);
+  const log = (...m) => console.error(new Date().toISOString(), 'gateway:', ...m);
+  const tlsOptions = tlsOf(args, log);
+  const exposure = { tls: tlsOptions !== null, accessToken: doors.accessToken };
+  const [host, port] = listenAddress(args.listen);
+  // Beyond loopback without TLS or a token: refused before binding when the
+  // address says so, and after binding for a name (what it resolved to).
+  if (host === '' || net.isIP(host)) {
+    const why = exposureRefusal(host, exposure);
+    if (why) fail(why);
+  }
   const service = loadService(args.proto);
   // Sessions on other replicas are reached where they live (router.js).
   let credentials;
@@ -231,10 +305,14 @@ function main() {
     }
   }
   const router = new Router(service, args.server, credentials);
-  const doors = doorsOf(args);
-  const log = (...m) => console.error(new Date().toISOString(), 'gateway:', ...m);
-  const [host, port] = listenAddress(args.listen);
-  const server = http.createServer((req, res) => serveSafely(req, res, log));
+  const handler = (req, res) => serveSafely(req, res, log);
+  const server = tlsOptions ? https.createServer(tlsOptions, handler) : http.createServer(handler);
+  // A failed handshake (plain HTTP on the TLS port, a browser refusing the
+  // certificate): said in the log, the connection dropped.
+  server.on('tlsClientError', (e, socket) => {
+    log(`TLS handshake from ${socket.remoteAddress} failed: ${e.code || e.message}`);
+    socket.destroy();
+  });
   const wss = new WebSocketServer({ noServer: true, maxPayload: doors.limits.maxMessageBytes });
   server.on('upgrade', (req, socket, head) => {
     if (!admit(req, socket, doors, log)) return;
@@ -248,15 +326,16 @@ function main() {
   });
   server.listen(port, host, () => {
     const a = server.address();
+    const why = exposureRefusal(a.address, exposure);
+    if (why) fail(why);
     const name = a.family === 'IPv6' ? `[${a.address}]` : a.address;
-    const base = `http://${name}:${a.port}/`;
+    const base = `${tlsOptions ? 'https' : 'http'}://${name}:${a.port}/`;
     const open = doors.accessToken ? `${base}?access=${encodeURIComponent(doors.accessToken)}` : base;
     console.log(`listening on ${base}`);
     if (doors.accessToken) console.log(`open ${open}`);
     log(`serving the viewer, dynsolid-server at ${args.server}`);
-    if (!isLoopback(a.address) && !doors.accessToken) {
-      log(`serving beyond loopback without --access_token_file: anyone who reaches ${base} can use it`);
-    }
+    const warning = exposureWarning(a.address, exposure);
+    if (warning) log(`${warning} (${base})`);
     if (args.create) createSession(router, args, open, log);
   });
   const stop = () => {

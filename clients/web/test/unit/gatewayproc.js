@@ -78,7 +78,7 @@ export function startGateway(serverAddress, args = []) {
   return new Promise((resolve, reject) => {
     proc.stdout.on('data', (d) => {
       out += d;
-      const m = out.match(/listening on (http:\/\/[^/\s]+\/)/);
+      const m = out.match(/listening on (https?:\/\/[^/\s]+\/)/);
       if (m) resolve({ url: m[1], port: Number(new URL(m[1]).port), proc, exited, stop, log: () => err });
     });
     exited.then((code) => reject(new Error(`the gateway exited (${code}) before it listened: ${err}`)));
@@ -105,11 +105,11 @@ export function get(port, pathText) {
   return rawHttp(port, `GET ${pathText} HTTP/1.1\r\nHost: 127.0.0.1:${port}\r\nConnection: close\r\n\r\n`);
 }
 
-// A page's WebSocket with `headers` (Origin, Host). Resolves
-// {ws, messages, next()} once open, or {refused: status, body} when the
-// upgrade is answered with an HTTP error.
-export function openPage(url, { headers = {}, path: wsPath = 'ws' } = {}) {
-  const ws = new WebSocket(url.replace(/^http/, 'ws') + wsPath, { headers });
+// A page's WebSocket with `headers` (Origin, Host); wss:// for an https://
+// gateway, trusting `ca`. Resolves {ws, messages, next()} once open, or
+// {refused: status, body} when the upgrade is answered with an HTTP error.
+export function openPage(url, { headers = {}, path: wsPath = 'ws', ca } = {}) {
+  const ws = new WebSocket(url.replace(/^http/, 'ws') + wsPath, { headers, ...(ca ? { ca } : {}) });
   const messages = [];
   const waiters = [];
   ws.on('message', (data, binary) => {

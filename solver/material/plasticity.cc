@@ -231,6 +231,29 @@ Points Plasticity::RestDisplacement(const models::CellCorotation& model,
   return sum;
 }
 
+int32_t Plasticity::CarryFrom(const Plasticity& old, const std::vector<int32_t>& source,
+                              const std::vector<std::vector<int32_t>>& entry_map) {
+  int32_t carried = 0;
+  for (size_t u = 0; u < first_.size() && u < source.size(); ++u) {
+    const int32_t s = source[u];
+    if (s < 0 || s >= old.units() || old.offsets_.empty()) continue;
+    const std::vector<int32_t>& map = entry_map[u];
+    const int n = size_[u];
+    if (map.empty() && old.size_[s] != n) continue;
+    double* to = offsets_.data() + 3 * static_cast<int64_t>(first_[u]);
+    const double* from = old.offsets_.data() + 3 * static_cast<int64_t>(old.first_[s]);
+    for (int a = 0; a < n; ++a) {
+      const int b = map.empty() ? a : map[a];
+      for (int k = 0; k < 3; ++k) to[3 * a + k] = from[3 * b + k];
+    }
+    alpha_[u] = old.alpha_[s];
+    dissipation_[u] = old.dissipation_[s];
+    ++carried;
+  }
+  UpdateActive();
+  return carried;
+}
+
 std::string Plasticity::SaveState() const {
   std::string out(kStateMagic, 4);
   Put<uint64_t>(out, laws_.size());

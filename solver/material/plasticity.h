@@ -121,6 +121,15 @@ class Plasticity : public models::CellFlow, public models::ElementFlow {
   // (Per-cell units only.)
   Points RestDisplacement(const models::CellCorotation& model, int64_t controls) const;
 
+  // A topology edit's carry-over: new unit u takes `old`'s unit
+  // source[u] (-1: none, it starts elastic at the mesh's rest shape), its
+  // support entry a being the old unit's entry entry_map[u][a] (empty: the
+  // same order). Its offsets, plastic strain and dissipation come along.
+  // Returns the units carried. Laws are not touched (set_laws).
+  int32_t CarryFrom(const Plasticity& old, const std::vector<int32_t>& source,
+                    const std::vector<std::vector<int32_t>>& entry_map);
+  int32_t units() const { return static_cast<int32_t>(first_.size()); }
+
   // State: laws, offsets, alpha and dissipation, as bytes and back; Parse
   // checks the bytes against this solid's cells, units and entries
   // (DataLoss naming what is wrong) without changing anything.

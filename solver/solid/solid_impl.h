@@ -391,6 +391,15 @@ struct Solid::Impl {
   void AttachPlasticity();
   // The flow units of the model in use (control cells or elements).
   material::Plasticity::Units PlasticUnits() const;
+  // A topology edit's carry-over of clay from `old` (the solid before it;
+  // `point_source` new control point -> the old one it is, -1 for a new
+  // point; `cell_source` new control cell -> old, -1 new): a control cell
+  // whose support is the same points keeps its offsets; an element keeps
+  // its offsets when its control cell's source has an element of its kind
+  // at the same place (rest centroids within a quarter of its size). Other
+  // units start from the mesh's rest shape. Returns the units carried.
+  int32_t CarryPlasticity(const Impl& old, const std::vector<int32_t>& point_source,
+                          const std::vector<int32_t>& cell_source);
   // The scene's flow law per control cell (the material at its rest
   // centroid, as the material regions give it).
   std::vector<material::FlowLaw> SceneFlowLaws(const Scene& scene) const;

@@ -3,6 +3,7 @@
 // (contact/obstacle_contact.h). Each part keeps its own state; the solid
 // only builds it, hands it positions and forces, and carries its bytes.
 #include <algorithm>
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <string>
@@ -61,6 +62,83 @@ material::Plasticity::Units Solid::Impl::PlasticUnits() const {
   if (cell_model != nullptr) return material::Plasticity::UnitsOf(*cell_model);
   if (corotational != nullptr) return material::Plasticity::UnitsOf(*layout);
   return {};
+}
+
+int32_t Solid::Impl::CarryPlasticity(const Impl& old, const std::vector<int32_t>& point_source,
+                                     const std::vector<int32_t>& cell_source) {
+  if (plasticity == nullptr || old.plasticity == nullptr) return 0;
+  const int32_t units = plasticity->units();
+  std::vector<int32_t> source(units, -1);
+  std::vector<std::vector<int32_t>> entry_map(units);
+  if (cell_model != nullptr && old.cell_model != nullptr) {
+    // Control cells: the same support points, in the old cell's order.
+    for (int32_t c = 0; c < cell_model->cells(); ++c) {
+      const int32_t src = cell_source[c];
+      if (src < 0 || src >= old.cell_model->cells()) continue;
+      const int32_t n = cell_model->support_size(c);
+      if (old.cell_model->support_size(src) != n) continue;
+      const int32_t* now = cell_model->support(c);
+      const int32_t* was = old.cell_model->support(src);
+      std::vector<int32_t> map(n);
+      bool same = true;
+      for (int32_t a = 0; a < n && same; ++a) {
+        const int32_t o = point_source[now[a]];
+        const int32_t* at = std::lower_bound(was, was + n, o);
+        same = o >= 0 && at != was + n && *at == o;
+        if (same) map[a] = static_cast<int32_t>(at - was);
+      }
+      if (!same) continue;
+      source[c] = src;
+      entry_map[c] = std::move(map);
+    }
+  } else if (cell_model == nullptr && old.cell_model == nullptr && corotational != nullptr &&
+             old.corotational != nullptr) {
+    // Elements: by kind and rest centroid within the source control cell.
+    struct Unit {
+      int32_t unit;
+      int kind;
+      Eigen::Vector3d centre;
+      double size;
+    };
+    auto units_by_cell = [](const Impl& im) {
+      std::vector<std::vector<Unit>> out(im.d->control().num_cells());
+      const std::vector<int32_t>& to_control = im.d->hierarchy.control_cell;
+      int32_t unit = 0;
+      for (int kind = 0; kind < 3; ++kind) {
+        const models::ElementBlock& block = im.layout->blocks[kind];
+        for (int32_t e = 0; e < block.size(); ++e, ++unit) {
+          const int32_t* ids = block.element_nodes(e);
+          Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+          for (int i = 0; i < block.nodes; ++i) centre += im.rest_nodes.row(ids[i]).transpose();
+          centre /= block.nodes;
+          const models::ElementGroup& g = block.groups[block.group[e]];
+          const int32_t cell = to_control.empty() ? block.cell[e] : to_control[block.cell[e]];
+          out[cell].push_back({unit, kind, centre, std::cbrt(std::abs(g.shape_volume))});
+        }
+      }
+      return out;
+    };
+    const std::vector<std::vector<Unit>> now = units_by_cell(*this);
+    const std::vector<std::vector<Unit>> was = units_by_cell(old);
+    for (int32_t c = 0; c < static_cast<int32_t>(now.size()); ++c) {
+      const int32_t src = cell_source[c];
+      if (src < 0 || src >= static_cast<int32_t>(was.size())) continue;
+      for (const Unit& u : now[c]) {
+        // The nearest old element of its kind (ties: the first).
+        const Unit* best = nullptr;
+        double best_d = INFINITY;
+        for (const Unit& o : was[src]) {
+          const double dist = (o.centre - u.centre).norm();
+          if (o.kind == u.kind && dist < best_d) {
+            best = &o;
+            best_d = dist;
+          }
+        }
+        if (best != nullptr && best_d < 0.25 * u.size) source[u.unit] = best->unit;
+      }
+    }
+  }
+  return plasticity->CarryFrom(*old.plasticity, source, entry_map);
 }
 
 absl::Status Solid::Impl::MakeEnvironment(const Scene& scene, const Solid::Surface& surface) {

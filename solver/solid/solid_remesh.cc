@@ -369,8 +369,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   rep = TransferReport();
 
   // Clay: each cell keeps the flow law of the cell it comes from (new
-  // cells the scene's). Its plastic offsets are not carried: a topology
-  // edit rebuilds the rest shape from the control mesh (docs/sculpt.md).
+  // cells the scene's), and the units the edit left alone keep their
+  // plastic offsets (CarryPlasticity); a bake resets them (its rest shape
+  // is the baked one).
   if (old.plasticity != nullptr && (im.cell_model != nullptr || im.corotational != nullptr)) {
     std::vector<material::FlowLaw> laws =
         im.plasticity != nullptr ? im.plasticity->laws()
@@ -385,6 +386,14 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
       im.AttachPlasticity();
     } else {
       im.plasticity->set_laws(std::move(laws));
+    }
+    if (t.baked == nullptr) {
+      std::vector<int32_t> point_source(nv, -1);
+      for (int32_t v = 0; v < nv; ++v) {
+        const auto& src = t.vertex_sources[v];
+        if (src.size() == 1 && src[0].second == 1.0) point_source[v] = src[0].first;
+      }
+      im.CarryPlasticity(old, point_source, t.cell_source);
     }
   }
 

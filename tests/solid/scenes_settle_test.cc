@@ -85,11 +85,7 @@ TEST_P(SceneSettleTest, AReleasedDragSettlesWithinThreeSeconds) {
   ASSERT_NE(s, nullptr);
   // First at rest where the scene puts it (gravity, a floor): a second.
   for (int k = 0; k < std::lround(1.0 / s->time_step()); ++k) ASSERT_OK(s->Step());
-  // The beam is the paper's local-frame model (its accuracy scene), which
-  // creeps: its kinetic energy falls by only about 0.45 per second whatever
-  // the damping (0.0087 of the peak 3 s after the release). It is held to
-  // 12 s here and counted as not settling within 3 s (docs/sculpt.md).
-  const double within = GetParam() == "beam" ? 12.0 : 3.0;
+  const double within = 3.0;
   const Settle settle = DragAndRelease(*s, within);
   std::printf("%s: kinetic energy peak %.4g J, %g s after the release %.4g J (ratio %.2g)\n",
               GetParam().c_str(), settle.peak, within, settle.last, settle.last / settle.peak);

@@ -589,6 +589,8 @@ absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuil
   const HistoryItem& next = undo ? history_.next_undo() : history_.next_redo();
   HistoryItem now{solid_->SaveStateParts(), scene_, next.what};
   RETURN_IF_ERROR(Restore(next, prebuilt));
+  // The state a failed step's message spoke of is gone.
+  last_error_.clear();
   const HistoryItem done = undo ? history_.Undo(std::move(now)) : history_.Redo(std::move(now));
   ++fields_version_;
   HistoryReport* r = reply->mutable_history();
@@ -611,6 +613,8 @@ absl::Status SimCore::StepOnce() {
     return s;
   }
   if (steps_remaining_ > 0 && --steps_remaining_ == 0) paused_ = true;
+  // A step went through: the state a failed step's message spoke of is gone.
+  last_error_.clear();
   return s;
 }
 

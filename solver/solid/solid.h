@@ -30,6 +30,7 @@
 #include "dynsolid/scene.pb.h"
 #include "solver/mesh/points.h"
 #include "solver/scene/build.h"
+#include "solver/solid/load_bounds.h"
 #include "solver/solid/saved_state.h"
 
 namespace dynsolid::models {
@@ -227,6 +228,9 @@ class Solid {
   // own frames: they differ by the frames' change over one step).
   Energies ComputeEnergies() const;
   // Total mass from Mt (kg) and the rest volume of the elements (m^3).
+  // The scale loads are checked against (load_bounds.h): size, mean
+  // modulus, density, mass.
+  LoadScale load_scale() const;
   double total_mass() const { return total_mass_; }
   double rest_volume() const { return rest_volume_; }
 

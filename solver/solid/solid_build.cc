@@ -508,6 +508,19 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   im.gravity = V(scene.loads().gravity());
+  {
+    // Loads within physics (load_bounds.h), named by their scene field.
+    const LoadScale scale = s->load_scale();
+    RETURN_IF_ERROR(CheckGravity(scale, im.gravity.stableNorm(), "loads.gravity"));
+    for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
+      RETURN_IF_ERROR(CheckForce(scale, V(scene.loads().point_forces(i).force()).stableNorm(),
+                                 absl::StrCat("loads.point_forces[", i, "].force")));
+    }
+    for (int i = 0; i < scene.loads().pressures_size(); ++i) {
+      RETURN_IF_ERROR(CheckPressure(scale, scene.loads().pressures(i).pascals(),
+                                    absl::StrCat("loads.pressures[", i, "].pascals")));
+    }
+  }
   // The environment (floor, obstacles), calibrated below once the sub-step
   // is known.
   RETURN_IF_ERROR(im.MakeEnvironment(scene, s->surface_));

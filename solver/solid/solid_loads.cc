@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/solid/solid.h"
+#include "solver/solid/load_bounds.h"
 #include "solver/solid/solid_impl.h"
 
 namespace dynsolid::solid {
@@ -195,9 +196,14 @@ void Solid::ApplyFixed() {
 
 // ---- Loads.
 
+LoadScale Solid::load_scale() const {
+  return ScaleOf(impl_->rest_control, *impl_->layout, total_mass_, rest_volume_);
+}
+
 absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
   Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidatePointForce(f, "point_force"));
+  RETURN_IF_ERROR(CheckForce(load_scale(), V(f.force()).stableNorm(), "point_force.force"));
   absl::StatusOr<MaterialLocation> at =
       im.Locate(V(f.position()), im.settings.snap_forces_to_quadrature());
   if (!at.ok()) {
@@ -215,6 +221,7 @@ absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
 absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
   Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidatePressure(p, "pressure"));
+  RETURN_IF_ERROR(CheckPressure(load_scale(), p.pascals(), "pressure.pascals"));
   RETURN_IF_ERROR(im.CheckControlCells(p.region(), "pressure.region"));
   std::vector<int32_t> quads = im.SelectQuads(p.region());
   if (quads.empty()) {
@@ -232,6 +239,7 @@ absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
 absl::Status Solid::SetGravity(const Vec3& g) {
   Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
+  RETURN_IF_ERROR(CheckGravity(load_scale(), V(g).stableNorm(), "gravity"));
   im.gravity = V(g);
   im.RebuildConstantLoads();
   im.LoadsChanged();

@@ -9,6 +9,13 @@
 //   {op: "command", request}            a CommandRequest on this page's
 //                                       Commands stream (opened on demand,
 //                                       one per session)
+//   {op: "export", id, request: {session: {id}, format, level?, color_field}}
+//                                       the design as a file (Export, a
+//                                       server stream) of one of this page's
+//                                       own sessions: the gateway adds the
+//                                       token it holds for it and the chunk
+//                                       size; at most MAX_EXPORTS at once
+//   {op: "export_cancel", id}           cancels that export
 // Gateway -> page:
 //   {op: "hello", server, gateway, max_message_bytes, max_messages_per_second}
 //   {op: "result", id, ok, response | code, code_name, message}
@@ -18,6 +25,15 @@
 //   {op: "commands_end", code, code_name, message}  the stream broke: the
 //                                       page resends what is unanswered
 //                                       (same client_id and seq: exactly once)
+//   {op: "export_start", id, file_name, media_type, step, level, cells,
+//        surface_faces, total_bytes}    the file's name and size (first chunk)
+//   {op: "export_chunk", id, offset, total_bytes, data}  data: base64, each
+//                                       message under max_message_bytes,
+//                                       in order, offsets contiguous
+//   {op: "export_end", id, ok, total_bytes | code, code_name, message}
+//                                       done, or refused/failed with the
+//                                       server's text (a page that goes away
+//                                       cancels its exports)
 //   {op: "error", message}              a message the gateway could not take
 //
 // A page sees and controls only its own sessions: those it created here or
@@ -28,7 +44,7 @@
 // not applied (the page sends it again a little later), anything else an
 // error. README.md "Doors".
 
-import { UNARY_METHODS, watchRaw, statusName, grpc } from './grpc.js';
+import { UNARY_METHODS, watchRaw, exportRaw, statusName, grpc } from './grpc.js';
 import { MAX_REDIRECTS } from './router.js';
 import { TokenBucket } from './guard.js';
 
@@ -41,6 +57,27 @@ const MAX_BUFFERED_BYTES = 2 << 20;
 // --max_messages_per_second, --message_burst). A drag sends about 60
 // messages a second.
 export const DEFAULT_LIMITS = { maxMessageBytes: 4 << 20, rate: 200, burst: 400 };
+
+// Exports one page may run at once.
+export const MAX_EXPORTS = 2;
+// ExportRequest.chunk_bytes: the server takes 4096 to 4 MiB; the gateway
+// asks for at most 1 MiB (one gRPC message) and for less when the page's
+// messages must be smaller (exportPieceBytes).
+const SERVER_MIN_CHUNK = 4096;
+const SERVER_CHUNK = 1 << 20;
+// JSON around an export_chunk's data, with room to spare (ids are short).
+const CHUNK_ENVELOPE_BYTES = 320;
+// An export's id as the page names it: a number, or a short plain string.
+const validExportId = (id) => (typeof id === 'number' && Number.isSafeInteger(id)) ||
+  (typeof id === 'string' && /^[\w.:-]{1,64}$/.test(id));
+
+// The most file bytes one export_chunk may carry so that the message (the
+// bytes in base64 and its JSON) stays within `maxMessageBytes`; 0 when the
+// limit leaves no room.
+export function exportPieceBytes(maxMessageBytes) {
+  const room = maxMessageBytes - CHUNK_ENVELOPE_BYTES;
+  return room < 4 ? 0 : Math.floor(room / 4) * 3;
+}
 
 const isObject = (v) => v !== null && typeof v === 'object' && !Array.isArray(v);
 
@@ -60,6 +97,7 @@ export class Bridge {
     this.commandsSession = null;
     this.closed = false;
     this.drainTimer = null;
+    this.exports = new Map();  // page's export id -> {call, timer}
     this.send({ op: 'hello', server: address, gateway: 'dynsolid-web',
       max_message_bytes: this.limits.maxMessageBytes, max_messages_per_second: this.limits.rate });
   }
@@ -116,6 +154,8 @@ export class Bridge {
       case 'watch': return this.startWatch(m.request || {});
       case 'unwatch': return this.stopWatch();
       case 'command': return this.command(m.request || {});
+      case 'export': return this.startExport(m);
+      case 'export_cancel': return this.cancelExport(m.id);
       default: this.send({ op: 'error', message: `unknown op ${JSON.stringify(m.op)}` });
     }
   }
@@ -124,6 +164,8 @@ export class Bridge {
   refuse(m, message, code = grpc.status.RESOURCE_EXHAUSTED) {
     if (m.op === 'call') {
       this.send({ op: 'result', id: m.id, ok: false, code, code_name: statusName(code), message });
+    } else if (m.op === 'export') {
+      this.send({ op: 'export_end', id: m.id, ok: false, code, code_name: statusName(code), message });
     } else if (m.op === 'command' && isObject(m.request) && code === grpc.status.RESOURCE_EXHAUSTED) {
       // As the server's own rate limit: not applied (applied_step -1).
       const { client_id: clientId, seq } = m.request;
@@ -292,10 +334,132 @@ export class Bridge {
     call.end();
   }
 
+  // ---- Export: the design as a file, relayed in pieces ----
+
+  exportFailed(id, code, message) {
+    this.send({ op: 'export_end', id, ok: false, code, code_name: statusName(code), message });
+  }
+
+  startExport({ id, request }) {
+    if (!validExportId(id)) {
+      this.send({ op: 'error', message: 'export: id must be a whole number or a short string (letters, digits, _.:-)' });
+      return;
+    }
+    const r = request || {};
+    const session = isObject(r.session) ? r.session.id : undefined;
+    if (this.exports.has(id)) {
+      this.exportFailed(id, grpc.status.ALREADY_EXISTS, `export ${id} is already running`);
+      return;
+    }
+    if (this.exports.size >= MAX_EXPORTS) {
+      this.exportFailed(id, grpc.status.RESOURCE_EXHAUSTED,
+        `${MAX_EXPORTS} exports are already running for this page: wait for one to finish`);
+      return;
+    }
+    if (typeof session !== 'string' || !this.sessions.has(session)) {
+      this.exportFailed(id, grpc.status.PERMISSION_DENIED, `export: session ${JSON.stringify(session ?? null)} ` +
+        'is not one this page created or joined (join it with its link first)');
+      return;
+    }
+    const piece = exportPieceBytes(this.limits.maxMessageBytes);
+    if (piece === 0) {
+      this.exportFailed(id, grpc.status.RESOURCE_EXHAUSTED,
+        `the gateway's message limit (${this.limits.maxMessageBytes} bytes) leaves no room for an export's data`);
+      return;
+    }
+    // Only the fields a page may set; the token is the one this page holds.
+    const req = { session: { id: session, token: this.sessions.get(session) },
+      format: r.format, color_field: r.color_field || '',
+      chunk_bytes: Math.min(SERVER_CHUNK, Math.max(SERVER_MIN_CHUNK, piece)) };
+    if (r.level !== undefined && r.level !== null) req.level = r.level;
+    this.runExport(id, req, piece, 0);
+  }
+
+  runExport(id, request, piece, redirects) {
+    const deadline = new Date(Date.now() + this.deadlineSeconds * 1000);
+    const call = exportRaw(this.service, this.router.forSession(request.session.id), request, { deadline });
+    const job = { call, timer: null, next: 0, total: -1 };
+    this.exports.set(id, job);
+    const current = () => this.exports.get(id) === job;
+    const finish = () => {
+      clearInterval(job.timer);
+      this.exports.delete(id);
+    };
+    const fail = (code, message) => {
+      finish();
+      call.cancel();
+      this.exportFailed(id, code, message);
+    };
+    call.on('data', (chunk) => {
+      if (!current()) return;
+      if (job.total < 0) {
+        job.total = chunk.total_bytes;
+        const { file_name, media_type, step, level, cells, surface_faces, total_bytes } = chunk;
+        this.send({ op: 'export_start', id, file_name, media_type, step, level, cells, surface_faces, total_bytes });
+      }
+      if (chunk.offset !== job.next || chunk.total_bytes !== job.total ||
+          job.next + chunk.data.length > job.total) {
+        fail(grpc.status.INTERNAL, `the server sent bytes ${chunk.offset}-${chunk.offset + chunk.data.length} ` +
+          `of ${chunk.total_bytes} where ${job.next} of ${job.total} was next`);
+        return;
+      }
+      for (let at = 0; at < chunk.data.length; at += piece) {
+        const data = chunk.data.subarray(at, Math.min(chunk.data.length, at + piece));
+        this.send({ op: 'export_chunk', id, offset: job.next, total_bytes: job.total, data: data.toString('base64') });
+        job.next += data.length;
+      }
+      if (this.ws.bufferedAmount > MAX_BUFFERED_BYTES) this.pauseExport(job);
+    });
+    call.on('error', (err) => {
+      if (!current()) return;
+      finish();
+      if (job.total < 0 && redirects < MAX_REDIRECTS && this.router.follow(err)) {
+        this.runExport(id, request, piece, redirects + 1);  // export it where it lives
+        return;
+      }
+      this.exportFailed(id, err.code, err.details || err.message);
+    });
+    call.on('end', () => {
+      if (!current()) return;
+      finish();
+      if (job.total < 0 || job.next !== job.total) {
+        this.exportFailed(id, grpc.status.INTERNAL,
+          `the server's export ended after ${job.next} of ${Math.max(job.total, 0)} bytes`);
+        return;
+      }
+      this.send({ op: 'export_end', id, ok: true, total_bytes: job.total });
+    });
+  }
+
+  // A page that reads slowly pauses the export's gRPC stream until its
+  // WebSocket has drained.
+  pauseExport(job) {
+    job.call.pause();
+    clearInterval(job.timer);
+    job.timer = setInterval(() => {
+      if (this.closed || !this.ws || this.ws.bufferedAmount < MAX_BUFFERED_BYTES / 4) {
+        clearInterval(job.timer);
+        job.timer = null;
+        if (!this.closed) job.call.resume();
+      }
+    }, 5);
+  }
+
+  cancelExport(id, why = 'cancelled by the page') {
+    const job = this.exports.get(id);
+    if (!job) return;
+    this.exports.delete(id);
+    clearInterval(job.timer);
+    job.call.cancel();
+    this.exportFailed(id, grpc.status.CANCELLED, why);
+  }
+
   close() {
     this.closed = true;
     clearInterval(this.drainTimer);
     this.stopWatch();
+    // The page is gone: its exports stop on the server too.
+    for (const id of [...this.exports.keys()]) this.cancelExport(id, 'the page went away');
     // Half-close: the server answers what it has and releases this page's
     // drags and curves (their streams ended).
     this.endCommands();

@@ -83,3 +83,35 @@ test('one command stream per session: switching sessions half-closes the old one
   streams[1].emit('error', { code: 14, details: 'server gone' });
   assert.deepEqual(sent[sent.length - 1], { op: 'commands_end', code: 14, code_name: 'UNAVAILABLE', message: 'server gone' });
 });
+
+test('export: a chunk out of place ends the export with INTERNAL and cancels the call; over the rate it gets export_end', async () => {
+  const { loadService } = await import('../../gateway/grpc.js');
+  const sent = [];
+  const ws = { readyState: 1, bufferedAmount: 0, send: (m) => sent.push(JSON.parse(m)) };
+  const stream = new EventEmitter();
+  stream.cancel = () => { stream.cancelled = true; };
+  const client = {
+    CreateSession: (r, o, cb) => cb(null, { id: 'a1', token: 't1' }),
+    makeServerStreamRequest: (path, ser, deser, request) => {
+      stream.request = request;
+      return stream;
+    },
+  };
+  const router = { first: 'x', client: () => client, forSession: () => client, learn: () => {}, follow: () => false, forget: () => {} };
+  let now = 0;
+  const bridge = new Bridge({ ws, service: loadService(), router, address: 'x', limits: { rate: 1, burst: 2, now: () => now } });
+  const send = (m) => bridge.onMessage(Buffer.from(JSON.stringify(m)), false);
+  send({ op: 'call', id: 1, method: 'CreateSession', request: {} });
+  send({ op: 'export', id: 9, request: { session: { id: 'a1', token: 'ignored' }, format: 'STL', chunk_bytes: 5 } });
+  assert.deepEqual([stream.request.session, stream.request.chunk_bytes], [{ id: 'a1', token: 't1' }, 1 << 20]);
+  stream.emit('data', { data: Buffer.from('abcd'), offset: 0, total_bytes: 10, file_name: 'f.stl' });
+  stream.emit('data', { data: Buffer.from('xy'), offset: 6, total_bytes: 10 });
+  assert.deepEqual(sent.slice(2).map((m) => m.op), ['export_start', 'export_chunk', 'export_end']);
+  assert.equal(Buffer.from(sent[3].data, 'base64').toString(), 'abcd');
+  assert.deepEqual([sent[4].ok, sent[4].code_name], [false, 'INTERNAL']);
+  assert.match(sent[4].message, /bytes 6-8 of 10 where 4 of 10 was next/);
+  assert.equal(stream.cancelled, true);
+  send({ op: 'export', id: 10, request: { session: { id: 'a1' }, format: 'STL' } });
+  const refused = sent[sent.length - 1];
+  assert.deepEqual([refused.op, refused.id, refused.code_name], ['export_end', 10, 'RESOURCE_EXHAUSTED']);
+});

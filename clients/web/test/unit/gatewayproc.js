@@ -19,10 +19,23 @@ process.on('exit', () => {
   for (const c of children) if (c.exitCode === null && c.signalCode === null) c.kill('SIGKILL');
 });
 
+// The file the fake server exports: `size` bytes, byte i = (7 i) mod 251.
+export function fakeExportFile(size) {
+  const b = Buffer.alloc(size);
+  for (let i = 0; i < size; ++i) b[i] = (7 * i) % 251;
+  return b;
+}
+
 // A fake server: sessions with tokens, every session call checking its token.
+// Export (its requests kept in `exports`, each with `cancelled` and
+// `whenCancelled` for when the caller goes away): a file of fakeExportFile(10000 + 1000 * level) in
+// chunks of chunk_bytes; VTU above level 4 is refused as the real server
+// refuses a level over its cell limit; PLY sends its first chunk and then
+// waits (for the caller to cancel).
 export async function fakeServer() {
   const service = loadService();
   const sessions = new Map();  // id -> {id, token, scene_name}
+  const exports = [];
   let next = 1;
   const denied = { code: grpc.status.PERMISSION_DENIED, details: 'wrong token' };
   const check = (ref, cb, ok) => {
@@ -46,6 +59,42 @@ export async function fakeServer() {
     }),
     GetStats: ({ request }, cb) => check(request, cb, () => cb(null, { step: 3 })),
     GetServerInfo: (call, cb) => cb(null, { replica: '', peers: [] }),
+    Export: (call) => {
+      const r = call.request;
+      const seen = { request: r, cancelled: false };
+      seen.whenCancelled = new Promise((resolve) => call.on('cancelled', () => {
+        seen.cancelled = true;
+        resolve();
+      }));
+      exports.push(seen);
+      check(r.session, (e) => call.emit('error', e), (s) => {
+        const level = r.level ?? 1;
+        const chunk = r.chunk_bytes || (1 << 20);
+        if (chunk < 4096 || chunk > (4 << 20)) {
+          call.emit('error', { code: grpc.status.INVALID_ARGUMENT,
+            details: `request.chunk_bytes: ${r.chunk_bytes} is not 0 or in [4096, 4194304]` });
+          return;
+        }
+        if (r.format === 'VTU' && level > 4) {
+          call.emit('error', { code: grpc.status.INVALID_ARGUMENT,
+            details: `request.level: ${level} subdivisions of this control mesh (3 cells) give about ` +
+              `${3 * 8 ** level} cells, more than the export limit of 2000; ask for a lower level` });
+          return;
+        }
+        const file = fakeExportFile(10000 + 1000 * level);
+        const ext = r.format.toLowerCase();
+        for (let offset = 0; offset < file.length; offset += chunk) {
+          const c = { data: file.subarray(offset, offset + chunk), offset, total_bytes: file.length };
+          if (offset === 0) {
+            Object.assign(c, { file_name: `${s.scene_name}-step3-level${level}.${ext}`,
+              media_type: 'application/octet-stream', step: 3, level, cells: 3 * 8 ** level, surface_faces: 14 });
+          }
+          call.write(c);
+          if (r.format === 'PLY') return;  // never ends: the caller cancels
+        }
+        call.end();
+      });
+    },
     Commands: (call) => {
       call.on('data', (r) => check(r.session, (e) => call.write({ client_id: r.client_id, seq: r.seq, code: e.code, message: e.details }),
         () => call.write({ client_id: r.client_id, seq: r.seq, code: 0, applied_step: 1 })));
@@ -57,7 +106,7 @@ export async function fakeServer() {
   const port = await new Promise((resolve, reject) => {
     server.bindAsync('127.0.0.1:0', grpc.ServerCredentials.createInsecure(), (err, p) => (err ? reject(err) : resolve(p)));
   });
-  return { address: `127.0.0.1:${port}`, sessions, stop: () => server.forceShutdown() };
+  return { address: `127.0.0.1:${port}`, sessions, exports, stop: () => server.forceShutdown() };
 }
 
 // Starts the gateway with `args`; resolves {url, port, proc, out(), stop()}

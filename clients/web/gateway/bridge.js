@@ -417,7 +417,10 @@ export class Bridge {
         this.runExport(id, request, piece, redirects + 1);  // export it where it lives
         return;
       }
-      this.exportFailed(id, err.code, err.details || err.message);
+      // A server from before Export answers UNIMPLEMENTED with no words.
+      const words = err.details || err.message;
+      this.exportFailed(id, err.code, err.code === grpc.status.UNIMPLEMENTED
+        ? `this dynsolid-server has no Export (an older build): ${words}` : words);
     });
     call.on('end', () => {
       if (!current()) return;

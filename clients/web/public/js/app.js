@@ -13,6 +13,7 @@ import { Feedback } from './feedback.js';
 import { bindKeys, wheelNudge } from './keys.js';
 import { statusText } from './status.js';
 import * as S from './sizing.js';
+import { Keep } from './keep.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -45,6 +46,7 @@ class App {
     this.sizing = null;         // {mesh: 'pending' | mesh | null, done, values}
     this.pointer = null;        // the last pointer position over the canvas (client px)
     this.bindUi();
+    this.keep = new Keep(this);  // Download and Record (keep.js)
     this.bindConnection();
     this.bindPointer();
     this.view.attachControls();
@@ -260,6 +262,7 @@ class App {
     $('share').textContent = `share: ${location.href}`;
     $('share').title = location.href;
     $('bake').disabled = false;
+    this.keep.setSession(info);
     this.refreshSessions();
   }
 
@@ -271,6 +274,7 @@ class App {
     history.replaceState(null, '', '#');
     $('share').textContent = '';
     $('bake').disabled = true;
+    this.keep.setSession(null);
     this.askClose(false);
   }
 
@@ -468,7 +472,7 @@ class App {
       }
       this.updateLegend();
     }
-    if (this.view.render()) this.countFps(t);
+    if (this.view.render(this.keep.forceDraw(t))) this.countFps(t);
   }
 
   // The first picture after joining: the progress banner says so.

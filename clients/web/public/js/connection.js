@@ -22,7 +22,7 @@ export class CallError extends Error {
 export const Code = {
   OK: 0, CANCELLED: 1, INVALID_ARGUMENT: 3, DEADLINE_EXCEEDED: 4, NOT_FOUND: 5,
   PERMISSION_DENIED: 7, RESOURCE_EXHAUSTED: 8, FAILED_PRECONDITION: 9, OUT_OF_RANGE: 11,
-  UNAVAILABLE: 14,
+  UNIMPLEMENTED: 12, INTERNAL: 13, UNAVAILABLE: 14,
 };
 
 function randomId() {
@@ -45,6 +45,8 @@ export class Connection {
     this.seq = 0;
     this.nextCallId = 1;
     this.calls = new Map();      // id -> {resolve, reject}
+    this.exports = new Map();    // id -> an export in progress (exportDesign)
+    this.nextExportId = 1;
     this.pending = new Map();    // seq -> {request, resolve, reject, sentAt}
     this.socket = null;
     this.open = false;
@@ -82,6 +84,10 @@ export class Connection {
         c.reject(new CallError(Code.UNAVAILABLE, 'UNAVAILABLE', 'the gateway went away'));
       }
       this.calls.clear();
+      for (const [, x] of this.exports) {
+        x.reject(new CallError(Code.UNAVAILABLE, 'UNAVAILABLE', 'the gateway went away during the download'));
+      }
+      this.exports.clear();
       if (wasOpen) this.onState('closed');
       if (!this.closedByUser) this.setTimeout(() => this.connect(), this.reconnectMs);
     };
@@ -130,6 +136,10 @@ export class Connection {
         return;
       }
       case 'reply': return this.onCommandReply(m.reply);
+      case 'export_start':
+      case 'export_chunk':
+      case 'export_end':
+        return this.onExport(m);
       case 'watch_end':
         if (m.code !== Code.OK) this.watchRequest = null;
         this.onWatchEnd(m);
@@ -170,6 +180,67 @@ export class Connection {
       }
       this.calls.set(id, { resolve, reject });
     });
+  }
+
+  // The current design as a file (the server's Export through the
+  // gateway): `request` is {session: {id}, format, level?, color_field}.
+  // onProgress({received, total, file_name}) after each piece. Resolves
+  // {file_name, media_type, step, level, cells, surface_faces, bytes
+  // (Uint8Array)}; rejects with CallError (the server's code and words).
+  // The returned promise has cancel() (the gateway cancels the call).
+  exportDesign(request, onProgress = () => {}) {
+    const id = this.nextExportId++;
+    let job;
+    const promise = new Promise((resolve, reject) => {
+      job = { resolve, reject, onProgress, start: null, bytes: null, received: 0 };
+      if (!this.sendJson({ op: 'export', id, request })) {
+        reject(new CallError(Code.UNAVAILABLE, 'UNAVAILABLE', 'not connected to the gateway'));
+        return;
+      }
+      this.exports.set(id, job);
+    });
+    promise.cancel = () => {
+      if (this.exports.has(id)) this.sendJson({ op: 'export_cancel', id });
+    };
+    return promise;
+  }
+
+  onExport(m) {
+    const job = this.exports.get(m.id);
+    if (!job) return;
+    const fail = (code, codeName, message) => {
+      this.exports.delete(m.id);
+      job.reject(new CallError(code, codeName, message));
+    };
+    if (m.op === 'export_start') {
+      job.start = m;
+      job.bytes = new Uint8Array(m.total_bytes);
+      job.onProgress({ received: 0, total: m.total_bytes, file_name: m.file_name });
+      return;
+    }
+    if (m.op === 'export_chunk') {
+      const data = fromBase64(m.data);
+      if (!job.bytes || m.offset !== job.received || m.offset + data.length > job.bytes.length) {
+        fail(Code.INTERNAL, 'INTERNAL', `the download's bytes came out of order (at ${m.offset}, expected ${job.received})`);
+        this.sendJson({ op: 'export_cancel', id: m.id });
+        return;
+      }
+      job.bytes.set(data, m.offset);
+      job.received += data.length;
+      job.onProgress({ received: job.received, total: m.total_bytes, file_name: job.start.file_name });
+      return;
+    }
+    if (!m.ok) {
+      fail(m.code, m.code_name, m.message);
+      return;
+    }
+    if (!job.start || job.received !== job.bytes.length) {
+      fail(Code.INTERNAL, 'INTERNAL', `the download ended after ${job.received} bytes of ${job.bytes ? job.bytes.length : '?'}`);
+      return;
+    }
+    this.exports.delete(m.id);
+    const { file_name, media_type, step, level, cells, surface_faces } = job.start;
+    job.resolve({ file_name, media_type, step, level, cells, surface_faces, bytes: job.bytes });
   }
 
   watch(request) {
@@ -243,6 +314,17 @@ export class Connection {
     const s = [...this.latencies].sort((a, b) => a - b);
     return s[Math.floor(s.length / 2)];
   }
+}
+
+// Base64 text as bytes (atob in the browser, Buffer in Node's tests).
+export function fromBase64(text) {
+  if (typeof atob === 'function') {
+    const s = atob(text);
+    const out = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; ++i) out[i] = s.charCodeAt(i);
+    return out;
+  }
+  return new Uint8Array(Buffer.from(text, 'base64'));
 }
 
 export function codeNameOf(code) {

@@ -3,6 +3,19 @@
 // details line and title), for logs, tests and bug reports.
 
 const RULES = [
+  // Downloads (Export, issue 38).
+  [/export limit|request\.level: -?\d+ is not in/i,
+    'That level is too fine to export for this solid.', 'Pick a lower level in the Download menu.'],
+  [/request\.format/i,
+    'The server does not write that file format.', 'Pick another format in the Download menu.'],
+  [/request\.color_field/i,
+    'The server cannot colour the file by that field.', 'Download it without colours.'],
+  [/^UNIMPLEMENTED .*\bExport\b/,
+    'This server cannot make downloads yet.', 'Update dynsolid-server and the gateway.'],
+  [/^CANCELLED .*(download|cancelled by the page)/i,
+    'The download was cancelled.', ''],
+  [/during the download/i,
+    'The connection to the server broke during the download.', 'Download it again once the page is live.'],
   [/scene_text|scene file/i,
     'The scene file has an error; nothing was created.', 'Fix the line named below and load the file again.'],
   [/cells must have positive volume|zero volume|negative volume|elements are inverted at rest|too distorted/i,

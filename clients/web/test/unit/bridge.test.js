@@ -99,7 +99,7 @@ test('export: a chunk out of place ends the export with INTERNAL and cancels the
   };
   const router = { first: 'x', client: () => client, forSession: () => client, learn: () => {}, follow: () => false, forget: () => {} };
   let now = 0;
-  const bridge = new Bridge({ ws, service: loadService(), router, address: 'x', limits: { rate: 1, burst: 2, now: () => now } });
+  const bridge = new Bridge({ ws, service: loadService(), router, address: 'x', limits: { rate: 1, burst: 3, now: () => now } });
   const send = (m) => bridge.onMessage(Buffer.from(JSON.stringify(m)), false);
   send({ op: 'call', id: 1, method: 'CreateSession', request: {} });
   send({ op: 'export', id: 9, request: { session: { id: 'a1', token: 'ignored' }, format: 'STL', chunk_bytes: 5 } });
@@ -111,6 +111,12 @@ test('export: a chunk out of place ends the export with INTERNAL and cancels the
   assert.deepEqual([sent[4].ok, sent[4].code_name], [false, 'INTERNAL']);
   assert.match(sent[4].message, /bytes 6-8 of 10 where 4 of 10 was next/);
   assert.equal(stream.cancelled, true);
+  // A server from before Export: UNIMPLEMENTED with no words, said plainly.
+  send({ op: 'export', id: 11, request: { session: { id: 'a1' }, format: 'STL' } });
+  stream.emit('error', { code: 12, details: '' , message: '12 UNIMPLEMENTED: ' });
+  const old = sent[sent.length - 1];
+  assert.deepEqual([old.op, old.id, old.code_name], ['export_end', 11, 'UNIMPLEMENTED']);
+  assert.match(old.message, /^this dynsolid-server has no Export \(an older build\): 12 UNIMPLEMENTED/);
   send({ op: 'export', id: 10, request: { session: { id: 'a1' }, format: 'STL' } });
   const refused = sent[sent.length - 1];
   assert.deepEqual([refused.op, refused.id, refused.code_name], ['export_end', 10, 'RESOURCE_EXHAUSTED']);

@@ -462,7 +462,6 @@ def server_under_cuts(args, fs_binary, work, figures):
         expect_equal("the restarted server's exit code after SIGTERM", code, 0)
         fs.unmount()
 
-        final = describe_journals(backing)
         figures.update({
             "cut1": report1, "reverted1": reverted1, "journals_after_cut1": after1,
             "recovered1": recovered1,
@@ -470,7 +469,6 @@ def server_under_cuts(args, fs_binary, work, figures):
             "recovered2": recovered2,
             "load": {k: rep[k] for k in ("sent", "acknowledged", "applied", "rejected",
                                          "resends", "reconnects", "verified", "problems")},
-            "journals_final": final,
         })
     finally:
         for thing in reversed(started):

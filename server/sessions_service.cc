@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
+#include "server/export_call.h"
 #include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "dynsolid/journal.pb.h"
@@ -205,6 +206,11 @@ grpc::ServerBidiReactor<CommandRequest, CommandReply>* SessionsService::Commands
 grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* SessionsService::Probe(
     grpc::CallbackServerContext* context) {
   return StartProbe(context, registry_);
+}
+
+grpc::ServerWriteReactor<ExportChunk>* SessionsService::Export(grpc::CallbackServerContext* context,
+                                                               const ExportRequest* request) {
+  return StartExport(context, request, registry_, builds_);
 }
 
 grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext* context,

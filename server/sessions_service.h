@@ -53,6 +53,10 @@ class SessionsService final
                                  PickReply* response) override;
   grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* Probe(
       grpc::CallbackServerContext* context) override;
+  // Export: the shape at a step boundary, the file made on the builds
+  // queue (export_call.h).
+  grpc::ServerWriteReactor<ExportChunk>* Export(grpc::CallbackServerContext* context,
+                                                const ExportRequest* request) override;
 
   grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
                                           const google::protobuf::Empty* request,

@@ -10,6 +10,8 @@
 //       (--scene NAME | --scene_file FILE | --id ID --token TOKEN)
 //       [--frames_dir DIR] [--format obj,vtu] [--record_every N]
 //       [--fields displacement,strain,stiffness,mass] [--json FILE] ...
+//   dynsolid-client [--server HOST:PORT] export --id ID --token TOKEN --format glb
+//       [--level L] [--out FILE] [--color_field displacement]
 //   dynsolid-client check --script FILE
 //
 // create/get/list/close/stats print the result as JSON on stdout (the proto3 JSON
@@ -23,6 +25,7 @@
 //
 // --scene_file reads a scene on this machine and sends its text; the
 // server rejects scenes that name a mesh file.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -37,6 +40,7 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
+#include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -67,7 +71,9 @@ ABSL_FLAG(std::string, fields, "",
           "stiffness, mass");
 ABSL_FLAG(std::string, frames_dir, "",
           "run: directory for recorded frames and snapshots (created if missing)");
-ABSL_FLAG(std::string, format, "obj", "run: frame file formats, comma separated: obj, vtu");
+ABSL_FLAG(std::string, format, "obj",
+          "run: frame file formats, comma separated: obj, vtu; export: one of obj, stl, ply, glb, "
+          "vtu");
 ABSL_FLAG(int, record_every, 0,
           "run: record every N-th frame received as frame_<step>.<format> (0: only snapshots)");
 ABSL_FLAG(std::string, json, "", "run: write the report as JSON to this file");
@@ -80,6 +86,11 @@ ABSL_FLAG(int, break_every, 0,
 ABSL_FLAG(bool, verbose, false, "run: print each script line and every reconnect on stderr");
 ABSL_FLAG(std::string, origin, "", "pick: the ray's origin X,Y,Z (metres)");
 ABSL_FLAG(std::string, direction, "", "pick: the ray's direction X,Y,Z");
+ABSL_FLAG(int, level, -1, "export: subdivision level 0-6 (-1: the session's own)");
+ABSL_FLAG(std::string, out, "",
+          "export: the file to write (empty: the name the server gives, in this directory)");
+ABSL_FLAG(std::string, color_field, "",
+          "export: glb vertex colours from a field (displacement, displacement_magnitude)");
 ABSL_FLAG(double, reconnect_seconds, 30,
           "run: give up when no stream has worked for this long");
 
@@ -100,6 +111,8 @@ const char kUsage[] =
     "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
     "  loads --id ID --token TOKEN    (the active loads and constraints, every client's)\n"
     "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
+    "  export --id ID --token TOKEN --format obj|stl|ply|glb|vtu [--level L] [--out FILE]\n"
+    "      [--color_field displacement] [--verbose]   (the current design, any level)\n"
     "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
     "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
     "      [--json FILE] [--start_paused] [--levels L] [--noclose] [--keep_going]\n"
@@ -295,6 +308,71 @@ class Client {
     return Report(Call([&](grpc::ClientContext* c) { return stub_->Pick(c, request, &reply); }), reply);
   }
 
+  // The current design as a file: streamed in chunks (progress on stderr
+  // with --verbose), checked for gaps and size, then written.
+  int Export() {
+    dynsolid::ExportRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    const std::string format = absl::GetFlag(FLAGS_format);
+    dynsolid::ExportRequest::Format f;
+    if (!dynsolid::ExportRequest::Format_Parse(absl::AsciiStrToUpper(format), &f) ||
+        f == dynsolid::ExportRequest::FORMAT_UNSPECIFIED) {
+      return UsageError(absl::StrCat("--format ", format, ": export takes obj, stl, ply, glb or vtu"));
+    }
+    request.set_format(f);
+    if (absl::GetFlag(FLAGS_level) >= 0) request.set_level(absl::GetFlag(FLAGS_level));
+    request.set_color_field(absl::GetFlag(FLAGS_color_field));
+    auto context = NewContext();
+    std::unique_ptr<grpc::ClientReader<dynsolid::ExportChunk>> reader =
+        stub_->Export(context.get(), request);
+    dynsolid::ExportChunk chunk, first;
+    std::string bytes;
+    bool have_first = false;
+    while (reader->Read(&chunk)) {
+      if (!have_first) {
+        first = chunk;
+        first.clear_data();
+        have_first = true;
+        bytes.reserve(static_cast<size_t>(std::max<int64_t>(0, chunk.total_bytes())));
+      }
+      if (chunk.offset() != static_cast<int64_t>(bytes.size()) ||
+          chunk.total_bytes() != first.total_bytes()) {
+        std::cerr << "dynsolid-client: export: a chunk at offset " << chunk.offset() << " of "
+                  << chunk.total_bytes() << " bytes after " << bytes.size() << " received\n";
+        context->TryCancel();
+        reader->Finish();
+        return kCallFailed;
+      }
+      bytes.append(chunk.data());
+      if (absl::GetFlag(FLAGS_verbose)) {
+        std::cerr << absl::StrFormat("export: %lld of %lld bytes (%.0f %%)\n",
+                                     static_cast<long long>(bytes.size()),
+                                     static_cast<long long>(first.total_bytes()),
+                                     first.total_bytes() > 0
+                                         ? 100.0 * bytes.size() / first.total_bytes()
+                                         : 100.0);
+      }
+    }
+    const grpc::Status status = reader->Finish();
+    if (!status.ok()) return Report(status, first);
+    if (!have_first || static_cast<int64_t>(bytes.size()) != first.total_bytes()) {
+      std::cerr << "dynsolid-client: export: " << bytes.size() << " bytes received of "
+                << first.total_bytes() << "\n";
+      return kCallFailed;
+    }
+    const std::string path =
+        absl::GetFlag(FLAGS_out).empty() ? first.file_name() : absl::GetFlag(FLAGS_out);
+    std::ofstream out(path, std::ios::binary);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    out.close();
+    if (!out) {
+      std::cerr << "dynsolid-client: export: cannot write " << path << "\n";
+      return kCallFailed;
+    }
+    first.set_file_name(path);
+    return Report(status, first);
+  }
+
   int Run(const dynsolid::client::Script& script) {
     namespace dc = dynsolid::client;
     dc::RunOptions o;
@@ -449,7 +527,8 @@ int main(int argc, char** argv) {
   }
   const std::vector<char*> args = absl::ParseCommandLine(argc, argv);
   if (args.size() != 2) {
-    return UsageError("expected one command: create, get, list, close, stats, mesh, pick, run or check");
+    return UsageError(
+        "expected one command: create, get, list, close, stats, mesh, pick, export, run or check");
   }
   const std::string command = args[1];
   if (command == "check") {
@@ -469,6 +548,7 @@ int main(int argc, char** argv) {
   if (command == "mesh") return client.Mesh();
   if (command == "loads") return client.Loads();
   if (command == "pick") return client.Pick();
+  if (command == "export") return client.Export();
   if (command == "run") {
     dynsolid::client::Script script;
     if (int e = LoadScript(&script); e != 0) return e;

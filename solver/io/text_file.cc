@@ -198,6 +198,8 @@ OutputFile::OutputFile(std::string path) : path_(std::move(path)) {
   buffer_.reserve(kFlushBytes + 4096);
 }
 
+OutputFile::OutputFile(std::string* sink) : sink_(sink) { buffer_.reserve(kFlushBytes + 4096); }
+
 OutputFile::~OutputFile() {
   if (file_ != nullptr) std::fclose(file_);
 }
@@ -215,7 +217,9 @@ void OutputFile::SetErrno(std::string_view what, int error) {
 }
 
 void OutputFile::Flush() {
-  if (file_ != nullptr && !buffer_.empty() && status_.ok()) {
+  if (sink_ != nullptr) {
+    sink_->append(buffer_);
+  } else if (file_ != nullptr && !buffer_.empty() && status_.ok()) {
     if (std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size()) {
       SetErrno("write failed", errno);
     }

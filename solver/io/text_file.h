@@ -160,6 +160,8 @@ inline size_t SafeReserve(int64_t declared, size_t remaining_bytes, size_t min_b
 class OutputFile {
  public:
   explicit OutputFile(std::string path);
+  // In memory: what is put is appended to *sink (nothing fails).
+  explicit OutputFile(std::string* sink);
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
   ~OutputFile();
@@ -192,6 +194,7 @@ class OutputFile {
 
   std::string path_;
   std::FILE* file_ = nullptr;
+  std::string* sink_ = nullptr;
   std::string buffer_;
   absl::Status status_;
 };

@@ -142,10 +142,31 @@ void WriteArray(OutputFile& out, const DataArray& a) {
 
 }  // namespace
 
+namespace {
+
+absl::Status PutVtu(OutputFile& out, const VolumeMesh& mesh);
+
+}  // namespace
+
 absl::Status WriteVtu(const std::string& path, const VolumeMesh& mesh) {
   RETURN_IF_ERROR(CheckMesh(path, mesh));
   OutputFile out(path);
   if (!out.ok()) return out.status();
+  return PutVtu(out, mesh);
+}
+
+absl::Status VtuBytes(const VolumeMesh& mesh, std::string* bytes) {
+  RETURN_IF_ERROR(CheckMesh("vtu", mesh));
+  std::string made;
+  OutputFile out(&made);
+  RETURN_IF_ERROR(PutVtu(out, mesh));
+  bytes->append(made);
+  return absl::OkStatus();
+}
+
+namespace {
+
+absl::Status PutVtu(OutputFile& out, const VolumeMesh& mesh) {
   const int64_t np = mesh.points.rows();
   const int64_t nc = static_cast<int64_t>(mesh.types.size());
   out.Put("<?xml version=\"1.0\"?>\n");
@@ -199,6 +220,8 @@ absl::Status WriteVtu(const std::string& path, const VolumeMesh& mesh) {
   out.Put("</VTKFile>\n");
   return out.Close();
 }
+
+}  // namespace
 
 VolumeMesh ElementsToVolumeMesh(const Points& nodes, const fem::ElementSet& elements,
                                 std::span<const int32_t> cell_control_cell, int level) {

@@ -47,6 +47,9 @@ struct VolumeMesh {
 // integer array, an empty array name or a repeated one. NotFound /
 // PermissionDenied / Internal when the file cannot be written.
 absl::Status WriteVtu(const std::string& path, const VolumeMesh& mesh);
+// The same file's bytes appended to *bytes (nothing appended on error;
+// messages name "vtu" where WriteVtu names the path).
+absl::Status VtuBytes(const VolumeMesh& mesh, std::string* bytes);
 
 // One VTK cell per finite element of `elements`, over the FEM nodes `nodes`
 // (#elements.num_nodes() by 3: mesh vertices then virtual nodes, e.g. the

@@ -14,8 +14,9 @@
 # VIEWER_LISTEN=0.0.0.0:8080 serves other machines: the gateway then needs
 # an access token (made here, carried by the printed URL); pages served
 # under a host name need VIEWER_ALLOW_ORIGIN=http://NAME:8080 (the
-# gateway's --allow_origin). It has no TLS of its own: put it behind a
-# proxy that terminates TLS (docs/viewer.md "Access", clients/web/README.md).
+# gateway's --allow_origin). VIEWER_TLS_CERT and VIEWER_TLS_KEY (PEM files)
+# serve the page over HTTPS (the gateway's --tls_cert/--tls_key; docs/
+# viewer.md "Serving beyond this machine").
 #
 # NO_SETUP=1 uses what is there (no build, no npm ci); DYNSOLID_SERVER
 # names the server binary (default build/$PRESET/server/dynsolid-server).
@@ -68,6 +69,9 @@ host="${VIEWER_LISTEN%:*}"
 args=(--server "$ADDR" --create "$SCENE")
 if [ -n "$LEVELS" ]; then args+=(--levels "$LEVELS"); fi
 if [ -n "$VIEWER_ALLOW_ORIGIN" ]; then args+=(--allow_origin "$VIEWER_ALLOW_ORIGIN"); fi
+if [ -n "${VIEWER_TLS_CERT:-}" ] || [ -n "${VIEWER_TLS_KEY:-}" ]; then
+  args+=(--tls_cert "${VIEWER_TLS_CERT:-}" --tls_key "${VIEWER_TLS_KEY:-}")
+fi
 case "$host" in
   127.*|localhost|"[::1]") ;;
   *)

@@ -176,7 +176,8 @@ def main():
           "no volume at /data")
     # The viewer's gateway: flags it takes (clients/web/gateway/main.js), and
     # its --server names the server service at the port the server listens on.
-    gateway_flags = {"server", "listen", "proto", "create", "levels"}
+    gateway_flags = {"server", "listen", "proto", "create", "levels", "access_token_file",
+                     "tls_cert", "tls_key", "allow_origin"}
     web = compose["services"].get("web")
     check(web is not None, "compose.yaml", "no web service (the viewer's gateway)")
     if web:

@@ -47,16 +47,8 @@ double SrgbToLinear(double c) {
 // JSON numbers: shortest text that reads back to the same double. A float
 // is written as the double it is exactly (so a reader comparing in double
 // or in float32 gets the stored value back).
-void JsonNumber(std::string& out, double v) {
-  char tmp[32];
-  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
-  out.append(tmp, r.ptr);
-}
-void JsonInt(std::string& out, int64_t v) {
-  char tmp[24];
-  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
-  out.append(tmp, r.ptr);
-}
+void JsonNumber(std::string& out, double v) { internal::AppendShortest(out, v); }
+void JsonInt(std::string& out, int64_t v) { internal::AppendInt(out, v); }
 void JsonVec3(std::string& out, const float v[3]) {
   out.push_back('[');
   for (int k = 0; k < 3; ++k) {

@@ -98,6 +98,22 @@ absl::Status WriteFileBytes(const std::string& path, std::string_view bytes) {
   return status;
 }
 
+void AppendShortest(std::string& out, double v) {
+  char tmp[32];
+  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
+  out.append(tmp, r.ptr);
+}
+void AppendShortest(std::string& out, float v) {
+  char tmp[32];
+  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
+  out.append(tmp, r.ptr);
+}
+void AppendInt(std::string& out, int64_t v) {
+  char tmp[24];
+  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
+  out.append(tmp, r.ptr);
+}
+
 void AppendU8(std::string& out, uint8_t v) { out.push_back(static_cast<char>(v)); }
 void AppendU16(std::string& out, uint16_t v) {
   out.push_back(static_cast<char>(v & 0xff));
@@ -130,22 +146,9 @@ using internal::SurfaceRules;
 using internal::WithPath;
 using internal::WriteFileBytes;
 
-// Text numbers exactly as OutputFile writes them (shortest round trip).
-void PutNumber(std::string& out, double v) {
-  char tmp[32];
-  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
-  out.append(tmp, r.ptr);
-}
-void PutFloat(std::string& out, float v) {
-  char tmp[32];
-  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
-  out.append(tmp, r.ptr);
-}
-void PutInt(std::string& out, int64_t v) {
-  char tmp[24];
-  const auto r = std::to_chars(tmp, tmp + sizeof(tmp), v);
-  out.append(tmp, r.ptr);
-}
+void PutNumber(std::string& out, double v) { internal::AppendShortest(out, v); }
+void PutFloat(std::string& out, float v) { internal::AppendShortest(out, v); }
+void PutInt(std::string& out, int64_t v) { internal::AppendInt(out, v); }
 
 // The PLY header of WritePly and WritePlyBinary; `format` is "ascii" or
 // "binary_little_endian".

@@ -82,6 +82,12 @@ absl::Status WithPath(const std::string& path, const absl::Status& status);
 // partly written file is removed.
 absl::Status WriteFileBytes(const std::string& path, std::string_view bytes);
 
+// Text numbers: the shortest text that reads back to the same value (as
+// OutputFile writes them).
+void AppendShortest(std::string& out, double v);
+void AppendShortest(std::string& out, float v);
+void AppendInt(std::string& out, int64_t v);
+
 // Little-endian binary appenders.
 void AppendU8(std::string& out, uint8_t v);
 void AppendU16(std::string& out, uint16_t v);

@@ -392,6 +392,17 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
       return absl::InvalidArgumentError(absl::StrCat("keyframe.codes has ", k.codes().size(),
                                                      " bytes, expected 6 x ", n));
     }
+    // A field is absent or has a value per vertex (deltas write into it).
+    for (const auto& [name, size] :
+         {std::pair{"displacement", k.fields().displacement_size()},
+          std::pair{"strain", k.fields().strain_size()},
+          std::pair{"stiffness", k.fields().stiffness_size()},
+          std::pair{"mass", k.fields().mass_size()}}) {
+      if (size != 0 && static_cast<size_t>(size) != n) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("keyframe.fields.", name, " has ", size, " values for ", n, " vertices"));
+      }
+    }
     grid_.origin = {k.grid().origin().x(), k.grid().origin().y(), k.grid().origin().z()};
     grid_.step = {k.grid().step().x(), k.grid().step().y(), k.grid().step().z()};
     error_bound_ = k.error_bound();
@@ -418,6 +429,17 @@ absl::Status SurfaceDecoder::Apply(const Frame& frame) {
                                                       " is not the last frame's step ", step_));
   }
   const size_t n = codes_.size() / 3;
+  // A delta's field values go into the keyframe's: it must have had them.
+  for (const auto& [name, size, have] :
+       {std::tuple{"displacement", d.fields().displacement_size(), displacement_.size()},
+        std::tuple{"strain", d.fields().strain_size(), strain_.size()},
+        std::tuple{"stiffness", d.fields().stiffness_size(), stiffness_.size()},
+        std::tuple{"mass", d.fields().mass_size(), mass_.size()}}) {
+    if (size != 0 && have != n) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("delta.fields.", name, ": present but the keyframe had none"));
+    }
+  }
   BitReader r(d.packed());
   const int bits = static_cast<int>(d.bits());
   const bool rice = d.rice_k_size() > 0;

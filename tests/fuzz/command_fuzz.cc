@@ -26,6 +26,7 @@
 #include "dynsolid/journal.pb.h"
 #include "server/finite_check.h"
 #include "tests/fuzz/fuzz_core.h"
+#include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
 namespace {
@@ -124,6 +125,7 @@ Fixture& F() {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  dynsolid::fuzz::QuietProtobuf();
   const std::string dir = fz::SeedDir();
   if (!dir.empty()) {
     int k = 0;

@@ -26,6 +26,7 @@
 #include "dynsolid/journal.pb.h"
 #include "server/finite_check.h"
 #include "server/journal.h"
+#include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
 namespace {
@@ -62,6 +63,7 @@ void WriteSeeds(const std::string& dir) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  dynsolid::fuzz::QuietProtobuf();
   const std::string dir = fz::SeedDir();
   if (!dir.empty()) {
     WriteSeeds(dir);

@@ -19,6 +19,7 @@
 #include "solver/mesh/cell_complex.h"
 #include "solver/scene/inline_mesh.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
 namespace {
@@ -40,6 +41,7 @@ bool SmallOwnMesh(const Scene& scene) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  dynsolid::fuzz::QuietProtobuf();
   const std::string dir = dynsolid::fuzz::SeedDir();
   if (dir.empty()) return 0;
   // The built-in scenes, as their text (scenes/*.textproto).

@@ -28,6 +28,7 @@
 
 #include "dynsolid/journal.pb.h"
 #include "tests/fuzz/fuzz_core.h"
+#include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
 namespace {
@@ -154,6 +155,7 @@ Fixture& F() {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  dynsolid::fuzz::QuietProtobuf();
   Fixture& f = F();
   const std::string dir = fz::SeedDir();
   if (!dir.empty()) {

@@ -25,6 +25,7 @@
 
 #include "clients/lib/surface.h"
 #include "server/surface_codec.h"
+#include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
 namespace {
@@ -89,6 +90,7 @@ std::vector<std::string> SeedStream(bool fields) {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  dynsolid::fuzz::QuietProtobuf();
   const std::string dir = fz::SeedDir();
   if (!dir.empty()) {
     fz::WriteFile(dir + "/stream_positions", fz::JoinChunks(SeedStream(false)));

@@ -185,9 +185,11 @@ struct CellPoints::Impl {
       if (block.group_start[gi + 1] - block.group_start[gi] == 1) {
         MakeRest(kind, gi, th.j, th.own[i]);
       } else {
+        // (A copy of the binding: clang before 16 cannot capture one.)
+        const int k_kind = kind;
         std::call_once(once[kind][gi], [&] {
           std::vector<double> j;
-          MakeRest(kind, gi, j, shared[kind][gi]);
+          MakeRest(k_kind, gi, j, shared[k_kind][gi]);
         });
         rest = &shared[kind][gi];
       }

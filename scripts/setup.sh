@@ -14,6 +14,8 @@ PACKAGES=(
   gmsh
   python3 python3-meshio python3-numpy python3-matplotlib python3-yaml
   openssl
+  libfuse3-dev fuse3
+  clang-14 libfuzzer-14-dev
 )
 
 missing=()

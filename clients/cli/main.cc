@@ -47,6 +47,7 @@
 #include "absl/strings/str_split.h"
 #include "clients/lib/script.h"
 #include "clients/lib/session_runner.h"
+#include "cmdline/cmdline.h"
 #include "dynsolid/service.grpc.pb.h"
 
 ABSL_FLAG(std::string, server, "127.0.0.1:50051", "dynsolid-server address, HOST:PORT");
@@ -519,13 +520,18 @@ int LoadScript(dynsolid::client::Script* script) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(kUsage);
   bool close_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a.rfind("--close", 0) == 0 || a.rfind("--noclose", 0) == 0) close_given = true;
   }
-  const std::vector<char*> args = absl::ParseCommandLine(argc, argv);
+  const std::vector<char*> args = dynsolid::cmdline::ParseCommandLine(argc, argv, kUsage, __FILE__);
+  if (absl::Status s = dynsolid::cmdline::CheckHostPort("--server", absl::GetFlag(FLAGS_server),
+                                                        /*allow_port_zero=*/false,
+                                                        /*allow_uri=*/true);
+      !s.ok()) {
+    return UsageError(std::string(s.message()));
+  }
   if (args.size() != 2) {
     return UsageError(
         "expected one command: create, get, list, close, stats, mesh, pick, export, run or check");

@@ -30,6 +30,7 @@
 #include "clients/haptic/loop_clock.h"
 #include "clients/haptic/probe_link.h"
 #include "clients/lib/channel.h"
+#include "cmdline/cmdline.h"
 #include "dynsolid/service.grpc.pb.h"
 
 ABSL_FLAG(std::string, server, "127.0.0.1:50051", "dynsolid-server address, HOST:PORT");
@@ -100,10 +101,14 @@ void PrintServerStats(dynsolid::Sessions::Stub& stub, const dynsolid::SessionRef
 }  // namespace
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
+  dynsolid::cmdline::ParseCommandLine(
+      argc, argv,
       "dynsolid-haptic-bridge [--server HOST:PORT] (--id ID --token TOKEN | --scene NAME) "
-      "--device virtual_hand|trajectory --script FILE [--seconds S] [--json F] [--trace F]");
-  absl::ParseCommandLine(argc, argv);
+      "--device virtual_hand|trajectory --script FILE [--seconds S] [--json F] [--trace F]",
+      __FILE__);
+  dynsolid::cmdline::CheckHostPortOrExit("dynsolid-haptic-bridge", "--server",
+                                         absl::GetFlag(FLAGS_server), /*allow_port_zero=*/false,
+                                         /*allow_uri=*/true);
   signal(SIGINT, OnSignal);
   signal(SIGTERM, OnSignal);
 

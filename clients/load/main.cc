@@ -14,6 +14,7 @@
 #include "absl/flags/usage.h"
 #include "absl/strings/str_split.h"
 #include "clients/load/load.h"
+#include "cmdline/cmdline.h"
 
 ABSL_FLAG(std::string, server, "", "Address of a running dynsolid-server (HOST:PORT)");
 ABSL_FLAG(std::string, server_binary, "",
@@ -43,8 +44,13 @@ ABSL_FLAG(std::string, markdown, "", "Write the report's table row (markdown) he
 ABSL_FLAG(bool, verbose, false, "Progress on stderr");
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage("load tests of dynsolid-server from scripted clients (docs/load.md)");
-  absl::ParseCommandLine(argc, argv);
+  dynsolid::cmdline::ParseCommandLine(
+      argc, argv, "dynsolid-load: load tests of dynsolid-server from scripted clients (docs/load.md)",
+      __FILE__);
+  if (!absl::GetFlag(FLAGS_server).empty()) {
+    dynsolid::cmdline::CheckHostPortOrExit("dynsolid-load", "--server", absl::GetFlag(FLAGS_server),
+                                           /*allow_port_zero=*/false, /*allow_uri=*/true);
+  }
   dynsolid::load::Options o;
   o.server = absl::GetFlag(FLAGS_server);
   o.server_binary = absl::GetFlag(FLAGS_server_binary);

@@ -25,6 +25,7 @@
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "cmdline/cmdline.h"
 #include "solver/solid/solid.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
@@ -39,8 +40,8 @@ ABSL_FLAG(int, frames, 0, "Write a frame (OBJ + .vtu) every K steps (0: none)");
 ABSL_FLAG(std::string, out, "", "Output folder (created)");
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage("dynsolid-sim --scene NAME|FILE [--levels L] --out DIR");
-  absl::ParseCommandLine(argc, argv);
+  dynsolid::cmdline::ParseCommandLine(
+      argc, argv, "dynsolid-sim --scene NAME|FILE [--levels L] --out DIR", __FILE__);
   auto log = spdlog::default_logger();
   log->set_pattern("[%H:%M:%S.%e] [sim] %v");
 

@@ -154,7 +154,17 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   ExportChunk chunk_out_;
 };
 
+class Refused final : public grpc::ServerWriteReactor<ExportChunk> {
+ public:
+  explicit Refused(const absl::Status& status) { Finish(ToGrpcStatus(status)); }
+  void OnDone() override { delete this; }
+};
+
 }  // namespace
+
+grpc::ServerWriteReactor<ExportChunk>* RefuseExport(const absl::Status& status) {
+  return new Refused(status);
+}
 
 grpc::ServerWriteReactor<ExportChunk>* StartExport(grpc::CallbackServerContext* context,
                                                    const ExportRequest* request,

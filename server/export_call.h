@@ -18,4 +18,7 @@ grpc::ServerWriteReactor<ExportChunk>* StartExport(grpc::CallbackServerContext* 
                                                    const ExportRequest* request,
                                                    SessionRegistry& registry, WorkQueue& builds);
 
+// A reactor that only finishes with `status` (a request that did not parse).
+grpc::ServerWriteReactor<ExportChunk>* RefuseExport(const absl::Status& status);
+
 }  // namespace dynsolid::server

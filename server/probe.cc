@@ -212,7 +212,7 @@ ProbeStats ProbeChannel::Stats() const {
 // ---------------------------------------------------------------- ProbeHub
 
 absl::StatusOr<std::shared_ptr<ProbeChannel>> ProbeHub::Attach(
-    grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* reactor, const ProbeOptions& options) {
+    grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* reactor, const ProbeOptions& options) {
   if (absl::Status s = CheckFinite(options, "options"); !s.ok()) return s;
   if (options.near_distance() < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -504,11 +504,11 @@ void ProbeHub::FillStats(SessionStats* stats) const {
 
 namespace {
 
-class ProbeReactor final : public grpc::ServerBidiReactor<ProbeRequest, ProbeReply> {
+class ProbeReactor final : public grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply> {
  public:
   ProbeReactor(grpc::CallbackServerContext* context, SessionRegistry& registry)
       : context_(context), registry_(registry) {
-    StartRead(&request_);
+    StartRead(&read_);
   }
 
   void OnReadDone(bool ok) override {
@@ -521,7 +521,8 @@ class ProbeReactor final : public grpc::ServerBidiReactor<ProbeRequest, ProbeRep
       return;
     }
     if (channel_ != nullptr && channel_->ended()) return;
-    if (absl::Status s = Handle(); !s.ok()) {
+    // Bytes that are not a ProbeRequest end the stream with why.
+    if (absl::Status s = read_.parsed ? Handle() : NotAMessage(read_); !s.ok()) {
       if (channel_ != nullptr) {
         channel_->Stop(s);
       } else {
@@ -529,7 +530,7 @@ class ProbeReactor final : public grpc::ServerBidiReactor<ProbeRequest, ProbeRep
       }
       return;
     }
-    StartRead(&request_);
+    StartRead(&read_);
   }
   void OnWriteDone(bool ok) override {
     if (channel_ != nullptr) channel_->OnWriteDone(ok);
@@ -588,12 +589,13 @@ class ProbeReactor final : public grpc::ServerBidiReactor<ProbeRequest, ProbeRep
   SessionRegistry& registry_;
   std::shared_ptr<const SolidSession> session_;
   std::shared_ptr<ProbeChannel> channel_;
-  ProbeRequest request_;
+  Parsed<ProbeRequest> read_;
+  ProbeRequest& request_ = read_.message;
 };
 
 }  // namespace
 
-grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* StartProbe(grpc::CallbackServerContext* context,
+grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* StartProbe(grpc::CallbackServerContext* context,
                                                               SessionRegistry& registry) {
   return new ProbeReactor(context, registry);
 }

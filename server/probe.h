@@ -42,6 +42,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "dynsolid/service.pb.h"
+#include "server/parsed_request.h"
 
 namespace dynsolid::server {
 
@@ -69,7 +70,7 @@ struct ProbeLimits {
 class ProbeChannel {
  public:
   // `reactor` receives StartWrite/Finish calls (never under the lock).
-  ProbeChannel(grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* reactor, int64_t id,
+  ProbeChannel(grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* reactor, int64_t id,
                double near_distance, double horizon)
       : reactor_(reactor), id_(id), near_distance_(near_distance), horizon_(horizon) {}
   ProbeChannel(const ProbeChannel&) = delete;
@@ -108,7 +109,7 @@ class ProbeChannel {
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   bool TakeFinishLocked(grpc::Status* status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
-  grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* const reactor_;
+  grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* const reactor_;
   const int64_t id_;
   const double near_distance_;
   const double horizon_;
@@ -151,7 +152,7 @@ class ProbeHub {
   // A new probe stream: ResourceExhausted at max_probes, Unavailable once
   // stopped, InvalidArgument for bad options.
   absl::StatusOr<std::shared_ptr<ProbeChannel>> Attach(
-      grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* reactor, const ProbeOptions& options);
+      grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* reactor, const ProbeOptions& options);
   // Makes an attached channel visible to the simulation thread (after the
   // reactor can route its OnWriteDone to it).
   void Activate(const std::shared_ptr<ProbeChannel>& channel);
@@ -221,7 +222,7 @@ class ProbeHub {
 };
 
 // The Probe RPC's reactor (registered by SessionsService).
-grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* StartProbe(grpc::CallbackServerContext* context,
+grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* StartProbe(grpc::CallbackServerContext* context,
                                                               SessionRegistry& registry);
 
 }  // namespace dynsolid::server

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <optional>
 
 #include "absl/strings/str_cat.h"
@@ -11,9 +12,85 @@
 #include "dynsolid/journal.pb.h"
 #include "server/journal.h"
 #include "server/log.h"
+#include "server/parsed_request.h"
 #include "server/probe.h"
 
 namespace dynsolid::server {
+namespace {
+
+// The index gRPC's generated code gives the method `name` of
+// dynsolid.Sessions (the order of the service's descriptor).
+int MethodIndex(const char* name) {
+  const google::protobuf::ServiceDescriptor* service =
+      google::protobuf::DescriptorPool::generated_pool()->FindServiceByName(
+          Sessions::service_full_name());
+  const google::protobuf::MethodDescriptor* method =
+      service != nullptr ? service->FindMethodByName(name) : nullptr;
+  if (method == nullptr) {
+    ServerLog().critical("dynsolid.Sessions has no method {}", name);
+    std::abort();
+  }
+  return method->index();
+}
+
+}  // namespace
+
+template <class Request, class Reply>
+void SessionsService::ParseFirst(const char* name,
+                                 grpc::ServerUnaryReactor* (SessionsService::*handler)(
+                                     grpc::CallbackServerContext*, const Request*, Reply*)) {
+  MarkMethodCallback(
+      MethodIndex(name),
+      new grpc::internal::CallbackUnaryHandler<Parsed<Request>, Reply>(
+          [this, handler](grpc::CallbackServerContext* context, const Parsed<Request>* request,
+                          Reply* reply) {
+            if (!request->parsed) {
+              grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+              reactor->Finish(ToGrpcStatus(NotAMessage(*request)));
+              return reactor;
+            }
+            return (this->*handler)(context, &request->message, reply);
+          }));
+}
+
+SessionsService::SessionsService(SessionRegistry& registry, Replicas& replicas, int max_sessions,
+                                 WorkQueue& builds, WorkQueue& encoders,
+                                 StreamOptions stream_options)
+    : registry_(registry), replicas_(replicas), max_sessions_(max_sessions), builds_(builds),
+      encoders_(encoders), stream_options_(stream_options) {
+  // gRPC's generated handlers would answer a request that does not parse
+  // with UNIMPLEMENTED and no message (unary) or end the reads as a
+  // half-close (streams, which then finish OK): every method but Watch
+  // (raw, parsed in streams.cc) is registered again with Parsed<Request>.
+  ParseFirst("CreateSession", &SessionsService::CreateSession);
+  ParseFirst("GetSession", &SessionsService::GetSession);
+  ParseFirst("ListSessions", &SessionsService::ListSessions);
+  ParseFirst("CloseSession", &SessionsService::CloseSession);
+  ParseFirst("GetStats", &SessionsService::GetStats);
+  ParseFirst("Inspect", &SessionsService::Inspect);
+  ParseFirst("Pick", &SessionsService::Pick);
+  ParseFirst("GetCommandLog", &SessionsService::GetCommandLog);
+  ParseFirst("GetServerInfo", &SessionsService::GetServerInfo);
+  MarkMethodCallback(MethodIndex("Commands"),
+                     new grpc::internal::CallbackBidiHandler<Parsed<CommandRequest>, CommandReply>(
+                         [this](grpc::CallbackServerContext* context) {
+                           return StartCommands(context, registry_);
+                         }));
+  MarkMethodCallback(MethodIndex("Probe"),
+                     new grpc::internal::CallbackBidiHandler<Parsed<ProbeRequest>, ProbeReply>(
+                         [this](grpc::CallbackServerContext* context) {
+                           return StartProbe(context, registry_);
+                         }));
+  // Export: the shape at a step boundary, the file made on the builds
+  // queue and streamed (export_call.h).
+  MarkMethodCallback(
+      MethodIndex("Export"),
+      new grpc::internal::CallbackServerStreamingHandler<Parsed<ExportRequest>, ExportChunk>(
+          [this](grpc::CallbackServerContext* context, const Parsed<ExportRequest>* request) {
+            if (!request->parsed) return RefuseExport(NotAMessage(*request));
+            return StartExport(context, &request->message, registry_, builds_);
+          }));
+}
 
 void SessionsService::OnBuilds(grpc::ServerUnaryReactor* reactor, std::function<void()> work) {
   builds_.Post([reactor, work = std::move(work)](bool run) {
@@ -196,21 +273,6 @@ grpc::ServerUnaryReactor* SessionsService::CloseSession(grpc::CallbackServerCont
 grpc::ServerWriteReactor<grpc::ByteBuffer>* SessionsService::Watch(
     grpc::CallbackServerContext* context, const grpc::ByteBuffer* request) {
   return StartWatch(context, request, registry_, encoders_, stream_options_);
-}
-
-grpc::ServerBidiReactor<CommandRequest, CommandReply>* SessionsService::Commands(
-    grpc::CallbackServerContext* context) {
-  return StartCommands(context, registry_);
-}
-
-grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* SessionsService::Probe(
-    grpc::CallbackServerContext* context) {
-  return StartProbe(context, registry_);
-}
-
-grpc::ServerWriteReactor<ExportChunk>* SessionsService::Export(grpc::CallbackServerContext* context,
-                                                               const ExportRequest* request) {
-  return StartExport(context, request, registry_, builds_);
 }
 
 grpc::ServerUnaryReactor* SessionsService::GetStats(grpc::CallbackServerContext* context,

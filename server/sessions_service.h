@@ -18,15 +18,15 @@
 
 namespace dynsolid::server {
 
-// Watch is a raw method (streams.h); the others are typed.
+// Watch is a raw method (streams.h); the others take Parsed<Request>
+// (parsed_request.h: bytes that are not a request get INVALID_ARGUMENT with
+// a message, on unary calls and streams alike) and reply typed messages.
 class SessionsService final
     : public Sessions::WithRawCallbackMethod_Watch<Sessions::CallbackService> {
  public:
   // `registry` and `builds` outlive the service and the gRPC server.
   SessionsService(SessionRegistry& registry, Replicas& replicas, int max_sessions,
-                  WorkQueue& builds, WorkQueue& encoders, StreamOptions stream_options)
-      : registry_(registry), replicas_(replicas), max_sessions_(max_sessions), builds_(builds),
-        encoders_(encoders), stream_options_(stream_options) {}
+                  WorkQueue& builds, WorkQueue& encoders, StreamOptions stream_options);
   SessionsService(const SessionsService&) = delete;
   SessionsService& operator=(const SessionsService&) = delete;
 
@@ -43,20 +43,12 @@ class SessionsService final
                                          google::protobuf::Empty* response) override;
   grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
                                                     const grpc::ByteBuffer* request) override;
-  grpc::ServerBidiReactor<CommandRequest, CommandReply>* Commands(
-      grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,
                                      const SessionRef* request, SessionStats* response) override;
   grpc::ServerUnaryReactor* Inspect(grpc::CallbackServerContext* context,
                                     const InspectRequest* request, InspectReply* response) override;
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
-  grpc::ServerBidiReactor<ProbeRequest, ProbeReply>* Probe(
-      grpc::CallbackServerContext* context) override;
-  // Export: the shape at a step boundary, the file made on the builds
-  // queue (export_call.h).
-  grpc::ServerWriteReactor<ExportChunk>* Export(grpc::CallbackServerContext* context,
-                                                const ExportRequest* request) override;
 
   grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
                                           const google::protobuf::Empty* request,
@@ -68,6 +60,13 @@ class SessionsService final
                                           CommandLog* response) override;
 
  private:
+  // Registers the unary method `name` so that its request is parsed here:
+  // bytes that do not parse are answered INVALID_ARGUMENT, the rest go to
+  // `handler`.
+  template <class Request, class Reply>
+  void ParseFirst(const char* name,
+                  grpc::ServerUnaryReactor* (SessionsService::*handler)(
+                      grpc::CallbackServerContext*, const Request*, Reply*));
   // Runs `work` on the builds queue; a call whose work never runs (the
   // server shuts down first) is finished with UNAVAILABLE.
   void OnBuilds(grpc::ServerUnaryReactor* reactor, std::function<void()> work);

@@ -270,7 +270,7 @@ class CommandsReactor;
 
 class CommandsState final : public ReplySink {
  public:
-  explicit CommandsState(grpc::ServerBidiReactor<CommandRequest, CommandReply>* reactor)
+  explicit CommandsState(grpc::ServerBidiReactor<Parsed<CommandRequest>, CommandReply>* reactor)
       : reactor_(reactor) {}
 
   // A reply from the session loop (after it is durable).
@@ -384,7 +384,7 @@ class CommandsState final : public ReplySink {
     return true;
   }
 
-  grpc::ServerBidiReactor<CommandRequest, CommandReply>* const reactor_;
+  grpc::ServerBidiReactor<Parsed<CommandRequest>, CommandReply>* const reactor_;
   mutable absl::Mutex mu_;
   std::deque<CommandReply> out_ ABSL_GUARDED_BY(mu_);
   CommandReply current_;  // the write in flight
@@ -396,11 +396,11 @@ class CommandsState final : public ReplySink {
   absl::Status status_ ABSL_GUARDED_BY(mu_);
 };
 
-class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, CommandReply> {
+class CommandsReactor final : public grpc::ServerBidiReactor<Parsed<CommandRequest>, CommandReply> {
  public:
   CommandsReactor(grpc::CallbackServerContext* context, SessionRegistry& registry)
       : context_(context), registry_(registry), state_(std::make_shared<CommandsState>(this)) {
-    StartRead(&request_);
+    StartRead(&read_);
   }
 
   void OnReadDone(bool ok) override {
@@ -409,11 +409,13 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
       return;
     }
     if (state_->finished()) return;
-    if (absl::Status s = Handle(); !s.ok()) {
+    // Bytes that are not a CommandRequest end the stream (gRPC's own
+    // handler would end the reads as if the client had half-closed).
+    if (absl::Status s = read_.parsed ? Handle() : NotAMessage(read_); !s.ok()) {
       state_->Stop(s);
       return;
     }
-    StartRead(&request_);
+    StartRead(&read_);
   }
   void OnWriteDone(bool ok) override { state_->OnWriteDone(ok); }
   void OnCancel() override { state_->Stop(absl::CancelledError("the client cancelled")); }
@@ -483,7 +485,8 @@ class CommandsReactor final : public grpc::ServerBidiReactor<CommandRequest, Com
   SessionRegistry& registry_;
   std::shared_ptr<CommandsState> state_;
   std::shared_ptr<const SolidSession> session_;
-  CommandRequest request_;
+  Parsed<CommandRequest> read_;
+  CommandRequest& request_ = read_.message;
 };
 
 }  // namespace
@@ -497,7 +500,7 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* StartWatch(grpc::CallbackServerConte
   return new WatchReactor(*request, registry, encoders, options);
 }
 
-grpc::ServerBidiReactor<CommandRequest, CommandReply>* StartCommands(
+grpc::ServerBidiReactor<Parsed<CommandRequest>, CommandReply>* StartCommands(
     grpc::CallbackServerContext* context, SessionRegistry& registry) {
   return new CommandsReactor(context, registry);
 }

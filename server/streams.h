@@ -13,6 +13,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "dynsolid/service.pb.h"
+#include "server/parsed_request.h"
 #include "server/session_registry.h"
 #include "server/work_queue.h"
 
@@ -33,7 +34,7 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* StartWatch(grpc::CallbackServerConte
                                                        WorkQueue& encoders,
                                                        const StreamOptions& options);
 
-grpc::ServerBidiReactor<CommandRequest, CommandReply>* StartCommands(
+grpc::ServerBidiReactor<Parsed<CommandRequest>, CommandReply>* StartCommands(
     grpc::CallbackServerContext* context, SessionRegistry& registry);
 
 }  // namespace dynsolid::server

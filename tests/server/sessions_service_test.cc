@@ -10,6 +10,7 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "absl/strings/str_cat.h"
 #include "dynsolid/service.grpc.pb.h"
 #include "health.grpc.pb.h"
 #include "live_fixture.h"
@@ -388,7 +389,7 @@ struct RawCall {
 };
 
 RawCall CallRaw(const std::shared_ptr<grpc::Channel>& channel, const std::string& method,
-                const std::string& request_bytes) {
+                const std::vector<std::string>& requests) {
   grpc::GenericStub stub(channel);
   grpc::CompletionQueue cq;
   grpc::ClientContext context;
@@ -406,9 +407,12 @@ RawCall CallRaw(const std::shared_ptr<grpc::Channel>& channel, const std::string
   RawCall r;
   call->StartCall(reinterpret_cast<void*>(1));
   r.started = await(1);
-  grpc::Slice request(request_bytes);
-  call->Write(grpc::ByteBuffer(&request, 1), reinterpret_cast<void*>(2));
-  r.written = await(2);
+  r.written = true;
+  for (const std::string& bytes : requests) {
+    grpc::Slice request(bytes);
+    call->Write(grpc::ByteBuffer(&request, 1), reinterpret_cast<void*>(2));
+    r.written = await(2) && r.written;
+  }
   call->WritesDone(reinterpret_cast<void*>(3));
   r.writes_done = await(3);
   grpc::ByteBuffer reply;
@@ -429,6 +433,11 @@ RawCall CallRaw(const std::shared_ptr<grpc::Channel>& channel, const std::string
     }
   }
   return r;
+}
+
+RawCall CallRaw(const std::shared_ptr<grpc::Channel>& channel, const std::string& method,
+                const std::string& request_bytes) {
+  return CallRaw(channel, method, std::vector<std::string>{request_bytes});
 }
 
 // Server reflection (grpc.reflection.v1alpha), spoken as raw bytes through
@@ -461,6 +470,57 @@ TEST_F(SessionsServiceTest, UnparsableWatchRequestIsInvalidArgument) {
   // The server still serves.
   Session s;
   EXPECT_THAT(CreateBuiltin("block3", &s, 0), GrpcOk());
+}
+
+// Bytes that are not a request, on every method of dynsolid.Sessions (unary
+// and streaming alike): INVALID_ARGUMENT with a message naming the request
+// type, never gRPC's bare UNIMPLEMENTED (unary) or an OK end (streams).
+TEST_F(SessionsServiceTest, UnparsableRequestsAreInvalidArgumentOnEveryMethod) {
+  const google::protobuf::ServiceDescriptor* service =
+      google::protobuf::DescriptorPool::generated_pool()->FindServiceByName("dynsolid.Sessions");
+  ASSERT_NE(service, nullptr);
+  ASSERT_EQ(service->method_count(), 13);
+  // Tag 0 with wire type 7; a length-delimited field 1 claiming 100 bytes
+  // of 1; a varint that never ends. None parses as any message.
+  const std::vector<std::string> garbage = {std::string("\x07", 1), std::string("\x0a\x64\x01", 3),
+                                            std::string(12, '\xff')};
+  for (int i = 0; i < service->method_count(); ++i) {
+    const google::protobuf::MethodDescriptor* m = service->method(i);
+    const std::string path = absl::StrCat("/", service->full_name(), "/", m->name());
+    for (const std::string& bytes : garbage) {
+      const RawCall c = CallRaw(channel_, path, bytes);
+      EXPECT_TRUE(c.finished) << path;
+      EXPECT_FALSE(c.read) << path;
+      EXPECT_THAT(c.status,
+                  GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                               AllOf(HasSubstr(m->input_type()->name()),
+                                     HasSubstr("not a valid message"))))
+          << path << " with " << bytes.size() << " bytes";
+    }
+  }
+  // On a stream, after a good request: the stream ends INVALID_ARGUMENT
+  // (the good one's reply may or may not have gone out first, as with any
+  // error that ends a stream).
+  Session s;
+  ASSERT_THAT(CreateBuiltin("block3", &s, 0), GrpcOk());
+  CommandRequest good;
+  good.mutable_session()->set_id(s.id());
+  good.mutable_session()->set_token(s.token());
+  good.set_client_id("garbage-test");
+  good.set_seq(1);
+  good.mutable_command()->mutable_pause();
+  const RawCall c = CallRaw(channel_, "/dynsolid.Sessions/Commands",
+                            {good.SerializeAsString(), std::string(12, '\xff')});
+  if (c.read) {
+    CommandReply reply;
+    EXPECT_TRUE(reply.ParseFromString(c.reply));
+    EXPECT_EQ(reply.seq(), 1);
+  }
+  EXPECT_THAT(c.status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                                     HasSubstr("CommandRequest: not a valid message")));
+  // The server still serves.
+  Session again;
+  EXPECT_THAT(CreateBuiltin("block3", &again, 0), GrpcOk());
 }
 
 TEST_F(SessionsServiceTest, ShutdownWithOpenSessionsCompletesAndRefusesNewCalls) {

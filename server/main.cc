@@ -30,6 +30,7 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/synchronization/mutex.h"
+#include "cmdline/cmdline.h"
 #include "server/log.h"
 #include "server/server.h"
 
@@ -91,11 +92,23 @@ ABSL_FLAG(double, shutdown_grace_seconds, 5.0,
           "On SIGINT/SIGTERM, how long running calls may take before they are cancelled");
 
 int main(int argc, char** argv) {
-  absl::SetProgramUsageMessage(
+  dynsolid::cmdline::ParseCommandLine(
+      argc, argv,
       "dynsolid-server [--listen HOST:PORT] [--data_dir DIR] [--tls_cert PEM --tls_key PEM] "
       "[--max_sessions N] [--max_message_bytes B] [--max_watchers_per_session N] "
-      "[--max_commands_per_second R] [--watch_hz HZ]");
-  absl::ParseCommandLine(argc, argv);
+      "[--max_commands_per_second R] [--watch_hz HZ]",
+      __FILE__);
+  // Listeners may ask for port 0 (a free port); an address others dial may not.
+  dynsolid::cmdline::CheckHostPortOrExit("dynsolid-server", "--listen", absl::GetFlag(FLAGS_listen),
+                                         /*allow_port_zero=*/true);
+  if (!absl::GetFlag(FLAGS_health_listen).empty()) {
+    dynsolid::cmdline::CheckHostPortOrExit("dynsolid-server", "--health_listen",
+                                           absl::GetFlag(FLAGS_health_listen), true);
+  }
+  if (!absl::GetFlag(FLAGS_advertise).empty()) {
+    dynsolid::cmdline::CheckHostPortOrExit("dynsolid-server", "--advertise",
+                                           absl::GetFlag(FLAGS_advertise), false);
+  }
 #ifdef NDEBUG
   // Debian's Abseil checks every Mutex acquisition for lock-order cycles
   // (a global graph behind a global lock, also for gRPC's own locks): a

@@ -67,7 +67,12 @@ for name in "${TARGETS[@]}"; do
   # A copy of the corpus: what the run finds stays out of the source tree.
   corpus="$WORK/corpus_$name"
   mkdir -p "$corpus"
-  cp -r "tests/fuzz/corpus/$name/." "$corpus/"
+  if [ -d "tests/fuzz/corpus/$name" ]; then
+    cp -r "tests/fuzz/corpus/$name/." "$corpus/"
+  else
+    # No committed seeds yet: the target writes its own (fuzz_util.h).
+    DYNSOLID_FUZZ_WRITE_SEEDS="$corpus" "$bin" >/dev/null 2>&1 || true
+  fi
   rc=0
   "${NICE[@]}" "$bin" -max_total_time="$SECONDS_PER_TARGET" -rss_limit_mb=2048 -timeout=10 \
     -print_final_stats=1 -artifact_prefix="$artifacts/" "$corpus" >"$log" 2>&1 || rc=$?
@@ -84,7 +89,7 @@ for name in "${TARGETS[@]}"; do
     echo "fuzz_smoke: rerun it with: $bin ${reproducer:-<input>}"
   fi
   summary+=("$(printf '%-16s executions %9s  cov %6s  corpus %4s seeds, %3s regressions  crashes %s' \
-    "$name" "${execs:-?}" "${cov:-?}" "$(ls "tests/fuzz/corpus/$name" | wc -l)" \
+    "$name" "${execs:-?}" "${cov:-?}" "$(ls "tests/fuzz/corpus/$name" 2>/dev/null | wc -l)" \
     "${#regressions[@]}" "$crashes")")
 done
 

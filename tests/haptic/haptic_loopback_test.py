@@ -217,7 +217,10 @@ def slope_through_origin(xs, ys):
 def check_region(name, r):
     rows, m = r["rows"], r["metrics"]
     contact = [x for x in rows if x["f_normal"] > 0]
-    check(len(contact) > 1000, "%s: the hand was in contact for %d ticks" % (name, len(contact)))
+    # (A share of the ticks, not a count: on a loaded machine the 1 kHz
+    # loop runs fewer ticks; here about 80 % of them push.)
+    check(len(contact) > 100 and len(contact) > 0.3 * len(rows),
+          "%s: the hand was in contact for %d of %d ticks" % (name, len(contact), len(rows)))
     # The force opposes penetration: along the outward normal, only with
     # the device below the (rest) surface.
     # A fresh model (at most 2 ms old) pushes only while the device is below

@@ -98,13 +98,15 @@ void ProbeChannel::Offer(ProbeReply reply) {
     if (reply.has_model()) ++models_sent_;
     if (writing_) {
       if (has_pending_) {
-        // Keep the rejections of the reply replaced.
+        // Keep the rejections of the reply replaced, in the order the poses
+        // came: its (older) ones first.
         ++replies_skipped_;
-        for (PoseRejection& r : *pending_.mutable_rejected()) {
-          if (reply.rejected_size() < static_cast<int>(kMaxRejectionsPerReply)) {
-            *reply.add_rejected() = std::move(r);
-          }
+        google::protobuf::RepeatedPtrField<PoseRejection> kept =
+            std::move(*pending_.mutable_rejected());
+        for (PoseRejection& r : *reply.mutable_rejected()) {
+          if (kept.size() < static_cast<int>(kMaxRejectionsPerReply)) *kept.Add() = std::move(r);
         }
+        *reply.mutable_rejected() = std::move(kept);
       }
       pending_ = std::move(reply);
       has_pending_ = true;

@@ -145,18 +145,15 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
   // Vertex normals: the sum over the vertex's fan triangles of their
   // (b - a) x (c - a), i.e. normals weighted by area.
   Points normals = Points::Zero(nv, 3);
-  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
-    const auto loop = surface.faces.row(r);
-    const Eigen::Vector3d a = p.row(loop[0]).transpose();
-    for (size_t i = 1; i + 1 < loop.size(); ++i) {
-      const Eigen::Vector3d b = p.row(loop[i]).transpose();
-      const Eigen::Vector3d c = p.row(loop[i + 1]).transpose();
-      const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
-      normals.row(loop[0]) += n;
-      normals.row(loop[i]) += n;
-      normals.row(loop[i + 1]) += n;
-    }
-  }
+  internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
+    const Eigen::Vector3d a = p.row(ia).transpose();
+    const Eigen::Vector3d b = p.row(ib).transpose();
+    const Eigen::Vector3d c = p.row(ic).transpose();
+    const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+    normals.row(ia) += n;
+    normals.row(ib) += n;
+    normals.row(ic) += n;
+  });
 
   // BIN chunk: positions, normals, colours, indices (all 4-byte multiples).
   std::string bin;
@@ -196,14 +193,11 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
     }
   }
   views.push_back({bin.size(), index_bytes, kElementArrayBuffer});
-  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
-    const auto loop = surface.faces.row(r);
-    for (size_t i = 1; i + 1 < loop.size(); ++i) {
-      AppendU32(bin, static_cast<uint32_t>(loop[0]));
-      AppendU32(bin, static_cast<uint32_t>(loop[i]));
-      AppendU32(bin, static_cast<uint32_t>(loop[i + 1]));
-    }
-  }
+  internal::ForEachFanTriangle(surface, [&](int32_t a, int32_t b, int32_t c) {
+    AppendU32(bin, static_cast<uint32_t>(a));
+    AppendU32(bin, static_cast<uint32_t>(b));
+    AppendU32(bin, static_cast<uint32_t>(c));
+  });
   while (bin.size() % 4 != 0) bin.push_back('\0');  // (already aligned)
 
   // JSON chunk. Accessors follow the views: 0 POSITION, 1 NORMAL,

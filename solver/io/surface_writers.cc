@@ -297,23 +297,20 @@ absl::Status StlBinaryBytes(const mesh::BoundarySurface& surface, std::string* o
   auto put_vertex = [&](int32_t v) {
     for (int k = 0; k < 3; ++k) AppendF32(o, static_cast<float>(p(v, k)));
   };
-  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
-    const auto loop = surface.faces.row(r);
-    const Eigen::Vector3d a = p.row(loop[0]).transpose();
-    for (size_t i = 1; i + 1 < loop.size(); ++i) {
-      const Eigen::Vector3d b = p.row(loop[i]).transpose();
-      const Eigen::Vector3d c = p.row(loop[i + 1]).transpose();
-      Eigen::Vector3d n = (b - a).cross(c - a);
-      const double length = n.norm();
-      n = length > 0.0 && std::isfinite(length) ? Eigen::Vector3d(n / length)
-                                                : Eigen::Vector3d::Zero();
-      for (int k = 0; k < 3; ++k) AppendF32(o, static_cast<float>(n[k]));
-      put_vertex(loop[0]);
-      put_vertex(loop[i]);
-      put_vertex(loop[i + 1]);
-      internal::AppendU16(o, 0);
-    }
-  }
+  internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
+    const Eigen::Vector3d a = p.row(ia).transpose();
+    const Eigen::Vector3d b = p.row(ib).transpose();
+    const Eigen::Vector3d c = p.row(ic).transpose();
+    Eigen::Vector3d n = (b - a).cross(c - a);
+    const double length = n.norm();
+    n = length > 0.0 && std::isfinite(length) ? Eigen::Vector3d(n / length)
+                                              : Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) AppendF32(o, static_cast<float>(n[k]));
+    put_vertex(ia);
+    put_vertex(ib);
+    put_vertex(ic);
+    internal::AppendU16(o, 0);
+  });
   return absl::OkStatus();
 }
 

@@ -95,6 +95,17 @@ void AppendU32(std::string& out, uint32_t v);
 void AppendF32(std::string& out, float v);
 void AppendF64(std::string& out, double v);
 
+// Calls fn(a, b, c) for each fan triangle of the surface's loops, in loop
+// order: (l0, l_i, l_i+1) for i = 1 .. size - 2 (the loops' triangulation
+// every writer uses).
+template <typename Fn>
+void ForEachFanTriangle(const mesh::BoundarySurface& surface, Fn&& fn) {
+  for (int32_t r = 0; r < surface.faces.rows(); ++r) {
+    const auto loop = surface.faces.row(r);
+    for (size_t i = 1; i + 1 < loop.size(); ++i) fn(loop[0], loop[i], loop[i + 1]);
+  }
+}
+
 // Number of fan triangles of the surface's loops (sum of size - 2).
 int64_t FanTriangleCount(const mesh::BoundarySurface& surface);
 

@@ -41,19 +41,23 @@ absl::Status Check(const LoadScale& s, double magnitude, std::string_view field,
 
 }  // namespace
 
-LoadScale ScaleOf(const Points& rest_control, const models::ElementLayout& layout, double mass,
-                  double rest_volume) {
-  LoadScale s;
-  if (rest_control.rows() > 0) {
-    s.size = (rest_control.colwise().maxCoeff() - rest_control.colwise().minCoeff()).norm();
-  }
+double MeanYoung(const models::ElementLayout& layout) {
   double young = 0;
   int64_t samples = 0;
   for (const auto& array : layout.materials) {
     for (const models::MaterialPoint& m : array) young += m.young;
     samples += static_cast<int64_t>(array.size());
   }
-  s.young = samples > 0 ? young / static_cast<double>(samples) : 0;
+  return samples > 0 ? young / static_cast<double>(samples) : 0;
+}
+
+LoadScale ScaleOf(const Points& rest_control, const models::ElementLayout& layout, double mass,
+                  double rest_volume) {
+  LoadScale s;
+  if (rest_control.rows() > 0) {
+    s.size = (rest_control.colwise().maxCoeff() - rest_control.colwise().minCoeff()).norm();
+  }
+  s.young = MeanYoung(layout);
   s.mass = mass;
   s.density = rest_volume > 0 ? mass / rest_volume : 0;
   return s;

@@ -34,6 +34,10 @@ struct LoadScale {
   double mass = 0;     // kg
 };
 
+// The mean Young's modulus over a layout's material samples (Pa; 0 without
+// samples).
+double MeanYoung(const models::ElementLayout& layout);
+
 // The scale of a solid from its control points at rest, its element layout
 // (material samples), total mass and rest volume.
 LoadScale ScaleOf(const Points& rest_control, const models::ElementLayout& layout, double mass,

@@ -11,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
+#include "solver/solid/load_bounds.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -156,14 +157,7 @@ absl::Status Solid::Impl::MakeEnvironment(const Scene& scene, const Solid::Surfa
 double Solid::Impl::CalibrateEnvironment(double h) {
   if (environment == nullptr) return 0;
   // The solid's mean modulus over its material samples.
-  double young = 0;
-  int64_t samples = 0;
-  for (const auto& array : layout->materials) {
-    for (const models::MaterialPoint& m : array) young += m.young;
-    samples += static_cast<int64_t>(array.size());
-  }
-  young /= std::max<int64_t>(1, samples);
-  environment->Calibrate(mt, young, h, substeps, settings.max_substeps());
+  environment->Calibrate(mt, MeanYoung(*layout), h, substeps, settings.max_substeps());
   substeps = std::max(substeps, environment->min_substeps());
   return environment->kappa();
 }

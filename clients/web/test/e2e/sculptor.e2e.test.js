@@ -73,13 +73,16 @@ test('a missed press in a tool leaves the camera where it was and says "no solid
   const box = await canvasBox();
   const before = await camera();
   const n = (await grpc.call('GetCommandLog', { session: ref })).entries.length;
+  await app(() => { window.__dynsolid.metrics.messages.length = 0; });
   await page.mouse.move(box.x + 40, box.y + 60);
   await page.mouse.down();
   for (let i = 1; i <= 8; ++i) await page.mouse.move(box.x + 40 + 25 * i, box.y + 60 + 10 * i);
   await page.mouse.up();
   await sleep(200);
   assert.deepEqual(await camera(), before, 'the camera did not move');
-  assert.equal(await hud(), 'no solid here');
+  // The HUD shows for 1.5 s, which a loaded machine can outlast before this
+  // line runs: the page's message log says it without the clock.
+  assert.equal((await messages()).filter((t) => t === 'no solid here').length, 1);
   assert.equal((await grpc.call('GetCommandLog', { session: ref })).entries.length, n, 'no command sent');
   // Alt+drag orbits in a tool.
   await page.keyboard.down('Alt');

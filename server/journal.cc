@@ -27,6 +27,10 @@ std::array<uint32_t, 256> MakeCrcTable() {
 
 absl::Status Errno(absl::string_view what, const std::string& path) {
   const int e = errno;
+  if (e == ENOSPC || e == EDQUOT) {
+    return absl::ResourceExhaustedError(absl::StrCat("no space left on the data disk: ", what, " ",
+                                                     path, ": ", std::strerror(e)));
+  }
   return absl::Status(e == ENOENT ? absl::StatusCode::kNotFound : absl::StatusCode::kInternal,
                       absl::StrCat(what, " ", path, ": ", std::strerror(e)));
 }
@@ -131,6 +135,33 @@ absl::StatusOr<std::unique_ptr<JournalWriter>> JournalWriter::Open(const std::st
   return std::unique_ptr<JournalWriter>(new JournalWriter(fd, path, size));
 }
 
+absl::Status JournalWriter::Reserve(uint64_t end, uint64_t extra) {
+  const uint64_t reserved = reserved_.load(std::memory_order_acquire);
+  if (end <= reserved || !reserve_supported_.load(std::memory_order_relaxed)) {
+    return absl::OkStatus();
+  }
+  // Blocks past the end of the file, its size unchanged: appends into them
+  // need no new blocks, so they cannot fail with ENOSPC (tmpfs, ext4, xfs,
+  // btrfs allocate them here).
+  const uint64_t target = end + extra;
+  int rc;
+  do {
+    rc = ::fallocate(fd_, FALLOC_FL_KEEP_SIZE, static_cast<off_t>(reserved),
+                     static_cast<off_t>(target - reserved));
+  } while (rc != 0 && errno == EINTR);
+  if (rc != 0) {
+    if (errno == EOPNOTSUPP || errno == ENOSYS) {
+      // A file system that cannot reserve: appends may still fail, and are
+      // then handled as write errors (SessionLoop::Persist).
+      reserve_supported_.store(false, std::memory_order_relaxed);
+      return absl::OkStatus();
+    }
+    return Errno(absl::StrCat("cannot reserve ", target - reserved, " bytes in journal"), path_);
+  }
+  reserved_.store(target, std::memory_order_release);
+  return absl::OkStatus();
+}
+
 JournalWriter::~JournalWriter() {
   if (fd_ >= 0) {
     ::fdatasync(fd_);
@@ -158,7 +189,10 @@ absl::Status WriteFileAtomically(const std::string& dir, const std::string& name
   absl::Status s = WriteAll(fd, bytes, tmp);
   if (s.ok() && ::fsync(fd) != 0) s = Errno("cannot fsync", tmp);
   ::close(fd);
-  if (!s.ok()) return s;
+  if (!s.ok()) {
+    ::unlink(tmp.c_str());  // a partial copy would only hold space
+    return s;
+  }
   if (::rename(tmp.c_str(), final_path.c_str()) != 0) return Errno("cannot rename", tmp);
   return SyncDir(dir);
 }

@@ -12,7 +12,9 @@
 // in order.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -62,12 +64,24 @@ class JournalWriter {
   absl::Status Sync();
   uint64_t size() const { return size_; }
 
+  // Makes sure the file's first `end` bytes have disk blocks (allocating
+  // `extra` more beyond them when it must allocate; the file's size does
+  // not change), so that appends up to `end` cannot fail for want of
+  // space. ResourceExhausted ("no space left on the data disk ...") when
+  // the disk is full. OK without doing anything on a file system that
+  // cannot reserve. May be called from another thread than Append/Sync (the
+  // session's simulation thread), but by one thread only.
+  absl::Status Reserve(uint64_t end, uint64_t extra);
+  uint64_t reserved() const { return reserved_.load(std::memory_order_acquire); }
+
  private:
   JournalWriter(int fd, std::string path, uint64_t size)
-      : fd_(fd), path_(std::move(path)), size_(size) {}
+      : fd_(fd), path_(std::move(path)), size_(size), reserved_(size) {}
   int fd_;
   std::string path_;
   uint64_t size_;
+  std::atomic<uint64_t> reserved_;
+  std::atomic<bool> reserve_supported_{true};
 };
 
 // Replaces dir/name with `bytes` atomically: writes dir/name.tmp (mode

@@ -43,6 +43,10 @@ ABSL_FLAG(int, max_sessions, 16, "Most sessions open (or being created) at once"
 ABSL_FLAG(int, max_message_bytes, 4 << 20, "Largest gRPC message received or sent, in bytes");
 ABSL_FLAG(int64_t, max_cells, 1'000'000,
           "Most level-L cells of a session's solid (checked before building)");
+ABSL_FLAG(int64_t, max_session_bytes, 0,
+          "Most memory a session's solid may need at its peak, bytes, estimated from the scene "
+          "before anything is built (CreateSession is refused at once past it). 0: a quarter "
+          "of the machine's physical memory; -1: no limit");
 ABSL_FLAG(int, sim_threads, 0,
           "Threads that step each session's solid (1-8; 0: all cores but one, at least one)");
 ABSL_FLAG(int, build_threads, 1, "Threads that build solids, off the gRPC threads");
@@ -62,6 +66,11 @@ ABSL_FLAG(int, build_nice, 10,
 ABSL_FLAG(std::string, data_dir, "",
           "Directory for session journals and snapshots; sessions found there are restored "
           "on start. Empty: sessions live in memory only");
+ABSL_FLAG(int64_t, min_free_disk_bytes, int64_t{8} << 20,
+          "With --data_dir: below this many bytes available there the data disk counts as full: "
+          "new sessions are refused and health says NOT_SERVING until it has room again (a "
+          "command that cannot reserve its journal space is refused, not applied, whatever "
+          "this is)");
 ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain: serve TLS (with --tls_key)");
 ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert");
 ABSL_FLAG(int, max_watchers_per_session, 64, "Most Watch streams open on one session");
@@ -131,12 +140,14 @@ int main(int argc, char** argv) {
   options.max_sessions = absl::GetFlag(FLAGS_max_sessions);
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_cells = absl::GetFlag(FLAGS_max_cells);
+  options.max_session_bytes = absl::GetFlag(FLAGS_max_session_bytes);
   options.build_threads = absl::GetFlag(FLAGS_build_threads);
   options.sim_threads = absl::GetFlag(FLAGS_sim_threads);
   options.encode_threads = absl::GetFlag(FLAGS_encode_threads);
   options.stream_nice = absl::GetFlag(FLAGS_stream_nice);
   options.stream_idle = absl::GetFlag(FLAGS_stream_idle);
   options.data_dir = absl::GetFlag(FLAGS_data_dir);
+  options.min_free_disk_bytes = absl::GetFlag(FLAGS_min_free_disk_bytes);
   options.tls_cert_file = absl::GetFlag(FLAGS_tls_cert);
   options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
   options.loop.max_watchers = absl::GetFlag(FLAGS_max_watchers_per_session);

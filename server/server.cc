@@ -1,12 +1,16 @@
 #include "server/server.h"
 
+#include <unistd.h>
+
 #include <chrono>
+#include <cstdio>
 #include <thread>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
 #include "absl/strings/str_cat.h"
+#include "cmdline/cmdline.h"
 #include "server/journal.h"
 #include "server/log.h"
 #include "server/thread_priority.h"
@@ -21,9 +25,14 @@ std::string HostOf(const std::string& listen) {
 }
 
 absl::Status CheckOptions(const ServerOptions& o) {
-  if (o.listen.empty() || o.listen.rfind(':') == std::string::npos) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("listen must be HOST:PORT, got \"", o.listen, "\""));
+  if (absl::Status s = cmdline::CheckHostPort("listen", o.listen, /*allow_port_zero=*/true);
+      !s.ok()) {
+    return s;
+  }
+  if (!o.health_listen.empty()) {
+    if (absl::Status s = cmdline::CheckHostPort("health_listen", o.health_listen, true); !s.ok()) {
+      return s;
+    }
   }
   if (o.max_sessions < 1) {
     return absl::InvalidArgumentError(
@@ -72,6 +81,10 @@ absl::Status CheckOptions(const ServerOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("build_nice must be in 0..19, got ", o.loop.build_nice));
   }
+  if (o.min_free_disk_bytes < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("min_free_disk_bytes must be >= 0, got ", o.min_free_disk_bytes));
+  }
   if (o.build_threads < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("build_threads must be >= 1, got ", o.build_threads));
@@ -81,11 +94,34 @@ absl::Status CheckOptions(const ServerOptions& o) {
 
 }  // namespace
 
+int64_t DefaultMaxSessionBytes() {
+  int64_t total = 0;
+  if (std::FILE* f = std::fopen("/proc/meminfo", "r")) {
+    char line[256];
+    while (std::fgets(line, sizeof(line), f) != nullptr) {
+      long long kb = 0;
+      if (std::sscanf(line, "MemTotal: %lld kB", &kb) == 1) {
+        total = static_cast<int64_t>(kb) * 1024;
+        break;
+      }
+    }
+    std::fclose(f);
+  }
+  if (total <= 0) {
+    const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+    if (pages > 0 && page > 0) total = static_cast<int64_t>(pages) * page;
+  }
+  return total > 0 ? total / 4 : int64_t{4} << 30;
+}
+
 Server::Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas)
     : options_(options),
       replicas_(std::move(replicas)),
       registry_(RegistryOptions{
-          options.max_sessions, BuildLimits{options.max_cells, options.sim_threads}, options.loop,
+          options.max_sessions,
+          BuildLimits{options.max_cells, options.sim_threads,
+                      options.max_session_bytes < 0 ? 0 : options.max_session_bytes},
+          options.loop,
           options.data_dir, replicas_->IdPrefix(),
           [r = replicas_.get()](absl::string_view id) { return r->Elsewhere(id); }}),
       builds_(options.build_threads, "build"),
@@ -93,8 +129,13 @@ Server::Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas)
       service_(registry_, *replicas_, options.max_sessions, builds_, encoders_,
                StreamOptions{options.loop.watch_hz, options.loop.max_watch_hz}) {}
 
-absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
-  if (absl::Status s = CheckOptions(options); !s.ok()) return s;
+absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& given) {
+  if (absl::Status s = CheckOptions(given); !s.ok()) return s;
+  ServerOptions options = given;
+  if (options.max_session_bytes == 0) options.max_session_bytes = DefaultMaxSessionBytes();
+  if (!options.data_dir.empty()) {
+    options.loop.disk = std::make_shared<DiskSpace>(options.data_dir, options.min_free_disk_bytes);
+  }
   std::string cert, key;
   if (!options.tls_cert_file.empty()) {
     absl::StatusOr<std::string> c = ReadWholeFile(options.tls_cert_file);
@@ -176,6 +217,22 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     return absl::UnavailableError(absl::StrCat(
         "cannot listen on ", health_failed ? options.health_listen : options.listen));
   }
+  if (const std::shared_ptr<DiskSpace>& disk = options.loop.disk; disk != nullptr) {
+    // Health follows the data disk: NOT_SERVING while it is full (new
+    // sessions are refused then), SERVING again once it has room.
+    disk->SetListener([s = server.get()](bool full) {
+      for (grpc::Server* g : {s->server_.get(), s->health_server_.get()}) {
+        if (g != nullptr && g->GetHealthCheckService() != nullptr) {
+          g->GetHealthCheckService()->SetServingStatus(!full);
+        }
+      }
+    });
+    if (disk->Check() >= 0 && disk->full()) {
+      ServerLog().warn("data disk {} starts full: new sessions are refused until it has room",
+                       options.data_dir);
+    }
+    server->disk_thread_ = std::thread([s = server.get()] { s->WatchDisk(); });
+  }
   server->address_ = absl::StrCat(HostOf(options.listen), ":", server->port_);
   server->replicas_->SetBoundAddress(server->address_);
   if (!server->replicas_->name().empty()) {
@@ -187,10 +244,14 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
                      server->replicas_->address(), peers.empty() ? "none" : peers);
   }
   ServerLog().info(
-      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} bytes; {} stepping "
+      "serving dynsolid.Sessions on {} ({}; max {} sessions, {} cells, {} MiB per session, {} "
+      "bytes per message; {} stepping "
       "threads per session; streaming threads at nice +{}{}; builds at nice +{}; {})",
       server->address_, options.tls_cert_file.empty() ? "plaintext" : "TLS",
-      options.max_sessions, options.max_cells, options.max_message_bytes,
+      options.max_sessions, options.max_cells,
+      options.max_session_bytes < 0 ? std::string("unlimited")
+                                    : std::to_string(options.max_session_bytes >> 20),
+      options.max_message_bytes,
       SimThreads(options.sim_threads), options.stream_nice,
       options.stream_idle ? ", SCHED_IDLE" : "", options.loop.build_nice,
       options.data_dir.empty() ? std::string("in memory")
@@ -201,6 +262,16 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
 
 Server::~Server() { Shutdown(absl::Seconds(5)); }
 
+void Server::WatchDisk() {
+  absl::MutexLock lock(&disk_mu_);
+  while (!disk_mu_.AwaitWithTimeout(absl::Condition(&disk_stop_),
+                                    options_.disk_check_interval)) {
+    disk_mu_.Unlock();
+    options_.loop.disk->Check();
+    disk_mu_.Lock();
+  }
+}
+
 void Server::Shutdown(absl::Duration deadline) {
   {
     absl::MutexLock lock(&shutdown_mu_);
@@ -210,6 +281,14 @@ void Server::Shutdown(absl::Duration deadline) {
   ServerLog().info("shutting down ({} sessions open)", registry_.size());
   // 0. Health says NOT_SERVING at once (readiness probes fail: a load
   //    balancer stops sending new calls while the sessions drain).
+  if (disk_thread_.joinable()) {
+    {
+      absl::MutexLock lock(&disk_mu_);
+      disk_stop_ = true;
+    }
+    disk_thread_.join();
+    options_.loop.disk->SetListener(nullptr);
+  }
   for (grpc::Server* s : {server_.get(), health_server_.get()}) {
     if (s != nullptr && s->GetHealthCheckService() != nullptr) s->GetHealthCheckService()->Shutdown();
   }

@@ -6,11 +6,13 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <thread>
 
 #include <grpcpp/grpcpp.h>
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "server/disk_space.h"
 #include "server/replicas.h"
 #include "server/session_registry.h"
 #include "server/sessions_service.h"
@@ -37,6 +39,11 @@ struct ServerOptions {
   // max_sessions * max_cells * 1.4 KB. The default admits every built-in
   // scene at 4 levels (bridge, the largest: 631k cells).
   int64_t max_cells = 1'000'000;
+  // Memory a session's solid may need at its peak, as estimated from the
+  // scene before building (EstimateSessionBytes); past it CreateSession is
+  // refused at once with RESOURCE_EXHAUSTED naming both. 0: a quarter of
+  // the machine's physical memory (DefaultMaxSessionBytes); -1: no limit.
+  int64_t max_session_bytes = 0;
   // Threads that step each session's solid (0: all cores but one, at least
   // one; see BuildLimits::sim_threads).
   int sim_threads = 0;
@@ -62,6 +69,13 @@ struct ServerOptions {
   // Persist every session under this directory and restore them on start
   // (persistence.h); empty: sessions live in memory only.
   std::string data_dir;
+  // With data_dir: below this many bytes available on its file system the
+  // disk counts as full (disk_space.h): new sessions are refused and health
+  // says NOT_SERVING until a check finds room again. A session's command
+  // that cannot reserve its journal space is refused whatever this is.
+  int64_t min_free_disk_bytes = 8 << 20;
+  // How often the data disk's free space is checked.
+  absl::Duration disk_check_interval = absl::Milliseconds(250);
   // TLS: PEM files of the server's certificate chain and private key. Both
   // or neither; empty: plaintext.
   std::string tls_cert_file;
@@ -72,6 +86,11 @@ struct ServerOptions {
   ReplicaOptions replicas;
   std::string peer_ca_file;
 };
+
+// A quarter of the machine's physical memory (MemTotal in /proc/meminfo,
+// else sysconf): one session may take that much at its peak, so a few can
+// be built at once and the machine keeps room for the rest.
+int64_t DefaultMaxSessionBytes();
 
 class Server {
  public:
@@ -101,6 +120,8 @@ class Server {
   void Shutdown(absl::Duration deadline);
 
   SessionRegistry& registry() { return registry_; }
+  // The data disk's state (null without data_dir).
+  const std::shared_ptr<DiskSpace>& disk() const { return options_.loop.disk; }
 
  private:
   Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas);
@@ -119,6 +140,11 @@ class Server {
   std::string address_;
   absl::Mutex shutdown_mu_;
   bool shut_down_ ABSL_GUARDED_BY(shutdown_mu_) = false;
+  // Checks the data disk every disk_check_interval until shutdown.
+  void WatchDisk();
+  std::thread disk_thread_;
+  absl::Mutex disk_mu_;
+  bool disk_stop_ ABSL_GUARDED_BY(disk_mu_) = false;
 };
 
 }  // namespace dynsolid::server

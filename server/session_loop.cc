@@ -480,7 +480,35 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
   if (commands.empty()) return;
   PersistBatch batch;
   int64_t duplicates = 0;
+  // Journal first: a command whose record could not be written is not
+  // applied. Its record's space is reserved before it is applied; when the
+  // disk is full it, and every command after it in this batch (a client's
+  // order is kept), is refused untouched.
+  absl::Status no_room;
   for (size_t k = 0; k < commands.size(); ++k) {
+    if (journal_ != nullptr && no_room.ok()) {
+      no_room = journal_->Reserve(
+          journal_submitted_ + commands[k].request.ByteSizeLong() + kJournalSlack,
+          kJournalReserveStep);
+      if (!no_room.ok() && options_.disk != nullptr) options_.disk->ReportFull(no_room.message());
+    }
+    if (!no_room.ok()) {
+      PendingCommand& c = commands[k];
+      CommandReply reply;
+      reply.set_client_id(c.request.client_id());
+      reply.set_seq(c.request.seq());
+      reply.set_code(static_cast<int32_t>(absl::StatusCode::kResourceExhausted));
+      reply.set_message(absl::StrCat(
+          "no space left on the data disk: the command was not applied, and nothing it would "
+          "have done happened; send it again when there is room (",
+          no_room.message(), ")"));
+      reply.set_applied_step(-1);
+      SessionLog().warn("session {}: client {} seq {} refused: {}", id_, c.request.client_id(),
+                        c.request.seq(), std::string(no_room.message()));
+      prebuilt = nullptr;  // a finished build for it is dropped
+      batch.replies.emplace_back(std::move(c.sink), std::move(reply));
+      continue;
+    }
     if (prebuilt == nullptr && core_->NeedsBuild(commands[k].request)) {
       // Build off the loop; this command waits for it, and so do the rest
       // but those HoldBehindBuild lets go ahead. What the server fills in
@@ -768,8 +796,23 @@ void SessionLoop::Persist() {
       s = journal_->Append(batch.framed);
       if (s.ok()) s = journal_->Sync();
     }
+    bool snapshot_written = false;
     if (s.ok() && !batch.snapshot.empty()) {
-      s = WriteFileAtomically(dir_, "snapshot.binpb", batch.snapshot);
+      // A snapshot that cannot be written loses nothing: the previous one
+      // and the journal (already durable) still recover the session. It is
+      // logged and tried again at the next snapshot.
+      const absl::Status snap = WriteFileAtomically(dir_, "snapshot.binpb", batch.snapshot);
+      snapshot_written = snap.ok();
+      if (!snap.ok()) {
+        JournalLog().warn("session {}: snapshot at step {} not written: {}", id_,
+                          batch.snapshot_step, snap.ToString());
+        if (absl::IsResourceExhausted(snap) && options_.disk != nullptr) {
+          options_.disk->ReportFull(snap.message());
+        }
+      }
+    }
+    if (!s.ok() && absl::IsResourceExhausted(s) && options_.disk != nullptr) {
+      options_.disk->ReportFull(s.message());
     }
     if (!s.ok()) {
       // Nothing is acknowledged that is not durable.
@@ -779,12 +822,14 @@ void SessionLoop::Persist() {
       persist_error_ = s;
       for (auto& [sink, reply] : batch.replies) {
         if (sink == nullptr) continue;  // the server's own (a release)
-        sink->Stop(absl::InternalError(absl::StrCat("the journal could not be written: ",
-                                                    s.message())));
+        sink->Stop(absl::Status(
+            absl::IsResourceExhausted(s) ? absl::StatusCode::kResourceExhausted
+                                         : absl::StatusCode::kInternal,
+            absl::StrCat("the journal could not be written: ", s.message())));
       }
       continue;
     }
-    if (!batch.snapshot.empty()) {
+    if (snapshot_written) {
       JournalLog().debug("session {}: snapshot at step {} ({} bytes)", id_, batch.snapshot_step,
                          batch.snapshot.size());
     }
@@ -792,7 +837,7 @@ void SessionLoop::Persist() {
       absl::MutexLock lock(&stats_mu_);
       counters_.journal_records += batch.records;
       counters_.journal_bytes = static_cast<int64_t>(journal_->size());
-      if (!batch.snapshot.empty()) {
+      if (snapshot_written) {
         ++counters_.snapshots;
         counters_.last_snapshot_step = batch.snapshot_step;
       }

@@ -32,6 +32,7 @@
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "dynsolid/service.pb.h"
+#include "server/disk_space.h"
 #include "server/journal.h"
 #include "server/probe.h"
 #include "server/sim_core.h"
@@ -91,7 +92,16 @@ struct LoopOptions {
   // Write a snapshot every this many steps (with a data directory).
   int64_t snapshot_every_steps = 20000;
   CoreOptions core;
+  // The data disk's state (with a data directory; may be null): told when
+  // a journal reservation or a write finds it full.
+  std::shared_ptr<DiskSpace> disk;
 };
+
+// Journal space reserved ahead (JournalWriter::Reserve) before a command is
+// applied: the command's bytes plus kJournalSlack (its reply and framing),
+// in steps of at least kJournalReserveStep.
+inline constexpr uint64_t kJournalSlack = 16 << 10;
+inline constexpr uint64_t kJournalReserveStep = 64 << 10;
 
 // State recovered from a session directory (see persistence.h).
 struct Recovered {

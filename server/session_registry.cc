@@ -20,6 +20,10 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
   // as such even when the server is full.
   absl::StatusOr<SceneRequest> scene = ResolveSceneRequest(request);
   if (!scene.ok()) return scene.status();
+  // A session that could not journal its commands is not opened.
+  if (!options_.data_dir.empty() && options_.loop.disk != nullptr) {
+    if (absl::Status s = options_.loop.disk->CheckNewSession(); !s.ok()) return s;
+  }
 
   {
     absl::MutexLock lock(&mu_);
@@ -62,7 +66,14 @@ absl::StatusOr<std::shared_ptr<const SolidSession>> SessionRegistry::Create(
     m.set_origin(scene->origin);
     m.set_created_unix_micros(absl::ToUnixMicros(created));
     m.set_start_paused(request.start_paused());
-    if (absl::Status s = CreateSessionDir(dir, m); !s.ok()) return s;
+    if (absl::Status s = CreateSessionDir(dir, m); !s.ok()) {
+      // No half-made directory is left for the next start to trip on.
+      (void)RemoveDirTree(dir);
+      if (absl::IsResourceExhausted(s) && options_.loop.disk != nullptr) {
+        options_.loop.disk->ReportFull(s.message());
+      }
+      return s;
+    }
   }
   CoreOptions core_options = options_.loop.core;
   core_options.can_save = !dir.empty();

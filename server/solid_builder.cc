@@ -3,13 +3,14 @@
 #include <algorithm>
 #include <thread>
 
-#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
@@ -155,6 +156,118 @@ int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, in
   return cells;
 }
 
+namespace {
+
+// Memory model, calibrated with dynsolid-sim (peak RSS, /usr/bin/time -v,
+// build plus two steps; bench/reports/reliability.md has the table).
+// See EstimateSessionBytes.
+//
+// Measured peak-RSS growth of dynsolid-server for one CreateSession
+// (VmHWM before and after), 2026-11-28:
+//   block 10^3, level 0, local_frame (1000 cells, 512 cubic):    +32.7 MB
+//   block 20^3, level 0, local_frame (8000 cells, 5832 cubic):  +730.1 MB
+//   block 30^3, level 0, local_frame (27000 cells, 19683 cubic): past
+//       +2715 MB and still building when stopped after 600 s
+//   block3, level 2, corotational per control cell (1728 cells): +18.3 MB
+//   block3, level 3, corotational per control cell (13824 cells): +92.0 MB
+//   chair, level 2, corotational (4864 cells): +26.0 MB
+//   beam, level 2, local_frame (640 cells, 152 cubic): +8.4 MB
+//   beam, level 3, local_frame (5120 cells, 2808 cubic): +26.8 MB
+//   mixed, level 2, local_frame (186 cells): +8.5 MB
+// The local-frame model on an unsubdivided (level 0) mesh costs about 125 kB
+// per cubic B-spline element (730 MB / 5832), which dominates; subdivided,
+// it costs 5-13 kB per cell, as the corotational models do (5-11 kB).
+// So: a fixed part and a per-cell cost by model and level, each rounded up
+// from the largest figure measured; the
+// implicit integrator (backward Euler, or AUTO which may choose it) has a
+// global matrix on top, counted as doubling the per-cell cost (not
+// measured: an upper guess).
+constexpr double kFixedBytes = 16.0 * (1 << 20);
+constexpr double kLocalFrameLevel0BytesPerCell = 128e3;
+constexpr double kLocalFrameBytesPerCell = 16e3;
+constexpr double kCorotationalBytesPerCell = 8e3;
+constexpr double kImplicitFactor = 2;
+
+std::string Mib(double bytes) { return absl::StrFormat("%.0f MiB", bytes / (1 << 20)); }
+
+// The size checks of BuildSolid, before the control mesh is made (from the
+// generator's parameters) and after (from the mesh): max_cells and
+// max_session_bytes.
+absl::Status CheckSize(const SceneRequest& request, double fine_cells, int levels,
+                       const std::string& control, const BuildLimits& limits) {
+  if (fine_cells > static_cast<double>(limits.max_cells)) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        request.origin, ": the solid would have about ", absl::StrFormat("%.0f", fine_cells),
+        " cells (", control, ", ", levels,
+        " subdivision levels), more than this server's limit of ", limits.max_cells,
+        "; use fewer levels or a coarser control mesh"));
+  }
+  if (limits.max_session_bytes > 0) {
+    const int64_t bytes =
+        EstimateSessionBytes(request.scene, static_cast<int64_t>(std::min(fine_cells, 9e18)), levels);
+    if (bytes > limits.max_session_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          request.origin, ": the solid would need about ", Mib(static_cast<double>(bytes)),
+          " of memory (estimated from its ", absl::StrFormat("%.0f", fine_cells), " cells: ",
+          control, ", ", levels, " subdivision levels, the ",
+          scene::ModelName(request.scene.solver()), " model), more than this server's limit of ",
+          Mib(static_cast<double>(limits.max_session_bytes)),
+          " per session (--max_session_bytes); use fewer levels or a coarser control mesh"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+int64_t EstimateSessionBytes(const Scene& scene, int64_t fine_cells, int levels) {
+  const SolverSettings solver = scene::ResolvedSolverSettings(scene);
+  double per_cell = kCorotationalBytesPerCell;
+  if (solver.model() == SolverSettings::LOCAL_FRAME) {
+    per_cell = levels == 0 ? kLocalFrameLevel0BytesPerCell : kLocalFrameBytesPerCell;
+  }
+  if (solver.integrator() == SolverSettings::BACKWARD_EULER ||
+      solver.integrator() == SolverSettings::AUTO) {
+    per_cell *= kImplicitFactor;
+  }
+  const double bytes = kFixedBytes + per_cell * static_cast<double>(fine_cells);
+  return bytes >= 9e18 ? int64_t{9'000'000'000'000'000'000} : static_cast<int64_t>(bytes);
+}
+
+std::optional<double> GeneratedFineCells(const Scene& scene, int levels) {
+  const ControlMesh& m = scene.mesh();
+  double cells = 0;
+  switch (m.source_case()) {
+    case ControlMesh::kBlock:
+      cells = double{1} * m.block().nx() * m.block().ny() * m.block().nz();
+      break;
+    case ControlMesh::kBeam:
+      cells = double{1} * m.beam().cells_along() * m.beam().cells_across() *
+              m.beam().cells_across();
+      break;
+    case ControlMesh::kTube:
+      cells = double{1} * m.tube().segments() * m.tube().layers() * m.tube().slices();
+      break;
+    case ControlMesh::kTorus:
+      cells = double{1} * m.torus().segments() * m.torus().cross() * m.torus().cross();
+      break;
+    case ControlMesh::kVoxels:
+      for (const VoxelBox& b : m.voxels().boxes()) {
+        if (b.subtract()) continue;
+        cells += double{1} * std::max(0, b.x1() - b.x0()) * std::max(0, b.y1() - b.y0()) *
+                 std::max(0, b.z1() - b.z0());
+      }
+      break;
+    default:
+      return std::nullopt;
+  }
+  // Every generated cell is a hexahedron: 8 children per level, and a
+  // locally refined one is a level ahead (7 * 8^L more cells each, an
+  // upper bound as refine_cells may repeat a cell).
+  const double per_cell = std::pow(8.0, levels);
+  return cells * per_cell + 7.0 * per_cell * scene.mesh().refine_cells_size();
+}
+
 int SimThreads(int sim_threads) {
   if (sim_threads > 0) return sim_threads;
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
@@ -163,18 +276,28 @@ int SimThreads(int sim_threads) {
 
 absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLimits& limits) {
   const auto start = std::chrono::steady_clock::now();
+  const int levels = request.levels.value_or(request.scene.subdivision().levels());
+  // A generated mesh is sized from its parameters first: a request for
+  // millions of cells is refused before any of them is made (making the
+  // control mesh alone of a 100^3 block takes hundreds of MB).
+  if (std::optional<double> cells = GeneratedFineCells(request.scene, levels)) {
+    const double control_cells = *cells / std::pow(8.0, levels);
+    if (absl::Status s = CheckSize(request, *cells, levels,
+                                   absl::StrFormat("%.0f generated control cells", control_cells),
+                                   limits);
+        !s.ok()) {
+      return s;
+    }
+  }
   absl::StatusOr<mesh::MeshInput> control =
       scene::ControlMeshInput(request.scene, request.base_dir);
   if (!control.ok()) return WithOrigin(control.status(), request.origin);
 
-  const int levels = request.levels.value_or(request.scene.subdivision().levels());
   const int64_t estimate = EstimateFineCells(*control, request.scene, levels);
-  if (estimate > limits.max_cells) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        request.origin, ": the solid would have about ", estimate, " cells (",
-        control->cells.size(), " control cells, ", levels,
-        " subdivision levels), more than this server's limit of ", limits.max_cells,
-        "; use fewer levels or a coarser control mesh"));
+  if (absl::Status s = CheckSize(request, static_cast<double>(estimate), levels,
+                                 absl::StrCat(control->cells.size(), " control cells"), limits);
+      !s.ok()) {
+    return s;
   }
 
   absl::StatusOr<scene::Discretization> d =

@@ -46,7 +46,28 @@ struct BuildLimits {
   // it). 0: all cores but one, at least one (the other core is left to
   // streaming, gRPC and the journal; see server/README.md "Threads").
   int sim_threads = 0;
+  // Largest memory a session's solid may need at its peak (its build), as
+  // EstimateSessionBytes estimates it before anything is built; 0: no
+  // limit.
+  int64_t max_session_bytes = 0;
 };
+
+// The memory a solid of `fine_cells` cells at subdivision level `levels`
+// needs at its peak (the build and its first steps), in bytes, for the
+// scene's solver settings: a linear model calibrated on measured sessions
+// (solid_builder.cc gives the figures). An estimate for the limit check,
+// meant to err high.
+int64_t EstimateSessionBytes(const Scene& scene, int64_t fine_cells, int levels);
+
+// The level-`levels` cells of a generated control mesh (mesh.block, beam,
+// tube, torus, voxels), from the generator's parameters alone: nothing is
+// generated, so a huge request costs nothing to refuse. Exact for the
+// hexahedral generators; for voxels an upper bound (overlapping boxes
+// counted twice, subtracted ones not taken off). nullopt for meshes that
+// must be read to be counted (mesh.file, mesh.inline_mesh, whose size the
+// message limit already bounds). A double: the parameters can ask for more
+// than 2^63 cells.
+std::optional<double> GeneratedFineCells(const Scene& scene, int levels);
 
 // The stepping threads `sim_threads` stands for (0: cores - 1, at least 1).
 int SimThreads(int sim_threads);

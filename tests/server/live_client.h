@@ -43,9 +43,10 @@ inline SessionRef RefOf(const Session& s) {
 // One Commands stream; Send writes a command and reads its reply.
 class CommandStream {
  public:
-  CommandStream(Sessions::Stub& stub, const Session& session, std::string client_id)
+  CommandStream(Sessions::Stub& stub, const Session& session, std::string client_id,
+                int deadline_seconds = 120)
       : session_(session), client_id_(std::move(client_id)) {
-    context_.set_deadline(Deadline(120));
+    context_.set_deadline(Deadline(deadline_seconds));
     stream_ = stub.Commands(&context_);
   }
   ~CommandStream() {

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
 #include "absl/time/time.h"
 #include "dynsolid/journal.pb.h"
 #include "server/log.h"
@@ -498,10 +499,12 @@ void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
       reply.set_client_id(c.request.client_id());
       reply.set_seq(c.request.seq());
       reply.set_code(static_cast<int32_t>(absl::StatusCode::kResourceExhausted));
+      absl::string_view why = no_room.message();
+      absl::ConsumePrefix(&why, "no space left on the data disk: ");
       reply.set_message(absl::StrCat(
           "no space left on the data disk: the command was not applied, and nothing it would "
           "have done happened; send it again when there is room (",
-          no_room.message(), ")"));
+          why, ")"));
       reply.set_applied_step(-1);
       SessionLog().warn("session {}: client {} seq {} refused: {}", id_, c.request.client_id(),
                         c.request.seq(), std::string(no_room.message()));

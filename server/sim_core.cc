@@ -609,7 +609,7 @@ absl::Status SimCore::StepOnce() {
   if (!s.ok()) {
     paused_ = true;
     steps_remaining_ = 0;
-    last_error_ = absl::StrCat("step ", solid_->steps() + 1, " failed: ", s.message());
+    last_error_ = std::string(s.message());  // "step N failed: ..."
     return s;
   }
   if (steps_remaining_ > 0 && --steps_remaining_ == 0) paused_ = true;

@@ -93,8 +93,11 @@ struct Fixture {
 };
 
 std::string SnapshotBytes(const SimCore& core) {
+  // As the session loop writes one: SaveTo's loop state and answer caches,
+  // the solid's own state beside them.
   dynsolid::persist::Snapshot s;
   core.SaveTo(&s);
+  s.set_solid_state(core.solid().SaveState());
   return s.SerializeAsString();
 }
 
@@ -115,8 +118,8 @@ Fixture& F() {
     for (int i = 0; i < 3; ++i) {
       if (!f->core->StepOnce().ok()) std::abort();
     }
-    f->core->SaveTo(&f->base);
-    f->base_bytes = f->base.SerializeAsString();
+    f->base_bytes = SnapshotBytes(*f->core);
+    if (!f->base.ParseFromString(f->base_bytes)) std::abort();
     return f;
   }();
   return *f;

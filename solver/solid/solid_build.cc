@@ -358,7 +358,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
       im.settings.model() != SolverSettings::COROTATIONAL) {
     return absl::UnimplementedError(
-        "solver.integrator: backward_euler linearizes the corotational model (MODEL.md 5); "
+        "solver.integrator: backward_euler linearizes the corotational model (docs/model.md 5); "
         "with solver.model local_frame it is not available in this build");
   }
   s->h_ = im.settings.time_step();

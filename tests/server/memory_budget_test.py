@@ -39,28 +39,37 @@ def vm_hwm_bytes(pid):
     fail("no VmHWM in /proc/%d/status" % pid)
 
 
+def start_server(args, *flags):
+    """A dynsolid-server on a free loopback port, and a function that runs
+    dynsolid-client against it (every call with a timeout: a server that
+    starts building fails the test instead of filling the machine)."""
+    server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0"] + list(flags),
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    first = first_line(server, 60)
+    match = re.fullmatch(r"listening on (127\.0\.0\.1:\d+)", first or "")
+    if not match:
+        server.kill()
+        fail("the server (%s) did not start: %r" % (" ".join(flags) or "default flags", first))
+    address = match.group(1)
+
+    def client(*command):
+        try:
+            return subprocess.run([args.client, "--server", address, "--timeout_seconds", "60"]
+                                  + list(command), capture_output=True, text=True, timeout=90)
+        except subprocess.TimeoutExpired:
+            fail("dynsolid-client %s did not return within 90 s (the server is building?)"
+                 % " ".join(command))
+
+    return server, client
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--server", required=True)
     parser.add_argument("--client", required=True)
     args = parser.parse_args()
-    server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
-                              stderr=subprocess.DEVNULL, text=True)
+    server, client = start_server(args)
     try:
-        first = first_line(server, 60)
-        match = re.fullmatch(r"listening on (127\.0\.0\.1:\d+)", first or "")
-        if not match:
-            fail("the server did not start: %r" % first)
-        address = match.group(1)
-
-        def client(*command):
-            try:
-                return subprocess.run([args.client, "--server", address, "--timeout_seconds", "60"]
-                                      + list(command), capture_output=True, text=True, timeout=90)
-            except subprocess.TimeoutExpired:
-                fail("dynsolid-client %s did not return within 90 s (the server is building?)"
-                     % " ".join(command))
-
         # Warm the server's gRPC paths first, so that the measured growth is
         # the refused request's own.
         small = client("create", "--scene", "block3", "--levels", "1")
@@ -106,20 +115,8 @@ def stopped_build(args):
     stands in for a scene the estimate gets badly wrong: block3 at level 3
     (13824 cells, estimated 124 MiB, measured about 90 MB) must be stopped,
     refused with RESOURCE_EXHAUSTED naming the phase, and leave no session."""
-    server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0",
-                               "--build_memory_factor", "0.01"], stdout=subprocess.PIPE,
-                              stderr=subprocess.DEVNULL, text=True)
+    server, client = start_server(args, "--build_memory_factor", "0.01")
     try:
-        first = first_line(server, 60)
-        match = re.fullmatch(r"listening on (127\.0\.0\.1:\d+)", first or "")
-        if not match:
-            fail("the server with --build_memory_factor 0.01 did not start: %r" % first)
-        address = match.group(1)
-
-        def client(*command):
-            return subprocess.run([args.client, "--server", address, "--timeout_seconds", "60"]
-                                  + list(command), capture_output=True, text=True, timeout=90)
-
         big = client("create", "--scene", "block3", "--levels", "3")
         print("stopped: exit %d: %s" % (big.returncode, big.stderr.strip()))
         if big.returncode == 0:

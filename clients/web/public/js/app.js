@@ -14,6 +14,8 @@ import { bindKeys, wheelNudge } from './keys.js';
 import { statusText } from './status.js';
 import * as S from './sizing.js';
 import { Keep } from './keep.js';
+import { FaceHover } from './hover.js';
+import { Help } from './help.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -28,6 +30,7 @@ class App {
     this.decoder = new SurfaceDecoder();
     this.view = new View($('view'));
     this.tools = new Tools(this);
+    this.faceHover = new FaceHover(this);  // Extrude and Merge: the face under the pointer
     this.session = null;        // {id, token}
     this.info = null;           // the Session message
     this.stats = null;
@@ -90,6 +93,7 @@ class App {
     $('field').onchange = () => this.setField($('field').value);
     $('show-control').onchange = () => this.pollOverlays(true);
     $('show-loads').onchange = () => this.refreshMarkers();
+    this.help = new Help();  // the shortcuts, on the first visit and with ?
     bindKeys(this);
     this.onToolChanged();
   }
@@ -110,6 +114,7 @@ class App {
     }
     if (this.tools.tool === 'sharp') this.controlMesh().catch(() => {});
     this.view.showCursor(null);
+    this.faceHover.clear();
   }
 
   numberParam(key, label, step) {

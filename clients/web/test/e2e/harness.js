@@ -156,9 +156,12 @@ export async function launchBrowser() {
   });
 }
 
-// A page of the viewer, with its console and errors collected.
-export async function openViewer(browser, url, { width = 1280, height = 800 } = {}) {
+// A page of the viewer, with its console and errors collected. The help
+// overlay a first visit shows is marked seen unless `firstVisit` (it would
+// cover the view the tests press on).
+export async function openViewer(browser, url, { width = 1280, height = 800, firstVisit = false } = {}) {
   const page = await browser.newPage({ viewport: { width, height } });
+  if (!firstVisit) await page.addInitScript(() => localStorage.setItem('dynsolid.help.seen', '1'));
   page.consoleLines = [];
   page.on('console', (m) => page.consoleLines.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => page.consoleLines.push(`pageerror: ${e.message}`));

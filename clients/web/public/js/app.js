@@ -16,6 +16,7 @@ import * as S from './sizing.js';
 import { Keep } from './keep.js';
 import { FaceHover } from './hover.js';
 import { Help } from './help.js';
+import { ScenePicker } from './scenes.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -62,6 +63,7 @@ class App {
   // ---- UI ----
 
   bindUi() {
+    this.scenes = new ScenePicker($('scene-select'), $('scene-about'));  // sizes as built here
     $('create').onclick = () => this.create({ builtin_scene: $('scene-select').value });
     $('scene-file').onchange = async (e) => {
       const file = e.target.files[0];
@@ -235,6 +237,8 @@ class App {
     this.feedback.progress(`creating ${label || source.builtin_scene || 'scene'}: building the solid…`);
     try {
       const s = await this.conn.call('CreateSession', request);
+      // The picker's size for this scene: as built without a levels override.
+      if (source.builtin_scene && levels === '') this.scenes.remember(source.builtin_scene, s.stats);
       this.created = `created ${s.scene_name}: ${s.stats.cells} cells, ${s.stats.boundary_faces} surface quads`;
       await this.join({ id: s.id, token: s.token });
     } catch (err) {

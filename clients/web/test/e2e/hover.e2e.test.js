@@ -1,6 +1,6 @@
 // Issue 41's hints on block3, asserted on pixels and the page's state, not
 // on time: the help overlay on a first visit (remembered, reopened with
-// ?), Extrude and Merge lighting the control face under the pointer (green:
+// ?), the scene picker's size of a scene built here, Extrude and Merge lighting the control face under the pointer (green:
 // taken, blue: merge's first, red: refused with the reason by the pointer),
 // and a topology edit shown as "building…" with the seconds so far.
 //
@@ -78,10 +78,19 @@ test('a first visit shows the help; Got it closes it for good; ? opens it again,
   }
 });
 
-test('block3: Extrude lights the control face under the pointer, and only there', async () => {
+test('the scene picker shows a scene\'s size once it was built here', async () => {
+  assert.match(await page.textContent('#scene-about'), /^block3: not built in this browser yet/);
   await page.click('#create');
   await until(() => app(() => window.__dynsolid.sizing && window.__dynsolid.sizing.done), 'block3 drawn and sized', 60000);
   ref = await app(() => window.__dynsolid.session);
+  const s = (await grpc.call('GetSession', ref)).stats;
+  const about = await page.textContent('#scene-about');
+  assert.ok(about.startsWith(`block3 as last built here: ${s.control_cells} control cells, ${s.control_vertices} control points; `), about);
+  assert.match(await page.textContent('#scene-select option[value=block3]'), /^block3 · \d+(\.\dk|k)? cells$/);
+  assert.equal(await page.textContent('#scene-select option[value=chair]'), 'chair');
+});
+
+test('block3: Extrude lights the control face under the pointer, and only there', async () => {
   await tool('extrude');
   const a = await project(TOP);
   await away();

@@ -163,3 +163,16 @@ test('hover: the control faces Extrude and Merge take', () => {
   assert.deepEqual(facePoints(mesh, positions, 3), [{ x: 0, y: 0, z: 0 }, { x: 1, y: 2, z: 3 }, { x: 4, y: 8, z: 12 }]);
   assert.equal(facePoints(mesh, positions.slice(0, 6), 3), null);
 });
+
+test('scene picker: the size as last built here, or that it is not known yet', async () => {
+  const { keepStats, optionText, aboutText } = await import('../../public/js/scenes.js');
+  const k = keepStats({ control_cells: 120, control_vertices: 260, levels: 2, cells: 7680, boundary_faces: 4864,
+    model: 'corotational_cells', nodes: 9 });
+  assert.deepEqual(k, { control_cells: 120, control_vertices: 260, levels: 2, cells: 7680, boundary_faces: 4864,
+    model: 'corotational_cells' });
+  assert.equal(optionText('chair', k), 'chair · 7.7k cells');
+  assert.equal(optionText('chair', undefined), 'chair');
+  assert.equal(optionText('big', { ...k, cells: 123456 }), 'big · 123k cells');
+  assert.equal(aboutText('chair', k), 'chair as last built here: 120 control cells, 260 control points; 7.7k cells and 4.9k surface quads at level 2, corotational_cells');
+  assert.match(aboutText('torus', null), /not built in this browser yet/);
+});

@@ -200,6 +200,19 @@ export async function until(predicate, what, timeoutMs = 30000, everyMs = 100) {
 
 // A server, a gateway, Chromium and one viewer page, with a gRPC client of
 // the server; close() writes the page's console to `dir` and stops all.
+// What the e2e tests ask of a page: app(fn, arg) runs fn in it; messages()
+// the texts it said (its metrics); until(...) waits like `until` above and,
+// when it gives up, says the page's last six messages. `pageOf()` gives the
+// test's page at call time (tests open theirs in `before`).
+export function pageHelpers(pageOf) {
+  const app = (fn, arg) => pageOf().evaluate(fn, arg);
+  const messages = () => app(() => window.__dynsolid.metrics.messages.map((m) => m.text));
+  const untilSaid = (predicate, what, ms) => until(predicate, what, ms).catch(async (e) => {
+    throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
+  });
+  return { app, messages, until: untilSaid };
+}
+
 export async function startViewer(dir) {
   const env = { server: new Server(dir) };
   const address = await env.server.start();

@@ -9,7 +9,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import { startViewer, openViewer, outDir, until as waitFor, sleep } from './harness.js';
+import { startViewer, openViewer, outDir, pageHelpers, sleep } from './harness.js';
 import { canvasShot, share } from './pixels.js';
 
 const out = outDir('hover');
@@ -18,11 +18,7 @@ let page;
 let grpc;
 let ref;
 
-const app = (fn, arg) => page.evaluate(fn, arg);
-const messages = () => app(() => window.__dynsolid.metrics.messages.map((m) => m.text));
-const until = (predicate, what, ms) => waitFor(predicate, what, ms).catch(async (e) => {
-  throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
-});
+const { app, messages, until } = pageHelpers(() => page);
 const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
 const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
 const stats = () => grpc.call('GetStats', ref);

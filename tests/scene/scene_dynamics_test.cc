@@ -434,6 +434,7 @@ TEST(DefaultsTest, EmptySolverSettingsResolveToTheDocumentedDefaults) {
   EXPECT_EQ(s.element_products(), SolverSettings::FLOAT);
   EXPECT_EQ(s.mass(), SolverSettings::CONSISTENT);
   EXPECT_EQ(s.corotation(), SolverSettings::ELEMENT);
+  EXPECT_EQ(s.explicit_solve(), SolverSettings::FACTORED);
   // A resolved scene is still valid, and resolving is idempotent.
   Scene scene;
   scene.mutable_mesh()->set_file("x.vtk");
@@ -456,6 +457,7 @@ TEST(DefaultsTest, GivenSolverSettingsAreKept) {
   given->set_element_products(SolverSettings::DOUBLE);
   given->set_mass(SolverSettings::LUMPED);
   given->set_corotation(SolverSettings::CONTROL_CELL);
+  given->set_explicit_solve(SolverSettings::CG);
   EXPECT_TRUE(
       google::protobuf::util::MessageDifferencer::Equals(ResolvedSolverSettings(scene), *given));
 

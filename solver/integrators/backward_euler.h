@@ -1,4 +1,4 @@
-// Backward Euler for stiff scenes (MODEL.md section 5), linearized at p(t)
+// Backward Euler for stiff scenes (docs/model.md section 5), linearized at p(t)
 // with the element frames held fixed for the step:
 //
 //   (Mt + h Dt + h^2 Kt) dv = h (F - h Kt v - Dt v),   v = (p - p_prev) / h,

@@ -81,4 +81,15 @@ absl::Status CheckGravity(const LoadScale& s, double magnitude, std::string_view
                s.density * s.size * s.size / s.young, 0.5);
 }
 
+absl::Status CheckExtent(const Points& rest_control, const Points& p) {
+  if (rest_control.rows() == 0 || p.rows() == 0) return absl::OkStatus();
+  const double rest = (rest_control.colwise().maxCoeff() - rest_control.colwise().minCoeff()).norm();
+  const double now = (p.colwise().maxCoeff() - p.colwise().minCoeff()).norm();
+  if (now <= kMostSizes * rest) return absl::OkStatus();
+  return absl::InternalError(absl::StrFormat(
+      "the solid blew up: its control points spread over %.3g m, more than %g times their "
+      "rest extent of %.3g m",
+      now, kMostSizes, rest));
+}
+
 }  // namespace dynsolid::solid

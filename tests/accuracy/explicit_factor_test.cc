@@ -21,15 +21,15 @@
 namespace dynsolid::stability {
 namespace {
 
-struct Run {
+struct Outcome {
   bool made = false;  // Create accepted the scene (explicit steps may be refused)
   Points rest, p;
   int64_t cg_iterations = 0;
 };
 
-Run Simulate(const std::string& text, SolverSettings::ExplicitSolve solve, int threads,
+Outcome Simulate(const std::string& text, SolverSettings::ExplicitSolve solve, int threads,
              int steps) {
-  Run run;
+  Outcome run;
   auto scene = scene::ParseScene(text, "test");
   EXPECT_OK(scene);
   if (!scene.ok()) return run;
@@ -51,14 +51,14 @@ Run Simulate(const std::string& text, SolverSettings::ExplicitSolve solve, int t
 }
 
 // max |p_a - p_b| over the largest displacement from rest.
-double RelativeDifference(const Run& a, const Run& b) {
+double RelativeDifference(const Outcome& a, const Outcome& b) {
   const double moved = (b.p - b.rest).cwiseAbs().maxCoeff();
   return (a.p - b.p).cwiseAbs().maxCoeff() / moved;
 }
 
 void ExpectSameAnswer(const std::string& name, const std::string& text, int steps) {
-  const Run factored = Simulate(text, SolverSettings::FACTORED, 2, steps);
-  const Run cg = Simulate(text, SolverSettings::CG, 2, steps);
+  const Outcome factored = Simulate(text, SolverSettings::FACTORED, 2, steps);
+  const Outcome cg = Simulate(text, SolverSettings::CG, 2, steps);
   ASSERT_EQ(factored.made, cg.made) << name;
   if (!factored.made) return;
   const double rel = RelativeDifference(factored, cg);
@@ -96,11 +96,11 @@ TEST(ExplicitFactorTest, MatchesTheCgOnABlockBeyondTheExactPreconditioner) {
 }
 
 TEST(ExplicitFactorTest, SameBitsForAnyThreadCount) {
-  const Run one = Simulate(BlockScene(), SolverSettings::FACTORED, 1, 50);
+  const Outcome one = Simulate(BlockScene(), SolverSettings::FACTORED, 1, 50);
   ASSERT_TRUE(one.made);
   EXPECT_GT((one.p - one.rest).cwiseAbs().maxCoeff(), 1e-6);  // it moved
   for (int threads : {2, 3}) {
-    const Run other = Simulate(BlockScene(), SolverSettings::FACTORED, threads, 50);
+    const Outcome other = Simulate(BlockScene(), SolverSettings::FACTORED, threads, 50);
     ASSERT_TRUE(other.made);
     EXPECT_TRUE(other.p == one.p) << threads << " threads";
   }

@@ -414,9 +414,10 @@ TEST_F(EveryFieldTest, UndeclaredEnumNumbersAreRejectedNamingTheField) {
     ExpectPositioned(scene, name, rule);
     ++visited;
   });
-  // solver.model, .integrator, .element_products, .mass, .corotation and
-  // materials.base.preset, materials.regions.material.preset.
-  EXPECT_EQ(visited, 7);
+  // solver.model, .integrator, .element_products, .mass, .corotation,
+  // .explicit_solve and materials.base.preset,
+  // materials.regions.material.preset.
+  EXPECT_EQ(visited, 8);
 }
 
 // ------------------------------------------------------------- defaults

@@ -2,8 +2,8 @@
 // made once (solver.explicit_solve FACTORED, the default) instead of a CG a
 // step. On the accuracy cases (bench/stability_cases.h) and on a block
 // large enough for the CG to run on its incomplete Cholesky preconditioner,
-// the factored path gives the CG path's answer (CG to 1e-13) within 1e-9
-// of the motion, and the same bits for 1, 2 and 3 threads.
+// the factored path gives the CG path's answer (CG to 1e-13), and the same
+// bits for 1, 2 and 3 threads.
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -28,7 +28,7 @@ struct Outcome {
 };
 
 Outcome Simulate(const std::string& text, SolverSettings::ExplicitSolve solve, int threads,
-             int steps) {
+                 int steps) {
   Outcome run;
   auto scene = scene::ParseScene(text, "test");
   EXPECT_OK(scene);
@@ -50,23 +50,40 @@ Outcome Simulate(const std::string& text, SolverSettings::ExplicitSolve solve, i
   return run;
 }
 
-// max |p_a - p_b| over the largest displacement from rest.
+// max |p_a - p_b| over the largest displacement from rest (0 when neither moved).
 double RelativeDifference(const Outcome& a, const Outcome& b) {
   const double moved = (b.p - b.rest).cwiseAbs().maxCoeff();
-  return (a.p - b.p).cwiseAbs().maxCoeff() / moved;
+  const double apart = (a.p - b.p).cwiseAbs().maxCoeff();
+  return apart == 0 ? 0 : apart / moved;
 }
 
+// The factored solve against the CG (to 1e-13). After one step the answers
+// differ by the solves' rounding, scaled by the matrix's conditioning: about
+// 1e-15 of the motion on the plain cases, 2.5e-8 with a 1e9 penalty spring and
+// 6e-10 with a 1e6 density ratio, so the bound is 1e-7. Over many steps a
+// large, soft motion amplifies any difference (the corotation's rotations
+// depend on the positions): 3e-15 after one step grows to 4e-7 after 30 on
+// the softest block (E = 1e3), so the bound there is 1e-6. A wrong solve
+// differs by order one.
 void ExpectSameAnswer(const std::string& name, const std::string& text, int steps) {
+  const Outcome factored1 = Simulate(text, SolverSettings::FACTORED, 2, 1);
+  const Outcome cg1 = Simulate(text, SolverSettings::CG, 2, 1);
+  ASSERT_EQ(factored1.made, cg1.made) << name;
+  if (!factored1.made) return;
+  const double rel1 = RelativeDifference(factored1, cg1);
+
   const Outcome factored = Simulate(text, SolverSettings::FACTORED, 2, steps);
   const Outcome cg = Simulate(text, SolverSettings::CG, 2, steps);
-  ASSERT_EQ(factored.made, cg.made) << name;
-  if (!factored.made) return;
   const double rel = RelativeDifference(factored, cg);
-  std::printf("%s: %d steps, factored against CG (%lld iterations): %.3g of the motion\n",
-              name.c_str(), steps, static_cast<long long>(cg.cg_iterations), rel);
+  std::printf("%s: factored against CG, 1 step: %.3g of the motion; %d steps (%lld CG "
+              "iterations): %.3g\n",
+              name.c_str(), rel1, steps, static_cast<long long>(cg.cg_iterations), rel);
+  EXPECT_LT(rel1, 1e-7) << name << ": one step";
   EXPECT_EQ(factored.cg_iterations, 0) << name;
-  EXPECT_GT(cg.cg_iterations, 0) << name;
-  EXPECT_LT(rel, 1e-9) << name;
+  if (cg.p != cg.rest) {
+    EXPECT_GT(cg.cg_iterations, 0) << name;
+  }
+  EXPECT_LT(rel, 1e-6) << name;
 }
 
 // A 6^3-cell block (6 m) at level 0 (343 control points: the CG runs on its

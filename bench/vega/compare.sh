@@ -36,7 +36,6 @@ for arg in "$@"; do
 done
 NICE=(nice -n 5)
 WARMUP=5
-STEPS_TOTAL=$((WARMUP + STEPS))
 
 # --- dynsolid: already built, never built here ----------------------------
 DYN_BUILD="$REPO/build/release"
@@ -100,22 +99,6 @@ echo "building VegaFEM subset + vega_block in $BUILD_DIR/vega" >&2
   || { tail -40 "$BUILD_DIR/vega-build.log" >&2; exit 1; }
 VEGA="$BUILD_DIR/vega/vega_block"
 
-# --- dynsolid's top-face probe: compiled like scaling_bench, linked against the
-# libraries already in build/release (optional: without it, no dynsolid top_dx).
-PROBE="$BUILD_DIR/dynsolid_top_dx"
-probe_ok=0
-if [[ -f "$DYN_BUILD/build.ninja" ]]; then
-  LIBS="$(sed -n '/^build bench\/scaling_bench:/,/TARGET_FILE/p' "$DYN_BUILD/build.ninja" \
-          | sed -n 's/^ *LINK_LIBRARIES = //p')"
-  if [[ -n "$LIBS" ]] && (cd "$DYN_BUILD" && "${NICE[@]}" c++ -I"$REPO" -I"$DYN_BUILD/proto/gen" \
-        -isystem /usr/include/eigen3 -O3 -DNDEBUG -march=x86-64-v3 -std=c++20 \
-        -o "$PROBE" "$HERE/dynsolid_top_dx.cc" $LIBS) >"$BUILD_DIR/probe-build.log" 2>&1; then
-    probe_ok=1
-  fi
-fi
-((probe_ok)) || echo "warning: dynsolid_top_dx did not build (see $BUILD_DIR/probe-build.log);" \
-                     "no dynsolid displacement column" >&2
-
 # --- runs, interleaved per size ------------------------------------------------
 RAW="${RAW:-$BUILD_DIR/compare_raw.txt}"
 : > "$RAW"
@@ -133,9 +116,6 @@ for n in $SIZES; do
     | grep '^vega ' >> "$RAW" || echo "vega n=$n integrator=backward_euler failed=1" >> "$RAW"
   "${NICE[@]}" "$SCALING" --sizes="$n" --solvers=backward_euler --steps="$STEPS" \
     | grep '^| [0-9]' | sed 's/^/dynsolid_row /' >> "$RAW" || true
-  if ((probe_ok)); then
-    "${NICE[@]}" "$PROBE" --n="$n" --steps_total=$STEPS_TOTAL | grep '^dynsolid ' >> "$RAW" || true
-  fi
 done
 
 # --- table -------------------------------------------------------------------------

@@ -5,8 +5,8 @@
 
 RAW lines (written by compare.sh):
   vega n=12 integrator=central dofs=.. free_dofs=.. ms_per_step=.. build_s=.. peak_mb=.. top_dx=..
-  dynsolid_row | 12^3 | 6591 | factored | build s | ms/step | solve | ms/sim s | us/DOF | substeps | MB |
-  dynsolid n=12 solver=factored top_nodes=.. top_dx=.. steps_total=45
+  dynsolid_row | 12^3 | 6591 | factored | build s | ms/step | solve | ms/sim s | us/DOF | substeps | MB | top dx mm |
+(scaling_bench's table rows; top dx: the top face's mean x displacement after the run)
 """
 import sys
 
@@ -36,10 +36,8 @@ def parse(path):
             n = int(c[0].split("^")[0])
             dyn[(n, c[2])] = {"dofs": c[1], "build_s": float(c[3]), "ms": float(c[4]),
                               "solve_ms": float(c[5]), "substeps": c[8], "peak_mb": float(c[9])}
-        elif line.startswith("dynsolid "):
-            d = kv(line)
-            if "top_dx" in d:
-                dyn_dx[(int(d["n"]), d["solver"])] = float(d["top_dx"])
+            if len(c) >= 11 and c[10]:
+                dyn_dx[(n, c[2])] = float(c[10]) / 1000.0  # mm -> m, as Vega's
     return vega, dyn, dyn_dx, header
 
 
@@ -152,7 +150,7 @@ def main():
             a.set_title(title)
             a.grid(True, which="both", alpha=0.3)
         a1.legend(fontsize=8)
-        fig.suptitle("Block n^3, h = 1 ms, 1 thread: dynsolid vs VegaFEM (2-core VM, shared)",
+        fig.suptitle("Block n^3, h = 1 ms: dynsolid (2 threads) vs VegaFEM (1 thread), 2-core VM",
                      fontsize=10)
         fig.tight_layout()
         fig.savefig(plot, dpi=110)

@@ -10,15 +10,12 @@
 #include <string>
 #include <vector>
 
+#include "solver/common/stats.h"
+
 namespace dynsolid::bench {
 
-// The middle sample (the upper of the two middle ones for an even count);
-// 0 for none.
-inline double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
+// The median of a run's samples: the project's one (solver/common/stats.h).
+using ::dynsolid::Median;
 
 // This process's peak resident set so far (VmHWM in /proc/self/status), MB;
 // -1 where the kernel does not say.

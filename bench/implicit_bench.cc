@@ -43,6 +43,7 @@
 
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
+#include "solver/common/stats.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
@@ -75,18 +76,11 @@ double CpuMs() {
   return 1e3 * ts.tv_sec + 1e-6 * ts.tv_nsec;
 }
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
-  return v[k];
-}
-
 // Median of a phase over the measured steps; -1 (absent) stays -1.
 double PhaseMedian(const std::vector<PhaseTimes>& phases, double PhaseTimes::*field) {
   std::vector<double> v;
   for (const PhaseTimes& p : phases) v.push_back(p.*field);
-  return Percentile(v, 0.5);
+  return Median(v);
 }
 
 std::string Fmt(double ms) {

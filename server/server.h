@@ -33,7 +33,7 @@ struct ServerOptions {
   // Largest message received or sent, in bytes.
   int max_message_bytes = 4 << 20;
   // Level-L cells a session's solid may have at most (estimated before
-  // building; see EstimateFineCells). A built solid keeps about 1.4 KB per
+  // building; see subdivision::EstimateFineCells). A built solid keeps about 1.4 KB per
   // cell and needs about twice that while building (chair at 4 levels:
   // 311k cells, 430 MB), so memory is bounded by roughly
   // max_sessions * max_cells * 1.4 KB. The default admits every built-in

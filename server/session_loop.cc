@@ -10,6 +10,7 @@
 #include "absl/time/time.h"
 #include "dynsolid/journal.pb.h"
 #include "server/log.h"
+#include "solver/common/stats.h"
 #include "server/thread_priority.h"
 
 namespace dynsolid::server {
@@ -18,15 +19,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 constexpr size_t kStepWindow = 1000;
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  // Nearest rank: the smallest value with at least q of the values <= it.
-  std::sort(v.begin(), v.end());
-  size_t k = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
-  if (k > 0) --k;
-  return v[std::min(k, v.size() - 1)];
-}
 
 void PushWindow(std::deque<double>& d, double v) {
   d.push_back(v);

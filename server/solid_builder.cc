@@ -19,6 +19,7 @@
 #include "solver/common/status_macros.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
+#include "solver/subdivision/cell_count.h"
 
 namespace dynsolid::server {
 namespace {
@@ -41,48 +42,6 @@ absl::Status RejectMeshFile(const Scene& scene, absl::string_view origin) {
       "\") is not accepted in a scene sent to the server, which never reads its own files "
       "for a client; describe the mesh with a generator (mesh.block, mesh.beam, mesh.tube, "
       "mesh.torus, mesh.voxels) or use a builtin_scene"));
-}
-
-// Each vertex's valence within one level-0 cell (faces as vertex loops):
-// the number of the cell's edges that meet there.
-std::vector<int64_t> CellVertexValences(const std::vector<std::vector<int32_t>>& faces) {
-  std::vector<std::pair<int32_t, int32_t>> edges;
-  for (const auto& loop : faces) {
-    for (size_t i = 0; i < loop.size(); ++i) {
-      const int32_t a = loop[i], b = loop[(i + 1) % loop.size()];
-      edges.emplace_back(std::min(a, b), std::max(a, b));
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-  std::vector<int32_t> ends;
-  for (const auto& [a, b] : edges) {
-    ends.push_back(a);
-    ends.push_back(b);
-  }
-  std::sort(ends.begin(), ends.end());
-  std::vector<int64_t> valences;
-  for (size_t i = 0; i < ends.size();) {
-    size_t j = i;
-    while (j < ends.size() && ends[j] == ends[i]) ++j;
-    valences.push_back(static_cast<int64_t>(j - i));
-    i = j;
-  }
-  return valences;
-}
-
-// Level-`levels` descendants (levels >= 1) of the level-1 child that
-// MacCracken-Joy makes at a cell vertex of valence k. That child has 2k + 2
-// vertices: two of valence k (the old vertex and the cell point) and 2k of
-// valence 3, so it splits into 2 children of its own kind and 2k
-// hexahedra, and a hexahedron into 8 hexahedra.
-int64_t DescendantsOfVertexChild(int64_t k, int levels) {
-  int64_t own_kind = 1, hexahedra = 0;
-  for (int l = 1; l < levels; ++l) {
-    hexahedra = 8 * hexahedra + 2 * k * own_kind;
-    own_kind *= 2;
-  }
-  return own_kind + hexahedra;
 }
 
 }  // namespace
@@ -140,25 +99,6 @@ absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& req
           static_cast<int>(request.model_override())));
   }
   return out;
-}
-
-int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, int levels) {
-  const int64_t num_cells = static_cast<int64_t>(control.cells.size());
-  std::vector<uint8_t> refined(num_cells, 0);
-  for (int32_t c : scene.mesh().refine_cells()) {
-    if (c >= 0 && c < num_cells) refined[c] = 1;
-  }
-  int64_t cells = 0;
-  for (int64_t c = 0; c < num_cells; ++c) {
-    // A locally refined cell is one level ahead of the others.
-    const int l = levels + refined[c];
-    if (l == 0) {
-      ++cells;
-      continue;
-    }
-    for (int64_t k : CellVertexValences(control.cells[c])) cells += DescendantsOfVertexChild(k, l);
-  }
-  return cells;
 }
 
 namespace {
@@ -325,7 +265,9 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
       scene::ControlMeshInput(request.scene, request.base_dir);
   if (!control.ok()) return WithOrigin(control.status(), request.origin);
 
-  const int64_t estimate = EstimateFineCells(*control, request.scene, levels);
+  const auto& refine = request.scene.mesh().refine_cells();
+  const int64_t estimate = subdivision::EstimateFineCells(
+      *control, {refine.data(), static_cast<size_t>(refine.size())}, levels);
   if (absl::Status s = CheckSize(request, static_cast<double>(estimate), levels,
                                  absl::StrCat(control->cells.size(), " control cells"), limits);
       !s.ok()) {

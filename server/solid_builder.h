@@ -40,7 +40,7 @@ absl::StatusOr<SceneRequest> ResolveSceneRequest(const CreateSessionRequest& req
 
 struct BuildLimits {
   // Largest number of level-L cells a solid may have (estimated before
-  // subdividing, see EstimateFineCells).
+  // subdividing, see subdivision::EstimateFineCells).
   int64_t max_cells = 1'000'000;
   // Threads that step each solid (Solid::Create; results do not depend on
   // it). 0: all cores but one, at least one (the other core is left to
@@ -99,15 +99,6 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
 // Builds solids for a session made from `request` (sim_core.h
 // SolidFactory): the request's own scene, or an edited scene.
 SolidFactory MakeSolidFactory(SceneRequest request, BuildLimits limits);
-
-// The number of level-`levels` cells MacCracken-Joy makes from `control`
-// (after locally refining scene.mesh.refine_cells): a cell splits into one
-// child per vertex, the child at a vertex of valence k has two vertices of
-// valence k and 2k of valence 3 and splits likewise, and a hexahedron
-// splits into 8. Exact without local refinement; with it, ignores the extra
-// vertices refinement adds to the refined cells' neighbours (an estimate for
-// the limit check, not a count). Cheap: no mesh is built.
-int64_t EstimateFineCells(const mesh::MeshInput& control, const Scene& scene, int levels);
 
 // The statistics of a built discretization.
 SolidStats ComputeStats(const scene::Discretization& d, double build_milliseconds);

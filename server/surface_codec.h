@@ -169,35 +169,7 @@ class SurfaceEncoder {
 // serialized body serves every watcher.
 std::string FrameTrailer(int64_t skipped, int64_t watcher_id);
 
-// Rebuilds positions from a watcher's frames.
-class SurfaceDecoder {
- public:
-  // Applies one frame. FailedPrecondition for a delta without a keyframe or
-  // whose base_step is not the last frame's step; InvalidArgument for a
-  // malformed frame.
-  absl::Status Apply(const Frame& frame);
-
-  bool has_keyframe() const { return has_keyframe_; }
-  int64_t step() const { return step_; }
-  int64_t topology_version() const { return topology_version_; }
-  // 3 per vertex, decoded in double precision.
-  std::vector<double> Positions() const;
-  const std::vector<int32_t>& quads() const { return quads_; }
-  const Vec3& error_bound() const { return error_bound_; }
-  const std::vector<float>& displacement() const { return displacement_; }
-  const std::vector<float>& strain() const { return strain_; }
-  const std::vector<float>& stiffness() const { return stiffness_; }
-  const std::vector<float>& mass() const { return mass_; }
-
- private:
-  bool has_keyframe_ = false;
-  int64_t step_ = 0;
-  int64_t topology_version_ = 0;
-  Grid grid_;
-  Vec3 error_bound_;
-  std::vector<int32_t> quads_;
-  std::vector<uint32_t> codes_;
-  std::vector<float> displacement_, strain_, stiffness_, mass_;
-};
+// The decoder is the client library's (clients/lib/surface.h): one for the
+// C++ side, which the server's tests run on its frames.
 
 }  // namespace dynsolid::server

@@ -8,14 +8,6 @@
 
 namespace dynsolid::haptic {
 
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  size_t k = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
-  if (k > 0) --k;
-  return v[std::min(k, v.size() - 1)];
-}
-
 LoopMetrics::LoopMetrics(double period, size_t reserve_ticks) : period_(period) {
   period_us_.reserve(reserve_ticks);
   lateness_us_.reserve(reserve_ticks);

@@ -7,10 +7,12 @@
 #include <string>
 #include <vector>
 
+#include "clients/lib/stats.h"
+
 namespace dynsolid::haptic {
 
-// Nearest-rank percentile (q in [0, 1]) of v; 0 for an empty v.
-double Percentile(std::vector<double> v, double q);
+// The client library's nearest-rank percentile.
+using client::Percentile;
 
 struct LoopSummary {
   double seconds = 0;

@@ -358,14 +358,6 @@ std::string MessageJson(const google::protobuf::Message& m) {
 
 }  // namespace
 
-double Percentile(std::vector<double> values, double p) {
-  if (values.empty()) return 0;
-  std::sort(values.begin(), values.end());
-  const double rank = std::ceil(p * static_cast<double>(values.size()));
-  const size_t i = static_cast<size_t>(std::clamp(rank, 1.0, double(values.size()))) - 1;
-  return values[i];
-}
-
 absl::StatusOr<RunReport> RunScript(const ChannelFactory& channels, const Script& script,
                                     const RunOptions& options) {
   const Clock::time_point start = Clock::now();

@@ -13,6 +13,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "absl/status/statusor.h"
+#include "clients/lib/stats.h"
 #include "absl/time/time.h"
 #include "clients/lib/channel.h"
 #include "clients/lib/command_channel.h"
@@ -96,7 +97,5 @@ std::string ReportJson(const RunReport& report);
 // A few lines for people.
 std::string ReportText(const RunReport& report);
 
-// Nearest-rank percentile (p in [0, 1]) of `values` (0 when empty).
-double Percentile(std::vector<double> values, double p);
 
 }  // namespace dynsolid::client

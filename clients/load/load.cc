@@ -18,6 +18,7 @@
 #include "absl/strings/str_split.h"
 #include "clients/lib/channel.h"
 #include "clients/lib/command_channel.h"
+#include "clients/lib/stats.h"
 #include "clients/lib/watcher.h"
 #include "clients/load/mix.h"
 #include "clients/load/server_process.h"
@@ -45,12 +46,9 @@ Percentiles Summarize(std::vector<double> v) {
   p.count = static_cast<int64_t>(v.size());
   if (v.empty()) return p;
   std::sort(v.begin(), v.end());
-  auto at = [&](double q) {
-    return v[std::min(v.size() - 1, static_cast<size_t>(std::ceil(q * v.size())) - (q > 0 ? 1 : 0))];
-  };
-  p.p50 = at(0.5);
-  p.p99 = at(0.99);
-  p.p999 = at(0.999);
+  p.p50 = client::Percentile(v, 0.5);
+  p.p99 = client::Percentile(v, 0.99);
+  p.p999 = client::Percentile(v, 0.999);
   p.max = v.back();
   return p;
 }

@@ -31,6 +31,8 @@
 namespace dynsolid::fem {
 
 enum class ElementKind : uint8_t { kCubic = 0, kLinear = 1, kPyramid = 2 };
+// How many kinds there are: loops over kinds run `kind < kElementKinds`.
+inline constexpr int kElementKinds = 3;
 
 inline constexpr int kCubicNodes = 64;
 inline constexpr int kLinearNodes = 8;

@@ -175,7 +175,7 @@ void Plasticity::Attach(models::CorotationalModel& model,
   scale_.assign(units.units, 0.0);
   int32_t unit = 0;
   int64_t entry = 0;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
     base_[kind] = unit;
     for (int32_t e = 0; e < block.size(); ++e, ++unit) {

@@ -175,11 +175,11 @@ CorotationalModel::CorotationalModel(const ElementLayout& layout, const Points& 
                                      int32_t quadrature_group_size, Products products)
     : layout_(layout), pool_(&pool), rest_(rest), num_nodes_(static_cast<int32_t>(rest.rows())) {
   pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
-  for (int kind = 1; kind < 3; ++kind) {
+  for (int kind = 1; kind < fem::kElementKinds; ++kind) {
     pooled_[kind] =
         SmallGroups(layout.blocks[kind], std::min(quadrature_group_size, kQuadratureGroupSize));
   }
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     frames_[kind].assign(layout.blocks[kind].size(), Eigen::Quaterniond::Identity());
   }
   if (products == Products::kNow) {
@@ -196,7 +196,7 @@ void CorotationalModel::EnsureProducts() const {
 
 void CorotationalModel::BuildProducts(const CorotationalModel* previous) {
   const ElementLayout& layout = layout_;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     // (A model made without products has no matrices to give.)
     const std::vector<int32_t> reuse = previous != nullptr && previous->has_products()
@@ -265,7 +265,7 @@ void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
   if (on == single_ && (!on || packed_f_[0].size() == packed_[0].size())) return;
   single_ = on;
   quadrature_.SetFloat(on);
-  for (int kind = 1; kind < 3; ++kind) {
+  for (int kind = 1; kind < fem::kElementKinds; ++kind) {
     for (size_t gi = 0; gi < small_[kind].size(); ++gi) {
       if (on) {
         small_f_[kind][gi].assign(small_[kind][gi].begin(), small_[kind][gi].end());
@@ -274,7 +274,7 @@ void CorotationalModel::SetSinglePrecisionLinearized(bool on) {
       }
     }
   }
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     packed_f_[kind].clear();
     if (on) {
       for (const PackedMatrix& k : packed_[kind]) packed_f_[kind].emplace_back(k);

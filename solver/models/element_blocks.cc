@@ -199,7 +199,7 @@ int64_t PerElementBytes(const ElementLayout& layout) {
 ElementSchedule ScheduleElements(const ElementLayout& layout, int32_t batch_size, int parts,
                                  int32_t num_nodes, const PooledGroups* pooled) {
   ElementSchedule out;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     std::vector<int32_t>& order = out.order[kind];
     order.reserve(block.by_group.size());
@@ -587,7 +587,7 @@ ElementLayout BuildElementLayout(const fem::ElementSet& elements, const Points& 
   MaterialTable table_of_materials(layout);
   // Arrays `whole` gave, by address: their material index once known.
   std::unordered_map<const void*, int32_t> whole_index;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const auto k = static_cast<fem::ElementKind>(kind);
     const fem::KindTable& table = layout.tables[kind] = fem::MakeKindTable(k);
     ElementBlock& block = layout.blocks[kind];
@@ -688,7 +688,7 @@ ElementLayout RelayoutMaterials(const ElementLayout& previous, const Points& res
   MaterialTable table_of_materials(layout);
   // previous's arrays (distinct by content) by their new index.
   std::vector<int32_t> kept(previous.materials.size(), -1);
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     layout.tables[kind] = previous.tables[kind];
     const ElementBlock& was = previous.blocks[kind];
     ElementBlock& block = layout.blocks[kind];

@@ -76,7 +76,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
   // Small cubic groups go to the quadrature points.
   const ElementBlock& cubic = layout.blocks[0];
   pooled_[0] = quadrature_.Choose(layout, quadrature_group_size);
-  for (int kind = 1; kind < 3; ++kind) {
+  for (int kind = 1; kind < fem::kElementKinds; ++kind) {
     pooled_[kind] = SmallGroups(layout.blocks[kind], quadrature_group_size);
   }
   // The cubic table's rule is a tensor Gauss rule of n1 points a side.
@@ -86,7 +86,7 @@ LocalFrameModel::LocalFrameModel(const ElementLayout& layout, DeformationMeasure
     const fem::Rule1d rule = fem::GaussLegendre(n1);
     kron_basis = KroneckerBasis::Make(rule.points, rule.weights);
   }
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = layout.blocks[kind];
     const fem::KindTable& table = layout.tables[kind];
     const std::vector<int32_t> reuse = previous != nullptr
@@ -180,7 +180,7 @@ Eigen::MatrixXd LocalFrameModel::K(int kind, int32_t group, int axis) const {
 
 InternalForceModel::Frames LocalFrameModel::frames() const {
   Frames out;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const std::vector<int32_t>& order = schedule_.order[kind];
     out[kind].resize(frames_[kind].size());
     for (size_t k = 0; k < order.size(); ++k) out[kind][order[k]] = frames_[kind][k];
@@ -189,7 +189,7 @@ InternalForceModel::Frames LocalFrameModel::frames() const {
 }
 
 void LocalFrameModel::set_frames(const Frames& frames) {
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const std::vector<int32_t>& order = schedule_.order[kind];
     for (size_t k = 0; k < order.size(); ++k) frames_[kind][k] = frames[kind][order[k]];
   }
@@ -554,7 +554,7 @@ double LocalFrameModel::ExactForces(const Points& d, Points& g) {
   if (!float_products_) return RunForces(d, g, packed_);
   // The float matrices' entries, products in double.
   std::array<std::vector<std::array<PackedMatrix, 3>>, 3> exact;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     for (const auto& k : packed_f_[kind]) {
       exact[kind].push_back({PackedMatrix(k[0]), PackedMatrix(k[1]), PackedMatrix(k[2])});
     }

@@ -84,7 +84,7 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
                 const std::vector<std::function<void()>>& beside) {
   const int32_t nc = static_cast<int32_t>(nm.cols());
   std::vector<Cell> cells(control_cells);
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
     for (int32_t e = 0; e < block.size(); ++e) {
       const int32_t fine = block.cell[e];
@@ -168,9 +168,9 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
     CellSumJob& job = jobs[j];
     const CellSumSpec& spec = *job.spec;
     std::array<std::vector<Key128>, 3> group_keys;
-    for (int kind = 0; kind < 3; ++kind) group_keys[kind].resize(layout.blocks[kind].groups.size());
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) group_keys[kind].resize(layout.blocks[kind].groups.size());
     pool.Run([&](int t) {
-      for (int kind = 0; kind < 3; ++kind) {
+      for (int kind = 0; kind < fem::kElementKinds; ++kind) {
         std::vector<Key128>& gk = group_keys[kind];
         for (size_t g = t; g < gk.size(); g += threads) gk[g] = spec.group_key(kind, static_cast<int32_t>(g));
       }

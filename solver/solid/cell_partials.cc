@@ -48,7 +48,7 @@ struct CellPoints::Impl {
   Impl(const models::ElementLayout& layout, const SparseMatrix& nm, int threads)
       : layout(layout), nm(nm), thread(threads) {
     if (fem::CubicTensorProducts::Applies(layout.tables[0])) cubic.emplace(layout.tables[0]);
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       once[kind] = std::vector<std::once_flag>(layout.blocks[kind].groups.size());
       shared[kind].resize(layout.blocks[kind].groups.size());
     }

@@ -34,7 +34,7 @@
 namespace dynsolid::solid {
 
 void Solid::Impl::MakeElementBoxes(const models::ElementLayout& l) {
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = l.blocks[kind];
     std::vector<Eigen::AlignedBox3d>& boxes = element_boxes[kind];
     boxes.resize(block.size());
@@ -53,7 +53,7 @@ void Solid::Impl::MakeElementBoxes(const models::ElementLayout& l) {
 absl::StatusOr<MaterialLocation> Solid::Impl::Locate(const Eigen::Vector3d& x, bool snap) const {
   const Points& rest = rest_nodes;
   std::vector<double> n, dn;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = layout->blocks[kind];
     const int nn = block.nodes;
     n.resize(nn);

@@ -104,7 +104,7 @@ void Solid::Impl::ControlMatricesFrom(const CellSums& sums, bool dense, bool has
 }
 
 bool Solid::Impl::SameMassAndDamping(const models::ElementLayout& l) const {
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& now = layout->blocks[kind];
     const models::ElementBlock& next = l.blocks[kind];
     if (now.size() != next.size()) return false;
@@ -147,7 +147,7 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
   const bool corot = settings.model() == SolverSettings::COROTATIONAL;
   const bool per_cell = corot && settings.corotation() == SolverSettings::CONTROL_CELL;
   double bytes = 0;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = l->blocks[kind];
     const double n = block.nodes;
     for (size_t gi = 0; gi < block.groups.size(); ++gi) {
@@ -418,7 +418,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   std::array<std::vector<models::MaterialPoint>, 3> base_arrays;
   models::ElementMaterials base_whole;
   if (materials == nullptr && whole == nullptr && painted.empty()) {
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       base_arrays[kind].assign(fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points, base);
     }
     base_whole = [&base_arrays](int kind, const fem::NodeMatrixX3&, int32_t) {

@@ -145,7 +145,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedPaint>> Solid::PreparePaint(
   std::array<std::vector<int32_t>, 3> painted;  // per element: index into arrays, or -1
   std::vector<std::vector<models::MaterialPoint>> arrays;
   fem::NodeMatrixX3 x;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = old.blocks[kind];
     const fem::KindTable& table = old.tables[kind];
     const int n = block.nodes;

@@ -105,7 +105,7 @@ int32_t Solid::Impl::CarryPlasticity(const Impl& old, const std::vector<int32_t>
       std::vector<std::vector<Unit>> out(im.d->control().num_cells());
       const std::vector<int32_t>& to_control = im.d->hierarchy.control_cell;
       int32_t unit = 0;
-      for (int kind = 0; kind < 3; ++kind) {
+      for (int kind = 0; kind < fem::kElementKinds; ++kind) {
         const models::ElementBlock& block = im.layout->blocks[kind];
         for (int32_t e = 0; e < block.size(); ++e, ++unit) {
           const int32_t* ids = block.element_nodes(e);

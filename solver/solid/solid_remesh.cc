@@ -217,7 +217,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   // (else empty).
   std::vector<std::array<std::vector<models::MaterialPoint>, 3>> uniform_arrays;
   if (!uniform) {
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       const models::ElementBlock& block = layout.blocks[kind];
       for (int32_t e = 0; e < block.size(); ++e) {
         old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
@@ -257,7 +257,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
         }
       }
       if (same && first != nullptr) {
-        for (int kind = 0; kind < 3; ++kind) {
+        for (int kind = 0; kind < fem::kElementKinds; ++kind) {
           uniform_arrays[src][kind].assign(layout.tables[kind].points, *first);
         }
         continue;

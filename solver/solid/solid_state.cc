@@ -565,7 +565,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
         std::memcpy(static_cast<void*>(arrays[k].data()), v.data(), v.size() * sizeof(double));
       }
     }
-    for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds && r.ok(); ++kind) {
       const models::ElementBlock& block = cur.blocks[kind];
       const int64_t count = r.Count("elements", max_arrays);
       if (r.ok() && count != block.size()) {
@@ -585,7 +585,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   };
   models::InternalForceModel::Frames frames;
   auto read_frames = [&] {
-    for (int kind = 0; kind < 3 && r.ok(); ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds && r.ok(); ++kind) {
       const std::vector<double> v = r.Doubles("frames", 4 * int64_t{cur.blocks[kind].size()});
       if (!r.ok()) break;
       frames[kind].resize(cur.blocks[kind].size());
@@ -620,7 +620,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
              std::memcmp(arrays[k].data(), l.materials[k].data(),
                          arrays[k].size() * sizeof(models::MaterialPoint)) == 0;
     }
-    for (int kind = 0; kind < 3 && same; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds && same; ++kind) {
       const models::ElementBlock& block = l.blocks[kind];
       same = static_cast<int64_t>(element_array[kind].size()) == block.size();
       for (int32_t e = 0; e < block.size() && same; ++e) {

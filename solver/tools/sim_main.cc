@@ -146,7 +146,7 @@ int main(int argc, char** argv) {
     run.total_mass = s.total_mass();
     run.rest_volume = s.rest_volume();
     control = s.control_positions();
-    const double ms = dynsolid::tools::Median(run.step_ms);
+    const double ms = dynsolid::Median(run.step_ms);
     log->info("{} steps: median {:.3f} ms per step ({:.0f} steps/s), kinetic {:.4g} J, strain {:.4g} J, "
               "{} rollback(s), {} sub-step(s) at the end",
               steps, ms, ms > 0 ? 1000.0 / ms : 0.0, run.energies.kinetic, run.energies.strain,

@@ -13,13 +13,6 @@
 
 namespace dynsolid::tools {
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings& t,
                       const std::string& origin, const RunRecord& run) {
   const auto& e = d.elements;

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "absl/status/status.h"
+#include "solver/common/stats.h"
 #include "solver/scene/build.h"
 #include "solver/solid/solid.h"
 
@@ -32,8 +33,6 @@ struct RunRecord {
 std::string StatsJson(const scene::Discretization& d, const scene::BuildTimings& t,
                       const std::string& origin, const RunRecord& run);
 
-// Median of `v` (0 for empty).
-double Median(std::vector<double> v);
 
 // Writes DIR/stats.json, DIR/boundary.obj, DIR/boundary.ply (with a
 // per-vertex `element_kind` field of the cell each boundary vertex first

@@ -65,7 +65,7 @@ TEST(CorotationalFoldTest, UpdateFramesThenAffineForcesIsForcesBitForBit) {
     const double eb = b->model->AffineForces(d, gb);
     EXPECT_EQ(ea, eb) << "state " << k;
     EXPECT_TRUE(ga == gb) << "state " << k;
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       const auto fa = a->model->frames()[kind];
       const auto fb = b->model->frames()[kind];
       ASSERT_EQ(fa.size(), fb.size());
@@ -121,7 +121,7 @@ TEST(CorotationalFoldTest, ResultsAreBitIdenticalForAnyPoolSize) {
     }
     EXPECT_EQ(e, e1) << threads << " threads";
     EXPECT_TRUE(g == g1) << threads << " threads";
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       for (size_t i = 0; i < frames1[kind].size(); ++i) {
         ASSERT_TRUE(f->model->frames()[kind][i].coeffs() == frames1[kind][i].coeffs())
             << threads << " threads";

@@ -132,7 +132,7 @@ TEST(CorotationalTest, GroupMatricesAreSymmetricWithTheRigidMotionsAsTheirNullSp
     // Worst cases over all groups, per kind: zero modes relative to the
     // largest eigenvalue (l[5] / l_max), the first non-zero one (l[6] / l_max),
     // and |K m| / (|K| |m|) over the six rigid modes m.
-    for (int kind = 0; kind < 3; ++kind) {
+    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       const ElementBlock& block = f->layout.blocks[kind];
       if (std::string(name) == "mixed") {
         ASSERT_GT(block.groups.size(), 0u) << "kind " << kind;
@@ -204,7 +204,7 @@ double ReferenceForces(const Fixture& f, const Points& d, Points& g) {
   g.setZero(d.rows(), 3);
   double energy = 0;
   fem::NodeMatrixX3 x0, x, grad;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = f.layout.blocks[kind];
     const fem::KindTable& table = f.layout.tables[kind];
     const int n = block.nodes;
@@ -415,7 +415,7 @@ TEST(CorotationalTest, AModelWithProductsWhenUsedMakesThemOnFirstUseWithTheSameB
   EXPECT_EQ(lazy.shared_matrix_bytes(), 0);
   EXPECT_EQ(lazy.quadrature_elements(), 0);
   // Its group choices are there before: what a cell corotation keys on.
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     for (size_t g = 0; g < f->layout.blocks[kind].groups.size(); ++g) {
       EXPECT_EQ(lazy.at_quadrature_points(kind, static_cast<int32_t>(g)),
                 f->model->at_quadrature_points(kind, static_cast<int32_t>(g)));

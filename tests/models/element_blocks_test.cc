@@ -156,7 +156,7 @@ void ExpectSameLayout(const ElementLayout& a, const ElementLayout& b) {
   for (size_t k = 0; k < a.materials.size(); ++k) EXPECT_EQ(a.materials[k], b.materials[k]) << k;
   EXPECT_EQ(a.rest_volume, b.rest_volume);
   EXPECT_EQ(a.inverted_elements, b.inverted_elements);
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& x = a.blocks[kind];
     const ElementBlock& y = b.blocks[kind];
     EXPECT_EQ(x.node_ids, y.node_ids);
@@ -198,7 +198,7 @@ TEST_P(RelayoutTest, EqualsTheLayoutBuiltFromTheSameSamples) {
   std::vector<std::vector<MaterialPoint>> arrays;
   std::array<std::vector<int32_t>, 3> index;
   int32_t given = 0;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = f.layout.blocks[kind];
     const fem::KindTable& table = f.layout.tables[kind];
     index[kind].assign(block.size(), -1);

@@ -33,7 +33,7 @@ std::unique_ptr<Fixture> Build(const std::string& name, int levels) {
 
 TEST(LocalFrameTest, ElementMatricesAreSymmetricWithConstantsAsTheirNullSpace) {
   auto f = Build("mixed", 2);  // cubic, linear and pyramid elements
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const ElementBlock& block = f->layout.blocks[kind];
     ASSERT_GT(block.groups.size(), 0u) << "kind " << kind;
     for (size_t g = 0; g < std::min<size_t>(block.groups.size(), 6); ++g) {

@@ -18,6 +18,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/journal.h"
+#include "clients/lib/surface.h"
 #include "server/surface_codec.h"
 #include "solver/scene/scene_loader.h"
 
@@ -56,10 +57,10 @@ std::shared_ptr<SurfaceSnapshot> Wave(std::shared_ptr<const SurfaceTopology> top
 }
 
 // Largest |decoded - server| per axis, divided by the stated bound.
-double WorstRatio(const SurfaceDecoder& d, const SurfaceSnapshot& s) {
-  const std::vector<double> p = d.Positions();
+double WorstRatio(const client::SurfaceDecoder& d, const SurfaceSnapshot& s) {
+  const std::vector<double> p = d.surface().positions;
   EXPECT_EQ(p.size(), s.positions.size());
-  const double bound[3] = {d.error_bound().x(), d.error_bound().y(), d.error_bound().z()};
+  const double bound[3] = {d.surface().error_bound[0], d.surface().error_bound[1], d.surface().error_bound[2]};
   double worst = 0;
   for (size_t i = 0; i < p.size() && i < s.positions.size(); ++i) {
     worst = std::max(worst, std::abs(p[i] - s.positions[i]) / bound[i % 3]);
@@ -70,7 +71,7 @@ double WorstRatio(const SurfaceDecoder& d, const SurfaceSnapshot& s) {
 TEST(SurfaceCodecTest, KeyframeThenDeltasReconstructWithinTheStatedBound) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   int keyframes = 0;
   for (int k = 0; k < 60; ++k) {
@@ -83,7 +84,7 @@ TEST(SurfaceCodecTest, KeyframeThenDeltasReconstructWithinTheStatedBound) {
   }
   EXPECT_EQ(keyframes, 1);
   EXPECT_TRUE(frame.has_delta());
-  EXPECT_EQ(dec.quads().size(), topo->quads.size());
+  EXPECT_EQ(dec.surface().quads.size(), topo->quads.size());
 }
 
 TEST(SurfaceCodecTest, TheBoundIsHalfAGridStepOfTheWidenedBox) {
@@ -103,7 +104,7 @@ TEST(SurfaceCodecTest, TheBoundIsHalfAGridStepOfTheWidenedBox) {
 TEST(SurfaceCodecTest, UnmovedSurfaceSendsAnEmptyDelta) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   ASSERT_TRUE(dec.Apply(frame).ok());
@@ -135,7 +136,7 @@ TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
 TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   auto base = Wave(topo, 0, 0.2, 0);
   enc.Encode(base, &frame);
@@ -155,14 +156,14 @@ TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
   // (4 bits each) is shorter than any Rice code.
   Frame key;
   SurfaceEncoder enc2(FieldChoice{});
-  SurfaceDecoder dec2;
+  client::SurfaceDecoder dec2;
   enc2.Encode(base, &key);
   ASSERT_TRUE(dec2.Apply(key).ok());
   const Keyframe& k = key.keyframe();
   const double sx = k.grid().step().x(), sy = k.grid().step().y(), sz = k.grid().step().z();
   auto shifted = std::make_shared<SurfaceSnapshot>(*base);
   shifted->step = 1;
-  const std::vector<double> start = dec2.Positions();
+  const std::vector<double> start = dec2.surface().positions;
   for (size_t i = 0; i < start.size(); i += 3) {
     shifted->positions[i] = start[i] + 5 * sx;
     shifted->positions[i + 1] = start[i + 1] + 5 * sy;
@@ -179,7 +180,7 @@ TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
 TEST(SurfaceCodecTest, LeavingTheGridOrChangingTopologyGivesAKeyframe) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   EXPECT_TRUE(enc.Encode(Wave(topo, 0, 0.2, 0), &frame));
   ASSERT_TRUE(dec.Apply(frame).ok());
@@ -202,7 +203,7 @@ TEST(SurfaceCodecTest, AWatcherThatSkippedManyFramesResumesConsistently) {
   // either a larger delta or, when that would be bigger, a fresh keyframe.
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
   ASSERT_TRUE(dec.Apply(frame).ok());
@@ -216,7 +217,7 @@ TEST(SurfaceCodecTest, AWatcherThatSkippedManyFramesResumesConsistently) {
 TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   auto topo = GridTopology(4);
   SurfaceEncoder enc(FieldChoice{true, false, true});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame frame;
   auto a = Wave(topo, 0, 0.2, 0);
   a->displacement.assign(16, 0.5f);
@@ -242,14 +243,14 @@ TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
   c->stiffness.assign(16, 2e5f);
   EXPECT_TRUE(enc.Encode(c, &frame));
   ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_EQ(dec.stiffness(), std::vector<float>(16, 2e5f));
+  EXPECT_EQ(dec.surface().stiffness, std::vector<float>(16, 2e5f));
 }
 
 TEST(SurfaceCodecTest, MassTravelsBesideTheOtherFieldsAndAMassPaintSendsAKeyframe) {
   auto topo = GridTopology(4);
   SurfaceEncoder enc(FieldChoice{true, true, true, true});
   SurfaceEncoder mass_only(FieldChoice{false, false, false, true});
-  SurfaceDecoder dec, dec_mass;
+  client::SurfaceDecoder dec, dec_mass;
   Frame frame;
   auto fill = [](SurfaceSnapshot& s, float density) {
     s.displacement.assign(16, 0.5f);
@@ -265,7 +266,7 @@ TEST(SurfaceCodecTest, MassTravelsBesideTheOtherFieldsAndAMassPaintSendsAKeyfram
   EXPECT_EQ(frame.keyframe().fields().mass(3), 1003.0f);
   const size_t all_four = frame.ByteSizeLong();
   ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_EQ(dec.mass(), a->mass);
+  EXPECT_EQ(dec.surface().mass, a->mass);
   EXPECT_TRUE(mass_only.Encode(a, &frame));
   EXPECT_EQ(frame.keyframe().fields().mass_size(), 16);
   EXPECT_EQ(frame.keyframe().fields().stiffness_size(), 0);
@@ -279,12 +280,12 @@ TEST(SurfaceCodecTest, MassTravelsBesideTheOtherFieldsAndAMassPaintSendsAKeyfram
   EXPECT_GT(frame.delta().moved(), 0);
   EXPECT_EQ(frame.delta().fields().mass_size(), frame.delta().moved());
   ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_EQ(dec.mass(), b->mass) << "every vertex of the wave moved";
+  EXPECT_EQ(dec.surface().mass, b->mass) << "every vertex of the wave moved";
   EXPECT_FALSE(mass_only.Encode(b, &frame));
   EXPECT_EQ(frame.delta().fields().mass_size(), frame.delta().moved());
   EXPECT_EQ(frame.delta().fields().displacement_size(), 0);
   ASSERT_TRUE(dec_mass.Apply(frame).ok());
-  EXPECT_EQ(dec_mass.mass(), b->mass);
+  EXPECT_EQ(dec_mass.surface().mass, b->mass);
   // A density paint without motion (fields_version moves): a keyframe.
   auto c = Wave(topo, 2, 0.2, 0.3);
   fill(*c, 2000);
@@ -292,7 +293,7 @@ TEST(SurfaceCodecTest, MassTravelsBesideTheOtherFieldsAndAMassPaintSendsAKeyfram
   c->mass[5] = 7000;
   EXPECT_TRUE(mass_only.Encode(c, &frame));
   ASSERT_TRUE(dec_mass.Apply(frame).ok());
-  EXPECT_EQ(dec_mass.mass(), c->mass);
+  EXPECT_EQ(dec_mass.surface().mass, c->mass);
   // Without fields a paint changes nothing on the wire: an empty delta.
   SurfaceEncoder plain(FieldChoice{});
   plain.Encode(b, &frame);
@@ -305,7 +306,7 @@ TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGri
   auto topo = GridTopology();
   auto cache = std::make_shared<EncodeCache>();
   SurfaceEncoder a(FieldChoice{}, cache), b(FieldChoice{}, cache), alone(FieldChoice{});
-  SurfaceDecoder da, db, dalone;
+  client::SurfaceDecoder da, db, dalone;
   Frame fa, fb, f;
   // a joins at step 0, b at step 1: b keys on a's grid (it still fits).
   auto s0 = Wave(topo, 0, 0.2, 0), s1 = Wave(topo, 1, 0.2, 0.01);
@@ -318,7 +319,7 @@ TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGri
   ASSERT_TRUE(da.Apply(fa).ok());
   ASSERT_TRUE(db.Apply(fb).ok());
   EXPECT_EQ(fb.keyframe().grid().origin().x(), 0 - 0.5);  // s0's grid
-  EXPECT_EQ(db.Positions(), da.Positions());
+  EXPECT_EQ(db.surface().positions, da.surface().positions);
   // From now on both are in the same state: one encoding serves both.
   const int64_t misses = cache->misses();
   for (int k = 2; k < 12; ++k) {
@@ -335,7 +336,7 @@ TEST(SurfaceCodecTest, WatchersInTheSameStateShareOneEncodingAndConvergeOnOneGri
   EXPECT_EQ(cache->misses() - misses, 10);  // one computation per snapshot
   EXPECT_GE(cache->hits(), 10);
   // Sharing changes no bit of what a watcher decodes.
-  EXPECT_EQ(da.Positions(), dalone.Positions());
+  EXPECT_EQ(da.surface().positions, dalone.surface().positions);
 }
 
 TEST(SurfaceCodecTest, SharedBytesWithATrailerAreExactlyEachWatchersFrame) {
@@ -343,7 +344,7 @@ TEST(SurfaceCodecTest, SharedBytesWithATrailerAreExactlyEachWatchersFrame) {
   auto cache = std::make_shared<EncodeCache>();
   SurfaceEncoder a(FieldChoice{true, false, true}, cache), b(FieldChoice{true, false, true}, cache);
   SurfaceEncoder alone(FieldChoice{true, false, true});
-  SurfaceDecoder da, db, dalone;
+  client::SurfaceDecoder da, db, dalone;
   for (int k = 0; k < 8; ++k) {
     auto snap = Wave(topo, k, 0.2, 0.01 * k);
     snap->displacement.assign(topo->vertex_count, 0.5f * k);
@@ -375,10 +376,10 @@ TEST(SurfaceCodecTest, SharedBytesWithATrailerAreExactlyEachWatchersFrame) {
     ASSERT_TRUE(db.Apply(got_b).ok()) << k;
     ASSERT_TRUE(dalone.Apply(f).ok()) << k;
     // Bit-identical to the watcher that encoded alone.
-    EXPECT_EQ(da.Positions(), dalone.Positions()) << k;
-    EXPECT_EQ(db.Positions(), dalone.Positions()) << k;
-    EXPECT_EQ(da.displacement(), dalone.displacement()) << k;
-    EXPECT_EQ(da.stiffness(), dalone.stiffness()) << k;
+    EXPECT_EQ(da.surface().positions, dalone.surface().positions) << k;
+    EXPECT_EQ(db.surface().positions, dalone.surface().positions) << k;
+    EXPECT_EQ(da.surface().displacement, dalone.surface().displacement) << k;
+    EXPECT_EQ(da.surface().stiffness, dalone.surface().stiffness) << k;
     EXPECT_LE(WorstRatio(da, *snap), 1.0 + 1e-9) << k;
   }
   EXPECT_EQ(FrameTrailer(0, 0), "");
@@ -387,7 +388,7 @@ TEST(SurfaceCodecTest, SharedBytesWithATrailerAreExactlyEachWatchersFrame) {
 TEST(SurfaceCodecTest, DecoderRefusesADeltaAgainstAnotherBase) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
-  SurfaceDecoder dec;
+  client::SurfaceDecoder dec;
   Frame first, second;
   enc.Encode(Wave(topo, 0, 0.2, 0), &first);
   enc.Encode(Wave(topo, 1, 0.2, 0.1), &second);

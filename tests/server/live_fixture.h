@@ -16,6 +16,7 @@
 #include "dynsolid/service.grpc.pb.h"
 #include "live_client.h"
 #include "server/server.h"
+#include "clients/lib/surface.h"
 #include "server/surface_codec.h"
 
 namespace dynsolid::server {
@@ -87,7 +88,7 @@ class LiveTest : public LoopbackServerTest {
 
 // Reads frames into a decoder until one at `step` arrives.
 inline ::testing::AssertionResult ReadUntilStep(grpc::ClientReader<Frame>& reader,
-                                         SurfaceDecoder& decoder, int64_t step,
+                                         client::SurfaceDecoder& decoder, int64_t step,
                                          std::vector<Frame>* frames = nullptr) {
   Frame f;
   while (decoder.step() != step || !decoder.has_keyframe()) {
@@ -101,10 +102,10 @@ inline ::testing::AssertionResult ReadUntilStep(grpc::ClientReader<Frame>& reade
 }
 
 // Largest |decoded - server| / bound over every coordinate.
-inline double WorstRatio(const SurfaceDecoder& d, const InspectReply& server) {
-  const std::vector<double> p = d.Positions();
+inline double WorstRatio(const client::SurfaceDecoder& d, const InspectReply& server) {
+  const std::vector<double> p = d.surface().positions;
   EXPECT_EQ(static_cast<int>(p.size()), server.surface_positions_size());
-  const double bound[3] = {d.error_bound().x(), d.error_bound().y(), d.error_bound().z()};
+  const double bound[3] = {d.surface().error_bound[0], d.surface().error_bound[1], d.surface().error_bound[2]};
   double worst = 0;
   for (int i = 0; i < server.surface_positions_size() && i < static_cast<int>(p.size()); ++i) {
     worst = std::max(worst, std::abs(p[i] - server.surface_positions(i)) / bound[i % 3]);

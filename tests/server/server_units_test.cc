@@ -64,51 +64,6 @@ TEST(TokensTest, TokensEqualComparesWholeStrings) {
   EXPECT_FALSE(TokensEqual("00ff0", "00ff"));
 }
 
-// The estimate against the built count on every built-in scene: exact
-// without local refinement, also for cells that are not hexahedra (mixed
-// has a pyramid whose apex has valence 4, a prism and a tetrahedron).
-TEST(EstimateFineCellsTest, MatchesTheBuiltCellCountOfEveryBuiltinScene) {
-  for (const std::string& name : scene::BuiltinSceneNames()) {
-    absl::StatusOr<Scene> scene = scene::BuiltinScene(name);
-    ASSERT_OK(scene);
-    absl::StatusOr<mesh::MeshInput> control =
-        scene::ControlMeshInput(*scene, scene::BuiltinSceneDir());
-    ASSERT_OK(control);
-    for (int levels = 0; levels <= 2; ++levels) {
-      absl::StatusOr<scene::Discretization> d = scene::Discretize(*scene, *control, levels);
-      ASSERT_OK(d);
-      const int64_t estimate = EstimateFineCells(*control, *scene, levels);
-      if (scene->mesh().refine_cells_size() == 0) {
-        EXPECT_EQ(estimate, d->fine().num_cells()) << name << " at " << levels << " levels";
-      } else {
-        // Refinement adds vertices to the neighbours' faces, which the
-        // estimate ignores: it may fall short, by at most a quarter here.
-        EXPECT_LE(estimate, d->fine().num_cells()) << name << " at " << levels << " levels";
-        EXPECT_GE(estimate, 0.75 * d->fine().num_cells())
-            << name << " at " << levels << " levels";
-      }
-    }
-  }
-}
-
-// With local refinement the estimate ignores the vertices refinement adds
-// to the neighbours' faces, so it may fall a little short.
-TEST(EstimateFineCellsTest, StaysCloseWithLocalRefinement) {
-  absl::StatusOr<Scene> scene = scene::ParseScene(
-      "mesh { block { nx: 3 ny: 3 nz: 3 } refine_cells: [0, 13] }", "refined");
-  ASSERT_OK(scene);
-  absl::StatusOr<mesh::MeshInput> control = scene::ControlMeshInput(*scene, "");
-  ASSERT_OK(control);
-  for (int levels = 0; levels <= 2; ++levels) {
-    absl::StatusOr<scene::Discretization> d = scene::Discretize(*scene, *control, levels);
-    ASSERT_OK(d);
-    const double cells = d->fine().num_cells();
-    const int64_t estimate = EstimateFineCells(*control, *scene, levels);
-    EXPECT_LE(estimate, cells) << "at " << levels << " levels";
-    EXPECT_GE(estimate, 0.8 * cells) << "at " << levels << " levels";
-  }
-}
-
 TEST(ResolveSceneRequestTest, ChecksSourceLevelsAndFiles) {
   CreateSessionRequest request;
   EXPECT_THAT(ResolveSceneRequest(request),

@@ -19,6 +19,7 @@
 #include "live_client.h"
 #include "live_fixture.h"
 #include "server/server.h"
+#include "clients/lib/surface.h"
 #include "server/surface_codec.h"
 
 namespace dynsolid::server {
@@ -43,7 +44,7 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
   *wr.mutable_session() = RefOf(s);
   wr.set_displacement(true);
   auto reader = stub_->Watch(&wc, wr);
-  SurfaceDecoder decoder;
+  client::SurfaceDecoder decoder;
   std::vector<Frame> frames;
   ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
   ASSERT_TRUE(frames[0].has_keyframe());
@@ -69,7 +70,7 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
     EXPECT_GT(worst, 0.0);  // quantized, not exact
     // And the block did move, by more than the bound.
     double largest_motion = 0;
-    const std::vector<double> now = decoder.Positions();
+    const std::vector<double> now = decoder.surface().positions;
     (void)now;
     for (const Frame& f : frames) {
       if (f.has_delta()) moved_total += f.delta().moved();
@@ -78,7 +79,7 @@ TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBo
     (void)largest_motion;
   }
   EXPECT_GT(moved_total, vertices) << "deltas listed too few moved vertices";
-  EXPECT_EQ(static_cast<int>(decoder.displacement().size()), vertices);
+  EXPECT_EQ(static_cast<int>(decoder.surface().displacement.size()), vertices);
   wc.TryCancel();
 }
 
@@ -93,7 +94,7 @@ TEST_F(LiveTest, AFrameFollowsAnAppliedCommandWithinAStepWhateverTheWatchRate) {
   *wr.mutable_session() = RefOf(s);
   wr.set_rate_hz(1);
   auto reader = stub_->Watch(&wc, wr);
-  SurfaceDecoder decoder;
+  client::SurfaceDecoder decoder;
   Frame first;
   ASSERT_TRUE(reader->Read(&first));
   ASSERT_TRUE(decoder.Apply(first).ok());
@@ -122,7 +123,7 @@ TEST_F(LiveTest, AnEarlyFrameGoesToTheCommandingClientsWatchersAndToThoseThatNam
   struct Watch {
     grpc::ClientContext context;
     std::unique_ptr<grpc::ClientReader<Frame>> reader;
-    SurfaceDecoder decoder;
+    client::SurfaceDecoder decoder;
     int64_t id = -1;
   };
   auto open = [&](Watch& w, const std::string& client) {
@@ -190,7 +191,7 @@ TEST_F(LiveTest, Block3DeltaFramesAreAtMostAQuarterOfRawFloat32Frames) {
   WatchRequest wr;
   *wr.mutable_session() = RefOf(s);
   auto reader = stub_->Watch(&wc, wr);
-  SurfaceDecoder decoder;
+  client::SurfaceDecoder decoder;
   std::vector<Frame> frames;
   ASSERT_TRUE(ReadUntilStep(*reader, decoder, 0, &frames));
   const int vertices = frames[0].keyframe().vertex_count();
@@ -265,7 +266,7 @@ TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsis
 
   // The fast watcher reads everything on its own thread.
   absl::Mutex mu;
-  SurfaceDecoder fast_decoder;
+  client::SurfaceDecoder fast_decoder;
   int64_t fast_frames = 0, fast_last_step = -1;
   bool fast_ok = true;
   std::thread fast_reader([&] {
@@ -343,7 +344,7 @@ TEST_F(LiveTest, ASlowWatcherNeitherSlowsTheLoopNorOtherWatchersAndResumesConsis
   ASSERT_EQ(paused.code(), 0);
   const InspectReply server = InspectAt(*stub_, s, 0);
   ASSERT_TRUE(server.paused());
-  SurfaceDecoder slow_decoder;
+  client::SurfaceDecoder slow_decoder;
   Frame f;
   int64_t reported_skips = 0;
   while (slow_decoder.step() != server.step()) {

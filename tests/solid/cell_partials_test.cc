@@ -32,7 +32,7 @@ models::MaterialSampler Damped(double (*c)(const Eigen::Vector3d&)) {
 Eigen::MatrixXd Reference(const models::test_util::MeshFixture& f, bool damping) {
   const Eigen::MatrixXd a = Eigen::MatrixXd(f.d.node_matrix);
   Eigen::MatrixXd nodes = Eigen::MatrixXd::Zero(a.rows(), a.rows());
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = f.layout.blocks[kind];
     const fem::KindTable& table = f.layout.tables[kind];
     const int n = table.nodes;

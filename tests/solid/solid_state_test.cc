@@ -167,7 +167,7 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   at += 8;
   for (uint64_t k = 0; k < arrays; ++k) at += 8 + 8 * u64(at);
   size_t frames_bytes = 0;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const uint64_t count = u64(at);
     at += 8 + 4 * count;
     frames_bytes += 8 + 32 * count;

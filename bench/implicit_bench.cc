@@ -58,7 +58,7 @@ ABSL_FLAG(bool, two_pass, false,
           "path Solid keeps for tests, for an A/B in one binary");
 ABSL_FLAG(std::string, cases, "static,pull,twist,orbit", "comma-separated cases to run");
 ABSL_FLAG(std::string, corotation, "element",
-          "element: a frame per finite element (MODEL.md 4b); cells: a frame per control cell "
+          "element: a frame per finite element (docs/model.md 4b); cells: a frame per control cell "
           "(solver.corotation CONTROL_CELL, models/cell_corotation.h)");
 
 namespace {

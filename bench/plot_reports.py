@@ -192,9 +192,9 @@ def accuracy_md(rows, args):
         f"bending frequency against Euler-Bernoulli {freq_an:.6g} Hz (1.875^2 sqrt(EI / rho A L^4)"
         " / 2 pi), measured from the zero crossings of the tip over 1.3 periods.",
         "",
-        "Models: `corotational` (a frame per element, MODEL.md 4b), `corotational_cells` (the "
+        "Models: `corotational` (a frame per element, docs/model.md 4b), `corotational_cells` (the "
         "same stiffness with a frame per control cell, `solver.corotation: CONTROL_CELL`), "
-        "`local_frame` (the paper's, MODEL.md 4a).",
+        "`local_frame` (the paper's, docs/model.md 4a).",
         "",
         "Static answers are linear, like the beam theories: the corotational model's linear "
         "static solve, and for the local-frame model (no assembled stiffness, no static solver) "

@@ -7,7 +7,10 @@
 #   scripts/fuzz_smoke.sh [SECONDS_PER_TARGET]   (default 20)
 # Environment: FUZZ_TARGETS="scene journal" runs only those; FUZZ_JOBS
 # (default 2) build jobs; FUZZ_NICE (default 0) niceness of builds and runs;
-# FUZZ_NO_BUILD=1 runs the targets as last built.
+# FUZZ_NO_BUILD=1 runs the targets as last built; FUZZ_SEED (default 1)
+# libFuzzer's -seed, so that a CI run explores the same inputs each time and
+# a red run is a finding, not luck (FUZZ_SEED=0: a new random seed per run,
+# for longer campaigns).
 # Prints per target: executions, coverage (libFuzzer's final cov:), and
 # crashes. Exits non-zero on any crash, leak, timeout or out-of-memory, and
 # prints the reproducer's path (build/fuzz/artifacts/<name>/...), which
@@ -75,7 +78,7 @@ for name in "${TARGETS[@]}"; do
   fi
   rc=0
   "${NICE[@]}" "$bin" -max_total_time="$SECONDS_PER_TARGET" -rss_limit_mb=2048 -timeout=10 \
-    -print_final_stats=1 -artifact_prefix="$artifacts/" "$corpus" >"$log" 2>&1 || rc=$?
+    -seed="${FUZZ_SEED:-1}" -print_final_stats=1 -artifact_prefix="$artifacts/" "$corpus" >"$log" 2>&1 || rc=$?
   execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -n 1 || true)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -n 1 | grep -o '[0-9]*' || true)
   reproducer=$(grep -o "Test unit written to .*" "$log" | tail -n 1 | sed 's/Test unit written to //' || true)

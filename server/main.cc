@@ -47,6 +47,10 @@ ABSL_FLAG(int64_t, max_session_bytes, 0,
           "Most memory a session's solid may need at its peak, bytes, estimated from the scene "
           "before anything is built (CreateSession is refused at once past it). 0: a quarter "
           "of the machine's physical memory; -1: no limit");
+ABSL_FLAG(double, build_memory_factor, 1.5,
+          "A solid's build is stopped (CreateSession refused with RESOURCE_EXHAUSTED, nothing "
+          "kept) when it grows the server's resident memory past this many times the "
+          "session's memory estimate; 0: never");
 ABSL_FLAG(int, sim_threads, 0,
           "Threads that step each session's solid (1-8; 0: all cores but one, at least one)");
 ABSL_FLAG(int, build_threads, 1, "Threads that build solids, off the gRPC threads");
@@ -141,6 +145,7 @@ int main(int argc, char** argv) {
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_cells = absl::GetFlag(FLAGS_max_cells);
   options.max_session_bytes = absl::GetFlag(FLAGS_max_session_bytes);
+  options.build_memory_factor = absl::GetFlag(FLAGS_build_memory_factor);
   options.build_threads = absl::GetFlag(FLAGS_build_threads);
   options.sim_threads = absl::GetFlag(FLAGS_sim_threads);
   options.encode_threads = absl::GetFlag(FLAGS_encode_threads);

@@ -8,12 +8,12 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/session_loop.h"
 #include "server/session_registry.h"
 #include "server/sim_core.h"
+#include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
@@ -36,7 +36,7 @@ Eigen::Vector3d FromVec3(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 // ------------------------------------------------------------ ProbeChannel
 
 bool ProbeChannel::Receive(const ProbePose& pose, const ProbeLimits& limits) {
-  absl::Status s = CheckFinite(pose, "pose");
+  absl::Status s = scene::ValidateValues(pose, "pose");
   absl::MutexLock lock(&mu_);
   ++received_;
   if (s.ok() && pose.seq() <= last_seq_) {
@@ -215,7 +215,7 @@ ProbeStats ProbeChannel::Stats() const {
 
 absl::StatusOr<std::shared_ptr<ProbeChannel>> ProbeHub::Attach(
     grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* reactor, const ProbeOptions& options) {
-  if (absl::Status s = CheckFinite(options, "options"); !s.ok()) return s;
+  if (absl::Status s = scene::ValidateValues(options, "options"); !s.ok()) return s;
   if (options.near_distance() < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         "options.near_distance: must be >= 0 (0: the default), got ", options.near_distance()));

@@ -59,7 +59,7 @@ struct ProbeLimits {
   double far_factor = 2.0;
   // Default near distance as a fraction of the largest extent.
   double near_fraction = 0.1;
-  // Default horizon tau, seconds (MODEL.md 9).
+  // Default horizon tau, seconds (docs/model.md 9).
   double horizon = 0.03;
   // A pose older than this (wall time, seconds) no longer applies its
   // force: a bridge that stopped sending does not keep pushing.

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <thread>
 
@@ -44,6 +45,11 @@ absl::Status CheckOptions(const ServerOptions& o) {
   }
   if (o.max_cells < 1) {
     return absl::InvalidArgumentError(absl::StrCat("max_cells must be >= 1, got ", o.max_cells));
+  }
+  if (!(o.build_memory_factor >= 0) || !std::isfinite(o.build_memory_factor)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "build_memory_factor must be finite and >= 0 (0: never stop a build), got ",
+        o.build_memory_factor));
   }
   if (o.sim_threads < 0 || o.sim_threads > 8) {
     return absl::InvalidArgumentError(
@@ -120,7 +126,8 @@ Server::Server(const ServerOptions& options, std::unique_ptr<Replicas> replicas)
       registry_(RegistryOptions{
           options.max_sessions,
           BuildLimits{options.max_cells, options.sim_threads,
-                      options.max_session_bytes < 0 ? 0 : options.max_session_bytes},
+                      options.max_session_bytes < 0 ? 0 : options.max_session_bytes,
+                      options.build_memory_factor},
           options.loop,
           options.data_dir, replicas_->IdPrefix(),
           [r = replicas_.get()](absl::string_view id) { return r->Elsewhere(id); }}),

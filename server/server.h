@@ -44,6 +44,8 @@ struct ServerOptions {
   // refused at once with RESOURCE_EXHAUSTED naming both. 0: a quarter of
   // the machine's physical memory (DefaultMaxSessionBytes); -1: no limit.
   int64_t max_session_bytes = 0;
+  // BuildLimits::build_memory_factor (--build_memory_factor).
+  double build_memory_factor = 1.5;
   // Threads that step each session's solid (0: all cores but one, at least
   // one; see BuildLimits::sim_threads).
   int sim_threads = 0;

@@ -7,13 +7,13 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/export_call.h"
-#include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "dynsolid/journal.pb.h"
 #include "server/journal.h"
 #include "server/log.h"
 #include "server/parsed_request.h"
 #include "server/probe.h"
+#include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
@@ -331,7 +331,7 @@ grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* con
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   std::shared_ptr<const SolidSession> session = SessionOrFinish(request->session(), reactor);
   if (session == nullptr) return reactor;
-  if (absl::Status s = CheckFinite(*request, "request"); !s.ok()) {
+  if (absl::Status s = scene::ValidateValues(*request, "request"); !s.ok()) {
     reactor->Finish(ToGrpcStatus(s));
     return reactor;
   }

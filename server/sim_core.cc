@@ -8,8 +8,8 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
-#include "server/finite_check.h"
 #include "solver/common/status_macros.h"
+#include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
 
 namespace dynsolid::server {
@@ -352,7 +352,7 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
 }
 
 absl::Status SimCore::Apply(const Command& c, CommandReply* reply, Prebuilt* prebuilt) {
-  if (absl::Status s = CheckFinite(c, "command"); !s.ok()) return s;
+  if (absl::Status s = scene::ValidateValues(c, "command"); !s.ok()) return s;
   switch (c.kind_case()) {
     case Command::kAddPointForce: {
       absl::StatusOr<int64_t> id = solid_->AddPointForce(c.add_point_force());
@@ -503,7 +503,7 @@ absl::Status SimCore::StepOnce() {
   if (!s.ok()) {
     paused_ = true;
     steps_remaining_ = 0;
-    last_error_ = absl::StrCat("step ", solid_->steps() + 1, " failed: ", s.message());
+    last_error_ = std::string(s.message());  // "step N failed: ..."
     return s;
   }
   if (steps_remaining_ > 0 && --steps_remaining_ == 0) paused_ = true;

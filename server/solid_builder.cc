@@ -1,16 +1,21 @@
 #include "server/solid_builder.h"
 
-#include <algorithm>
-#include <thread>
+#include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
+#include <optional>
+#include <string_view>
+#include <thread>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "solver/common/build_watch.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
@@ -218,6 +223,33 @@ absl::Status CheckSize(const SceneRequest& request, double fine_cells, int level
   return absl::OkStatus();
 }
 
+// This process's resident memory, bytes (0 when /proc does not say).
+int64_t ResidentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  int64_t size = 0, resident = 0;
+  if (!(statm >> size >> resident)) return 0;
+  return resident * static_cast<int64_t>(sysconf(_SC_PAGESIZE));
+}
+
+// The check a build of `request` runs between its phases: the process's
+// resident memory may grow by at most `factor` times `estimate` bytes from
+// where it was when the build began. (Other sessions' memory moves the
+// figure too; the factor leaves room for that.)
+common::BuildCheck MemoryWatch(const SceneRequest& request, int64_t estimate, double factor) {
+  const int64_t start = ResidentBytes();
+  const double allowed = factor * static_cast<double>(estimate);
+  return [start, allowed, estimate, factor, origin = request.origin](std::string_view phase) {
+    const int64_t grown = ResidentBytes() - start;
+    if (static_cast<double>(grown) <= allowed) return absl::OkStatus();
+    return absl::ResourceExhaustedError(absl::StrCat(
+        origin, ": the build was stopped after its ", std::string(phase), " phase: it had grown the server's "
+        "memory by ", Mib(static_cast<double>(grown)), ", more than ", factor,
+        " times the session's estimate of ", Mib(static_cast<double>(estimate)),
+        " (--build_memory_factor); nothing of it was kept. The estimate is too low for "
+        "this scene: use fewer levels or a coarser control mesh"));
+  };
+}
+
 }  // namespace
 
 int64_t EstimateSessionBytes(const Scene& scene, int64_t fine_cells, int levels) {
@@ -300,9 +332,16 @@ absl::StatusOr<BuiltSolid> BuildSolid(const SceneRequest& request, const BuildLi
     return s;
   }
 
+  // The build is watched against its estimate from here on.
+  std::optional<common::ScopedBuildWatch> watch;
+  if (limits.build_memory_factor > 0) {
+    watch.emplace(MemoryWatch(request, EstimateSessionBytes(request.scene, estimate, levels),
+                              limits.build_memory_factor));
+  }
   absl::StatusOr<scene::Discretization> d =
       scene::Discretize(request.scene, *control, request.levels);
   if (!d.ok()) return WithOrigin(d.status(), request.origin);
+  RETURN_IF_ERROR(common::CheckBuildWatch("subdivision"));
   SolidStats stats = ComputeStats(*d, 0);
   absl::StatusOr<std::unique_ptr<solid::Solid>> solid =
       solid::Solid::Create(request.scene, *std::move(d), SimThreads(limits.sim_threads));

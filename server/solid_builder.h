@@ -50,6 +50,13 @@ struct BuildLimits {
   // EstimateSessionBytes estimates it before anything is built; 0: no
   // limit.
   int64_t max_session_bytes = 0;
+  // A build is stopped, and what it made freed, when it has grown the
+  // process's resident memory past this many times its estimate
+  // (EstimateSessionBytes), checked between its phases
+  // (common::CheckBuildWatch); 0: never. The estimate errs high (a third to
+  // a half above what builds were measured to take), so the default of 1.5
+  // stops only a build that the estimate got badly wrong.
+  double build_memory_factor = 1.5;
 };
 
 // The memory a solid of `fine_cells` cells at subdivision level `levels`

@@ -8,11 +8,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
-#include "server/finite_check.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/session_loop.h"
 #include "server/sim_core.h"
+#include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
@@ -213,7 +213,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     WatchRequest request;
     grpc::ByteBuffer copy(raw);
     absl::Status s = grpc::SerializationTraits<WatchRequest>::Deserialize(&copy, &request).ok()
-                         ? CheckFinite(request, "")
+                         ? scene::ValidateValues(request, "")
                          : absl::InvalidArgumentError("WatchRequest: not a valid message");
     double rate = request.rate_hz();
     if (s.ok() && (rate < 0 || rate > options.max_watch_hz)) {

@@ -1,5 +1,5 @@
 // Quadrature tables per element kind and the rest geometry of an element
-// at its quadrature points (MODEL.md section 3).
+// at its quadrature points (docs/model.md section 3).
 //
 // An element matrix is a quadrature loop that reads like the formula:
 //   for q: dV = det(J0_q) w_q; G_q = dN_q J0_q^-1; M += mu N_q N_q^T dV ...

@@ -1,4 +1,4 @@
-// Element classification on the subdivided mesh (MODEL.md section 3).
+// Element classification on the subdivided mesh (docs/model.md section 3).
 //
 // Each level-L cell gets elements by kind:
 //  - cubic (BE): a hexahedron whose faces and vertices are interior, whose

@@ -20,7 +20,7 @@ inline constexpr int NodesOf(ElementKind kind) {
                                         : kPyramidNodes;
 }
 
-// Gauss-Legendre points per direction used for each kind (MODEL.md
+// Gauss-Legendre points per direction used for each kind (docs/model.md
 // section 3: 4 on cubic elements, 2 on linear and pyramid elements).
 inline constexpr int QuadratureOrder(ElementKind kind) {
   return kind == ElementKind::kCubic ? 4 : 2;

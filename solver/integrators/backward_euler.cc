@@ -4,13 +4,11 @@
 #include <cassert>
 #include <cmath>
 
-#include <Eigen/SparseCholesky>
 
 namespace dynsolid::integrators {
 
 struct BackwardEuler::Flat {
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> factor;
-  mutable Eigen::VectorXd out;
+  ReducedCholesky factor;  // on the free DOFs
 };
 
 std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& md,
@@ -18,29 +16,32 @@ std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& m
                                                           double h,
                                                           const Eigen::SparseMatrix<double>& k0) {
   const int64_t n = md.rows();
-  std::vector<Eigen::Triplet<double>> t;
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  t.reserve(static_cast<size_t>(3 * md.nonZeros() + k0.nonZeros()));
   for (int64_t r = 0; r < n; ++r) {
     for (SparseMatrix::InnerIterator it(md, r); it; ++it) {
-      for (int c = 0; c < 3; ++c) t.emplace_back(3 * r + c, 3 * it.col() + c, it.value());
+      for (int c = 0; c < 3; ++c) {
+        t.emplace_back(static_cast<int32_t>(3 * r + c), static_cast<int32_t>(3 * it.col() + c),
+                       it.value());
+      }
     }
   }
   for (int k = 0; k < k0.outerSize(); ++k) {
     for (Eigen::SparseMatrix<double>::InnerIterator it(k0, k); it; ++it) {
-      t.emplace_back(it.row(), it.col(), h * h * it.value());
+      t.emplace_back(static_cast<int32_t>(it.row()), static_cast<int32_t>(it.col()),
+                     h * h * it.value());
     }
   }
-  Eigen::SparseMatrix<double> p(3 * n, 3 * n);
+  SparseMatrix p(3 * n, 3 * n);
   p.setFromTriplets(t.begin(), t.end());
-  // Fixed DOFs: identity rows and columns.
-  for (int k = 0; k < p.outerSize(); ++k) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(p, k); it; ++it) {
-      if (fixed[it.row() / 3] || fixed[it.col() / 3]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
-    }
+  // Fixed DOFs leave the system (their rows of the solve are zero, as
+  // Precondition masks them).
+  std::vector<uint8_t> fixed_dofs(static_cast<size_t>(3 * n), 0);
+  for (int64_t i = 0; i < n; ++i) {
+    if (fixed[i]) fixed_dofs[3 * i] = fixed_dofs[3 * i + 1] = fixed_dofs[3 * i + 2] = 1;
   }
   auto flat = std::make_shared<Flat>();
-  flat->factor.compute(p);
-  if (flat->factor.info() != Eigen::Success) return nullptr;
-  flat->out.resize(3 * n);
+  if (!flat->factor.Factor(p, fixed_dofs)) return nullptr;
   return flat;
 }
 
@@ -55,9 +56,7 @@ void BackwardEuler::Precondition(const Points& r, Points& z) const {
     return;
   }
   // Row-major #control by 3 is the flat DOF vector 3 i + c.
-  const Eigen::Map<const Eigen::VectorXd> rv(r.data(), r.size());
-  flat_->out = flat_->factor.solve(rv);
-  Eigen::Map<Eigen::VectorXd>(z.data(), z.size()) = flat_->out;
+  flat_->factor.SolveVector(r.data(), z.data());  // row-major: DOF 3 i + c
   Mask(z);
 }
 

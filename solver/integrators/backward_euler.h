@@ -1,4 +1,4 @@
-// Backward Euler for stiff scenes (MODEL.md section 5), linearized at p(t)
+// Backward Euler for stiff scenes (docs/model.md section 5), linearized at p(t)
 // with the element frames held fixed for the step:
 //
 //   (Mt + h Dt + h^2 Kt) dv = h (F - h Kt v - Dt v),   v = (p - p_prev) / h,
@@ -8,9 +8,12 @@
 // matrix-free through a callback. Solved by preconditioned CG on all three
 // components at once (Kt couples them); the preconditioner is the incomplete
 // Cholesky factor of Mt + h Dt per component, or, after
-// SetStiffnessPreconditioner(K0), the sparse LDL^T factor of
-// Mt + h Dt + h^2 K0 with K0 the rest stiffness (the system itself at small
-// rotations: a handful of iterations whatever the stiffness).
+// SetStiffnessPreconditioner(K0), the sparse Cholesky factor of
+// Mt + h Dt + h^2 K0 on the free DOFs with K0 the rest stiffness (the
+// system itself at small rotations: a handful of iterations whatever the
+// stiffness), made by CHOLMOD (ReducedCholesky: METIS or AMD order,
+// supernodal factorization, simplicial solves; it replaced Eigen's
+// SimplicialLDLT, whose solve was most of a step on large meshes).
 //
 // Warm start. CG starts from dv0 extrapolated linearly from the last two
 // steps' dv (2 dv[n-1] - dv[n-2]; dv[n-1] after one step; zero after Setup
@@ -50,6 +53,7 @@
 #include <Eigen/SparseCore>
 
 #include "solver/integrators/cg.h"
+#include "solver/integrators/reduced_cholesky.h"
 
 namespace dynsolid::integrators {
 

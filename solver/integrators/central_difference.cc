@@ -4,14 +4,22 @@
 namespace dynsolid::integrators {
 
 void CentralDifference::Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h,
-                              std::vector<uint8_t> fixed) {
+                              std::vector<uint8_t> fixed, Solve solve) {
   mt_ = mt;
   dt_ = dt;
   h_ = h;
   lhs_ = 2.0 * (*mt);
   if (dt != nullptr) lhs_ += h * (*dt);
-  cg_.Setup(&lhs_, std::move(fixed),
-            lhs_.rows() <= kExactRows ? Preconditioner::kDirect : Preconditioner::kIncompleteCholesky);
+  factor_ = ReducedCholesky();
+  if (solve == Solve::kFactored && factor_.Factor(lhs_, fixed)) {
+    // No CG set-up (its preconditioner would be a second factor).
+    cg_ = ConjugateGradient();
+  } else {
+    factor_ = ReducedCholesky();
+    cg_.Setup(&lhs_, std::move(fixed),
+              lhs_.rows() <= kExactRows ? Preconditioner::kDirect
+                                        : Preconditioner::kIncompleteCholesky);
+  }
   lhs_diagonal_max_ = 0;
   for (int64_t i = 0; i < lhs_.rows(); ++i) lhs_diagonal_max_ = std::max(lhs_diagonal_max_, lhs_.coeff(i, i));
   rhs_.setZero(mt->rows(), 3);
@@ -30,6 +38,12 @@ CgStats CentralDifference::Step(const Points& p, const Points& p_prev, const Poi
     tmp_ = p - p_prev;
     delta_.noalias() = *dt_ * tmp_;
     rhs_ -= (2.0 * h_) * delta_;
+  }
+  if (factor_.factored()) {
+    // Exact to rounding: no iterations, no residual to report.
+    factor_.Solve(rhs_, delta_);
+    p_next = 2.0 * p - p_prev + delta_;
+    return CgStats{};
   }
   delta_.setZero();
   // A residual this small moves no control point by more than rounding

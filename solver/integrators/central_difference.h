@@ -4,15 +4,20 @@
 //   (2 Mt + h Dt) p(t+h) = 2 h^2 F(t) + 4 Mt p(t) - (2 Mt - h Dt) p(t-h),
 //   F(t) = A^T (f(t) - g(A p(t))),
 //
-// solved by preconditioned conjugate gradient warm-started from
-// 2 p(t) - p(t-h): the unknown is the correction to that guess, so the
-// relative tolerance (the paper's 1e-4) measures the force response. The
-// preconditioner is the matrix's exact Cholesky factor up to kExactRows
-// control points, then CG stops after an iteration per column (torus, 108
-// points: 15 iterations a step to 3, its solve 0.19 to 0.024 ms; nozzle,
-// 220: 12 to 3, 0.38 to 0.11 ms; the chair's set-up after an edit 2-3 ms
-// to 0.7-1), incomplete Cholesky above (the bridge's 392 points converge
-// in an iteration with it, and the dense solve took 0.20 ms to its 0.024).
+// solved for the correction to the guess 2 p(t) - p(t-h). The matrix
+// 2 Mt + h Dt is constant between set-ups (an edit, a paint of mass or
+// damping, a change of sub-step or of the fixed set), so by default
+// (Solve::kFactored) Setup factors it once on the free rows
+// (ReducedCholesky: CHOLMOD) and a step is a forward and a back
+// substitution for the three columns, exact to rounding (a 12^3-cell block
+// at level 0, 2197 points with ~224 entries a row: the CG took 19
+// iterations a step). Solve::kCg, the reference path and the fallback
+// where the factor cannot be made, is preconditioned conjugate gradient
+// warm-started from 2 p(t) - p(t-h): the unknown is the correction to that
+// guess, so the relative tolerance (the paper's 1e-4) measures the force
+// response. Its preconditioner is the matrix's exact Cholesky factor up to
+// kExactRows control points, then CG stops after an iteration per column,
+// incomplete Cholesky above.
 // Stiffness is explicit: stable only for h < 2 / omega_max
 // (the caller sub-steps). Fixed control points keep their positions.
 //
@@ -20,14 +25,22 @@
 #pragma once
 
 #include "solver/integrators/cg.h"
+#include "solver/integrators/reduced_cholesky.h"
 
 namespace dynsolid::integrators {
 
 class CentralDifference {
  public:
   static constexpr int64_t kExactRows = 256;
+  enum class Solve { kFactored, kCg };
   // mt (and dt when not null) must outlive the integrator.
-  void Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h, std::vector<uint8_t> fixed);
+  void Setup(const SparseMatrix* mt, const SparseMatrix* dt, double h, std::vector<uint8_t> fixed,
+             Solve solve = Solve::kFactored);
+
+  // Whether steps solve with the factor (kFactored asked and the factor
+  // made) rather than CG.
+  bool factored() const { return factor_.factored(); }
+  const ReducedCholesky& factor() const { return factor_; }
 
   CgStats Step(const Points& p, const Points& p_prev, const Points& force, Points& p_next,
                double tolerance, int max_iterations);
@@ -40,6 +53,7 @@ class CentralDifference {
   double h_ = 0;
   SparseMatrix lhs_;
   ConjugateGradient cg_;
+  ReducedCholesky factor_;
   Points rhs_, tmp_, delta_;
   double lhs_diagonal_max_ = 0;
   // CG's absolute floor per column: this times the largest diagonal entry

@@ -1,4 +1,4 @@
-// glTF 2.0 binary (.glb) export of the boundary surface (MODEL.md section
+// glTF 2.0 binary (.glb) export of the boundary surface (docs/model.md section
 // 7): one scene, one node, one mesh with one TRIANGLES primitive.
 //
 // Layout (little-endian): the 12-byte GLB header ("glTF", version 2, total

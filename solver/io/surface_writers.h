@@ -1,4 +1,4 @@
-// Writers of the boundary surface (MODEL.md section 7) for rendering and
+// Writers of the boundary surface (docs/model.md section 7) for rendering and
 // export, positions in metres as stored:
 //   OBJ and PLY (ASCII), binary PLY: the surface's outward loops as
 //     polygons of any size (not triangulated);

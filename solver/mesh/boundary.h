@@ -1,4 +1,4 @@
-// Boundary representation (MODEL.md section 7): the faces with one cell,
+// Boundary representation (docs/model.md section 7): the faces with one cell,
 // as a polygon mesh with outward loops, for rendering and export.
 #pragma once
 

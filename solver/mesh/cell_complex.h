@@ -1,4 +1,4 @@
-// The control mesh: a cell complex of polyhedral cells (MODEL.md section 1).
+// The control mesh: a cell complex of polyhedral cells (docs/model.md section 1).
 //
 // Vertices carry rest positions (#V by 3, metres). Faces are vertex loops
 // (any n >= 3). Every face is stored once; a face has one or two cells:
@@ -68,7 +68,7 @@ class CellComplex {
   CellComplex(CellComplex&&) noexcept = default;
   CellComplex& operator=(CellComplex&&) noexcept = default;
 
-  // Validates `input` (MODEL.md section 1) and builds the complex. Errors are
+  // Validates `input` (docs/model.md section 1) and builds the complex. Errors are
   // InvalidArgument and name the cell, face or vertex and the rule broken.
   // Every vertex must belong to a cell (see DropUnusedVertices).
   static absl::StatusOr<CellComplex> FromInput(const MeshInput& input);

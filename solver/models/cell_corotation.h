@@ -1,7 +1,7 @@
 // The corotational model with one frame per control cell
 // (solver.corotation: CONTROL_CELL), applied in control-point space.
 //
-// MODEL.md 4b rotates each finite element's stiffness by the element's own
+// docs/model.md 4b rotates each finite element's stiffness by the element's own
 // frame, so every step passes over all elements (64 per control cell at two
 // levels, 64 quadrature points each). Here the stiffness of a control cell
 // is summed once, at rest, over its elements and mapped to its control
@@ -35,7 +35,7 @@
 // momentum). What it gives up: a cell bent through a large angle is rotated
 // by its average frame rather than element by element.
 //
-// Backward Euler (MODEL.md 5) holds the frames of p(t) for a step:
+// Backward Euler (docs/model.md 5) holds the frames of p(t) for a step:
 // UpdateFrames(p) finds them as Forces(p) does, AffineForces(x) is the force
 // with them held (affine in x; AffineForces(p) after UpdateFrames(p) equals
 // Forces(p) bit for bit) and ApplyLinearized(v) = sum_c E_c^T R_c K_c R_c^T

@@ -1,4 +1,4 @@
-// Corotational linear elasticity (MODEL.md 4b; Mueller and Gross 2004):
+// Corotational linear elasticity (docs/model.md 4b; Mueller and Gross 2004):
 // the standard comparison for the paper's local-frame model.
 //
 // Per element group (shared rest shape up to translation and material) the

@@ -2,7 +2,7 @@
 // each element's material sample array (one value per quadrature point:
 // the paper's "parametric arrays of sample values", deduplicated), and
 // groups of elements that share one rest shape (up to translation) and one
-// material array, so they share one element matrix (MODEL.md 4a: "share
+// material array, so they share one element matrix (docs/model.md 4a: "share
 // one matrix between elements whose rest shape and material are equal").
 #pragma once
 

@@ -1,4 +1,4 @@
-// The one interface both stiffness models share (MODEL.md section 4): the
+// The one interface both stiffness models share (docs/model.md section 4): the
 // integrators only ever ask for g(d), the internal forces on the FEM nodes.
 #pragma once
 

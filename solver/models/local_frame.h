@@ -1,4 +1,4 @@
-// The paper's local-frame stiffness model (MODEL.md 4a).
+// The paper's local-frame stiffness model (docs/model.md 4a).
 //
 // Per element group (shared rest shape and material) three n x n matrices,
 // reading Eq. 15 as the diagonal blocks of the full element stiffness
@@ -21,7 +21,7 @@
 // Strain energy E = 1/2 sum dhat . K dhat.
 //
 // The force is the gradient of E with the frames held fixed:
-// g = (d delta / d d)^T y. MODEL.md 4a reads the force as y itself
+// g = (d delta / d d)^T y. docs/model.md 4a reads the force as y itself
 // (R_e K_i dhat on the nodes); that operator is not symmetric: on the beam
 // scene its linearization at rest has an antisymmetric part of 17 % and 15
 // negative eigenvalues, so the solid drifts away from rest with any time
@@ -57,7 +57,7 @@
 // one element wasted most of a panel product and all of a batch's
 // gathers.
 //
-// Note on Eq. 15's factor 2 (MODEL.md writes K^x_x = 2 int ...): with it,
+// Note on Eq. 15's factor 2 (docs/model.md writes K^x_x = 2 int ...): with it,
 // E would not keep its meaning in pascals (the energy 1/2 eps C eps gives
 // int B^T C B); kStiffnessFactor = 1 keeps E in pascals.
 #pragma once

@@ -1,4 +1,4 @@
-// The local-frame deformation measure R (MODEL.md 4a): a per-node vector
+// The local-frame deformation measure R (docs/model.md 4a): a per-node vector
 // delta built only from changes of edge lengths and face corner angles, so
 // it is blind to rigid motion.
 //  - stretch, per edge (i, j): delta_i -= (l - l0)/2 e_ij,

@@ -492,6 +492,9 @@ SolverSettings ResolvedSolverSettings(const SolverSettings& settings) {
   if (s.corotation() == SolverSettings::COROTATION_DEFAULT) {
     s.set_corotation(SolverSettings::ELEMENT);
   }
+  if (s.explicit_solve() == SolverSettings::EXPLICIT_SOLVE_DEFAULT) {
+    s.set_explicit_solve(SolverSettings::FACTORED);
+  }
   return s;
 }
 

@@ -1,4 +1,4 @@
-// DeleteCells: drop cells, drop vertices no survivor uses (MODEL.md section 8).
+// DeleteCells: drop cells, drop vertices no survivor uses (docs/model.md section 8).
 #include <utility>
 
 #include "absl/strings/str_cat.h"

@@ -1,4 +1,4 @@
-// ExtrudeFaces: grow prisms out of boundary faces (MODEL.md section 8).
+// ExtrudeFaces: grow prisms out of boundary faces (docs/model.md section 8).
 #include <cmath>
 #include <utility>
 

@@ -1,4 +1,4 @@
-// MergeFaces: join two boundary faces with one connecting cell (MODEL.md 8).
+// MergeFaces: join two boundary faces with one connecting cell (docs/model.md 8).
 #include <limits>
 #include <utility>
 

@@ -1,4 +1,4 @@
-// Ray picking on a quad surface (the level-L boundary, MODEL.md section 7).
+// Ray picking on a quad surface (the level-L boundary, docs/model.md section 7).
 //
 // Quads are vertex loops (a, b, c, d) into `positions` (#V by 3, metres); a
 // triangle is the degenerate quad (a, b, c, c). A quad's bilinear map is

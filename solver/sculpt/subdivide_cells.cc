@@ -1,4 +1,4 @@
-// SubdivideCells: local MacCracken-Joy refinement of chosen cells (MODEL.md 8).
+// SubdivideCells: local MacCracken-Joy refinement of chosen cells (docs/model.md 8).
 #include <utility>
 
 #include "absl/strings/str_cat.h"

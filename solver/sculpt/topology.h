@@ -1,4 +1,4 @@
-// Topology edits on the control mesh (MODEL.md section 8).
+// Topology edits on the control mesh (docs/model.md section 8).
 //
 // Every edit is a pure function of
 //   rest     the control complex at rest (positions in metres),
@@ -15,9 +15,8 @@
 // Determinism: the same input gives the same output bits (no hashing, no
 // threads; every loop runs in index order).
 //
-// API note: the brief's sketch passed `sharp` as tags per rest edge and
-// returned the new mesh's sharp edges as vertex pairs. We keep that: edge ids
-// are not stable across an edit (FromInput numbers edges afresh), vertex
+// Sharp edges go in as tags per rest edge and come back as the new mesh's
+// sharp edges as vertex pairs: edge ids are not stable across an edit (FromInput numbers edges afresh), vertex
 // pairs are, and subdivision::SharpEdgesFromPairs turns pairs back into
 // tags for the rebuilt complex.
 #pragma once

@@ -39,6 +39,12 @@ absl::Status Check(const LoadScale& s, double magnitude, std::string_view field,
   return absl::OkStatus();
 }
 
+// The diagonal of the points' bounding box (0 without points).
+double Extent(const Points& p) {
+  if (p.rows() == 0) return 0;
+  return (p.colwise().maxCoeff() - p.colwise().minCoeff()).norm();
+}
+
 }  // namespace
 
 double MeanYoung(const models::ElementLayout& layout) {
@@ -54,9 +60,7 @@ double MeanYoung(const models::ElementLayout& layout) {
 LoadScale ScaleOf(const Points& rest_control, const models::ElementLayout& layout, double mass,
                   double rest_volume) {
   LoadScale s;
-  if (rest_control.rows() > 0) {
-    s.size = (rest_control.colwise().maxCoeff() - rest_control.colwise().minCoeff()).norm();
-  }
+  s.size = Extent(rest_control);
   s.young = MeanYoung(layout);
   s.mass = mass;
   s.density = rest_volume > 0 ? mass / rest_volume : 0;
@@ -79,6 +83,17 @@ absl::Status CheckGravity(const LoadScale& s, double magnitude, std::string_view
   // Every solid falls g / 2 in one second.
   return Check(s, magnitude, field, "m/s^2", "rho |g| L^2 / E",
                s.density * s.size * s.size / s.young, 0.5);
+}
+
+absl::Status CheckExtent(const Points& rest_control, const Points& p) {
+  if (rest_control.rows() == 0 || p.rows() == 0) return absl::OkStatus();
+  const double rest = Extent(rest_control);
+  const double now = Extent(p);
+  if (now <= kMostSizes * rest) return absl::OkStatus();
+  return absl::InternalError(absl::StrFormat(
+      "the solid blew up: its control points spread over %.3g m, more than %g times their "
+      "rest extent of %.3g m",
+      now, kMostSizes, rest));
 }
 
 }  // namespace dynsolid::solid

@@ -49,4 +49,12 @@ absl::Status CheckForce(const LoadScale& s, double magnitude, std::string_view f
 absl::Status CheckPressure(const LoadScale& s, double magnitude, std::string_view field);
 absl::Status CheckGravity(const LoadScale& s, double magnitude, std::string_view field);
 
+// Whether a state is still within physics: its control points' extent (the
+// diagonal of their bounding box) at most 10 times their rest extent, the
+// same bound as the loads'. Rigid motion and rotation keep the extent (a
+// rotation grows a box's diagonal by at most sqrt(3)); a blow-up passes the
+// bound within steps, even one that a follower pressure pays for and the
+// energy ledger therefore lets through. InternalError saying both extents.
+absl::Status CheckExtent(const Points& rest_control, const Points& p);
+
 }  // namespace dynsolid::solid

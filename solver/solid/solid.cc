@@ -27,6 +27,7 @@
 #include "solver/models/local_frame.h"
 #include "solver/models/measure.h"
 #include "solver/scene/scene_loader.h"
+#include "solver/solid/load_bounds.h"
 #include "solver/subdivision/mcj.h"
 
 namespace dynsolid::solid {
@@ -394,6 +395,9 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     if (!p_next.allFinite()) {
       return absl::InternalError(absl::StrCat("non-finite control points at sub-step ", k));
     }
+    if (const absl::Status within = CheckExtent(rest_control, p_next); !within.ok()) {
+      return absl::InternalError(absl::StrCat(within.message(), " at sub-step ", k));
+    }
     // Forces (and strain energy) at the new state, reused by the next sub-step.
     if (Folded()) {
       // E_R is quadratic in p with gradient A^T g_R and Hessian Kt (frames of
@@ -494,7 +498,7 @@ absl::Status Solid::Step() {
     if (attempt >= kMaxHalvings || im.substeps * 2 > im.settings.max_substeps()) {
       last_step_ = stats;
       return absl::FailedPreconditionError(absl::StrCat(
-          "step ", steps_, ": ", st.message(), "; still unstable after ", attempt + 1,
+          "step ", steps_ + 1, " failed: ", st.message(), "; still unstable after ", attempt + 1,
           " halvings of the sub-step (", im.substeps, " sub-steps of ", im.h_sub,
           " s); state restored to the step's start"));
     }

@@ -1,8 +1,7 @@
-// A deformable subdivision solid in motion (MODEL.md sections 3-6), with
+// A deformable subdivision solid in motion (docs/model.md sections 3-6), with
 // runtime edits for live sessions (loads, constraints, material painting),
-// exact save/restore and the boundary surface for watchers. (The runtime API
-// follows the signatures of issue 5's brief; additions: load_ids(),
-// constraint_ids(), gravity(), SurfaceBounds(), scene items get ids.)
+// exact save/restore and the boundary surface for watchers. Scene items
+// (loads, constraints) get ids that the runtime edits name.
 //
 // Built once from a scene and its discretization: element quadrature data,
 // per-element material sample arrays, the internal-force model, the
@@ -155,12 +154,14 @@ class Solid {
                                                        int threads);
 
   // Advances one scene time step h. Stability guard: when the state goes
-  // non-finite or the energy H = kinetic + strain + springs - external work
-  // grows (a stable run only loses it), the step is rolled back to its
+  // non-finite, the energy H = kinetic + strain + springs - external work
+  // grows (a stable run only loses it), or the control points spread over
+  // more than 10 times their rest extent (load_bounds.h CheckExtent: a
+  // blow-up a follower pressure pays for), the step is rolled back to its
   // start, the explicit sub-step halved, and the step retried (reported in
   // last_step().rollbacks and rollbacks()). After kMaxHalvings failed
   // halvings the state stays at the step's start and the result is
-  // FailedPrecondition saying why.
+  // FailedPrecondition "step N failed: why" (N = steps() + 1).
   absl::Status Step();
   static constexpr int kMaxHalvings = 6;
   // Create refuses scenes whose element matrices would exceed this
@@ -260,7 +261,7 @@ class Solid {
   // legitimate edit never triggers a rollback.
 
   // A constant force (newtons) at the material point whose rest position is
-  // f.position (found like the scene's point forces, MODEL.md 6). Fields:
+  // f.position (found like the scene's point forces, docs/model.md 6). Fields:
   // "point_force.position.x must be finite ...", "point_force.position:
   // point (...) is not inside the solid at rest".
   absl::StatusOr<int64_t> AddPointForce(const PointForce& f);
@@ -539,7 +540,7 @@ class Solid {
   absl::StatusOr<std::optional<PickHit>> Pick(const Eigen::Vector3d& origin,
                                               const Eigen::Vector3d& direction) const;
 
-  // ---- Haptic contact (MODEL.md 9; solid_contact.cc). What a haptic probe
+  // ---- Haptic contact (docs/model.md 9; solid_contact.cc). What a haptic probe
   // needs from the solid: the closest point of the current boundary
   // surface, the solid's local response there, and a reaction load at that
   // exact material point. The surface's quads are the boundary faces of
@@ -567,7 +568,7 @@ class Solid {
   // for a quad out of range or (u, v) outside [0, 1]^2.
   absl::StatusOr<SurfacePoint> SurfacePointAt(int32_t quad, double u, double v) const;
 
-  // The solid's response at a surface point over a horizon tau (MODEL.md
+  // The solid's response at a surface point over a horizon tau (docs/model.md
   // 9): W = J_c S^-1 J_c^T with S = Mt / tau^2 + Dt / tau + K on the free
   // control points. K is the model's stiffness: for the corotational model
   // A^T K A at rest (the matrix its implicit step is preconditioned with,
@@ -630,7 +631,7 @@ class Solid {
   absl::Status SetContactLoads(const std::vector<ContactLoad>& loads);
   bool has_contact_loads() const;
 
-  // ---- Boundary surface for watchers (MODEL.md 7): the level-L boundary
+  // ---- Boundary surface for watchers (docs/model.md 7): the level-L boundary
   // faces. Topology is fixed until a topology edit; topology_version()
   // counts those (Remeshed gives the new solid this one's + 1).
   struct Surface {

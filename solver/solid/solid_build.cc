@@ -24,6 +24,7 @@
 #include <google/protobuf/io/zero_copy_stream_impl_lite.h>
 
 #include "absl/strings/str_cat.h"
+#include "solver/common/build_watch.h"
 #include "solver/common/parallel.h"
 #include "solver/common/status_macros.h"
 #include "solver/common/worker_pool.h"
@@ -357,7 +358,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   if (im.settings.integrator() == SolverSettings::BACKWARD_EULER &&
       im.settings.model() != SolverSettings::COROTATIONAL) {
     return absl::UnimplementedError(
-        "solver.integrator: backward_euler linearizes the corotational model (MODEL.md 5); "
+        "solver.integrator: backward_euler linearizes the corotational model (docs/model.md 5); "
         "with solver.model local_frame it is not available in this build");
   }
   s->h_ = im.settings.time_step();
@@ -430,6 +431,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   s->rest_volume_ = layout->rest_volume;
   rep.phases.layout = MsSince(t_phase);
+  RETURN_IF_ERROR(common::CheckBuildWatch("element layout"));
   if (carried != nullptr) {
     im.mass_cells = carried->impl_->mass_cells;
     im.k0_cells = carried->impl_->k0_cells;
@@ -455,6 +457,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   rep.mass_cells_made = material.mass_cells != nullptr ? material.mass_cells->made : -1;
   if (material.cell_model != nullptr) rep.k0_cells_made = material.k_cells_made;
   im.InstallMaterial(std::move(material));
+  RETURN_IF_ERROR(common::CheckBuildWatch("stiffness model and mass"));
   s->total_mass_ = SumOfValues(im.mt);
   RETURN_IF_ERROR(im.MakePlasticity(scene));  // clay, when some material yields
 
@@ -605,6 +608,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     t_phase = Clock::now();
     im.k0 = im.StiffnessMatrix(*im.layout, *im.corotational, *im.pool, &im.k0_cells);
     rep.phases.k0 = MsSince(t_phase);
+    RETURN_IF_ERROR(common::CheckBuildWatch("implicit stiffness matrix"));
     // (The per-cell corotation made these partials already: counted there.)
     if (im.cell_model == nullptr) rep.k0_cells_made = im.k0_cells != nullptr ? im.k0_cells->made : -1;
   }

@@ -1,4 +1,4 @@
-// Haptic contact (MODEL.md 9; solid.h "Haptic contact"): the closest point
+// Haptic contact (docs/model.md 9; solid.h "Haptic contact"): the closest point
 // of the boundary surface to a probe, the solid's local response there
 // over a horizon tau, and reaction loads at surface material points.
 //

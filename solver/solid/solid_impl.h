@@ -478,7 +478,10 @@ struct Solid::Impl {
       // (A restore that keeps the material, the sub-step and the fixed set,
       // as an undo of a load does, keeps the integrator's matrices and
       // preconditioner: the same bits, without refactoring them.)
-      integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
+      integrator.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed,
+                       settings.explicit_solve() == SolverSettings::CG
+                           ? integrators::CentralDifference::Solve::kCg
+                           : integrators::CentralDifference::Solve::kFactored);
       explicit_setup = std::move(now);
     }
   }

@@ -1,4 +1,4 @@
-// MacCracken-Joy subdivision of cell complexes (MODEL.md section 2).
+// MacCracken-Joy subdivision of cell complexes (docs/model.md section 2).
 //
 // One level maps a complex to a finer one and returns the subdivision
 // matrix A_l (rows: new vertices, columns: old vertices; every row sums to
@@ -27,7 +27,7 @@ struct SubdivisionOptions {
   // Cells to refine (empty: all). With a subset this is local subdivision:
   // unrefined cells keep their vertices, and faces and edges they share
   // with refined cells are split at their centroid and midpoint, so their
-  // shape does not change (reading of MODEL.md section 2).
+  // shape does not change (reading of docs/model.md section 2).
   std::vector<int32_t> cells;
   // Also check cell volumes of the result (tests; off on hot paths).
   bool validate_geometry = false;

@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
       run.step_ms.push_back(
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       if (!st.ok()) {
-        std::cerr << "dynsolid-sim: step " << i << ": " << st.message() << "\n";
+        std::cerr << "dynsolid-sim: " << st.message() << "\n";
         return 1;
       }
       run.phases.push_back(s.last_phases());

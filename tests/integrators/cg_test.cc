@@ -3,8 +3,12 @@
 // against a dense reference solve: the exact preconditioner (kDirect, dense
 // and sparse factors) makes CG stop after one iteration per column with the
 // reference's answer, keeps fixed rows, and falls back to incomplete
-// Cholesky where the matrix is not positive definite.
+// Cholesky where the matrix is not positive definite. The explicit step's
+// factor (ReducedCholesky) solves the reduced system to rounding, and
+// CentralDifference with it steps as with CG (issue 42).
 #include "solver/integrators/cg.h"
+#include "solver/integrators/central_difference.h"
+#include "solver/integrators/reduced_cholesky.h"
 
 #include <cmath>
 #include <vector>
@@ -157,6 +161,85 @@ TEST(CgTest, AnIndefiniteMatrixGetsNoExactFactor) {
   fixed[13] = 1;
   p.Setup(s, fixed, Preconditioner::kDirect);
   EXPECT_TRUE(p.exact());
+}
+
+TEST(ReducedCholeskyTest, SolvesTheFreeRowsAndZeroesTheFixed) {
+  const SparseMatrix s = GridMass(9, 8, 7);
+  const int n = static_cast<int>(s.rows());
+  std::vector<uint8_t> fixed(n, 0);
+  for (int i = 0; i < n; i += 5) fixed[i] = 1;
+  ReducedCholesky factor;
+  ASSERT_TRUE(factor.Factor(s, fixed));
+  EXPECT_TRUE(factor.factored());
+  EXPECT_GT(factor.factor_nonzeros(), 0);
+  const Points b = RightHandSide(n);
+  Points x;
+  factor.Solve(b, x);
+  const Points ref = Reference(s, fixed, b, Points::Zero(n, 3));
+  EXPECT_LE((x - ref).cwiseAbs().maxCoeff(), 1e-12 * ref.cwiseAbs().maxCoeff());
+  for (int i = 0; i < n; i += 5) EXPECT_EQ(x.row(i), Eigen::RowVector3d::Zero()) << i;
+  // Solving again gives the same bits (the workspace is reused).
+  Points again;
+  factor.Solve(b, again);
+  EXPECT_TRUE(again == x);
+}
+
+TEST(ReducedCholeskyTest, AnIndefiniteMatrixIsNotFactored) {
+  SparseMatrix s = GridMass(3, 3, 3);
+  s.coeffRef(13, 13) = -5.0;
+  std::vector<uint8_t> fixed(s.rows(), 0);
+  ReducedCholesky factor;
+  EXPECT_FALSE(factor.Factor(s, fixed));
+  EXPECT_FALSE(factor.factored());
+  fixed[13] = 1;  // the rest is positive definite
+  EXPECT_TRUE(factor.Factor(s, fixed));
+  // Everything fixed: nothing to solve, zeros.
+  std::vector<uint8_t> all(s.rows(), 1);
+  EXPECT_TRUE(factor.Factor(s, all));
+  Points x;
+  factor.Solve(RightHandSide(static_cast<int>(s.rows())), x);
+  EXPECT_EQ(x.cwiseAbs().maxCoeff(), 0.0);
+}
+
+// Central differences with the factor against CG to 1e-13 (incomplete
+// Cholesky: 512 points is above kExactRows), with damping and fixed rows,
+// over steps whose forces depend on the state: within 1e-9 of the motion.
+TEST(ReducedCholeskyTest, CentralDifferenceStepsAsWithCg) {
+  const SparseMatrix mt = GridMass(8, 8, 8);
+  const SparseMatrix dt = 3.0 * mt;
+  const int n = static_cast<int>(mt.rows());
+  ASSERT_GT(n, CentralDifference::kExactRows);
+  std::vector<uint8_t> fixed(n, 0);
+  for (int i = 0; i < 64; ++i) fixed[i] = 1;  // the bottom layer
+  const double h = 1e-3;
+  CentralDifference factored, cg;
+  factored.Setup(&mt, &dt, h, fixed, CentralDifference::Solve::kFactored);
+  cg.Setup(&mt, &dt, h, fixed, CentralDifference::Solve::kCg);
+  ASSERT_TRUE(factored.factored());
+  ASSERT_FALSE(cg.factored());
+  const Points rest = RightHandSide(n);
+  Points pa = rest, pa_prev = rest, pb = rest, pb_prev = rest, next(n, 3), force(n, 3);
+  int iterations = 0;
+  for (int step = 0; step < 20; ++step) {
+    // A spring to rest plus a constant push: F = -k (p - rest) + f.
+    force = -50.0 * (pa - rest);
+    force.col(0).array() += 1.0;
+    const CgStats a = factored.Step(pa, pa_prev, force, next, 1e-4, 500);
+    EXPECT_EQ(a.iterations, 0);
+    pa_prev = pa;
+    pa = next;
+    force = -50.0 * (pb - rest);
+    force.col(0).array() += 1.0;
+    const CgStats b = cg.Step(pb, pb_prev, force, next, 1e-13, 500);
+    iterations += b.iterations;
+    pb_prev = pb;
+    pb = next;
+  }
+  EXPECT_GT(iterations, 0);
+  const double moved = (pb - rest).cwiseAbs().maxCoeff();
+  ASSERT_GT(moved, 0);
+  EXPECT_LT((pa - pb).cwiseAbs().maxCoeff(), 1e-9 * moved);
+  for (int i = 0; i < 64; ++i) EXPECT_EQ(pa.row(i), rest.row(i)) << i;
 }
 
 }  // namespace

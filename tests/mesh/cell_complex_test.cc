@@ -89,7 +89,7 @@ TEST(CellComplexTest, BoundaryExtractionIsOutward) {
   EXPECT_NEAR(six_v / 6.0, 2.0, 1e-12) << "enclosed volume of the boundary surface";
 }
 
-// ---- Every bad-mesh rule of MODEL.md section 1, with its message. ----
+// ---- Every bad-mesh rule of docs/model.md section 1, with its message. ----
 
 TEST(CellComplexValidationTest, NonFiniteCoordinate) {
   MeshInput in = Grid(1, 1, 1);

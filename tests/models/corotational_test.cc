@@ -1,4 +1,4 @@
-// Corotational linear elasticity (MODEL.md 4b): element matrices, rigid
+// Corotational linear elasticity (docs/model.md 4b): element matrices, rigid
 // motion, the energy and its gradient, the analytic energy of uniform
 // strain, the linearization, a slow dense reference path, determinism across
 // thread counts and no allocation per step.

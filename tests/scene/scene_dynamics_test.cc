@@ -414,9 +414,10 @@ TEST_F(EveryFieldTest, UndeclaredEnumNumbersAreRejectedNamingTheField) {
     ExpectPositioned(scene, name, rule);
     ++visited;
   });
-  // solver.model, .integrator, .element_products, .mass, .corotation and
-  // materials.base.preset, materials.regions.material.preset.
-  EXPECT_EQ(visited, 7);
+  // solver.model, .integrator, .element_products, .mass, .corotation,
+  // .explicit_solve and materials.base.preset,
+  // materials.regions.material.preset.
+  EXPECT_EQ(visited, 8);
 }
 
 // ------------------------------------------------------------- defaults
@@ -434,6 +435,7 @@ TEST(DefaultsTest, EmptySolverSettingsResolveToTheDocumentedDefaults) {
   EXPECT_EQ(s.element_products(), SolverSettings::FLOAT);
   EXPECT_EQ(s.mass(), SolverSettings::CONSISTENT);
   EXPECT_EQ(s.corotation(), SolverSettings::ELEMENT);
+  EXPECT_EQ(s.explicit_solve(), SolverSettings::FACTORED);
   // A resolved scene is still valid, and resolving is idempotent.
   Scene scene;
   scene.mutable_mesh()->set_file("x.vtk");
@@ -456,6 +458,7 @@ TEST(DefaultsTest, GivenSolverSettingsAreKept) {
   given->set_element_products(SolverSettings::DOUBLE);
   given->set_mass(SolverSettings::LUMPED);
   given->set_corotation(SolverSettings::CONTROL_CELL);
+  given->set_explicit_solve(SolverSettings::CG);
   EXPECT_TRUE(
       google::protobuf::util::MessageDifferencer::Equals(ResolvedSolverSettings(scene), *given));
 

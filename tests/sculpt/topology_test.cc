@@ -1,4 +1,4 @@
-// Topology edits on hand-counted voxel meshes (MODEL.md section 8).
+// Topology edits on hand-counted voxel meshes (docs/model.md section 8).
 #include "solver/sculpt/topology.h"
 
 #include <cmath>

@@ -17,9 +17,9 @@
 #include <gtest/gtest.h>
 
 #include "absl/strings/str_cat.h"
-#include "server/finite_check.h"
 #include "server/journal.h"
 #include "server/surface_codec.h"
+#include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
@@ -490,22 +490,22 @@ TEST(FiniteCheckTest, NamesTheFirstNonFiniteFieldByItsPath) {
   Command c;
   c.mutable_add_point_force()->mutable_position()->set_x(1);
   c.mutable_add_point_force()->mutable_force()->set_z(std::numeric_limits<double>::quiet_NaN());
-  const absl::Status s = CheckFinite(c, "command");
+  const absl::Status s = scene::ValidateValues(c, "command");
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(s.message(), "command.add_point_force.force.z: must be finite, got nan");
+  EXPECT_EQ(s.message(), "command.add_point_force.force.z must be finite, got nan");
 
   Scene scene;
   scene.mutable_loads()->add_point_forces();
   scene.mutable_loads()->add_point_forces()->mutable_force()->set_y(
       -std::numeric_limits<double>::infinity());
-  EXPECT_EQ(CheckFinite(scene, "scene").message(),
-            "scene.loads.point_forces[1].force.y: must be finite, got -inf");
+  EXPECT_EQ(scene::ValidateValues(scene, "scene").message(),
+            "scene.loads.point_forces[1].force.y must be finite, got -inf");
 
   WatchRequest w;
   w.set_rate_hz(std::numeric_limits<double>::infinity());
-  EXPECT_EQ(CheckFinite(w, "").message(), "rate_hz: must be finite, got inf");
+  EXPECT_EQ(scene::ValidateValues(w, "").message(), "rate_hz must be finite, got inf");
   w.set_rate_hz(30);
-  EXPECT_TRUE(CheckFinite(w, "").ok());
+  EXPECT_TRUE(scene::ValidateValues(w, "").ok());
 }
 
 }  // namespace

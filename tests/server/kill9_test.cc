@@ -9,9 +9,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gmock/gmock.h>
@@ -311,9 +313,20 @@ TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
     ASSERT_TRUE(painter.Write(1, paint));
     ASSERT_TRUE(painter.Write(2, paint2));
     ASSERT_TRUE(painter.Write(3, ForceCommand(1.5, 1.5, 3, 0, 0, -2e4)));
-    // A few steps later the loop has taken the first paint and is building it.
-    const int64_t sent = InspectAt(*stub, s, 0, false, false).step();
-    InspectAt(*stub, s, sent + 5, false, false);
+    // Once the first paint's build is done the loop has both paints (the
+    // second is building now, the painter's force waits behind it). Waiting
+    // for that, not for a number of steps: on a loaded machine the painter's
+    // stream can take longer than a few steps to deliver, and the other
+    // client's commands would then rightly go first.
+    for (int tries = 0;; ++tries) {
+      grpc::ClientContext context;
+      context.set_deadline(Deadline());
+      SessionStats stats;
+      ASSERT_TRUE(stub->GetStats(&context, testing::RefOf(s), &stats).ok());
+      if (stats.builds() >= 1) break;
+      ASSERT_LT(tries, 6000) << "the first paint was not built within 60 s";
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
     const CommandReply pushed = pusher.Send(1, ForceCommand(0.5, 0.5, 3, 1e4, 0, 0));
     const CommandReply fixed = pusher.Send(2, fix);
     CommandReply painted, painted2, forced;

@@ -69,7 +69,7 @@ TEST_F(LiveTest, InvalidCommandsOfEveryKindAreRejectedWithTheirMessageAndChangeN
   cases.push_back({"force outside the solid", ForceCommand(10, 10, 10, 1, 0, 0), 3,
                    "command.add_point_force.position"});
   cases.push_back({"nan force", ForceCommand(1, 1, 1, nan, 0, 0), 3,
-                   "command.add_point_force.force.x: must be finite, got nan"});
+                   "command.add_point_force.force.x must be finite, got nan"});
   {
     Command c;
     c.mutable_add_pressure()->mutable_region()->mutable_sphere()->mutable_center()->set_x(50);
@@ -83,7 +83,7 @@ TEST_F(LiveTest, InvalidCommandsOfEveryKindAreRejectedWithTheirMessageAndChangeN
   {
     Command c;
     c.mutable_set_gravity()->set_z(-inf);
-    cases.push_back({"infinite gravity", c, 3, "command.set_gravity.z: must be finite, got -inf"});
+    cases.push_back({"infinite gravity", c, 3, "command.set_gravity.z must be finite, got -inf"});
   }
   {
     Command c;
@@ -97,7 +97,7 @@ TEST_F(LiveTest, InvalidCommandsOfEveryKindAreRejectedWithTheirMessageAndChangeN
     cases.push_back({"fix selecting nothing", c, 3, "command.fix_region selects no control point"});
     Command n;
     n.mutable_fix_region()->mutable_box()->mutable_max()->set_y(nan);
-    cases.push_back({"nan fix box", n, 3, "command.fix_region.box.max.y: must be finite, got nan"});
+    cases.push_back({"nan fix box", n, 3, "command.fix_region.box.max.y must be finite, got nan"});
   }
   {
     Command c;

@@ -9,7 +9,9 @@ The real dynsolid-server (default limits: --max_cells 1000000 and
 8 GiB while building. It must be refused with RESOURCE_EXHAUSTED naming the
 memory estimate and the limit, and the server's peak RSS (VmHWM in
 /proc/PID/status) must grow by less than 50 MB. A small scene is still
-accepted. Every client call has a timeout: a server that starts building
+accepted. Then a server allowed 1 % of each estimate (--build_memory_factor
+0.01) must stop block3's level-3 build between its phases and refuse it,
+leaving no session. Every client call has a timeout: a server that starts building
 fails the test instead of filling the machine (it is killed).
 """
 import argparse
@@ -37,28 +39,37 @@ def vm_hwm_bytes(pid):
     fail("no VmHWM in /proc/%d/status" % pid)
 
 
+def start_server(args, *flags):
+    """A dynsolid-server on a free loopback port, and a function that runs
+    dynsolid-client against it (every call with a timeout: a server that
+    starts building fails the test instead of filling the machine)."""
+    server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0"] + list(flags),
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    first = first_line(server, 60)
+    match = re.fullmatch(r"listening on (127\.0\.0\.1:\d+)", first or "")
+    if not match:
+        server.kill()
+        fail("the server (%s) did not start: %r" % (" ".join(flags) or "default flags", first))
+    address = match.group(1)
+
+    def client(*command):
+        try:
+            return subprocess.run([args.client, "--server", address, "--timeout_seconds", "60"]
+                                  + list(command), capture_output=True, text=True, timeout=90)
+        except subprocess.TimeoutExpired:
+            fail("dynsolid-client %s did not return within 90 s (the server is building?)"
+                 % " ".join(command))
+
+    return server, client
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--server", required=True)
     parser.add_argument("--client", required=True)
     args = parser.parse_args()
-    server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
-                              stderr=subprocess.DEVNULL, text=True)
+    server, client = start_server(args)
     try:
-        first = first_line(server, 60)
-        match = re.fullmatch(r"listening on (127\.0\.0\.1:\d+)", first or "")
-        if not match:
-            fail("the server did not start: %r" % first)
-        address = match.group(1)
-
-        def client(*command):
-            try:
-                return subprocess.run([args.client, "--server", address, "--timeout_seconds", "60"]
-                                      + list(command), capture_output=True, text=True, timeout=90)
-            except subprocess.TimeoutExpired:
-                fail("dynsolid-client %s did not return within 90 s (the server is building?)"
-                     % " ".join(command))
-
         # Warm the server's gRPC paths first, so that the measured growth is
         # the refused request's own.
         small = client("create", "--scene", "block3", "--levels", "1")
@@ -89,7 +100,38 @@ def main():
         again = client("create", "--scene", "block3", "--levels", "1")
         if again.returncode != 0:
             fail("block3 refused after the huge request: %s" % again.stderr.strip())
-        print("PASS")
+    finally:
+        server.kill()
+        server.wait()
+    stopped_build(args)
+    print("PASS")
+
+
+def stopped_build(args):
+    """A build that grows past its estimate is stopped between its phases.
+
+    The estimate errs high, so a real scene never passes it at the default
+    --build_memory_factor of 1.5; a server told to allow 1 % of the estimate
+    stands in for a scene the estimate gets badly wrong: block3 at level 3
+    (13824 cells, estimated 124 MiB, measured about 90 MB) must be stopped,
+    refused with RESOURCE_EXHAUSTED naming the phase, and leave no session."""
+    server, client = start_server(args, "--build_memory_factor", "0.01")
+    try:
+        big = client("create", "--scene", "block3", "--levels", "3")
+        print("stopped: exit %d: %s" % (big.returncode, big.stderr.strip()))
+        if big.returncode == 0:
+            fail("block3 at level 3 was built within 1 %% of its estimate: %s" % big.stdout)
+        for want in ("RESOURCE_EXHAUSTED", "the build was stopped after its", "phase",
+                     "--build_memory_factor", "nothing of it was kept"):
+            if want not in big.stderr:
+                fail("the stopped build's refusal does not say %r: %s" % (want, big.stderr.strip()))
+        listed = client("list")
+        if listed.returncode != 0:
+            fail("list failed after the stopped build: %s" % listed.stderr.strip())
+        if "block3" in listed.stdout:
+            fail("the stopped build left a session: %s" % listed.stdout.strip())
+        if server.poll() is not None:
+            fail("the server exited")
     finally:
         server.kill()
         server.wait()

@@ -378,8 +378,8 @@ TEST_F(ProbeTest, BadPosesAreRefusedAndChangeNothing) {
       p, [](const ProbeReply& r) { return r.rejected_total() >= 6; }, &refused);
   ASSERT_EQ(refused.size(), 6u);
   EXPECT_EQ(refused[0].code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
-  EXPECT_THAT(refused[0].message(), HasSubstr("pose.position.x: must be finite"));
-  EXPECT_THAT(refused[1].message(), HasSubstr("pose.coupling_force.y: must be finite"));
+  EXPECT_THAT(refused[0].message(), HasSubstr("pose.position.x must be finite"));
+  EXPECT_THAT(refused[1].message(), HasSubstr("pose.coupling_force.y must be finite"));
   EXPECT_THAT(refused[2].message(), HasSubstr("above the server's limit"));
   EXPECT_EQ(refused[3].code(), static_cast<int>(grpc::StatusCode::OUT_OF_RANGE));
   EXPECT_THAT(refused[3].message(), HasSubstr("outside its bounds"));

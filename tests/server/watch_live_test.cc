@@ -370,7 +370,7 @@ TEST_F(LiveTest, NonFiniteWatchRatesAndTooManyWatchersAreRefused) {
     r.set_rate_hz(std::numeric_limits<double>::quiet_NaN());
     const grpc::Status st = RefusedWatch(r);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-    EXPECT_EQ(st.error_message(), "rate_hz: must be finite, got nan");
+    EXPECT_EQ(st.error_message(), "rate_hz must be finite, got nan");
   }
   grpc::ClientContext first;
   first.set_deadline(Deadline());

@@ -1,4 +1,4 @@
-// Haptic contact (solid.h "Haptic contact", MODEL.md 9): the closest point
+// Haptic contact (solid.h "Haptic contact", docs/model.md 9): the closest point
 // of the surface, the local response at it, and contact loads.
 #include <gmock/gmock.h>
 #include <google/protobuf/text_format.h>

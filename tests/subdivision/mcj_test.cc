@@ -95,7 +95,7 @@ TEST(MacCrackenJoyTest, RegularGridIsTensorProductCubicBSpline) {
 }
 
 TEST(MacCrackenJoyTest, PaperMasks) {
-  // The numbers MODEL.md quotes, read off one interior vertex, edge, face
+  // The numbers docs/model.md quotes, read off one interior vertex, edge, face
   // and cell point of a 4x4x4 grid.
   auto m = Build(Grid(4, 4, 4));
   auto level = SubdivideOnce(*m, {});

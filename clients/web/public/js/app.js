@@ -14,6 +14,9 @@ import { bindKeys, wheelNudge } from './keys.js';
 import { statusText } from './status.js';
 import * as S from './sizing.js';
 import { Keep } from './keep.js';
+import { FaceHover } from './hover.js';
+import { Help } from './help.js';
+import { ScenePicker } from './scenes.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -28,6 +31,7 @@ class App {
     this.decoder = new SurfaceDecoder();
     this.view = new View($('view'));
     this.tools = new Tools(this);
+    this.faceHover = new FaceHover(this);  // Extrude and Merge: the face under the pointer
     this.session = null;        // {id, token}
     this.info = null;           // the Session message
     this.stats = null;
@@ -59,6 +63,7 @@ class App {
   // ---- UI ----
 
   bindUi() {
+    this.scenes = new ScenePicker($('scene-select'), $('scene-about'));  // sizes as built here
     $('create').onclick = () => this.create({ builtin_scene: $('scene-select').value });
     $('scene-file').onchange = async (e) => {
       const file = e.target.files[0];
@@ -90,6 +95,7 @@ class App {
     $('field').onchange = () => this.setField($('field').value);
     $('show-control').onchange = () => this.pollOverlays(true);
     $('show-loads').onchange = () => this.refreshMarkers();
+    this.help = new Help();  // the shortcuts, on the first visit and with ?
     bindKeys(this);
     this.onToolChanged();
   }
@@ -110,6 +116,7 @@ class App {
     }
     if (this.tools.tool === 'sharp') this.controlMesh().catch(() => {});
     this.view.showCursor(null);
+    this.faceHover.clear();
   }
 
   numberParam(key, label, step) {
@@ -230,6 +237,8 @@ class App {
     this.feedback.progress(`creating ${label || source.builtin_scene || 'scene'}: building the solid…`);
     try {
       const s = await this.conn.call('CreateSession', request);
+      // The picker's size for this scene: as built without a levels override.
+      if (source.builtin_scene && levels === '') this.scenes.remember(source.builtin_scene, s.stats);
       this.created = `created ${s.scene_name}: ${s.stats.cells} cells, ${s.stats.boundary_faces} surface quads`;
       await this.join({ id: s.id, token: s.token });
     } catch (err) {

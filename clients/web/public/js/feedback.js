@@ -48,9 +48,11 @@ export class Feedback {
     b.appendChild(bar);
     const t0 = performance.now();
     const main = b.querySelector('.text');
-    this.progressTimer = setInterval(() => {
-      main.textContent = `${text} ${((performance.now() - t0) / 1000).toFixed(0)} s`;
-    }, 1000);
+    const tick = () => {
+      main.textContent = `${text} ${((performance.now() - t0) / 1000).toFixed(1)} s`;
+    };
+    tick();
+    this.progressTimer = setInterval(tick, 100);
   }
 
   stopProgress() {

@@ -19,6 +19,7 @@ export function keyAction(e) {
   if (mod && k.toLowerCase() === 'y') return { action: 'redo' };
   if (mod || e.altKey) return null;
   if (k === 'Escape') return { action: 'cancel' };
+  if (k === '?') return { action: 'help' };
   if (e.code === 'BracketLeft' || e.code === 'BracketRight' || (k.length === 1 && '[]{}'.includes(k))) {
     const bigger = e.code === 'BracketRight' || k === ']' || k === '}';
     return { action: 'nudge', which: e.shiftKey ? 'strength' : 'size', steps: bigger ? 1 : -1 };
@@ -38,7 +39,11 @@ export function bindKeys(app) {
     switch (a.action) {
       case 'undo': app.send(C.undo(), 'undo'); break;
       case 'redo': app.send(C.redo(), 'redo'); break;
-      case 'cancel': app.tools.cancel(); break;
+      case 'cancel':
+        if (app.help.isOpen) app.help.close();
+        else app.tools.cancel();
+        break;
+      case 'help': app.help.toggle(); break;
       case 'nudge': app.nudge(a.which, a.steps); break;
       case 'look': app.look(a.preset); break;
       default: break;

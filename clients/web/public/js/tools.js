@@ -83,6 +83,7 @@ export class Tools {
     this.curvePoints = [];
     this.mergeFirst = null;
     this.app.refreshMarkers();
+    if (this.app.faceHover) this.app.faceHover.draw();
   }
 
   brushRadius() {
@@ -152,7 +153,10 @@ export class Tools {
     const press = this.active;
     // The disc follows the pointer, also along a brush's stroke.
     if (!press || BRUSHES.includes(this.tool)) this.showCursorAt(e.clientX, e.clientY);
-    if (!press) return;
+    if (!press) {
+      this.app.faceHover.move(e.clientX, e.clientY);
+      return;
+    }
     press.last = e;
     if (press.onMove) press.onMove(e);
   }
@@ -331,6 +335,7 @@ export class Tools {
       case 'merge':
         if (!this.mergeFirst) {
           this.mergeFirst = { face: hit.control_face };
+          this.app.faceHover.clear();  // drawn as the chosen face now
           this.app.message(`merge: face ${hit.control_face} chosen; click the face to join it to`);
           return;
         } else {
@@ -352,8 +357,17 @@ export class Tools {
     }
   }
 
+  // A topology edit or a bake: the solid is rebuilt on the server, shown
+  // as "building…" with the seconds so far until the answer.
   async edit(command, what) {
-    const reply = await this.conn.command(command);
+    this.app.faceHover.clear();
+    this.app.feedback.progress(`${what}: building…`);
+    let reply;
+    try {
+      reply = await this.conn.command(command);
+    } finally {
+      this.app.feedback.stopProgress();
+    }
     const e = reply.edit || {};
     const text = e.summary || `${e.control_cells_before} → ${e.control_cells_after} control cells`;
     this.app.message(`${what}: ${text}` + (reply.hold_ms ? `, ${reply.hold_ms.toFixed(0)} ms` : ''));

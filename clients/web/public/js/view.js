@@ -12,6 +12,8 @@ import { BrushCursor } from './cursor.js';
 import { PRESETS, frameSphere, aboveGround } from './camera.js';
 
 const SURFACE_COLOR = 0xd8cbb6;
+// Highlighted control faces (showFaces): taken, refused, merge's first.
+const FACE_COLORS = { ok: 0x2fe07a, refused: 0xff5a4a, chosen: 0x58a6ff };
 
 // Whether WebGL runs on the CPU (SwiftShader, llvmpipe).
 function softwareRenderer() {
@@ -66,6 +68,19 @@ export class View {
     this.controlLines = null;
     this.markers = new THREE.Group();
     this.scene.add(this.markers);
+    // Control faces under the pointer (Extrude, Merge: hover.js), drawn
+    // over the surface: a control face lies a little outside the smooth
+    // surface it makes, or inside it where the solid is concave.
+    this.faceGroup = new THREE.Group();
+    this.scene.add(this.faceGroup);
+    this.faceMaterials = {};
+    for (const [kind, color] of Object.entries(FACE_COLORS)) {
+      this.faceMaterials[kind] = {
+        fill: new THREE.MeshBasicMaterial({ color, transparent: true, opacity: 0.55, depthTest: false,
+          depthWrite: false, side: THREE.DoubleSide }),
+        line: new THREE.LineBasicMaterial({ color, depthTest: false }),
+      };
+    }
     this.cursor = new BrushCursor();
     this.scene.add(this.cursor.group);
     this.grid = null;
@@ -332,6 +347,32 @@ export class View {
     this.controlLines.add(front, behind);
     this.controlGeometry = g;
     this.overlay.add(this.controlLines);
+  }
+
+  // Control faces to highlight (hover.js): [{points: [{x, y, z}, ...],
+  // kind: 'ok' | 'refused' | 'chosen'}], filled and outlined over the
+  // surface; [] clears.
+  showFaces(faces) {
+    this.needsRender = true;
+    for (const c of [...this.faceGroup.children]) {
+      this.faceGroup.remove(c);
+      c.geometry.dispose();
+    }
+    for (const { points, kind } of faces) {
+      if (!points || points.length < 3) continue;
+      const v = [];
+      for (let i = 1; i + 1 < points.length; ++i) {
+        for (const p of [points[0], points[i], points[i + 1]]) v.push(p.x, p.y, p.z);
+      }
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(v), 3));
+      const fill = new THREE.Mesh(g, (this.faceMaterials[kind] || this.faceMaterials.ok).fill);
+      fill.renderOrder = 3;
+      const outline = new THREE.LineLoop(new THREE.BufferGeometry().setFromPoints(
+        points.map((p) => new THREE.Vector3(p.x, p.y, p.z))), (this.faceMaterials[kind] || this.faceMaterials.ok).line);
+      outline.renderOrder = 3;
+      this.faceGroup.add(fill, outline);
+    }
   }
 
   // Pins and loads from Inspect (loads = true), and this page's curve in

@@ -9,7 +9,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
-import { startViewer, outDir, until as waitFor, sleep } from './harness.js';
+import { startViewer, outDir, pageHelpers, sleep } from './harness.js';
 
 const out = outDir('clay');
 let env;
@@ -17,11 +17,7 @@ let page;
 let grpc;
 let ref;
 
-const messages = () => page.evaluate(() => window.__dynsolid.metrics.messages.map((m) => m.text));
-// Waits like harness.until; a timeout also says what the page said.
-const until = (predicate, what, ms) => waitFor(predicate, what, ms).catch(async (e) => {
-  throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
-});
+const { messages, until } = pageHelpers(() => page);
 const shot = (name) => page.screenshot({ path: path.join(out, `${name}.png`) });
 const project = (point) => page.evaluate((q) => window.__dynsolid.view.project(q), point);
 const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);

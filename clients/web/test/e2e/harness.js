@@ -156,9 +156,12 @@ export async function launchBrowser() {
   });
 }
 
-// A page of the viewer, with its console and errors collected.
-export async function openViewer(browser, url, { width = 1280, height = 800 } = {}) {
+// A page of the viewer, with its console and errors collected. The help
+// overlay a first visit shows is marked seen unless `firstVisit` (it would
+// cover the view the tests press on).
+export async function openViewer(browser, url, { width = 1280, height = 800, firstVisit = false } = {}) {
   const page = await browser.newPage({ viewport: { width, height } });
+  if (!firstVisit) await page.addInitScript(() => localStorage.setItem('dynsolid.help.seen', '1'));
   page.consoleLines = [];
   page.on('console', (m) => page.consoleLines.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => page.consoleLines.push(`pageerror: ${e.message}`));
@@ -197,6 +200,19 @@ export async function until(predicate, what, timeoutMs = 30000, everyMs = 100) {
 
 // A server, a gateway, Chromium and one viewer page, with a gRPC client of
 // the server; close() writes the page's console to `dir` and stops all.
+// What the e2e tests ask of a page: app(fn, arg) runs fn in it; messages()
+// the texts it said (its metrics); until(...) waits like `until` above and,
+// when it gives up, says the page's last six messages. `pageOf()` gives the
+// test's page at call time (tests open theirs in `before`).
+export function pageHelpers(pageOf) {
+  const app = (fn, arg) => pageOf().evaluate(fn, arg);
+  const messages = () => app(() => window.__dynsolid.metrics.messages.map((m) => m.text));
+  const untilSaid = (predicate, what, ms) => until(predicate, what, ms).catch(async (e) => {
+    throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
+  });
+  return { app, messages, until: untilSaid };
+}
+
 export async function startViewer(dir) {
   const env = { server: new Server(dir) };
   const address = await env.server.start();

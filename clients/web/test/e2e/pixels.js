@@ -64,3 +64,25 @@ export function yellowNear(page, shot, at, r) {
     return { share: hit / Math.max(n, 1), centre: centre >= 13 };
   }, { x: at.x - shot.box.x, y: at.y - shot.box.y, r });
 }
+
+// The share of the pixels within `r` px of client point `at` whose colour
+// satisfies `test(r, g, b)` (a plain function: it runs in the page).
+export function share(page, shot, at, r, test) {
+  return inPage(page, shot, (d, w, h, { x, y, r, src }) => {
+    // eslint-disable-next-line no-new-func
+    const ok = new Function(`return (${src});`)();
+    let n = 0;
+    let hit = 0;
+    for (let dy = -r; dy <= r; ++dy) {
+      for (let dx = -r; dx <= r; ++dx) {
+        const px = Math.round(x) + dx;
+        const py = Math.round(y) + dy;
+        if (dx * dx + dy * dy > r * r || px < 0 || py < 0 || px >= w || py >= h) continue;
+        n++;
+        const i = 4 * (py * w + px);
+        if (ok(d[i], d[i + 1], d[i + 2])) hit++;
+      }
+    }
+    return hit / Math.max(n, 1);
+  }, { x: at.x - shot.box.x, y: at.y - shot.box.y, r, src: test.toString() });
+}

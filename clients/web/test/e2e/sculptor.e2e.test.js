@@ -12,7 +12,7 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import path from 'node:path';
-import { startViewer, outDir, until as waitFor, sleep, REPO } from './harness.js';
+import { startViewer, outDir, pageHelpers, sleep, REPO } from './harness.js';
 import { canvasShot, colourAt, yellowNear } from './pixels.js';
 
 const out = outDir('sculptor');
@@ -21,11 +21,7 @@ let page;
 let grpc;
 let ref;
 
-const app = (fn, arg) => page.evaluate(fn, arg);
-const messages = () => app(() => window.__dynsolid.metrics.messages.map((m) => m.text));
-const until = (predicate, what, ms) => waitFor(predicate, what, ms).catch(async (e) => {
-  throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
-});
+const { app, messages, until } = pageHelpers(() => page);
 const shot = (name) => page.screenshot({ path: path.join(out, `${name}.png`) });
 const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
 const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);

@@ -7,6 +7,7 @@ import assert from 'node:assert/strict';
 import { explain } from '../../public/js/explain.js';
 import { statusText } from '../../public/js/status.js';
 import { keyAction } from '../../public/js/keys.js';
+import { faceLoop, isBoundaryFace, faceAccepted, facePoints } from '../../public/js/hover.js';
 import { PRESETS, frameSphere, aboveGround } from '../../public/js/camera.js';
 import { vertexQuads, creasedNormals, matcapShade, matcapPixels } from '../../public/js/shading.js';
 
@@ -66,6 +67,7 @@ test('keys: undo, redo, Esc, [ ] with shift, view presets', () => {
   assert.deepEqual(k('Z', { ctrlKey: true, shiftKey: true }), { action: 'redo' });
   assert.deepEqual(k('y', { metaKey: true }), { action: 'redo' });
   assert.deepEqual(k('Escape'), { action: 'cancel' });
+  assert.deepEqual(k('?', { code: 'Slash', shiftKey: true }), { action: 'help' });
   assert.deepEqual(k(']', { code: 'BracketRight' }), { action: 'nudge', which: 'size', steps: 1 });
   assert.deepEqual(k('{', { code: 'BracketLeft', shiftKey: true }), { action: 'nudge', which: 'strength', steps: -1 });
   assert.deepEqual(k('1'), { action: 'look', preset: 'front' });
@@ -134,4 +136,43 @@ test('the matcap never goes dark and is lit from above', () => {
   assert.equal(px.length, 16 * 16 * 4);
   // Row 0 is the bottom of the sphere (a DataTexture): darker than the top row.
   assert.ok(px[4 * (1 * 16 + 8)] < px[4 * (14 * 16 + 8)]);
+});
+
+test('hover: the control faces Extrude and Merge take', () => {
+  // Two cells: a quad shared (face 1, inner), boundary quads 0 and 2, a
+  // boundary triangle 3.
+  const mesh = {
+    face_offsets: [0, 4, 8, 12, 15],
+    face_vertices: [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 0, 1, 4],
+    face_cells: [0, -1, 0, 1, 1, -1, 1, -1],
+  };
+  assert.deepEqual(faceLoop(mesh, 1), [4, 5, 6, 7]);
+  assert.equal(faceLoop(mesh, 4), null);
+  assert.equal(faceLoop(mesh, -1), null);
+  assert.equal(isBoundaryFace(mesh, 0), true);
+  assert.equal(isBoundaryFace(mesh, 1), false);
+  assert.deepEqual(faceAccepted('extrude', mesh, 0), { ok: true, why: '' });
+  assert.match(faceAccepted('extrude', mesh, 1).why, /inner face/);
+  assert.equal(faceAccepted('extrude', mesh, 9).ok, false);
+  assert.equal(faceAccepted('merge', mesh, 0, null).ok, true);
+  assert.equal(faceAccepted('merge', mesh, 2, 0).ok, true);
+  assert.match(faceAccepted('merge', mesh, 0, 0).why, /already chosen/);
+  assert.match(faceAccepted('merge', mesh, 3, 0).why, /3 corners; the first face has 4/);
+  const positions = [];
+  for (let v = 0; v < 12; ++v) positions.push(v, 2 * v, 3 * v);
+  assert.deepEqual(facePoints(mesh, positions, 3), [{ x: 0, y: 0, z: 0 }, { x: 1, y: 2, z: 3 }, { x: 4, y: 8, z: 12 }]);
+  assert.equal(facePoints(mesh, positions.slice(0, 6), 3), null);
+});
+
+test('scene picker: the size as last built here, or that it is not known yet', async () => {
+  const { keepStats, optionText, aboutText } = await import('../../public/js/scenes.js');
+  const k = keepStats({ control_cells: 120, control_vertices: 260, levels: 2, cells: 7680, boundary_faces: 4864,
+    model: 'corotational_cells', nodes: 9 });
+  assert.deepEqual(k, { control_cells: 120, control_vertices: 260, levels: 2, cells: 7680, boundary_faces: 4864,
+    model: 'corotational_cells' });
+  assert.equal(optionText('chair', k), 'chair · 7.7k cells');
+  assert.equal(optionText('chair', undefined), 'chair');
+  assert.equal(optionText('big', { ...k, cells: 123456 }), 'big · 123k cells');
+  assert.equal(aboutText('chair', k), 'chair as last built here: 120 control cells, 260 control points; 7.7k cells and 4.9k surface quads at level 2, corotational_cells');
+  assert.match(aboutText('torus', null), /not built in this browser yet/);
 });

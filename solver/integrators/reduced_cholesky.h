@@ -7,7 +7,7 @@
 // fill-reducing order of METIS's nested dissection and AMD, a supernodal
 // factorization (dense blocks, BLAS), then the factor turned simplicial for
 // the solves, whose loops CHOLMOD specializes for a few right-hand sides
-// (docs/design.md, "The explicit step's factor"). Single-threaded and
+// (docs/architecture.md, "The explicit step's factor"). Single-threaded and
 // without OpenMP, so its bits depend on the values alone, never on the
 // simulation's thread count.
 #pragma once

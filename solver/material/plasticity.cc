@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include <Eigen/QR>
+
 #include "absl/strings/str_cat.h"
 
 namespace dynsolid::material {
@@ -48,6 +50,37 @@ class Reader {
   std::string_view b_;
   size_t pos_ = 0;
 };
+
+// u(x) = u0 + A (x - x0), the affine map closest to samples (x_i, u_i) in
+// least squares; with too few points, or points on a plane or a line, the
+// least-norm A (a translation when A cannot be told).
+struct AffineFit {
+  Eigen::Vector3d x0 = Eigen::Vector3d::Zero(), u0 = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d At(const Eigen::Vector3d& x) const { return u0 + a * (x - x0); }
+};
+
+AffineFit FitAffine(const std::vector<Eigen::Vector3d>& x, const std::vector<Eigen::Vector3d>& u) {
+  AffineFit f;
+  const int n = static_cast<int>(x.size());
+  if (n == 0) return f;
+  for (int i = 0; i < n; ++i) {
+    f.x0 += x[i];
+    f.u0 += u[i];
+  }
+  f.x0 /= n;
+  f.u0 /= n;
+  if (n < 4) return f;
+  Eigen::MatrixXd xs(n, 3), us(n, 3);
+  for (int i = 0; i < n; ++i) {
+    xs.row(i) = (x[i] - f.x0).transpose();
+    us.row(i) = (u[i] - f.u0).transpose();
+  }
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(xs);
+  cod.setThreshold(1e-9);
+  f.a = cod.solve(us).transpose();
+  return f;
+}
 
 }  // namespace
 
@@ -252,6 +285,73 @@ int32_t Plasticity::CarryFrom(const Plasticity& old, const std::vector<int32_t>&
   }
   UpdateActive();
   return carried;
+}
+
+int32_t Plasticity::EstimateChanged(const Plasticity& old,
+                                    const models::CellCorotation& old_model,
+                                    const models::CellCorotation& model, const Points& old_rest,
+                                    const Points& rest, const std::vector<int32_t>& point_source,
+                                    const std::vector<int32_t>& cell_source,
+                                    const std::vector<int32_t>& carried) {
+  if (old.offsets_.empty() || offsets_.empty() ||
+      static_cast<int32_t>(old.first_.size()) != old_model.cells() ||
+      static_cast<int32_t>(first_.size()) != model.cells()) {
+    return 0;
+  }
+  const Points averaged = old.RestDisplacement(old_model, old_rest.rows());
+  auto row = [](const Points& p, int32_t i) -> Eigen::Vector3d { return p.row(i).transpose(); };
+  int32_t estimated = 0;
+  std::vector<Eigen::Vector3d> xs, us;
+  for (int32_t c = 0; c < model.cells(); ++c) {
+    if (c < static_cast<int32_t>(carried.size()) && carried[c] >= 0) continue;
+    const int32_t src = c < static_cast<int32_t>(cell_source.size()) ? cell_source[c] : -1;
+    const bool sourced = src >= 0 && src < old_model.cells();
+    const int32_t* was = sourced ? old_model.support(src) : nullptr;
+    const int32_t was_n = sourced ? old_model.support_size(src) : 0;
+    const double* from = sourced ? old.offsets_.data() + 3 * static_cast<int64_t>(old.first_[src])
+                                 : nullptr;
+    const int32_t* now = model.support(c);
+    const int32_t n = model.support_size(c);
+    xs.clear();
+    us.clear();
+    if (sourced) {
+      for (int32_t b = 0; b < was_n; ++b) {
+        xs.push_back(row(old_rest, was[b]));
+        us.emplace_back(from[3 * b], from[3 * b + 1], from[3 * b + 2]);
+      }
+    } else {
+      for (int32_t a = 0; a < n; ++a) {
+        const int32_t o = point_source[now[a]];
+        if (o < 0) continue;
+        xs.push_back(row(old_rest, o));
+        us.push_back(row(averaged, o));
+      }
+    }
+    if (xs.empty()) continue;
+    const AffineFit fit = FitAffine(xs, us);
+    double* to = offsets_.data() + 3 * static_cast<int64_t>(first_[c]);
+    bool moved = false;
+    for (int32_t a = 0; a < n; ++a) {
+      const int32_t o = point_source[now[a]];
+      Eigen::Vector3d u = fit.At(row(rest, now[a]));
+      if (sourced && o >= 0) {
+        const int32_t* at = std::lower_bound(was, was + was_n, o);
+        if (at != was + was_n && *at == o) {
+          const double* f = from + 3 * (at - was);
+          u = Eigen::Vector3d(f[0], f[1], f[2]);
+        }
+      } else if (!sourced && o >= 0) {
+        u = row(averaged, o);
+      }
+      for (int k = 0; k < 3; ++k) to[3 * a + k] = u[k];
+      moved = moved || u != Eigen::Vector3d::Zero();
+    }
+    alpha_[c] = sourced ? old.alpha_[src] : 0.0;
+    dissipation_[c] = 0;
+    if (moved) ++estimated;
+  }
+  UpdateActive();
+  return estimated;
 }
 
 std::string Plasticity::SaveState() const {

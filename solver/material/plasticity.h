@@ -128,6 +128,22 @@ class Plasticity : public models::CellFlow, public models::ElementFlow {
   // Returns the units carried. Laws are not touched (set_laws).
   int32_t CarryFrom(const Plasticity& old, const std::vector<int32_t>& source,
                     const std::vector<std::vector<int32_t>>& entry_map);
+  // After CarryFrom, per control cell (per-cell units only): the cells a
+  // topology edit changed (carried[c] < 0) get an estimate of the old
+  // plastic rest shape instead of the mesh's. A cell with a source
+  // (cell_source[c] >= 0) keeps the source's offsets at the points the two
+  // share and takes, at its other points, the affine map that best fits
+  // (least squares over rest positions) the source's offsets; a new cell
+  // takes the old points' averaged offsets (RestDisplacement) where it has
+  // old points and their affine fit elsewhere. Plastic strain comes from
+  // the source (0 in a new cell); dissipation stays with the old units.
+  // `point_source`: new control point -> old one (-1: new); rest positions
+  // of the old and new control points. Returns the cells estimated.
+  int32_t EstimateChanged(const Plasticity& old, const models::CellCorotation& old_model,
+                          const models::CellCorotation& model, const Points& old_rest,
+                          const Points& rest, const std::vector<int32_t>& point_source,
+                          const std::vector<int32_t>& cell_source,
+                          const std::vector<int32_t>& carried);
   int32_t units() const { return static_cast<int32_t>(first_.size()); }
 
   // State: laws, offsets, alpha and dissipation, as bytes and back; Parse

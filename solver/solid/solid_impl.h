@@ -396,8 +396,10 @@ struct Solid::Impl {
   // point; `cell_source` new control cell -> old, -1 new): a control cell
   // whose support is the same points keeps its offsets; an element keeps
   // its offsets when its control cell's source has an element of its kind
-  // at the same place (rest centroids within a quarter of its size). Other
-  // units start from the mesh's rest shape. Returns the units carried.
+  // at the same place (rest centroids within a quarter of its size). The
+  // control cells the edit changed start from an estimate of the old
+  // plastic shape (Plasticity::EstimateChanged); elements the edit changed
+  // start from the mesh's rest shape. Returns the units carried.
   int32_t CarryPlasticity(const Impl& old, const std::vector<int32_t>& point_source,
                           const std::vector<int32_t>& cell_source);
   // The scene's flow law per control cell (the material at its rest

@@ -139,7 +139,12 @@ int32_t Solid::Impl::CarryPlasticity(const Impl& old, const std::vector<int32_t>
       }
     }
   }
-  return plasticity->CarryFrom(*old.plasticity, source, entry_map);
+  const int32_t carried = plasticity->CarryFrom(*old.plasticity, source, entry_map);
+  if (cell_model != nullptr && old.cell_model != nullptr) {
+    plasticity->EstimateChanged(*old.plasticity, *old.cell_model, *cell_model, old.rest_control,
+                                rest_control, point_source, cell_source, source);
+  }
+  return carried;
 }
 
 absl::Status Solid::Impl::MakeEnvironment(const Scene& scene, const Solid::Surface& surface) {

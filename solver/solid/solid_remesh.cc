@@ -368,6 +368,18 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   TransferReport& rep = report != nullptr ? *report : local;
   rep = TransferReport();
 
+  // Old control point -> new, for regions given by control points, and
+  // back: a survivor is the first point whose only source it is, with
+  // weight 1 (later ones, such as an extrusion's copies, are new points).
+  std::vector<int32_t> point_map(old_nc, -1), point_source(nv, -1);
+  for (int32_t v = 0; v < nv; ++v) {
+    const auto& src = t.vertex_sources[v];
+    if (src.size() == 1 && src[0].second == 1.0 && point_map[src[0].first] < 0) {
+      point_map[src[0].first] = v;
+      point_source[v] = src[0].first;
+    }
+  }
+
   // Clay: each cell keeps the flow law of the cell it comes from (new
   // cells the scene's), and the units the edit left alone keep their
   // plastic offsets (CarryPlasticity); a bake resets them (its rest shape
@@ -387,14 +399,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     } else {
       im.plasticity->set_laws(std::move(laws));
     }
-    if (t.baked == nullptr) {
-      std::vector<int32_t> point_source(nv, -1);
-      for (int32_t v = 0; v < nv; ++v) {
-        const auto& src = t.vertex_sources[v];
-        if (src.size() == 1 && src[0].second == 1.0) point_source[v] = src[0].first;
-      }
-      im.CarryPlasticity(old, point_source, t.cell_source);
-    }
+    if (t.baked == nullptr) im.CarryPlasticity(old, point_source, t.cell_source);
   }
 
   // Loads, drags and constraints, with their ids.
@@ -447,19 +452,12 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     }
   }
   std::sort(rep.dropped_loads.begin(), rep.dropped_loads.end());
+  // A survivor held before is held where it was. (A new point whose only
+  // source is a held point, such as an extruded copy of a pinned face's
+  // vertex, is not that point: it is held where it is, if a pin takes it.)
   std::vector<uint8_t> was_fixed(nv, 0);
   for (int32_t v = 0; v < nv; ++v) {
-    const auto& src = t.vertex_sources[v];
-    was_fixed[v] = src.size() == 1 && old.fixed[src[0].first] != 0;
-  }
-  // Old control point -> new, for regions given by control points: a
-  // survivor is its only source with weight 1.
-  std::vector<int32_t> point_map(old_nc, -1);
-  for (int32_t v = 0; v < nv; ++v) {
-    const auto& src = t.vertex_sources[v];
-    if (src.size() == 1 && src[0].second == 1.0 && point_map[src[0].first] < 0) {
-      point_map[src[0].first] = v;
-    }
+    was_fixed[v] = point_source[v] >= 0 && old.fixed[point_source[v]] != 0;
   }
   for (const Impl::FixConstraint& c : old.fixes) {
     Region region;

@@ -5,13 +5,16 @@
 // face's control points, h = 1 ms. For each size and solver: build time,
 // median ms per step (and its solve phase) after a warm-up, and the peak
 // resident memory of the process so far (VmHWM: sizes run smallest first,
-// so a row's peak is its own or a smaller one's).
+// so a row's peak is its own or a smaller one's), and the answer: the top
+// face's mean x displacement after all 5 + steps steps (bench/vega/compare.sh
+// sets it beside VegaFEM's).
 //
 //   scaling_bench [--sizes=8,12,16,24] [--steps=40] [--solvers=factored,cg,backward_euler]
 //
 // Prints figures only; nothing here is a test (the bench smoke runs it tiny).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -94,8 +97,8 @@ int main(int argc, char** argv) {
   std::printf("# Scaling: n^3-cell blocks at level 0, corotational (a frame per control cell), "
               "consistent mass, h = 1 ms, %d steps after 5 warm-up\n\n", steps);
   std::printf("| cells | DOFs | solver | build s | ms/step | solve ms/step | ms per simulated s | "
-              "us/DOF/step | substeps | peak RSS MB |\n");
-  std::printf("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+              "us/DOF/step | substeps | peak RSS MB | top dx mm |\n");
+  std::printf("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   int failures = 0;
   for (int n : sizes) {
     for (const std::string& solver : solvers) {
@@ -118,6 +121,7 @@ int main(int argc, char** argv) {
       }
       const double build_ms = Ms(t0);
       dynsolid::solid::Solid& solid = **s;
+      const dynsolid::Points rest = solid.control_positions();
       std::vector<double> step_ms, solve_ms;
       bool ok = true;
       for (int i = 0; i < 5 + steps && ok; ++i) {
@@ -135,10 +139,18 @@ int main(int argc, char** argv) {
       }
       const int64_t dofs = 3 * solid.control_positions().rows();
       const double ms = Median(step_ms);
-      std::printf("| %d^3 | %lld | %s | %.2f | %.3f | %.3f | %.0f | %.3f | %d | %.0f |\n", n,
-                  static_cast<long long>(dofs), solver.c_str(), build_ms / 1000.0, ms,
+      double top_dx = 0;  // the top face's (n+1)^2 control points (z = 3 m at rest)
+      int top = 0;
+      for (Eigen::Index i = 0; i < rest.rows(); ++i) {
+        if (std::abs(rest(i, 2) - 3.0) < 1e-9) {
+          top_dx += solid.control_positions()(i, 0) - rest(i, 0);
+          ++top;
+        }
+      }
+      std::printf("| %d^3 | %lld | %s | %.2f | %.3f | %.3f | %.0f | %.3f | %d | %.0f | %.4f |\n",
+                  n, static_cast<long long>(dofs), solver.c_str(), build_ms / 1000.0, ms,
                   Median(solve_ms), ms / solid.time_step(), 1000.0 * ms / dofs,
-                  solid.build_report().substeps, PeakRssMb());
+                  solid.build_report().substeps, PeakRssMb(), top > 0 ? 1000.0 * top_dx / top : 0.0);
       std::fflush(stdout);
     }
   }

@@ -373,7 +373,9 @@ def server_under_cuts(args, fs_binary, work, figures):
         started.append(load)
 
         # Cut 1: instant, drop everything not durable.
-        wait_for("the load's commands in the journal", lambda: journal_bytes(backing) > 0, 30)
+        # (A wait, not a figure: a CI run on a loaded machine, load 6 on two
+        # cores, took more than 30 s to create the load's sessions.)
+        wait_for("the load's commands in the journal", lambda: journal_bytes(backing) > 0, 180)
         time.sleep(2.5)
         server.process.send_signal(signal.SIGSTOP)
         fs.cut(signal.SIGUSR1)

@@ -306,7 +306,10 @@ absl::Status SimCore::UndoEdit(const persist::UndoEntry& entry, const persist::E
   ASSIGN_OR_RETURN(sculpt::AppliedEdit r,
                    sculpt::RevertEdit(before, *std::move(d), *solid_, change.edit()));
   solid_ = std::move(r.solid);
-  scene_ = change.before_original() ? original_ : std::make_shared<const Scene>(std::move(r.scene));
+  // The scene the rebuilt solid was fingerprinted with (its loads and pins
+  // taken out), never original_ even when equal in mesh: a revert saves
+  // the solid's state with this scene and its undo rebuilds from it.
+  scene_ = std::make_shared<const Scene>(std::move(r.scene));
   ++fields_version_;
   history_.SetMesh(change.mesh_before(),
                    absl::StrCat(client, "\nthe undo of \"", entry.what(), "\""));

@@ -7,8 +7,40 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
+#include "solver/scene/inline_mesh.h"
+#include "solver/sculpt/edit_common.h"
 
 namespace dynsolid::sculpt {
+namespace {
+
+// `before` in the form an edit leaves a scene in (apply.h): the control
+// mesh of `d` inline at its rest positions (no file, generator, scale or
+// local refinement left to apply), its sharp edges listed, its levels. A
+// session rebuilds a solid from a scene with BuildEdited (a revert's undo,
+// crash recovery), which must give the same discretization as the one
+// built here, or a saved state will not restore into it.
+absl::StatusOr<std::pair<Scene, scene::Discretization>> SelfContained(
+    const Scene& before, const scene::Discretization& d) {
+  std::pair<Scene, scene::Discretization> out;
+  Scene& scene = out.first;
+  scene = before;
+  const mesh::MeshInput input = internal::ToInput(d.control());
+  ControlMesh* m = scene.mutable_mesh();
+  m->Clear();
+  *m->mutable_inline_mesh() = scene::InlineFromMesh(input);
+  scene.mutable_subdivision()->set_levels(d.hierarchy.levels);
+  SharpFeatures* sharp = scene.mutable_sharp();
+  sharp->Clear();
+  for (const auto& [a, b] : internal::SharpPairs(d.control(), d.control_sharp)) {
+    EdgeRef* e = sharp->add_edges();
+    e->set_v0(a);
+    e->set_v1(b);
+  }
+  ASSIGN_OR_RETURN(out.second, scene::Discretize(scene, input, std::nullopt));
+  return out;
+}
+
+}  // namespace
 
 absl::StatusOr<AppliedEdit> RevertEdit(const Scene& before, scene::Discretization d_before,
                                        const solid::Solid& solid, const TopologyEdit& edit) {
@@ -76,9 +108,10 @@ absl::StatusOr<AppliedEdit> RevertEdit(const Scene& before, scene::Discretizatio
   out.vertices_after = nb;
   out.elements_after = d_before.elements.num_cubic() + d_before.elements.num_linear() +
                        d_before.elements.num_pyramid();
+  ASSIGN_OR_RETURN(auto own, SelfContained(before, d_before));
   ASSIGN_OR_RETURN(std::unique_ptr<solid::Solid> built,
-                   solid.BuildRemeshed(before, std::move(d_before), t.cell_source, nullptr));
-  ASSIGN_OR_RETURN(out.solid, solid.CarryOver(std::move(built), before, t, &out.transfer));
+                   solid.BuildRemeshed(own.first, std::move(own.second), t.cell_source, nullptr));
+  ASSIGN_OR_RETURN(out.solid, solid.CarryOver(std::move(built), own.first, t, &out.transfer));
   out.scene = out.transfer.scene;
   out.summary = absl::StrCat("put back the control mesh from before \"", r.summary, "\" (",
                              out.cells_after, " cells, ", out.vertices_after, " vertices)");

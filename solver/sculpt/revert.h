@@ -23,6 +23,9 @@ namespace dynsolid::sculpt {
 //    base material;
 //  - loads, drags and pins are carried over (re-selected from their
 //    regions, ids kept; those with no place are dropped and named).
+// The rebuilt solid stands on `before` in the form an edit leaves a scene
+// in (its mesh inline, sharp edges listed, levels), so that the scene it
+// reports rebuilds it (BuildEdited) and its saved states restore there.
 // InvalidArgument when `solid`'s control mesh is not the edit's result
 // (another edit changed it since): nothing is changed.
 absl::StatusOr<AppliedEdit> RevertEdit(const Scene& before, scene::Discretization d_before,

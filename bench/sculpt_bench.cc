@@ -22,6 +22,7 @@
 #include "absl/strings/str_format.h"
 #include "google/protobuf/text_format.h"
 #include "bench/cpu_name.h"
+#include "bench/figures.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/sculpt/apply.h"
@@ -29,13 +30,10 @@
 
 namespace {
 
+using dynsolid::bench::Median;
+
 double Ms(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 }  // namespace

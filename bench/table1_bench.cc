@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 
 #include "absl/strings/str_cat.h"
+#include "bench/figures.h"
 #include "solver/models/measure.h"
 #include "solver/models/panel_product.h"
 #include "solver/scene/build.h"
@@ -28,15 +29,11 @@
 
 namespace {
 
+using dynsolid::bench::Median;
+
 using Clock = std::chrono::steady_clock;
 double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 struct Run {

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/figures.h"
 #include "centralDifferencesSparse.h"
 #include "corotationalLinearFEM.h"
 #include "corotationalLinearFEMForceModel.h"
@@ -40,19 +41,12 @@
 
 namespace {
 
+using dynsolid::bench::PeakRssMb;
+
 using Clock = std::chrono::steady_clock;
 
 double MsSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
-double PeakRssMb() {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("VmHWM:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
-  }
-  return -1;
 }
 
 bool Flag(const char* arg, const char* name, std::string* value) {

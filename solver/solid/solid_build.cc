@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <functional>
 #include <map>
 #include <mutex>
@@ -324,7 +325,13 @@ void Solid::Impl::ConfigureLinearized() {
 int Solid::Impl::SubstepsFor(double omega) const {
   const double stable = omega > 0 ? 2.0 / omega : INFINITY;
   const double limit = settings.stability_safety() * stable;
-  return std::max(MinSubsteps(), static_cast<int>(std::ceil(settings.time_step() / limit)));
+  // Saturates: a stiffness without bound (a paint of 1e300 Pa) needs more
+  // sub-steps than any int, which the callers refuse past max_substeps.
+  const double needed = std::ceil(settings.time_step() / limit);
+  if (!(needed < static_cast<double>(std::numeric_limits<int>::max()))) {
+    return std::numeric_limits<int>::max();
+  }
+  return std::max(MinSubsteps(), static_cast<int>(needed));
 }
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::Create(const Scene& scene,

@@ -491,7 +491,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   s.p_ = t.current;
   im.hold = t.current;
   for (int32_t v = 0; v < nv; ++v) {
-    if (was_fixed[v]) im.hold.row(v) = old.hold.row(t.vertex_sources[v][0].first);
+    if (was_fixed[v]) im.hold.row(v) = old.hold.row(point_source[v]);
     if (im.fix_count[v] > 0) s.p_.row(v) = im.hold.row(v);
   }
   for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;

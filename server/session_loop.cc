@@ -707,6 +707,7 @@ void SessionLoop::AnswerInspects(bool all_unavailable) {
     }
     if (i.request.control_mesh()) FillControlMesh(s.discretization(), r.mutable_control_mesh());
     if (i.request.loads()) core_->DescribeLoads(&r);
+    if (i.request.history()) core_->DescribeHistory(r.mutable_history());
     i.done(std::move(r));
   }
   waiting_inspects_ = std::move(keep);
@@ -723,7 +724,7 @@ void SessionLoop::UpdateCounters() {
   counters_.fields_version = core_->fields_version();
   counters_.applied = core_->commands_applied();
   counters_.rejected = core_->commands_rejected();
-  const History& h = core_->history();
+  const UndoHistory& h = core_->history();
   counters_.undo_depth = h.undo_depth();
   counters_.redo_depth = h.redo_depth();
   counters_.history_bytes = h.bytes();

@@ -45,24 +45,11 @@ bool Undoable(const Command& c) {
     case Command::kEdit:
     case Command::kDrag:
     case Command::kCurve:
+    case Command::kRevertToScene:
       return true;
     default:
       return false;
   }
-}
-
-// The command's field name ("add_point_force"), or the edit's ("edit
-// extrude_faces").
-std::string KindName(const Command& c) {
-  const google::protobuf::FieldDescriptor* f =
-      Command::descriptor()->FindFieldByNumber(c.kind_case());
-  std::string name = f != nullptr ? f->name() : "none";
-  if (c.kind_case() == Command::kEdit) {
-    const google::protobuf::FieldDescriptor* e =
-        TopologyEdit::descriptor()->FindFieldByNumber(c.edit().kind_case());
-    if (e != nullptr) absl::StrAppend(&name, " ", e->name());
-  }
-  return name;
 }
 
 std::vector<Eigen::Vector3d> Targets(const MoveDrag& m) {
@@ -90,18 +77,10 @@ void SetStatus(const absl::Status& s, CommandReply* reply) {
 struct SimCore::Prebuilt {
   // A topology edit's prepared solid, or the error preparing it gave.
   std::optional<absl::StatusOr<sculpt::PreparedEdit>> edit;
-  // An undo's or redo's solid for `for_scene`, or the factory's error.
-  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid>>> solid;
-  std::shared_ptr<const Scene> for_scene;
   // A paint's prepared material, or the error preparing it gave.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedPaint>>> paint;
   // An unfix's prepared stable step, or the error preparing it gave.
   std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedUnfix>>> unfix;
-  // An undo's or redo's state prepared for the solid it goes into (the
-  // current one, or `solid` above), for the history entry whose state is
-  // `for_state`.
-  std::optional<absl::StatusOr<std::shared_ptr<solid::Solid::PreparedState>>> state;
-  const solid::SavedState* for_state = nullptr;
 };
 
 uint64_t SimCore::LastSeq(const std::string& client_id) const {
@@ -117,12 +96,8 @@ bool SimCore::NeedsBuild(const CommandRequest& request) const {
       c.kind_case() == Command::kUnfix) {
     return true;
   }
-  if (c.kind_case() == Command::kUndo && history_.can_undo()) {
-    return factory_ != nullptr || history_.next_undo().scene == scene_;
-  }
-  if (c.kind_case() == Command::kRedo && history_.can_redo()) {
-    return factory_ != nullptr || history_.next_redo().scene == scene_;
-  }
+  // Undo and redo apply in line (an edit's inverse holds the loop while
+  // it rebuilds the solid).
   return false;
 }
 
@@ -194,31 +169,8 @@ std::function<std::shared_ptr<SimCore::Prebuilt>()> SimCore::Prebuild(
       return out;
     };
   }
-  const HistoryItem& item =
-      c.kind_case() == Command::kUndo ? history_.next_undo() : history_.next_redo();
-  // The entry stays put until Process takes the result (no command applies
-  // meanwhile), so its state is read where it is.
-  const solid::SavedState* state = &item.state;
-  if (item.scene == scene_) {
-    // The same solid: its state prepared (parsed, its material built).
-    return [solid = solid_, state]() {
-      auto out = std::make_shared<Prebuilt>();
-      out->for_state = state;
-      out->state = solid->PrepareState(solid::Solid::JoinState(*state));
-      return out;
-    };
-  }
-  std::shared_ptr<const Scene> target = item.scene;
-  return [factory = factory_, target, original = original_, state]() {
-    auto out = std::make_shared<Prebuilt>();
-    out->for_scene = target;
-    out->solid = factory(target == original ? nullptr : target.get());
-    if (out->solid->ok()) {
-      out->for_state = state;
-      out->state = (**out->solid)->PrepareState(solid::Solid::JoinState(*state));
-    }
-    return out;
-  };
+  // NeedsBuild says no to anything else.
+  return [] { return std::make_shared<Prebuilt>(); };
 }
 
 absl::Status CheckClientIdCharacters(const std::string& id) {
@@ -378,16 +330,13 @@ SimCore::Outcome SimCore::Process(const CommandRequest& request, CommandReply* r
   reply->set_applied_step(solid_->steps());
   const Command& command = request.command();
   const bool undoable = Undoable(command);
-  HistoryItem before;
   const auto t0 = std::chrono::steady_clock::now();
-  if (undoable) {
-    before.state = solid_->SaveStateParts();
-    before.scene = scene_;
-    before.what = absl::StrCat("client ", request.client_id(), " seq ", request.seq(), ": ",
-                               KindName(command));
-  }
-  const absl::Status s = Apply(command, reply, prebuilt.get());
-  if (s.ok() && undoable) history_.Record(std::move(before));
+  std::unique_ptr<Before> before;
+  if (undoable) before = CaptureBefore(command);
+  absl::Status s = command.kind_case() == Command::kUndo || command.kind_case() == Command::kRedo
+                       ? UndoRedo(command.kind_case() == Command::kUndo, request.client_id(), reply)
+                       : Apply(command, reply, prebuilt.get());
+  if (s.ok() && undoable) s = Record(request, *before, *reply);
   if (s.ok()) RecordOwner(request.client_id(), *reply);
   last_hold_ms_ =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -499,9 +448,11 @@ absl::Status SimCore::Apply(const Command& c, CommandReply* reply, Prebuilt* pre
       return Rename(solid_->MoveDrag(c.move_drag().load_id(), Targets(c.move_drag())),
                     "move_drag", "move_drag");
     case Command::kUndo:
-      return UndoRedo(true, reply, prebuilt);
     case Command::kRedo:
-      return UndoRedo(false, reply, prebuilt);
+      // Process passes the sender (UndoRedo); Apply has no client.
+      return absl::InternalError("undo and redo are applied by Process");
+    case Command::kRevertToScene:
+      return RevertToScene();
     case Command::KIND_NOT_SET:
       break;
   }
@@ -542,63 +493,6 @@ absl::Status SimCore::ApplyEdit(const TopologyEdit& edit, CommandReply* reply,
   solid_ = std::move(applied->solid);
   scene_ = std::make_shared<const Scene>(std::move(applied->scene));
   ++fields_version_;
-  r->set_hold_ms(
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-  return absl::OkStatus();
-}
-
-absl::Status SimCore::Restore(const HistoryItem& item, Prebuilt* prebuilt) {
-  // The state prepared off the loop for this entry, if any (its errors are
-  // the restore's).
-  solid::Solid::PreparedState* prepared = nullptr;
-  if (prebuilt != nullptr && prebuilt->state.has_value() && prebuilt->for_state == &item.state) {
-    if (!prebuilt->state->ok()) return prebuilt->state->status();
-    prepared = prebuilt->state->value().get();
-  }
-  if (item.scene == scene_) {
-    return prepared != nullptr
-               ? solid_->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
-               : solid_->RestoreStateAtClock(solid::Solid::JoinState(item.state), solid_->time(), solid_->steps());
-  }
-  if (factory_ == nullptr) {
-    return absl::FailedPreconditionError("this session cannot rebuild its solid (no factory)");
-  }
-  absl::StatusOr<std::shared_ptr<solid::Solid>> rebuilt =
-      prebuilt != nullptr && prebuilt->solid.has_value() && prebuilt->for_scene == item.scene
-          ? *std::move(prebuilt->solid)
-          : factory_(item.scene == original_ ? nullptr : item.scene.get());
-  if (!rebuilt.ok()) return rebuilt.status();
-  RETURN_IF_ERROR(prepared != nullptr && prebuilt->for_scene == item.scene
-                      ? (*rebuilt)->RestorePreparedAtClock(*prepared, solid_->time(), solid_->steps())
-                      : (*rebuilt)->RestoreStateAtClock(solid::Solid::JoinState(item.state), solid_->time(), solid_->steps()));
-  (*rebuilt)->set_topology_version(solid_->topology_version() + 1);
-  solid_ = *std::move(rebuilt);
-  scene_ = item.scene;
-  return absl::OkStatus();
-}
-
-absl::Status SimCore::UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuilt) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const char* field = undo ? "command.undo" : "command.redo";
-  if (undo ? !history_.can_undo() : !history_.can_redo()) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        field, ": nothing to ", undo ? "undo" : "redo", " (undo list ", history_.undo_depth(),
-        ", redo list ", history_.redo_depth(), " entries; ", history_.bytes(), " of ",
-        history_.limit_bytes(), " bytes)"));
-  }
-  const HistoryItem& next = undo ? history_.next_undo() : history_.next_redo();
-  HistoryItem now{solid_->SaveStateParts(), scene_, next.what};
-  RETURN_IF_ERROR(Restore(next, prebuilt));
-  // The state a failed step's message spoke of is gone.
-  last_error_.clear();
-  const HistoryItem done = undo ? history_.Undo(std::move(now)) : history_.Redo(std::move(now));
-  ++fields_version_;
-  HistoryReport* r = reply->mutable_history();
-  r->set_undo_depth(history_.undo_depth());
-  r->set_redo_depth(history_.redo_depth());
-  r->set_bytes(history_.bytes());
-  r->set_limit_bytes(history_.limit_bytes());
-  r->set_what(done.what);
   r->set_hold_ms(
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   return absl::OkStatus();
@@ -693,7 +587,7 @@ void SimCore::SaveTo(persist::Snapshot* snapshot) const {
     return static_cast<int32_t>(table.size() - 1);
   };
   snapshot->set_scene(index(scene_));
-  history_.SaveTo(snapshot, index);
+  history_.SaveTo(snapshot->mutable_undo_history());
 }
 
 absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
@@ -707,9 +601,6 @@ absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
     }
     return scenes[i];
   };
-  for (const auto* list : {&snapshot.undo(), &snapshot.redo()}) {
-    for (const persist::HistoryEntry& e : *list) RETURN_IF_ERROR(scene_of(e.scene()).status());
-  }
   ASSIGN_OR_RETURN(std::shared_ptr<const Scene> scene, scene_of(snapshot.scene()));
   std::shared_ptr<solid::Solid> solid = solid_;
   if (scene != scene_) {
@@ -725,7 +616,9 @@ absl::Status SimCore::RestoreFrom(const persist::Snapshot& snapshot) {
   }
   solid_ = std::move(solid);
   scene_ = std::move(scene);
-  history_.RestoreFrom(snapshot, [&](int32_t i) { return *scene_of(i); });
+  // (Snapshots of the old session-wide history, snapshot.undo and redo,
+  // are not read: their entries are whole states, not actions.)
+  history_.RestoreFrom(snapshot.undo_history());
   const persist::LoopState& loop = snapshot.loop();
   paused_ = loop.paused();
   steps_remaining_ = loop.steps_remaining();

@@ -13,6 +13,7 @@
 #include <deque>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "absl/container/flat_hash_map.h"
@@ -30,8 +31,8 @@ struct CoreOptions {
   int answer_cache = 256;
   // Whether Save can work (the session has a data directory).
   bool can_save = false;
-  // Bytes the undo and redo lists may hold (history.h); the oldest entries
-  // go first. Part of the session's determinism: recover with the same.
+  // Bytes the undo histories may hold (history.h); the oldest entries go
+  // first. Part of the session's determinism: recover with the same.
   int64_t undo_bytes = int64_t{256} << 20;
 };
 
@@ -135,7 +136,9 @@ class SimCore {
   int64_t fields_version() const { return fields_version_; }
   int64_t commands_applied() const { return applied_; }
   int64_t commands_rejected() const { return rejected_; }
-  const History& history() const { return history_; }
+  const UndoHistory& history() const { return history_; }
+  // Everyone's undo entries (InspectRequest.history).
+  void DescribeHistory(HistoryInfo* out) const { history_.Describe(out); }
   // The scene of the current solid (the session's own until a topology edit).
   const Scene& scene() const { return *scene_; }
   // Wall time the last command held the loop, ms.
@@ -169,10 +172,42 @@ class SimCore {
   };
   absl::Status Apply(const Command& command, CommandReply* reply, Prebuilt* prebuilt);
   absl::Status ApplyEdit(const TopologyEdit& edit, CommandReply* reply, Prebuilt* prebuilt);
-  // Undo or redo: puts the solid in `item`'s state (rebuilding it when the
-  // scene differs, or taking the prebuilt solid); on error nothing changed.
-  absl::Status Restore(const HistoryItem& item, Prebuilt* prebuilt);
-  absl::Status UndoRedo(bool undo, CommandReply* reply, Prebuilt* prebuilt);
+
+  // ---- Per-person undo (sim_core_undo.cc; history.h says the design).
+  // What a command's entry needs from before it is applied.
+  struct Before {
+    std::optional<solid::Solid::LoadInfo> load;              // remove_load
+    std::optional<solid::Solid::ConstraintInfo> constraint;  // unfix
+    Vec3 gravity;                                            // set_gravity
+    std::shared_ptr<const std::string> material;             // paint
+    TopologyEdit edit;                                       // edit (a bake filled in)
+    std::string state;                                       // revert_to_scene
+    std::shared_ptr<const Scene> scene;                      // edit, revert_to_scene
+  };
+  std::unique_ptr<Before> CaptureBefore(const Command& command) const;
+  // Records an applied command in its client's history (a drag's release
+  // in the drag's entry).
+  absl::Status Record(const CommandRequest& request, const Before& before,
+                      const CommandReply& reply);
+  // The sender's own undo or redo; on error nothing changed.
+  absl::Status UndoRedo(bool undo, const std::string& client, CommandReply* reply);
+  absl::Status CheckChange(const persist::UndoEntry& entry, const persist::UndoChange& change,
+                           bool undo, const std::string& client) const;
+  absl::Status ApplyChange(const persist::UndoEntry& entry, persist::UndoChange& change,
+                           bool undo, const std::string& client, bool* did);
+  absl::Status UndoEdit(const persist::UndoEntry& entry, const persist::EditChange& change,
+                        const std::string& client);
+  absl::Status RedoEdit(const persist::UndoEntry& entry, const persist::EditChange& change,
+                        const std::string& client);
+  absl::Status PutBackState(const persist::RevertChange& change);
+  // The session's own scene again, the clock going on.
+  absl::Status RevertToScene();
+  // Re-adds a load or pin an entry names; the new id is aliased.
+  absl::Status AddBack(const persist::UndoChange& change, int64_t id);
+  bool HasLoad(int64_t id) const;
+  bool HasPin(int64_t id) const;
+  // "cannot undo \"x\": " and the refusal.
+  static std::string Refusal(bool undo, const persist::UndoEntry& entry);
   void Remember(Client& client, const CommandReply& reply);
   // Records the owner of the item an applied command added (if it added
   // one) and forgets the oldest owners of removed items beyond kKeptOwners.
@@ -194,7 +229,7 @@ class SimCore {
   std::shared_ptr<const Scene> original_;  // the session's own scene
   std::shared_ptr<const Scene> scene_;     // the current solid's
   SolidFactory factory_;
-  History history_;
+  UndoHistory history_;
   double last_hold_ms_ = 0;
 };
 

@@ -111,6 +111,7 @@ const char kUsage[] =
     "  stats --id ID --token TOKEN\n"
     "  mesh --id ID --token TOKEN     (the control mesh: ids for topology edits)\n"
     "  loads --id ID --token TOKEN    (the active loads and constraints, every client's)\n"
+    "  history --id ID --token TOKEN  (everyone's undo entries: who did what, undone or not)\n"
     "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
     "  export --id ID --token TOKEN --format obj|stl|ply|glb|vtu [--level L] [--out FILE]\n"
     "      [--color_field displacement] [--verbose]   (the current design, any level)\n"
@@ -285,6 +286,15 @@ class Client {
     *out.mutable_constraints() = reply.constraints();
     *out.mutable_gravity() = reply.gravity();
     return Report(status, out);
+  }
+
+  int History() {
+    dynsolid::InspectRequest request;
+    if (int e = ReadRef(*request.mutable_session()); e != 0) return e;
+    request.set_history(true);
+    dynsolid::InspectReply reply;
+    const grpc::Status status = Call([&](grpc::ClientContext* c) { return stub_->Inspect(c, request, &reply); });
+    return Report(status, reply.history());
   }
 
   int Pick() {
@@ -553,6 +563,7 @@ int main(int argc, char** argv) {
   if (command == "stats") return client.Stats();
   if (command == "mesh") return client.Mesh();
   if (command == "loads") return client.Loads();
+  if (command == "history") return client.History();
   if (command == "pick") return client.Pick();
   if (command == "export") return client.Export();
   if (command == "run") {

@@ -60,6 +60,7 @@ const std::vector<VerbSpec>& Verbs() {
       {"bake", {}, nullptr},
       {"undo", {}, nullptr},
       {"redo", {}, nullptr},
+      {"revert", {}, nullptr},
       {"pause", {}, nullptr},
       {"resume", {}, nullptr},
       {"step", {"count"}, "count"},
@@ -598,6 +599,8 @@ std::string ParseLine(const std::vector<std::string>& words,
     c.mutable_undo();
   } else if (verb == "redo") {
     c.mutable_redo();
+  } else if (verb == "revert") {
+    c.mutable_revert_to_scene();  // back to the session's scene, undoably
   } else if (verb == "pause") {
     c.mutable_pause();
   } else if (verb == "resume") {

@@ -277,6 +277,12 @@ absl::StatusOr<AppliedEdit> ApplyEdit(const Scene& scene, const solid::Solid& so
   return out;
 }
 
+absl::StatusOr<EditResult> EditAtRest(const scene::Discretization& d, const TopologyEdit& edit) {
+  RETURN_IF_ERROR(scene::ValidateValues(edit, "edit"));
+  const mesh::CellComplex& rest = d.control();
+  return Dispatch(rest, rest.positions(), d.control_sharp, edit);
+}
+
 absl::StatusOr<std::unique_ptr<solid::Solid>> BuildEdited(const Scene& scene, int threads) {
   ASSIGN_OR_RETURN(scene::Discretization d, scene::BuildDiscretization(scene, "", std::nullopt));
   return solid::Solid::Create(scene, std::move(d), threads);

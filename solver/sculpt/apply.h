@@ -12,6 +12,7 @@
 #include "absl/status/statusor.h"
 #include "dynsolid/scene.pb.h"
 #include "solver/mesh/cell_complex.h"
+#include "solver/sculpt/topology.h"
 #include "solver/solid/solid.h"
 
 namespace dynsolid::sculpt {
@@ -71,6 +72,11 @@ absl::StatusOr<PreparedEdit> PrepareEdit(const Scene& scene, const solid::Solid&
 // The cheap part, at a step boundary: the edit with the current positions,
 // the state carried over onto the prepared solid.
 absl::StatusOr<AppliedEdit> FinishEdit(PreparedEdit prepared, const solid::Solid& solid);
+
+// The edit alone on a control mesh at rest (`d`'s), nothing built: the new
+// mesh and where its vertices and cells come from (topology.h EditResult).
+// The same checks and errors as PrepareEdit's edit part.
+absl::StatusOr<EditResult> EditAtRest(const scene::Discretization& d, const TopologyEdit& edit);
 
 // The solid of an edited scene (its control mesh inline): Discretize and
 // Create with `threads` stepping threads.

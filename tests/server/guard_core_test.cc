@@ -1,7 +1,7 @@
 // The stability guard seen from a session's core (SimCore): a blow-up is
 // caught within physics, rolled back, pauses the session and says why; the
-// message goes when the state it spoke of goes (an undo of the load that
-// caused it, a good step).
+// message goes when the state it spoke of goes (a revert to the scene, a
+// good step) and comes back with it (the revert's undo).
 #include <memory>
 #include <string>
 
@@ -66,10 +66,16 @@ TEST(GuardCoreTest, ABlowUpIsCaughtRolledBackAndItsMessageGoesWithItsState) {
   EXPECT_FALSE(s.core->StepOnce().ok());
   EXPECT_THAT(s.core->last_error(), HasSubstr("blew up"));
 
-  // Undoing the pressure takes the state the message spoke of away: the
-  // message goes with it, and the block steps again and settles.
+  // Undoing the pressure takes the load away from the solid as it is now
+  // (undo is per person and keeps everyone's motion, server/history.h):
+  // the state the message spoke of stays, and so does the message.
   const CommandReply undo = Send(s, "undo {}");
   ASSERT_EQ(undo.code(), 0) << undo.message();
+  EXPECT_TRUE(s.core->solid().ActiveLoads().empty());
+  EXPECT_THAT(s.core->last_error(), HasSubstr("blew up"));
+  // A revert to the scene takes that state away: the message goes with it,
+  // and the block steps again and stays at rest.
+  ASSERT_EQ(Send(s, "revert_to_scene {}").code(), 0);
   EXPECT_EQ(s.core->last_error(), "");
   ASSERT_EQ(Send(s, "resume {}").code(), 0);
   for (int i = 0; i < 200; ++i) ASSERT_OK(s.core->StepOnce());
@@ -77,9 +83,10 @@ TEST(GuardCoreTest, ABlowUpIsCaughtRolledBackAndItsMessageGoesWithItsState) {
   EXPECT_LE(Extent(s), 1.01 * rest);
 }
 
-// The message speaks of a state: a redo that brings the blown-up state back
-// brings the failure back at its first step, and the message with it.
-TEST(GuardCoreTest, ARedoOfTheBlownUpStateFailsAgainAtOnce) {
+// The message speaks of a state: the undo of the revert that took the
+// blown-up state away brings it back, and the failure with it at its
+// first step (on the session's clock, 50 steps later).
+TEST(GuardCoreTest, UndoingTheRevertBringsTheBlownUpStateBackAndItFailsAgainAtOnce) {
   TestCore s = MakeTestCore("block3", 2, /*start_paused=*/false);
   const CommandReply add = Send(s, R"(add_pressure {
       region { box { min { x: -0.1 y: -0.1 z: 2.99 } max { x: 3.1 y: 3.1 z: 3.1 } } }
@@ -89,12 +96,12 @@ TEST(GuardCoreTest, ARedoOfTheBlownUpStateFailsAgainAtOnce) {
   for (int i = 0; i < 2000 && failed.ok(); ++i) failed = s.core->StepOnce();
   ASSERT_FALSE(failed.ok());
   const int64_t failed_at = s.core->steps() + 1;
-  ASSERT_EQ(Send(s, "undo {}").code(), 0);
+  ASSERT_EQ(Send(s, "revert_to_scene {}").code(), 0);
   ASSERT_EQ(Send(s, "resume {}").code(), 0);
   for (int i = 0; i < 50; ++i) ASSERT_OK(s.core->StepOnce());
   EXPECT_EQ(s.core->last_error(), "");
-  const CommandReply redo = Send(s, "redo {}");
-  ASSERT_EQ(redo.code(), 0) << redo.message();
+  const CommandReply undo = Send(s, "undo {}");
+  ASSERT_EQ(undo.code(), 0) << undo.message();
   ASSERT_EQ(Send(s, "resume {}").code(), 0);
   const absl::Status again = s.core->StepOnce();
   ASSERT_FALSE(again.ok()) << "the state that failed at step " << failed_at << " is back";

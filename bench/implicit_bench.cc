@@ -80,7 +80,7 @@ double CpuMs() {
 double PhaseMedian(const std::vector<PhaseTimes>& phases, double PhaseTimes::*field) {
   std::vector<double> v;
   for (const PhaseTimes& p : phases) v.push_back(p.*field);
-  return Median(v);
+  return dynsolid::Median(v);
 }
 
 std::string Fmt(double ms) {
@@ -220,8 +220,8 @@ Case Run(const std::string& name, const dynsolid::Scene& scene) {
     phases.push_back(s.last_phases());
   }
   c.cpu = (CpuMs() - cpu0) / steps;
-  c.median = Percentile(ms, 0.5);
-  c.p90 = Percentile(ms, 0.9);
+  c.median = dynsolid::Median(ms);
+  c.p90 = dynsolid::Percentile(ms, 0.9);
   c.mean = std::accumulate(ms.begin(), ms.end(), 0.0) / ms.size();
   c.cg_mean = std::accumulate(cg.begin(), cg.end(), 0.0) / cg.size();
   c.passes_mean = std::accumulate(passes.begin(), passes.end(), 0.0) / passes.size();

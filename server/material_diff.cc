@@ -11,35 +11,6 @@
 namespace dynsolid::server {
 namespace {
 
-// solid_state.cc's word checksum (format version 4 and later), which the
-// state's checksum combines for the head and the section.
-uint64_t Mix64(uint64_t x) {
-  x ^= x >> 33;
-  x *= 0xff51afd7ed558ccdull;
-  x ^= x >> 33;
-  x *= 0xc4ceb9fe1a85ec53ull;
-  x ^= x >> 33;
-  return x;
-}
-uint64_t WordChecksum(std::string_view bytes) {
-  constexpr uint64_t kPrime = 1099511628211ull;
-  uint64_t h[4] = {1469598103934665603ull, 0x9e3779b97f4a7c15ull, 0x632be59bd9b4e019ull,
-                   0xbf58476d1ce4e5b9ull};
-  const size_t n = bytes.size();
-  size_t i = 0;
-  for (; i + 32 <= n; i += 32) {
-    for (int k = 0; k < 4; ++k) {
-      uint64_t w;
-      std::memcpy(&w, bytes.data() + i + 8 * k, 8);
-      h[k] = (h[k] ^ w) * kPrime;
-    }
-  }
-  for (; i < n; ++i) h[i % 4] = (h[i % 4] ^ static_cast<unsigned char>(bytes[i])) * kPrime;
-  uint64_t r = n;
-  for (uint64_t x : h) r = Mix64(r ^ Mix64(x));
-  return r;
-}
-
 // The head's layout (solid_state.cc SaveStateParts): magic 8, version 4,
 // fingerprint 16, payload size 8; time, steps, rollbacks 8 each, sub-steps
 // 4, omega and stable step 8 each, then forces_valid, the last strain
@@ -84,7 +55,7 @@ absl::StatusOr<ElementMaterials> MaterialsOf(const solid::Solid& solid) {
         const int32_t node = (*nodes[kind])[static_cast<size_t>(e) * per[kind] + k];
         for (int c = 0; c < 3; ++c) Put<double>(&buffer, rest(node, c));
       }
-      m->keys.push_back(WordChecksum(buffer));
+      m->keys.push_back(solid::WordChecksum(buffer));
     }
   }
   if (m->keys.size() != m->element_array.size()) {
@@ -231,9 +202,9 @@ std::string StateWithMaterial(const solid::SavedState& now, const std::string& s
   std::memcpy(s.head.data() + kPayloadSizeAt, &payload, sizeof(payload));
   s.head[kForcesValidAt] = 0;
   s.head[kLedgerRebaseAt] = 1;
-  s.head_sum = WordChecksum(s.head);
+  s.head_sum = solid::WordChecksum(s.head);
   s.section = std::make_shared<const std::string>(section);
-  s.section_sum = WordChecksum(section);
+  s.section_sum = solid::WordChecksum(section);
   return solid::Solid::JoinState(s);
 }
 

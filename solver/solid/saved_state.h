@@ -10,8 +10,16 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 
 namespace dynsolid::solid {
+
+// The state format's word checksum (version 4 and later): FNV-1a steps
+// over 8-byte words in four independent chains (words k, k + 4, ... in
+// chain k % 4), each finished with a 64-bit mixer, combined with the
+// length. head_sum and section_sum below are this of their bytes; a
+// history that rewrites a section (server/material_diff.h) sums it here.
+uint64_t WordChecksum(std::string_view bytes);
 
 struct SavedState {
   std::string head;       // everything before the material section

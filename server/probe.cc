@@ -13,6 +13,7 @@
 #include "server/session_loop.h"
 #include "server/session_registry.h"
 #include "server/sim_core.h"
+#include "server/vec3.h"
 #include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
@@ -20,14 +21,6 @@ namespace {
 
 constexpr size_t kMaxRejectionsPerReply = 16;
 constexpr size_t kRecentModels = 256;
-
-Vec3 ToVec3(const Eigen::Vector3d& v) {
-  Vec3 out;
-  out.set_x(v.x());
-  out.set_y(v.y());
-  out.set_z(v.z());
-  return out;
-}
 
 Eigen::Vector3d FromVec3(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 

@@ -13,6 +13,7 @@
 #include "server/log.h"
 #include "server/parsed_request.h"
 #include "server/probe.h"
+#include "server/vec3.h"
 #include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
@@ -313,18 +314,6 @@ grpc::ServerUnaryReactor* SessionsService::Inspect(grpc::CallbackServerContext* 
       [context] { return context->IsCancelled(); });
   return reactor;
 }
-
-namespace {
-
-Vec3 ToVec3(const Eigen::Vector3d& v) {
-  Vec3 out;
-  out.set_x(v.x());
-  out.set_y(v.y());
-  out.set_z(v.z());
-  return out;
-}
-
-}  // namespace
 
 grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* context,
                                                 const PickRequest* request, PickReply* response) {

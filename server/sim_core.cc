@@ -504,6 +504,13 @@ absl::Status SimCore::StepOnce() {
     paused_ = true;
     steps_remaining_ = 0;
     last_error_ = std::string(s.message());  // "step N failed: ..."
+    // What a person can do about it: an undo takes its action back from the
+    // solid as it is now (server/history.h), which keeps a blown-up shape.
+    if (absl::StrContains(last_error_, "blew up")) {
+      absl::StrAppend(&last_error_,
+                      ". The session is paused; undoing the load or edit that caused it keeps "
+                      "this shape, revert_to_scene (undoable) takes the session back to its scene");
+    }
     return s;
   }
   if (steps_remaining_ > 0 && --steps_remaining_ == 0) paused_ = true;

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "server/material_diff.h"
 #include "server/sim_core.h"
+#include "server/vec3.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/build.h"
 #include "solver/sculpt/apply.h"
@@ -16,14 +17,6 @@
 
 namespace dynsolid::server {
 namespace {
-
-Vec3 ToVec3(const Eigen::Vector3d& x) {
-  Vec3 v;
-  v.set_x(x.x());
-  v.set_y(x.y());
-  v.set_z(x.z());
-  return v;
-}
 
 bool SameVec(const Vec3& a, const Vec3& b) {
   return a.x() == b.x() && a.y() == b.y() && a.z() == b.z();

@@ -60,6 +60,7 @@ TEST(GuardCoreTest, ABlowUpIsCaughtRolledBackAndItsMessageGoesWithItsState) {
   const std::string said = s.core->last_error();
   EXPECT_THAT(said, HasSubstr(absl::StrCat("step ", s.core->steps() + 1, " failed")));
   EXPECT_THAT(said, HasSubstr("blew up"));
+  EXPECT_THAT(said, HasSubstr("revert_to_scene"));  // what a person can do
 
   // Resuming as it is fails again at once, and says so for that step.
   ASSERT_EQ(Send(s, "resume {}").code(), 0);

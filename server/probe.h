@@ -47,7 +47,6 @@
 namespace dynsolid::server {
 
 class SimCore;
-class SessionRegistry;
 
 struct ProbeLimits {
   // Probe streams per session (RESOURCE_EXHAUSTED beyond).
@@ -220,9 +219,5 @@ class ProbeHub {
   bool loads_on_ = false;  // read by busy() on the simulation thread only
   bool pushed_ = false;    // some probe applied a force since the last contact_ended
 };
-
-// The Probe RPC's reactor (registered by SessionsService).
-grpc::ServerBidiReactor<Parsed<ProbeRequest>, ProbeReply>* StartProbe(grpc::CallbackServerContext* context,
-                                                              SessionRegistry& registry);
 
 }  // namespace dynsolid::server

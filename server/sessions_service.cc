@@ -13,6 +13,7 @@
 #include "server/log.h"
 #include "server/parsed_request.h"
 #include "server/probe.h"
+#include "server/probe_rpc.h"
 #include "server/vec3.h"
 #include "solver/scene/scene_loader.h"
 

@@ -15,6 +15,11 @@
 #                           steps: the Table-1 style table (OFFLINE=0: skip;
 #                           about a minute on two cores)
 #   sculpt.png              the block before and after sculpting (four frames)
+#   keep/                   the sculpted block baked and exported (scene file,
+#                           OBJ, STL, glb), the session created again from the
+#                           scene file (recreated.obj), and the session's
+#                           animation replayed from its journal (animation/:
+#                           sculpt.pvd and a VTU per frame); keep.png
 #   haptic/                 the haptic segment (HAPTIC=0: skip): traces, loop
 #                           metrics, force_depth.png (docs/haptic.md)
 #   summary.md              the session summary, the Table-1 style table and
@@ -26,7 +31,7 @@ OUT=${OUT:-out/main}
 OFFLINE=${OFFLINE:-1}
 STEPS=${STEPS:-20}
 RECORD_EVERY=${RECORD_EVERY:-10}
-TARGETS="dynsolid-server dynsolid-client"
+TARGETS="dynsolid-server dynsolid-client dynsolid-replay"
 if [ "$OFFLINE" != 0 ]; then TARGETS="$TARGETS dynsolid-sim"; fi
 # shellcheck disable=SC2086
 bash scripts/build.sh $TARGETS
@@ -53,11 +58,35 @@ trap cleanup EXIT
 start_server "$S/server.out" "$S/server.log" --listen 127.0.0.1:0 --data_dir "$DATA"
 echo "run_main: dynsolid-server listening on $ADDR" >&2
 
-"$CLIENT" --server "$ADDR" run --script clients/scripts/sculpt_block3.txt \
-  --scene block3 --start_paused \
+# The session is created first (its id and token are kept: the design is
+# exported from it afterwards).
+"$CLIENT" --server "$ADDR" create --scene block3 --start_paused > "$S/session.json"
+SID=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["id"])' "$S/session.json")
+STOKEN=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["token"])' "$S/session.json")
+REF=(--id "$SID" --token "$STOKEN")
+"$CLIENT" --server "$ADDR" run --script clients/scripts/sculpt_block3.txt "${REF[@]}" --noclose \
   --frames_dir "$S/frames" --format obj,vtu --record_every "$RECORD_EVERY" \
   --fields displacement,strain,stiffness \
   --json "$S/report.json" | tee "$S/client.txt"
+
+# Keeping the work (docs/export.md): the sculpted block is baked (its shape
+# now is its rest shape), exported as a scene file, OBJ, STL and glTF, and
+# created again from the scene file; the re-created session's surface is
+# exported beside the original's. Then the session's animation is replayed
+# from its journal (.pvd + one VTU per frame).
+K="$OUT/keep"
+rm -rf "$K"
+mkdir -p "$K"
+printf 'bake\nwait 0\n' > "$K/bake.txt"
+"$CLIENT" --server "$ADDR" run --script "$K/bake.txt" "${REF[@]}" --noclose --nowatch > /dev/null
+for f in scene:textproto obj:obj stl:stl glb:glb; do
+  "$CLIENT" --server "$ADDR" export "${REF[@]}" --format "${f%%:*}" --out "$K/sculpted.${f##*:}" \
+    > "$K/export_${f%%:*}.json"
+done
+"$CLIENT" --server "$ADDR" create --scene_file "$K/sculpted.textproto" --start_paused > "$K/recreated.json"
+RID=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["id"])' "$K/recreated.json")
+RTOKEN=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["token"])' "$K/recreated.json")
+"$CLIENT" --server "$ADDR" export --id "$RID" --token "$RTOKEN" --format obj --out "$K/recreated.obj" > /dev/null
 
 # The design segment (docs/sculpt.md "Designs that stay"): the clay block
 # pulled by a drag and released keeps its new shape, then is baked.
@@ -78,6 +107,13 @@ if [ "$SERVER_EXIT" != 0 ]; then
   exit 1
 fi
 echo "run_main: dynsolid-server stopped cleanly (exit 0)" >&2
+
+# The animation of the sculpting session, replayed from its journal.
+"$BIN/server/dynsolid-replay" --session "$DATA/sessions/$SID" --out "$K/animation" --fps 20 \
+  --name sculpt > "$K/replay.json"
+/usr/bin/python3 scripts/render_frames.py "$OUT/keep.png" \
+  "$K/sculpted.obj:the sculpted block, baked" "$K/recreated.obj:created again from sculpted.textproto" >&2
+KEEP_LINES=$(/usr/bin/python3 scripts/keep_summary.py "$K")
 
 # The sculpting, before and after (scripts/render_frames.py).
 F="$S/frames"
@@ -149,6 +185,12 @@ fi
   echo "- $DROP_LINE"
   echo
   echo "![drop](drop.png) (\`drop.png\`)"
+  echo
+  echo "## Keeping the work: save as, export, animation (docs/export.md)"
+  echo
+  echo "$KEEP_LINES"
+  echo
+  echo "![keep](keep.png) (\`keep.png\`)"
   if [ "$OFFLINE" != 0 ]; then
     echo
     echo "## Offline: every built-in scene, $STEPS steps with dynsolid-sim (Table-1 style)"

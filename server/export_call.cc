@@ -11,6 +11,7 @@
 #include "server/grpc_status.h"
 #include "server/sim_core.h"
 #include "solver/export/design_export.h"
+#include "solver/sculpt/design_scene.h"
 
 namespace dynsolid::server {
 namespace {
@@ -27,7 +28,7 @@ absl::StatusOr<exporter::Format> FormatOf(ExportRequest::Format f) {
     case ExportRequest::VTU: return exporter::Format::kVtu;
     default:
       return absl::InvalidArgumentError(absl::StrCat(
-          "request.format: ", static_cast<int>(f), " is not a format (OBJ, STL, PLY, GLB, VTU)"));
+          "request.format: ", static_cast<int>(f), " is not a format (OBJ, STL, PLY, GLB, VTU, SCENE)"));
   }
 }
 
@@ -43,7 +44,12 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
  public:
   ExportCall(const ExportRequest& request, SessionRegistry& registry, WorkQueue& builds)
       : request_(request), builds_(builds) {
-    absl::StatusOr<exporter::Format> format = FormatOf(request.format());
+    absl::StatusOr<exporter::Format> format = exporter::Format::kObj;
+    if (request.format() == ExportRequest::SCENE) {
+      scene_file_ = true;
+    } else {
+      format = FormatOf(request.format());
+    }
     if (!format.ok()) {
       Finish(ToGrpcStatus(format.status()));
       return;
@@ -92,6 +98,20 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     step_ = core->steps();
     name_ = core->scene().name();
     level_ = request_.has_level() ? request_.level() : s.discretization().hierarchy.levels;
+    if (scene_file_) {
+      if (level_ != s.discretization().hierarchy.levels) {
+        Finish(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
+            "request.level: a scene file is saved at the session's level ",
+            s.discretization().hierarchy.levels, " (its painted samples belong to that level's "
+            "elements), not ", level_))));
+        return;
+      }
+      // The design's samples and clay are read here, at the step boundary
+      // (a walk over the elements' sample arrays); the text is made off
+      // the loop.
+      design_ = std::make_shared<Scene>(sculpt::DesignScene(core->scene(), s));
+      cells_ = static_cast<int64_t>(s.discretization().hierarchy.control_cell.size());
+    }
     builds_.Post([this](bool run) { Make(run); });
   }
 
@@ -99,6 +119,11 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   void Make(bool run) {
     if (!run) {
       Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+      return;
+    }
+    if (scene_file_) {
+      MakeSceneFile();
+      WriteNext();
       return;
     }
     exporter::ExportOptions options;
@@ -117,6 +142,17 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     WriteNext();
   }
 
+  // The design as a scene file: a comment saying where it came from, then
+  // the scene's text.
+  void MakeSceneFile() {
+    made_.bytes = sculpt::SceneText(
+        *design_, absl::StrCat("dynsolid scene: a design saved by Export SCENE (docs/export.md) from "
+                               "session ", request_.session().id(), " at step ", step_, ".\n"
+                               "dynsolid-client create --scene_file FILE takes it back."));
+    made_.cells = cells_;
+    file_name_ = FileName(name_, step_, level_, "textproto");
+  }
+
   void WriteNext() {
     const int64_t total = static_cast<int64_t>(made_.bytes.size());
     if (offset_ >= total && offset_ > 0) {
@@ -130,7 +166,7 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     chunk_out_.set_total_bytes(total);
     if (offset_ == 0) {
       chunk_out_.set_file_name(file_name_);
-      chunk_out_.set_media_type(exporter::MediaType(format_));
+      chunk_out_.set_media_type(scene_file_ ? "text/plain" : exporter::MediaType(format_));
       chunk_out_.set_step(step_);
       chunk_out_.set_level(level_);
       chunk_out_.set_cells(made_.cells);
@@ -143,6 +179,9 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   const ExportRequest request_;
   WorkQueue& builds_;
   exporter::Format format_ = exporter::Format::kGlb;
+  bool scene_file_ = false;  // SCENE: design_ as text
+  std::shared_ptr<const Scene> design_;
+  int64_t cells_ = 0;
   int chunk_ = kDefaultChunk;
   std::shared_ptr<const scene::Discretization> discretization_;
   Points positions_, rest_;

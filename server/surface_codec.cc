@@ -20,9 +20,6 @@ int64_t Quantize(const Grid& g, int axis, double x) {
 uint32_t ZigZag(int32_t d) {
   return d >= 0 ? static_cast<uint32_t>(d) << 1 : (static_cast<uint32_t>(-(d + 1)) << 1) | 1u;
 }
-int32_t UnZigZag(uint32_t z) {
-  return (z & 1u) ? -static_cast<int32_t>(z >> 1) - 1 : static_cast<int32_t>(z >> 1);
-}
 
 int BitWidth(uint32_t v) {
   int b = 0;
@@ -49,24 +46,6 @@ class BitWriter {
   int used_ = 0;
 };
 
-class BitReader {
- public:
-  explicit BitReader(const std::string& in) : in_(in) {}
-  bool Get(int bits, uint32_t* value) {
-    uint32_t v = 0;
-    for (int i = 0; i < bits; ++i, ++at_) {
-      if (at_ / 8 >= in_.size()) return false;
-      if ((static_cast<unsigned char>(in_[at_ / 8]) >> (at_ % 8)) & 1u) v |= 1u << i;
-    }
-    *value = v;
-    return true;
-  }
-
- private:
-  const std::string& in_;
-  size_t at_ = 0;
-};
-
 // Rice code (service.proto Delta): u = z >> k ones, a zero, k low bits;
 // u >= 16 escapes to 16 ones and 17 raw bits.
 constexpr int kMaxRiceK = 16;
@@ -87,20 +66,6 @@ void PutRice(BitWriter& w, uint32_t z, int k) {
     for (uint32_t i = 0; i < kRiceEscape; ++i) w.Put(1, 1);
     w.Put(z, 17);
   }
-}
-
-bool GetRice(BitReader& r, int k, uint32_t* z) {
-  uint32_t u = 0;
-  for (;;) {
-    uint32_t bit = 0;
-    if (!r.Get(1, &bit)) return false;
-    if (bit == 0) break;
-    if (++u == kRiceEscape) return r.Get(17, z);
-  }
-  uint32_t low = 0;
-  if (!r.Get(k, &low)) return false;
-  *z = (u << k) | low;
-  return true;
 }
 
 void SetVec3(const std::array<double, 3>& a, Vec3* v) {

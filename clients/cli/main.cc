@@ -74,7 +74,7 @@ ABSL_FLAG(std::string, frames_dir, "",
           "run: directory for recorded frames and snapshots (created if missing)");
 ABSL_FLAG(std::string, format, "obj",
           "run: frame file formats, comma separated: obj, vtu; export: one of obj, stl, ply, glb, "
-          "vtu");
+          "vtu, scene (the design as a scene file that create --scene_file takes back)");
 ABSL_FLAG(int, record_every, 0,
           "run: record every N-th frame received as frame_<step>.<format> (0: only snapshots)");
 ABSL_FLAG(std::string, json, "", "run: write the report as JSON to this file");
@@ -113,7 +113,7 @@ const char kUsage[] =
     "  loads --id ID --token TOKEN    (the active loads and constraints, every client's)\n"
     "  history --id ID --token TOKEN  (everyone's undo entries: who did what, undone or not)\n"
     "  pick --id ID --token TOKEN --origin X,Y,Z --direction X,Y,Z\n"
-    "  export --id ID --token TOKEN --format obj|stl|ply|glb|vtu [--level L] [--out FILE]\n"
+    "  export --id ID --token TOKEN --format obj|stl|ply|glb|vtu|scene [--level L] [--out FILE]\n"
     "      [--color_field displacement] [--verbose]   (the current design, any level)\n"
     "  run --script FILE (--scene NAME | --scene_file FILE | --id ID --token TOKEN)\n"
     "      [--frames_dir DIR] [--format obj,vtu] [--record_every N] [--fields LIST]\n"
@@ -328,7 +328,7 @@ class Client {
     dynsolid::ExportRequest::Format f;
     if (!dynsolid::ExportRequest::Format_Parse(absl::AsciiStrToUpper(format), &f) ||
         f == dynsolid::ExportRequest::FORMAT_UNSPECIFIED) {
-      return UsageError(absl::StrCat("--format ", format, ": export takes obj, stl, ply, glb or vtu"));
+      return UsageError(absl::StrCat("--format ", format, ": export takes obj, stl, ply, glb, vtu or scene"));
     }
     request.set_format(f);
     if (absl::GetFlag(FLAGS_level) >= 0) request.set_level(absl::GetFlag(FLAGS_level));

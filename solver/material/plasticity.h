@@ -154,6 +154,7 @@ class Plasticity : public models::CellFlow, public models::ElementFlow {
     std::vector<double> offsets, alpha, dissipation;
   };
   std::string SaveState() const;
+  State state() const { return {laws_, offsets_, alpha_, dissipation_}; }
   // For a solid of `cells` control cells whose model has `units`.
   static absl::StatusOr<State> ParseState(std::string_view bytes, int32_t cells, Units units);
   void set_state(State s);

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/scene/inline_mesh.h"
+#include "solver/sculpt/design_scene.h"
 #include "solver/sculpt/edit_common.h"
 
 namespace dynsolid::sculpt {
@@ -22,21 +23,10 @@ namespace {
 absl::StatusOr<std::pair<Scene, scene::Discretization>> SelfContained(
     const Scene& before, const scene::Discretization& d) {
   std::pair<Scene, scene::Discretization> out;
-  Scene& scene = out.first;
-  scene = before;
+  out.first = SelfContainedScene(before, d);
+  out.first.clear_design();  // the materials are carried over
   const mesh::MeshInput input = internal::ToInput(d.control());
-  ControlMesh* m = scene.mutable_mesh();
-  m->Clear();
-  *m->mutable_inline_mesh() = scene::InlineFromMesh(input);
-  scene.mutable_subdivision()->set_levels(d.hierarchy.levels);
-  SharpFeatures* sharp = scene.mutable_sharp();
-  sharp->Clear();
-  for (const auto& [a, b] : internal::SharpPairs(d.control(), d.control_sharp)) {
-    EdgeRef* e = sharp->add_edges();
-    e->set_v0(a);
-    e->set_v1(b);
-  }
-  ASSIGN_OR_RETURN(out.second, scene::Discretize(scene, input, std::nullopt));
+  ASSIGN_OR_RETURN(out.second, scene::Discretize(out.first, input, std::nullopt));
   return out;
 }
 

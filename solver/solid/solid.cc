@@ -190,6 +190,15 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
   MassSolver solve_mass(mass, fixed_set);
   std::vector<double> alpha, beta;
   double lambda = 0;
+  // The forces at rest: zero, unless clay has moved the elements' rest
+  // shapes (plastic offsets per element), when the difference quotient
+  // must take them off (g(rest) / eps would read as a huge stiffness).
+  Points g_rest;
+  if (cells == nullptr && plasticity != nullptr) {
+    m.ResetFrames();
+    m.ExactForces(rest, gn);
+    if (gn.cwiseAbs().maxCoeff() > 0) g_rest = gn;
+  }
   for (int k = 0; k < kMaxSteps; ++k) {
     if (cells != nullptr) {
       cells->ApplyRest(q, kq, cell_pool);  // the same K, in control space
@@ -197,6 +206,7 @@ double Solid::Impl::EstimateOmegaMax(models::InternalForceModel& m, const Sparse
       dn = rest + eps * (nm * q);
       m.ResetFrames();
       m.ExactForces(dn, gn);
+      if (g_rest.size() > 0) gn -= g_rest;
       kq.noalias() = nm.transpose() * gn;
       kq /= eps;
     }

@@ -677,6 +677,13 @@ class Solid {
     double dissipation = 0, max_strain = 0;
   };
   PlasticStats plastic_stats() const;
+  // The design's own state (scene.proto Design): every element's material
+  // samples as painted and the clay's flow laws, plastic offsets and
+  // strain. A scene of this solid's control mesh (at its rest shape) and
+  // subdivision with this as its `design` creates a solid with the same
+  // samples and clay state, bit for bit (the export's "save as",
+  // sculpt/design_scene.h). Its dissipation history is not kept.
+  Design SaveDesign() const;
   // The environment (floor, obstacles): surface vertices in contact now and
   // the deepest of them (metres below the plane it entered by).
   struct ContactStats {

@@ -4,6 +4,7 @@
 // material layout built off the loop and installed (BuildMaterial,
 // InstallMaterial) as paints and topology edits need.
 #include "solver/solid/solid.h"
+#include "solver/solid/design.h"
 #include "solver/solid/solid_impl.h"
 
 #include <algorithm>
@@ -417,7 +418,21 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   // scenes; the chair has a painted region and samples).
   std::array<std::vector<models::MaterialPoint>, 3> base_arrays;
   models::ElementMaterials base_whole;
-  if (materials == nullptr && whole == nullptr && painted.empty()) {
+  // A saved design (scene.design; design.h): its samples, element by
+  // element, over what the regions give. Only a plain Create reads it (an
+  // edit's build carries its materials over).
+  const bool use_design = scene.has_design() && materials == nullptr && whole == nullptr &&
+                          carried == nullptr;
+  std::unique_ptr<DesignMaterials> design;
+  const Design& saved = scene.design();
+  if (use_design && (saved.elements_size() > 0 || saved.sample_runs_size() > 0 ||
+                     saved.materials_size() > 0)) {
+    ASSIGN_OR_RETURN(design, DesignMaterials::Make(saved, s->d_.elements, rest));
+    base_whole = [&design](int kind, const fem::NodeMatrixX3& x, int32_t) {
+      return design->Find(kind, x);
+    };
+    whole = &base_whole;
+  } else if (materials == nullptr && whole == nullptr && painted.empty()) {
     for (int kind = 0; kind < fem::kElementKinds; ++kind) {
       base_arrays[kind].assign(fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points, base);
     }
@@ -467,6 +482,11 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   RETURN_IF_ERROR(common::CheckBuildWatch("stiffness model and mass"));
   s->total_mass_ = SumOfValues(im.mt);
   RETURN_IF_ERROR(im.MakePlasticity(scene));  // clay, when some material yields
+  if (use_design) {
+    ASSIGN_OR_RETURN(std::optional<material::Plasticity::State> clay,
+                     DesignClay(scene.design(), control.num_cells(), im.PlasticUnits()));
+    if (clay.has_value()) im.InstallParts({}, std::move(clay));
+  }
 
   // Constraints: the scene's fixed regions, held at rest.
   im.fix_count.assign(nc, 0);

@@ -129,6 +129,7 @@ Scene CleanScene(const Scene& scene, const std::vector<int32_t>& cell_source) {
   clean.mutable_constraints()->clear_fixed();
   clean.clear_traced();
   clean.mutable_materials()->clear_regions();
+  clean.clear_design();  // the materials are carried over
   for (PenaltySpring& s : *clean.mutable_constraints()->mutable_springs()) {
     *s.mutable_region() = RemapRegion(s.region(), cell_source);
   }

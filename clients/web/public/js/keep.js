@@ -17,17 +17,23 @@ export const FORMATS = [
     what: 'coloured by displacement: any glTF viewer, Blender, the web' },
   { key: 'vtu', format: 'VTU', label: 'VTU (volume)', ext: 'vtu', color_field: '',
     what: 'every element, with its displacement: ParaView' },
+  { key: 'scene', format: 'SCENE', label: 'Scene (save as)', ext: 'textproto', color_field: '',
+    sessionLevelOnly: true,
+    what: 'the design itself, painted and shaped: open it again with "Scene file…"' },
 ];
 
 // The server's own export limit on levels (service.proto ExportRequest).
 export const MAX_EXPORT_LEVEL = 6;
 
 // The levels offered for a session simulated at `level`: its own first,
-// then up to two finer ones (never above MAX_EXPORT_LEVEL).
-export function levelChoices(level) {
+// then up to two finer ones (never above MAX_EXPORT_LEVEL); only its own
+// for an entry saved at the session's level (a scene file: its painted
+// samples belong to that level).
+export function levelChoices(level, entry) {
   const base = Math.max(0, Math.min(MAX_EXPORT_LEVEL, Number.isInteger(level) ? level : 0));
   const out = [];
-  for (let l = base; l <= Math.min(MAX_EXPORT_LEVEL, base + 2); ++l) {
+  const last = entry && entry.sessionLevelOnly ? base : Math.min(MAX_EXPORT_LEVEL, base + 2);
+  for (let l = base; l <= last; ++l) {
     out.push({ level: l, text: l === base ? `level ${l} (session)` : `level ${l} (finer)` });
   }
   return out;
@@ -141,7 +147,8 @@ export class Keep {
     const level = info && info.stats ? info.stats.levels : 0;
     for (const select of document.querySelectorAll('#download-formats select')) {
       select.textContent = '';
-      for (const c of levelChoices(level)) select.add(new Option(c.text, String(c.level)));
+      const entry = FORMATS.find((f) => f.key === select.dataset.levelFor);
+      for (const c of levelChoices(level, entry)) select.add(new Option(c.text, String(c.level)));
     }
     $('download').disabled = !info;
     if (!info) $('download-menu').hidden = true;

@@ -29,7 +29,11 @@ function connected() {
 }
 
 test('the menu offers OBJ, STL, PLY, glTF coloured by displacement and VTU, at the session\'s level up to two finer', () => {
-  assert.deepEqual(FORMATS.map((f) => f.format), ['OBJ', 'STL', 'PLY', 'GLB', 'VTU']);
+  assert.deepEqual(FORMATS.map((f) => f.format), ['OBJ', 'STL', 'PLY', 'GLB', 'VTU', 'SCENE']);
+  // A scene file is saved at the session's level only.
+  const scene = FORMATS.find((f) => f.format === 'SCENE');
+  assert.equal(scene.ext, 'textproto');
+  assert.deepEqual(levelChoices(2, scene).map((c) => c.level), [2]);
   assert.equal(FORMATS.find((f) => f.format === 'GLB').color_field, 'displacement');
   assert.deepEqual(levelChoices(2).map((c) => c.level), [2, 3, 4]);
   assert.deepEqual(levelChoices(2).map((c) => c.text), ['level 2 (session)', 'level 3 (finer)', 'level 4 (finer)']);

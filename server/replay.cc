@@ -1,0 +1,219 @@
+#include "server/replay.h"
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "dynsolid/journal.pb.h"
+#include "server/journal.h"
+#include "server/persistence.h"
+#include "solver/common/status_macros.h"
+#include "solver/export/design_export.h"
+
+namespace dynsolid::server {
+namespace {
+
+absl::Status WriteFile(const std::string& path, const std::string& bytes) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  f.close();
+  if (!f) return absl::UnavailableError(absl::StrCat("cannot write ", path));
+  return absl::OkStatus();
+}
+
+std::string Stem(const std::string& name) {
+  std::string out;
+  for (char c : name) out.push_back(std::isalnum(static_cast<unsigned char>(c)) || c == '-' ? c : '_');
+  return out.empty() ? "session" : out.substr(0, 64);
+}
+
+}  // namespace
+
+absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const ReplayOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!(o.fps > 0) || !std::isfinite(o.fps)) {
+    return absl::InvalidArgumentError(absl::StrCat("--fps: ", o.fps, " is not a positive number"));
+  }
+  if (!std::isfinite(o.from) || o.from < 0 || !std::isfinite(o.to)) {
+    return absl::InvalidArgumentError(absl::StrCat("--from ", o.from, " --to ", o.to,
+                                                   ": times are finite seconds, --from >= 0"));
+  }
+  if (o.level < -1 || o.level > 6) {
+    return absl::InvalidArgumentError(absl::StrCat("--level: ", o.level, " is outside 0-6"));
+  }
+  if (!o.pvd && !o.obj) return absl::InvalidArgumentError("--format: no format to write");
+  // The session as it was created, and its whole journal.
+  std::string manifest_bytes;
+  {
+    std::ifstream f(dir + "/manifest.binpb", std::ios::binary);
+    if (!f) return absl::NotFoundError(absl::StrCat(dir, "/manifest.binpb: not a session directory"));
+    manifest_bytes.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  persist::Manifest manifest;
+  if (!manifest.ParseFromString(manifest_bytes) || manifest.format() != 1) {
+    return absl::DataLossError(absl::StrCat(dir, "/manifest.binpb is not a format-1 manifest"));
+  }
+  ASSIGN_OR_RETURN(JournalContents journal, ReadJournal(dir + "/journal", 0));
+  std::vector<persist::JournalRecord> records(journal.records.size());
+  for (size_t i = 0; i < records.size(); ++i) {
+    if (!records[i].ParseFromString(journal.records[i])) {
+      return absl::DataLossError(absl::StrCat(dir, "/journal: record ", i, " does not parse"));
+    }
+  }
+  // Steps after the last record are written down only by a snapshot, or by
+  // the record itself when it left the session paused with a Step count
+  // (known once the replay reaches it).
+  int64_t snapshot_step = 0;
+  if (absl::StatusOr<JournalContents> snap = ReadJournal(dir + "/snapshot.binpb", 0);
+      snap.ok() && snap->records.size() == 1) {
+    persist::Snapshot snapshot;
+    if (snapshot.ParseFromString(snap->records[0])) snapshot_step = snapshot.step();
+  }
+  const SceneRequest request = SceneRequestOf(manifest);
+  ASSIGN_OR_RETURN(BuiltSolid built, BuildSolid(request, o.limits));
+  CoreOptions core_options = o.core;
+  core_options.can_save = true;
+  SimCore core(built.solid, core_options, manifest.start_paused(), request.scene,
+               MakeSolidFactory(request, o.limits));
+  const double h = core.solid().time_step();
+  ReplayReport rep;
+  rep.journal_records = static_cast<int64_t>(records.size());
+  if (o.fps * h > 1 + 1e-9) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "--fps %g: more than one frame per step (the session steps %g s, at most %g fps)", o.fps, h,
+        1 / h));
+  }
+  if (o.to >= 0 && o.from > o.to) {
+    return absl::InvalidArgumentError(absl::StrFormat("--from %g is after --to %g", o.from, o.to));
+  }
+  const int level = o.level >= 0 ? o.level : core.solid().discretization().hierarchy.levels;
+  const std::string stem = o.name.empty() ? Stem(request.scene.name())
+                                          : Stem(o.name);
+  std::error_code ec;
+  std::filesystem::create_directories(o.out_dir, ec);
+  if (ec) return absl::UnavailableError(absl::StrCat("--out ", o.out_dir, ": ", ec.message()));
+
+  // Files written so far: removed again if the replay fails.
+  struct Cleanup {
+    const std::string& dir;
+    std::vector<std::string>* files;
+    bool keep = false;
+    ~Cleanup() {
+      if (keep) return;
+      for (const std::string& f : *files) std::filesystem::remove(dir + "/" + f);
+    }
+  } cleanup{o.out_dir, &rep.files};
+  std::string pvd =
+      "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n";
+  auto write_frame = [&](int index) -> absl::Status {
+    const solid::Solid& s = core.solid();
+    exporter::DesignInput in{&s.discretization(), s.control_positions(),
+                             s.discretization().control().positions()};
+    const std::string base = absl::StrFormat("%s_%04d", stem, index);
+    for (const bool volume : {true, false}) {
+      if (volume ? !o.pvd : !o.obj) continue;
+      exporter::ExportOptions eo;
+      eo.format = volume ? exporter::Format::kVtu : exporter::Format::kObj;
+      eo.level = level;
+      absl::StatusOr<exporter::Exported> made = exporter::ExportDesign(in, eo);
+      if (!made.ok()) {
+        return absl::Status(made.status().code(), absl::StrCat("--", made.status().message()));
+      }
+      const std::string file = absl::StrCat(base, volume ? ".vtu" : ".obj");
+      RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, made->bytes));
+      rep.files.push_back(file);
+      if (volume) {
+        absl::StrAppend(&pvd, "    <DataSet timestep=\"", absl::StrFormat("%.17g", s.time()),
+                        "\" part=\"0\" file=\"", file, "\"/>\n");
+      }
+    }
+    rep.frame_steps.push_back(s.steps());
+    rep.frame_times.push_back(s.time());
+    return absl::OkStatus();
+  };
+
+  // Step by step: at each step boundary its records are applied (as the
+  // live loop did, in journal order), then a frame is written if one is
+  // due, then the session steps if it was running. The end is known once
+  // the last record is applied: where a Step count pauses the session, or
+  // the last record's step (or the snapshot's, when later) for a session
+  // that was running.
+  size_t next = 0;
+  int64_t frame = 0;
+  std::optional<int64_t> end;
+  double to = o.to;
+  for (;;) {
+    const int64_t step = core.steps();
+    while (next < records.size() && records[next].step() == step) {
+      if (absl::Status s = core.Replay(records[next]); !s.ok()) {
+        return absl::DataLossError(absl::StrCat(dir, "/journal: ", s.message()));
+      }
+      ++next;
+    }
+    if (!end.has_value() && next == records.size()) {
+      const int64_t last = records.empty() ? 0 : records.back().step();
+      end = !core.WantsStep() ? step
+            : core.paused()   ? step + core.steps_remaining()
+                              : std::max({last, snapshot_step, step});
+      rep.end_step = *end;
+      rep.end_time = static_cast<double>(*end) * h;
+      if (to < 0) to = rep.end_time;
+      if (o.from > to || to > rep.end_time * (1 + 1e-12) + 1e-12) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "--from %g --to %g: the journal covers [0, %g] s (steps 0-%d, %d records)", o.from, to,
+            rep.end_time, *end, records.size()));
+      }
+    }
+    // The frames due here: those whose time is nearest this step.
+    bool past = false;
+    for (;; ++frame) {
+      const double t = o.from + static_cast<double>(frame) / o.fps;
+      if (to >= 0 && t > to * (1 + 1e-12) + 1e-12) {
+        past = true;
+        break;
+      }
+      const int64_t at = std::llround(t / h);
+      if (at > step) break;
+      if (at == step && (rep.frame_steps.empty() || rep.frame_steps.back() < step)) {
+        if (rep.frame_steps.size() >= 100000) {
+          return absl::InvalidArgumentError("--fps, --from, --to: more than 100000 frames");
+        }
+        RETURN_IF_ERROR(write_frame(static_cast<int>(rep.frame_steps.size())));
+      }
+    }
+    if (past || (end.has_value() && step >= *end)) break;
+    if (!core.WantsStep()) {
+      return absl::DataLossError(absl::StrCat(dir, ": the session is paused at step ", step,
+                                              " and the journal's next record is at step ",
+                                              records[next].step()));
+    }
+    (void)core.StepOnce();  // a failed step is part of the history (it pauses)
+  }
+  if (!end.has_value()) {
+    // The range ended before the last record: the end is at least there.
+    rep.end_step = std::max({records.back().step(), snapshot_step, core.steps()});
+    rep.end_time = static_cast<double>(rep.end_step) * h;
+  }
+  if (o.pvd) {
+    absl::StrAppend(&pvd, "  </Collection>\n</VTKFile>\n");
+    const std::string file = stem + ".pvd";
+    RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, pvd));
+    rep.files.push_back(file);
+  }
+  rep.frames = static_cast<int>(rep.frame_steps.size());
+  cleanup.keep = true;
+  rep.milliseconds =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return rep;
+}
+
+}  // namespace dynsolid::server

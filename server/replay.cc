@@ -18,6 +18,7 @@
 #include "server/persistence.h"
 #include "solver/common/status_macros.h"
 #include "solver/export/design_export.h"
+#include "solver/io/gltf_writer.h"
 
 namespace dynsolid::server {
 namespace {
@@ -50,7 +51,7 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
   if (o.level < -1 || o.level > 6) {
     return absl::InvalidArgumentError(absl::StrCat("--level: ", o.level, " is outside 0-6"));
   }
-  if (!o.pvd && !o.obj) return absl::InvalidArgumentError("--format: no format to write");
+  if (!o.pvd && !o.obj && !o.glb) return absl::InvalidArgumentError("--format: no format to write");
   // The session as it was created, and its whole journal.
   std::string manifest_bytes;
   {
@@ -112,6 +113,8 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
       for (const std::string& f : *files) std::filesystem::remove(dir + "/" + f);
     }
   } cleanup{o.out_dir, &rep.files};
+  std::optional<mesh::BoundarySurface> glb_first;  // --format glb: the first frame
+  std::vector<Points> glb_frames;                   // and the later ones' positions
   std::string pvd =
       "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n";
   auto write_frame = [&](int index) -> absl::Status {
@@ -134,6 +137,26 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
       if (volume) {
         absl::StrAppend(&pvd, "    <DataSet timestep=\"", absl::StrFormat("%.17g", s.time()),
                         "\" part=\"0\" file=\"", file, "\"/>\n");
+      }
+    }
+    if (o.glb) {
+      exporter::ExportOptions eo;
+      eo.format = exporter::Format::kGlb;
+      eo.level = level;
+      absl::StatusOr<mesh::BoundarySurface> surface = exporter::DesignSurface(in, eo);
+      if (!surface.ok()) {
+        return absl::Status(surface.status().code(), absl::StrCat("--", surface.status().message()));
+      }
+      if (glb_first.has_value()) {
+        if (surface->faces.offsets != glb_first->faces.offsets ||
+            surface->faces.items != glb_first->faces.items) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              "--format glb: the surface changed at step ", s.steps(), " (a topology edit); a glTF "
+              "animation needs one surface: start after it (--from) or use pvd or obj"));
+        }
+        glb_frames.push_back(std::move(surface->positions));
+      } else {
+        glb_first = *std::move(surface);
       }
     }
     rep.frame_steps.push_back(s.steps());
@@ -202,6 +225,17 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
     // The range ended before the last record: the end is at least there.
     rep.end_step = std::max({records.back().step(), snapshot_step, core.steps()});
     rep.end_time = static_cast<double>(rep.end_step) * h;
+  }
+  if (o.glb && glb_first.has_value()) {
+    io::GlbOptions g;
+    g.generator = "dynsolid-replay";
+    g.morph_frames = std::move(glb_frames);
+    g.morph_times = rep.frame_times;
+    std::string bytes;
+    RETURN_IF_ERROR(io::GlbBytes(*glb_first, g, &bytes));
+    const std::string file = stem + ".glb";
+    RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, bytes));
+    rep.files.push_back(file);
   }
   if (o.pvd) {
     absl::StrAppend(&pvd, "  </Collection>\n</VTKFile>\n");

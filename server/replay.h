@@ -9,7 +9,11 @@
 // Output, in out_dir:
 //  - PVD: NAME_NNNN.vtu per frame (the volume, design_export.h VTU) and
 //    NAME.pvd, the ParaView collection listing each with its time;
-//  - OBJ: NAME_NNNN.obj per frame (the boundary surface).
+//  - OBJ: NAME_NNNN.obj per frame (the boundary surface);
+//  - GLB: NAME.glb, one glTF 2.0 file: the first frame's surface and a
+//    morph target per later frame, animated by weights at the frames'
+//    times (any glTF viewer, Blender). Needs one surface throughout: a
+//    topology edit within the range is an error naming its step.
 // No gRPC, no server: a file-level tool (dynsolid-replay, replay_main.cc).
 #pragma once
 
@@ -31,7 +35,7 @@ struct ReplayOptions {
   double fps = 30;
   // Subdivision levels of the frames (0-6); -1: the session's.
   int level = -1;
-  bool pvd = true, obj = false;
+  bool pvd = true, obj = false, glb = false;
   std::string out_dir;
   // File names' stem (empty: the scene's name).
   std::string name;

@@ -2,7 +2,7 @@
 //
 //   dynsolid-replay --session DATA_DIR/sessions/ID --out DIR
 //                   [--from 0] [--to END] [--fps 30] [--level L]
-//                   [--format pvd,obj] [--name STEM]
+//                   [--format pvd,obj,glb] [--name STEM]
 //                   [--undo_bytes N] [--answer_cache N]
 //
 // Prints one JSON line: the frames, their steps and times, the files. Exit
@@ -30,7 +30,7 @@ ABSL_FLAG(double, fps, 30, "Frames per second of session time (at most one per s
 ABSL_FLAG(int, level, -1, "Subdivision levels of the frames, 0-6; -1: the session's");
 ABSL_FLAG(std::string, format, "pvd",
           "Comma separated: pvd (a VTU per frame and a .pvd index for ParaView), obj (an OBJ "
-          "per frame)");
+          "per frame), glb (one glTF file, a morph target per frame)");
 ABSL_FLAG(std::string, name, "", "Stem of the file names; empty: the scene's name");
 ABSL_FLAG(int64_t, undo_bytes, int64_t{256} << 20,
           "The server's --undo_bytes when it ran the session (part of its determinism)");
@@ -65,8 +65,10 @@ int main(int argc, char** argv) {
       o.pvd = true;
     } else if (f == "obj") {
       o.obj = true;
+    } else if (f == "glb") {
+      o.glb = true;
     } else {
-      std::cerr << "dynsolid-replay: --format: unknown format \"" << f << "\" (pvd, obj)\n";
+      std::cerr << "dynsolid-replay: --format: unknown format \"" << f << "\" (pvd, obj, glb)\n";
       return 2;
     }
   }

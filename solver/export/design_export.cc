@@ -70,7 +70,10 @@ const char* MediaType(Format f) {
   return "application/octet-stream";
 }
 
-absl::StatusOr<Exported> ExportDesign(const DesignInput& in, const ExportOptions& options) {
+namespace {
+
+// The request's checks (ExportDesign's errors).
+absl::Status CheckInput(const DesignInput& in, const ExportOptions& options) {
   if (in.discretization == nullptr) return absl::InvalidArgumentError("no discretization");
   const scene::Discretization& d = *in.discretization;
   const mesh::CellComplex& control = d.control();
@@ -93,25 +96,82 @@ absl::StatusOr<Exported> ExportDesign(const DesignInput& in, const ExportOptions
         "color_field: \"", options.color_field,
         "\" is not a field of an export (displacement, displacement_magnitude)"));
   }
+  return absl::OkStatus();
+}
 
-  // The control mesh subdivided `level` times, the elements classified
-  // when a volume is asked for.
+}  // namespace
+
+absl::StatusOr<mesh::BoundarySurface> DesignSurface(const DesignInput& in,
+                                                    const ExportOptions& options,
+                                                    int64_t* cells, int64_t* vertices) {
+  RETURN_IF_ERROR(CheckInput(in, options));
+  const scene::Discretization& d = *in.discretization;
+  ASSIGN_OR_RETURN(subdivision::Hierarchy h,
+                   subdivision::Subdivide(d.hierarchy.control, options.level, d.control_sharp,
+                                          [](const mesh::CellComplex&) {}));
+  const Points x = h.a * in.positions;
+  const Points u = h.a * (in.positions - in.rest);
+  mesh::BoundarySurface surface = mesh::ExtractBoundary(*h.fine, &x);
+  if (cells != nullptr) *cells = h.fine->num_cells();
+  if (vertices != nullptr) *vertices = h.fine->num_vertices();
+  mesh::VertexField disp{"displacement", 3, {}};
+  mesh::VertexField mag{"displacement_magnitude", 1, {}};
+  for (int32_t v : surface.mesh_vertex) {
+    for (int k = 0; k < 3; ++k) disp.values.push_back(u(v, k));
+    mag.values.push_back(u.row(v).norm());
+  }
+  surface.fields.push_back(std::move(disp));
+  surface.fields.push_back(std::move(mag));
+  return surface;
+}
+
+absl::StatusOr<Exported> ExportDesign(const DesignInput& in, const ExportOptions& options) {
+  RETURN_IF_ERROR(CheckInput(in, options));
+  const scene::Discretization& d = *in.discretization;
+  Exported out;
   const bool volume = options.format == Format::kVtu;
+  if (!volume) {
+    ASSIGN_OR_RETURN(mesh::BoundarySurface surface,
+                     DesignSurface(in, options, &out.cells, &out.vertices));
+    out.surface_faces = surface.faces.rows();
+    switch (options.format) {
+      case Format::kObj:
+        RETURN_IF_ERROR(io::ObjBytes(surface, &out.bytes));
+        break;
+      case Format::kStl:
+        RETURN_IF_ERROR(io::StlBinaryBytes(surface, &out.bytes));
+        break;
+      case Format::kPly:
+        RETURN_IF_ERROR(io::PlyBinaryBytes(surface, &out.bytes));
+        break;
+      case Format::kGlb: {
+        io::GlbOptions glb;
+        glb.color_field = options.color_field;
+        glb.generator = "dynsolid export";
+        RETURN_IF_ERROR(io::GlbBytes(surface, glb, &out.bytes));
+        break;
+      }
+      case Format::kVtu:
+        break;
+    }
+    return out;
+  }
+
+  // The volume: the control mesh subdivided `level` times, its elements
+  // classified.
   fem::ElementSet elements;
   ASSIGN_OR_RETURN(subdivision::Hierarchy h,
                    subdivision::Subdivide(d.hierarchy.control, options.level, d.control_sharp,
                                           [&](const mesh::CellComplex& fine) {
-                                            if (volume) elements = fem::ClassifyElements(fine);
+                                            elements = fem::ClassifyElements(fine);
                                           }));
   // (a: fine vertices x control points; the identity at level 0.)
   const mesh::CellComplex& fine = *h.fine;
-  const Points x = h.a * in.positions;
-  const Points u = h.a * (in.positions - in.rest);
-
-  Exported out;
   out.cells = fine.num_cells();
   out.vertices = fine.num_vertices();
-  if (volume) {
+  {
+    const Points x = h.a * in.positions;
+    const Points u = h.a * (in.positions - in.rest);
     // The FEM nodes: the vertices, then a virtual apex per pyramid cell.
     Points nodes = x, nodes_u = u;
     if (elements.num_virtual_nodes > 0) {
@@ -130,38 +190,6 @@ absl::StatusOr<Exported> ExportDesign(const DesignInput& in, const ExportOptions
     vm.point_data.push_back(std::move(disp));
     vm.point_data.push_back(std::move(mag));
     RETURN_IF_ERROR(io::VtuBytes(vm, &out.bytes));
-    return out;
-  }
-
-  mesh::BoundarySurface surface = mesh::ExtractBoundary(fine, &x);
-  out.surface_faces = surface.faces.rows();
-  mesh::VertexField disp{"displacement", 3, {}};
-  mesh::VertexField mag{"displacement_magnitude", 1, {}};
-  for (int32_t v : surface.mesh_vertex) {
-    for (int k = 0; k < 3; ++k) disp.values.push_back(u(v, k));
-    mag.values.push_back(u.row(v).norm());
-  }
-  surface.fields.push_back(std::move(disp));
-  surface.fields.push_back(std::move(mag));
-  switch (options.format) {
-    case Format::kObj:
-      RETURN_IF_ERROR(io::ObjBytes(surface, &out.bytes));
-      break;
-    case Format::kStl:
-      RETURN_IF_ERROR(io::StlBinaryBytes(surface, &out.bytes));
-      break;
-    case Format::kPly:
-      RETURN_IF_ERROR(io::PlyBinaryBytes(surface, &out.bytes));
-      break;
-    case Format::kGlb: {
-      io::GlbOptions glb;
-      glb.color_field = options.color_field;
-      glb.generator = "dynsolid export";
-      RETURN_IF_ERROR(io::GlbBytes(surface, glb, &out.bytes));
-      break;
-    }
-    case Format::kVtu:
-      break;
   }
   return out;
 }

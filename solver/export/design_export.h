@@ -24,6 +24,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "solver/mesh/boundary.h"
 #include "solver/mesh/points.h"
 #include "solver/scene/build.h"
 
@@ -62,5 +63,15 @@ struct Exported {
 // max_cells at that level (with the count), positions of the wrong size or
 // non-finite, an unknown colour field.
 absl::StatusOr<Exported> ExportDesign(const DesignInput& in, const ExportOptions& options);
+
+// The boundary surface of ExportDesign's surface formats (options.level;
+// its positions now, with the fields `displacement` and
+// `displacement_magnitude`), for callers that write it themselves (an
+// animation's frames). The same errors; `cells` and `vertices` (optional)
+// get the counts at that level.
+absl::StatusOr<mesh::BoundarySurface> DesignSurface(const DesignInput& in,
+                                                    const ExportOptions& options,
+                                                    int64_t* cells = nullptr,
+                                                    int64_t* vertices = nullptr);
 
 }  // namespace dynsolid::exporter

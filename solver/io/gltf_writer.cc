@@ -142,18 +142,60 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
                                           " bytes of buffer: beyond GLB's 4 GiB"));
   }
 
+  // The animation's frames: the surface's vertices each, finite and
+  // within float32, at increasing finite times.
+  const size_t targets = options.morph_frames.size();
+  if (targets > 0 || !options.morph_times.empty()) {
+    if (options.morph_times.size() != targets + 1) {
+      return absl::InvalidArgumentError(Cat("animation: ", options.morph_times.size(),
+                                            " times for ", targets + 1, " frames"));
+    }
+    for (size_t k = 0; k < options.morph_times.size(); ++k) {
+      const double t = options.morph_times[k];
+      if (!std::isfinite(t) || (k > 0 && !(t > options.morph_times[k - 1]))) {
+        return absl::InvalidArgumentError(
+            Cat("animation: frame ", k, "'s time ", t, " is not finite and after the one before"));
+      }
+    }
+    for (size_t k = 0; k < targets; ++k) {
+      const Points& f = options.morph_frames[k];
+      if (f.rows() != nv || f.cols() != 3) {
+        return absl::InvalidArgumentError(Cat("animation: frame ", k + 1, " has ", f.rows(),
+                                              " vertices, the surface ", nv));
+      }
+      if (!f.allFinite() || f.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
+        return absl::InvalidArgumentError(
+            Cat("animation: frame ", k + 1, "'s positions are not finite float32 values"));
+      }
+    }
+  }
+
   // Vertex normals: the sum over the vertex's fan triangles of their
-  // (b - a) x (c - a), i.e. normals weighted by area.
-  Points normals = Points::Zero(nv, 3);
-  internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
-    const Eigen::Vector3d a = p.row(ia).transpose();
-    const Eigen::Vector3d b = p.row(ib).transpose();
-    const Eigen::Vector3d c = p.row(ic).transpose();
-    const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
-    normals.row(ia) += n;
-    normals.row(ib) += n;
-    normals.row(ic) += n;
-  });
+  // (b - a) x (c - a), i.e. normals weighted by area; unit length (a
+  // vertex on no face or only on degenerate triangles has no normal; glTF
+  // requires unit normals, so it gets +z).
+  auto unit_normals = [&](const Points& q) {
+    Points normals = Points::Zero(nv, 3);
+    internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
+      const Eigen::Vector3d a = q.row(ia).transpose();
+      const Eigen::Vector3d b = q.row(ib).transpose();
+      const Eigen::Vector3d c = q.row(ic).transpose();
+      const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+      normals.row(ia) += n;
+      normals.row(ib) += n;
+      normals.row(ic) += n;
+    });
+    for (int64_t i = 0; i < nv; ++i) {
+      const double length = normals.row(i).norm();
+      if (length > 0.0 && std::isfinite(length)) {
+        normals.row(i) /= length;
+      } else {
+        normals.row(i) = Eigen::RowVector3d(0, 0, 1);
+      }
+    }
+    return normals;
+  };
+  const Points normals = unit_normals(p);
 
   // BIN chunk: positions, normals, colours, indices (all 4-byte multiples).
   std::string bin;
@@ -173,13 +215,7 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
   }
   views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
   for (int64_t i = 0; i < nv; ++i) {
-    Eigen::Vector3d n = normals.row(i).transpose();
-    const double length = n.norm();
-    // A vertex on no face or only on degenerate triangles has no normal;
-    // glTF requires unit normals, so it gets +z.
-    n = length > 0.0 && std::isfinite(length) ? Eigen::Vector3d(n / length)
-                                              : Eigen::Vector3d::UnitZ();
-    for (int k = 0; k < 3; ++k) AppendF32(bin, static_cast<float>(n[k]));
+    for (int k = 0; k < 3; ++k) AppendF32(bin, static_cast<float>(normals(i, k)));
   }
   double range[2] = {0.0, 0.0};
   if (colour != nullptr) {
@@ -198,6 +234,47 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
     AppendU32(bin, static_cast<uint32_t>(b));
     AppendU32(bin, static_cast<uint32_t>(c));
   });
+  // The animation: per target its POSITION and NORMAL offsets (float32 of
+  // the double differences) with their bounds, then the key times and the
+  // weights (frame k: target k - 1 at 1, the rest 0).
+  struct Target {
+    float lo[3], hi[3];
+  };
+  std::vector<Target> morph(targets);
+  for (size_t k = 0; k < targets; ++k) {
+    const Points& f = options.morph_frames[k];
+    const Points fn = unit_normals(f);
+    Target& t = morph[k];
+    for (int c = 0; c < 3; ++c) {
+      t.lo[c] = std::numeric_limits<float>::max();
+      t.hi[c] = -t.lo[c];
+    }
+    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+    for (int64_t i = 0; i < nv; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        const float d = static_cast<float>(f(i, c) - p(i, c));
+        t.lo[c] = std::min(t.lo[c], d);
+        t.hi[c] = std::max(t.hi[c], d);
+        AppendF32(bin, d);
+      }
+    }
+    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+    for (int64_t i = 0; i < nv; ++i) {
+      for (int c = 0; c < 3; ++c) AppendF32(bin, static_cast<float>(fn(i, c) - normals(i, c)));
+    }
+  }
+  if (targets > 0) {
+    views.push_back({bin.size(), 4 * (targets + 1), 0});
+    for (double t : options.morph_times) AppendF32(bin, static_cast<float>(t));
+    views.push_back({bin.size(), 4 * (targets + 1) * targets, 0});
+    for (size_t k = 0; k <= targets; ++k) {
+      for (size_t m = 0; m < targets; ++m) AppendF32(bin, k > 0 && m == k - 1 ? 1.0f : 0.0f);
+    }
+  }
+  if (bin.size() + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(
+        Cat("animation of ", targets + 1, " frames needs ", bin.size(), " bytes: beyond GLB's 4 GiB"));
+  }
   while (bin.size() % 4 != 0) bin.push_back('\0');  // (already aligned)
 
   // JSON chunk. Accessors follow the views: 0 POSITION, 1 NORMAL,
@@ -227,7 +304,26 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
   JsonInt(j, index_accessor);
   j += ",\"material\":0,\"mode\":";
   JsonInt(j, kTriangles);
+  // Morph targets: accessors after the indices, two per target.
+  const int first_target = index_accessor + 1;
+  if (targets > 0) {
+    j += ",\"targets\":[";
+    for (size_t k = 0; k < targets; ++k) {
+      if (k > 0) j += ",";
+      j += "{\"POSITION\":";
+      JsonInt(j, first_target + 2 * static_cast<int>(k));
+      j += ",\"NORMAL\":";
+      JsonInt(j, first_target + 2 * static_cast<int>(k) + 1);
+      j += "}";
+    }
+    j += "]";
+  }
   j += "}]";
+  if (targets > 0) {
+    j += ",\"weights\":[";
+    for (size_t k = 0; k < targets; ++k) j += k > 0 ? ",0" : "0";
+    j += "]";
+  }
   if (colour != nullptr) {
     j += ",\"extras\":{\"color_field\":";
     j += JsonWriter::Quote(colour->name);
@@ -264,15 +360,52 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
     j += "},";
   }
   accessor(index_accessor, kUnsignedInt, 3 * nt, "SCALAR");
-  j += "}],\"bufferViews\":[";
+  j += "}";
+  // Views after the indices' (index_accessor is also its view): two per
+  // target, then the times and the weights.
+  for (size_t k = 0; k < targets; ++k) {
+    j += ",";
+    accessor(first_target + 2 * static_cast<int>(k), kFloat, nv, "VEC3");
+    j += ",\"min\":";
+    JsonVec3(j, morph[k].lo);
+    j += ",\"max\":";
+    JsonVec3(j, morph[k].hi);
+    j += "},";
+    accessor(first_target + 2 * static_cast<int>(k) + 1, kFloat, nv, "VEC3");
+    j += "}";
+  }
+  const int times_accessor = first_target + 2 * static_cast<int>(targets);
+  if (targets > 0) {
+    j += ",";
+    accessor(times_accessor, kFloat, static_cast<int64_t>(targets + 1), "SCALAR");
+    j += ",\"min\":[";
+    JsonNumber(j, static_cast<double>(static_cast<float>(options.morph_times.front())));
+    j += "],\"max\":[";
+    JsonNumber(j, static_cast<double>(static_cast<float>(options.morph_times.back())));
+    j += "]},";
+    accessor(times_accessor + 1, kFloat, static_cast<int64_t>((targets + 1) * targets), "SCALAR");
+    j += "}";
+  }
+  j += "],";
+  if (targets > 0) {
+    j += "\"animations\":[{\"name\":\"replay\",\"samplers\":[{\"input\":";
+    JsonInt(j, times_accessor);
+    j += ",\"output\":";
+    JsonInt(j, times_accessor + 1);
+    j += ",\"interpolation\":\"LINEAR\"}],\"channels\":[{\"sampler\":0,\"target\":{\"node\":0,"
+         "\"path\":\"weights\"}}]}],";
+  }
+  j += "\"bufferViews\":[";
   for (size_t v = 0; v < views.size(); ++v) {
     if (v > 0) j += ",";
     j += "{\"buffer\":0,\"byteOffset\":";
     JsonInt(j, static_cast<int64_t>(views[v].offset));
     j += ",\"byteLength\":";
     JsonInt(j, static_cast<int64_t>(views[v].length));
-    j += ",\"target\":";
-    JsonInt(j, views[v].target);
+    if (views[v].target != 0) {
+      j += ",\"target\":";
+      JsonInt(j, views[v].target);
+    }
     j += "}";
   }
   j += "],\"buffers\":[{\"byteLength\":";

@@ -18,6 +18,7 @@
 
 #include <array>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "solver/mesh/boundary.h"
@@ -34,6 +35,15 @@ struct GlbOptions {
   std::string generator = "dynsolid";
   // Rotate the node from z-up to glTF's y-up (see above).
   bool z_up = true;
+  // A morph-target animation (a replayed session): the positions of the
+  // later frames of the same surface (each #vertices x 3, metres) and
+  // every frame's time (seconds, increasing; one more than morph_frames:
+  // the surface's own positions are the first frame). Frame k > 0 is morph
+  // target k - 1 (POSITION and NORMAL offsets from the first frame); one
+  // animation's weights step through the targets, one at a time, linear
+  // between frames.
+  std::vector<Points> morph_frames;
+  std::vector<double> morph_times;
 };
 
 // Appends the .glb file's bytes to *out. Errors as in surface_writers.h

@@ -11,7 +11,8 @@ painted, pulled until it yields, released, baked, pinned and pulled again.
    the live session was exported at (VTU, full precision), the very same
    bytes: the replay reaches the live positions bit for bit.
 3. The animation: a .pvd index and one VTU per frame, which meshio reads,
-   with the frame count and times asked for.
+   with the frame count and times asked for; an OBJ per frame; one glb
+   with a morph target per frame, which Khronos' glTF validator passes.
 4. A range outside the journal is refused (exit 2), and nothing is written.
 
 Usage: keep_loopback_test.py --server PATH --client PATH --replay PATH
@@ -21,12 +22,14 @@ import argparse
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+SOURCE = os.path.abspath(os.path.join(HERE, "..", ".."))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "testing"))
 from client_loopback_test import Server, run_client  # noqa: E402
@@ -143,7 +146,7 @@ def run(args, tmp):
 
     # 3. An animation, 20 frames per second over 0.2-0.7 s, read by meshio.
     r = subprocess.run([args.replay, "--session", session_dir, "--out", "anim", "--from", "0.2",
-                        "--to", "0.7", "--fps", "20", "--format", "pvd,obj"],
+                        "--to", "0.7", "--fps", "20", "--format", "pvd,obj,glb"],
                        capture_output=True, text=True, timeout=600)
     expect(r.returncode == 0, "replay: %s" % r.stderr)
     report = json.loads(r.stdout)
@@ -175,6 +178,33 @@ def run(args, tmp):
         expect(points > 0 and cells > 0, "frame %d: %d points, %d cells" % (k, points, cells))
     print("meshio read %d frames: %d points, %d cells each; largest displacement %.4f m"
           % (len(read), read[0][0], read[0][1], max(x[2] for x in read)))
+
+    # The glTF animation: one file, a morph target per later frame, its
+    # key times the frames', valid for Khronos' validator.
+    glbs = [x for x in os.listdir("anim") if x.endswith(".glb")]
+    expect(len(glbs) == 1, "glb files %r" % glbs)
+    with open(os.path.join("anim", glbs[0]), "rb") as f:
+        glb = f.read()
+    magic, version, length = struct.unpack_from("<4sII", glb, 0)
+    expect(magic == b"glTF" and version == 2 and length == len(glb), "glb header")
+    (json_length,) = struct.unpack_from("<I", glb, 12)
+    gltf = json.loads(glb[20:20 + json_length])
+    targets = gltf["meshes"][0]["primitives"][0]["targets"]
+    expect_equal("morph targets", len(targets), 10)
+    sampler = gltf["animations"][0]["samplers"][0]
+    times = gltf["accessors"][sampler["input"]]
+    expect_equal("animation key times", times["count"], 11)
+    expect(abs(times["min"][0] - 0.2) < 1e-6 and abs(times["max"][0] - 0.7) < 1e-6,
+           "key times %r-%r" % (times["min"], times["max"]))
+    expect_equal("weights", gltf["accessors"][sampler["output"]]["count"], 11 * 10)
+    validator = os.path.join(SOURCE, "tests", "io", "gltf")
+    expect(os.path.isdir(os.path.join(validator, "node_modules")),
+           "tests/io/gltf/node_modules is missing: run scripts/setup_web.sh")
+    v = subprocess.run(["node", os.path.join(validator, "validate.mjs"),
+                        os.path.join("anim", glbs[0])], capture_output=True, text=True, timeout=120)
+    expect(v.returncode == 0, "glTF validator: %s%s" % (v.stdout, v.stderr))
+    print("glb animation: %d bytes, %d morph targets; the glTF validator: %s"
+          % (len(glb), len(targets), v.stdout.strip().splitlines()[-1] if v.stdout.strip() else "ok"))
 
     # 4. Outside the journal: refused, nothing written.
     r = subprocess.run([args.replay, "--session", session_dir, "--out", "late", "--from", "0.5",

@@ -359,6 +359,20 @@ TEST(GltfWriterTest, RefusesBadSurfaces) {
                      {.color_field = "strain"},
                      "colour field 'strain' is not finite at vertex 6"});
   }
+  {
+    // Animations (morph targets): a time per frame, increasing; frames of
+    // the surface's vertices.
+    GlbOptions o;
+    o.morph_frames = {cube.positions};
+    o.morph_times = {0.0};
+    cases.push_back({"times", cube, o, "animation: 1 times for 2 frames"});
+    o.morph_times = {0.5, 0.5};
+    cases.push_back(
+        {"order", cube, o, "animation: frame 1's time 0.5 is not finite and after the one before"});
+    o.morph_frames = {Points::Zero(7, 3)};
+    o.morph_times = {0.0, 1.0};
+    cases.push_back({"frame size", cube, o, "animation: frame 1 has 7 vertices, the surface 8"});
+  }
   ScopedTempDir tmp;
   for (const Case& c : cases) {
     const std::string path = tmp.path() + "/" + c.what + ".glb";

@@ -94,6 +94,13 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     d->control_sharp = s.discretization().control_sharp;
     positions_ = s.control_positions();
     rest_ = s.discretization().control().positions();
+    if (format_ == exporter::Format::kVtu && !scene_file_) {
+      // The materials as painted (a walk over the samples) for the
+      // volume's cell data.
+      absl::StatusOr<exporter::MaterialFields> fields =
+          exporter::MaterialFieldsOf(s.discretization(), s.SaveDesign());
+      if (fields.ok()) materials_ = std::make_shared<exporter::MaterialFields>(*std::move(fields));
+    }
     discretization_ = std::move(d);
     step_ = core->steps();
     name_ = core->scene().name();
@@ -131,7 +138,7 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     options.level = level_;
     options.color_field = request_.color_field();
     absl::StatusOr<exporter::Exported> made = exporter::ExportDesign(
-        exporter::DesignInput{discretization_.get(), positions_, rest_}, options);
+        exporter::DesignInput{discretization_.get(), positions_, rest_, materials_.get()}, options);
     if (!made.ok()) {
       Finish(ToGrpcStatus(absl::Status(made.status().code(),
                                        absl::StrCat("request.", made.status().message()))));
@@ -181,6 +188,7 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   exporter::Format format_ = exporter::Format::kGlb;
   bool scene_file_ = false;  // SCENE: design_ as text
   std::shared_ptr<const Scene> design_;
+  std::shared_ptr<const exporter::MaterialFields> materials_;  // VTU
   int64_t cells_ = 0;
   int chunk_ = kDefaultChunk;
   std::shared_ptr<const scene::Discretization> discretization_;

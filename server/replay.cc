@@ -121,6 +121,15 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
     const solid::Solid& s = core.solid();
     exporter::DesignInput in{&s.discretization(), s.control_positions(),
                              s.discretization().control().positions()};
+    // The volume's material cell data, as the live export gives it.
+    std::optional<exporter::MaterialFields> materials;
+    if (o.pvd) {
+      absl::StatusOr<exporter::MaterialFields> m = exporter::MaterialFieldsOf(s.discretization(), s.SaveDesign());
+      if (m.ok()) {
+        materials = *std::move(m);
+        in.materials = &*materials;
+      }
+    }
     const std::string base = absl::StrFormat("%s_%04d", stem, index);
     for (const bool volume : {true, false}) {
       if (volume ? !o.pvd : !o.obj) continue;

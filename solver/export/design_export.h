@@ -17,13 +17,19 @@
 //  - volume: VTU (VTK XML, ASCII) with one cell per finite element of that
 //    level and the point fields below.
 // Fields (PLY and VTU carry them; glb can colour by one): `displacement`
-// (A (p - p_rest), m, 3 components) and `displacement_magnitude`.
+// (A (p - p_rest), m, 3 components) and `displacement_magnitude`. The VTU
+// has cell data too: `strain` (the largest engineering strain |l / l0 - 1|
+// between any two of the cell's nodes, as the surface's strain field is
+// made), `element_kind`, `control_cell`, and with DesignInput::materials
+// `young_modulus`, `density` and `plastic_strain`.
 #pragma once
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
+#include "dynsolid/scene.pb.h"
 #include "solver/mesh/boundary.h"
 #include "solver/mesh/points.h"
 #include "solver/scene/build.h"
@@ -38,10 +44,30 @@ const char* Extension(Format f);
 // application/xml).
 const char* MediaType(Format f);
 
+// A design's materials for the volume export's cell data: per finite
+// element of the solid (at its own level; kinds in order cubic, trilinear,
+// pyramid, the solid's element order) and per control cell, the mean
+// Young's modulus (Pa) and density (kg/m^3) over the quadrature samples,
+// and the accumulated plastic strain (the largest over a control cell's
+// flow units; 0 without clay).
+struct MaterialFields {
+  int level = -1;  // the solid's level
+  std::vector<double> young, density, plastic;                 // per element
+  std::vector<double> cell_young, cell_density, cell_plastic;  // per control cell
+};
+
+// From a solid's discretization and its design (solid::Solid::SaveDesign).
+// InvalidArgument when the design is not for that discretization.
+absl::StatusOr<MaterialFields> MaterialFieldsOf(const scene::Discretization& d,
+                                                const Design& design);
+
 struct DesignInput {
   const scene::Discretization* discretization = nullptr;  // control mesh, sharp tags
   Points positions;  // control points now (#control x 3)
   Points rest;       // control points at rest (#control x 3)
+  // The VTU's material cell data (null: none): at the solid's own level
+  // each element's, at another level its control cell's.
+  const MaterialFields* materials = nullptr;
 };
 
 struct ExportOptions {

@@ -164,20 +164,29 @@ def run(args, tmp):
         "out = []\n"
         "for path in sys.argv[1:]:\n"
         "    m = meshio.read(path)\n"
+        "    cd = lambda name: max(float(a.max()) for a in m.cell_data[name])\n"
         "    out.append([len(m.points), sum(len(c.data) for c in m.cells),\n"
-        "                float(abs(m.point_data['displacement']).max())])\n"
+        "                float(abs(m.point_data['displacement']).max()),\n"
+        "                cd('plastic_strain'), cd('young_modulus'), cd('strain')])\n"
         "print(json.dumps(out))\n")
     files = [os.path.join("anim", s.get("file")) for s in sets]
     m = subprocess.run(["/usr/bin/python3", "-c", check] + files, capture_output=True, text=True,
                        timeout=300)
     expect(m.returncode == 0, "meshio: %s" % m.stderr)
     read = json.loads(m.stdout)
-    for k, (s, (points, cells, disp)) in enumerate(zip(sets, read)):
+    for k, (s, (points, cells, disp, plastic, young, strain)) in enumerate(zip(sets, read)):
         expect(abs(float(s.get("timestep")) - (0.2 + k / 20)) < 1e-9,
                "frame %d's time %s, asked for %g" % (k, s.get("timestep"), 0.2 + k / 20))
         expect(points > 0 and cells > 0, "frame %d: %d points, %d cells" % (k, points, cells))
-    print("meshio read %d frames: %d points, %d cells each; largest displacement %.4f m"
-          % (len(read), read[0][0], read[0][1], max(x[2] for x in read)))
+    print("meshio read %d frames: %d points, %d cells each; largest displacement %.4f m, "
+          "plastic strain %.4f, Young's modulus %.3g Pa, cell strain %.4f"
+          % (len(read), read[0][0], read[0][1], max(x[2] for x in read), max(x[3] for x in read),
+             max(x[4] for x in read), max(x[5] for x in read)))
+    # The clay yielded under the pull (its plastic strain is in the cells),
+    # and the painted patch (3 MPa on the 1 MPa clay) shows in the moduli.
+    expect(max(x[3] for x in read) > 0, "no plastic strain in any frame")
+    expect(2.5e6 < max(x[4] for x in read) <= 3e6 * (1 + 1e-9),
+           "the painted modulus: %r" % max(x[4] for x in read))
 
     # The glTF animation: one file, a morph target per later frame, its
     # key times the frames', valid for Khronos' validator.

@@ -11,6 +11,8 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <map>
+#include <algorithm>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -24,6 +26,7 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
+#include "solver/subdivision/mcj.h"
 #include "tests/io/io_test_util.h"
 #include "tests/testing/status_matchers.h"
 
@@ -137,6 +140,80 @@ TEST(DesignExportTest, EveryLevelOfTheSurfaceEnclosesTheSolidsVolumeAndTheSimula
   }
 }
 
+// The volume the cells of `fine` enclose at positions x: each cell's faces
+// fan-triangulated from their first vertex (as the export triangulates), in
+// the cell's outward orientation, summed by the divergence theorem. A face
+// two cells share cancels exactly (a reversed loop has the same diagonal),
+// so this is the boundary's volume computed from the cells, not from it.
+double CellsVolume(const mesh::CellComplex& fine, const Points& x) {
+  double volume = 0;
+  for (int32_t c = 0; c < fine.num_cells(); ++c) {
+    const auto faces = fine.cell_faces(c);
+    const auto flipped = fine.cell_face_flipped(c);
+    for (size_t k = 0; k < faces.size(); ++k) {
+      std::vector<int32_t> loop(fine.face_vertices(faces[k]).begin(),
+                                fine.face_vertices(faces[k]).end());
+      if (flipped[k]) std::reverse(loop.begin() + 1, loop.end());
+      const Eigen::Vector3d a = x.row(loop[0]).transpose();
+      for (size_t i = 1; i + 1 < loop.size(); ++i) {
+        volume += a.dot(Eigen::Vector3d(x.row(loop[i]).transpose())
+                            .cross(Eigen::Vector3d(x.row(loop[i + 1]).transpose()))) / 6.0;
+      }
+    }
+  }
+  return volume;
+}
+
+// A slicer's checks on the STL: closed and oriented (every edge, by its
+// end points, in exactly two triangles, once each way round), and its
+// enclosed volume that of the level's cells at the same positions (within
+// the float32 rounding of STL coordinates: 1e-6 relative). The volume
+// equals the solid's FEM rest volume at rest only where every element is
+// trilinear and every boundary quad planar; measured, printed.
+TEST(DesignExportTest, TheStlIsClosedAndOrientedAndEnclosesTheCellsVolume) {
+  const Fixture f = Bent();
+  for (const bool at_rest : {false, true}) {
+    DesignInput in = InputOf(f);
+    if (at_rest) in.positions = f.rest;
+    for (int level = 0; level <= 3; ++level) {
+      SCOPED_TRACE(absl::StrCat(at_rest ? "at rest" : "bent", ", level ", level));
+      ASSERT_OK_AND_ASSIGN(Exported stl, ExportDesign(in, {Format::kStl, level, ""}));
+      const uint32_t n = U32(stl.bytes, 80);
+      using P = std::array<float, 3>;
+      std::map<std::pair<P, P>, int> directed;
+      for (uint32_t t = 0; t < n; ++t) {
+        const size_t at = 84 + 50 * static_cast<size_t>(t) + 12;
+        P v[3];
+        for (int k = 0; k < 3; ++k) {
+          for (int c = 0; c < 3; ++c) v[k][c] = F32(stl.bytes, at + 12 * k + 4 * c);
+        }
+        for (int k = 0; k < 3; ++k) ++directed[{v[k], v[(k + 1) % 3]}];
+      }
+      int open = 0, twice = 0;
+      for (const auto& [edge, count] : directed) {
+        if (count != 1) ++twice;
+        if (directed.count({edge.second, edge.first}) != 1) ++open;
+      }
+      EXPECT_EQ(open, 0) << "edges with no triangle the other way round (holes)";
+      EXPECT_EQ(twice, 0) << "edges run the same way by two triangles (inconsistent winding)";
+      const double volume = StlVolume(stl.bytes);
+      ASSERT_OK_AND_ASSIGN(subdivision::Hierarchy h,
+                           subdivision::Subdivide(f.solid->discretization().hierarchy.control, level,
+                                                  f.solid->discretization().control_sharp,
+                                                  [](const mesh::CellComplex&) {}));
+      const double cells = CellsVolume(*h.fine, h.a * in.positions);
+      EXPECT_GT(volume, 0);
+      EXPECT_NEAR(volume, cells, 1e-6 * cells);
+      if (at_rest && level == f.solid->discretization().hierarchy.levels) {
+        std::printf("at rest, the simulated level: the STL encloses %.12f m^3, the cells %.12f, "
+                    "the solid's FEM rest volume %.12f (relative difference %.2e)\n",
+                    volume, cells, f.solid->rest_volume(),
+                    std::abs(cells - f.solid->rest_volume()) / f.solid->rest_volume());
+      }
+    }
+  }
+}
+
 TEST(DesignExportTest, PlyAndVtuOpenInMeshioWithTheDisplacementField) {
   const Fixture f = Bent();
   const DesignInput in = InputOf(f);
@@ -153,6 +230,41 @@ TEST(DesignExportTest, PlyAndVtuOpenInMeshioWithTheDisplacementField) {
   r = io::testing::RunMeshio(vtu_path, absl::StrCat("--point-data displacement,displacement_magnitude"));
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_THAT(r.output, HasSubstr(absl::StrCat("\"hexahedron\": ", vtu.cells)));
+  // The cell data: strain from the nodes, the materials from the design.
+  // The block is one material (E 1e5 Pa, 1000 kg/m^3) without clay: the
+  // sums are known at the solid's level (each element's mean) and at a
+  // finer one (the control cells'); at rest no cell is strained.
+  ASSERT_OK_AND_ASSIGN(MaterialFields materials,
+                       MaterialFieldsOf(f.solid->discretization(), f.solid->SaveDesign()));
+  DesignInput with = in;
+  with.materials = &materials;
+  for (const int level : {1, 2}) {
+    ASSERT_OK_AND_ASSIGN(Exported v, ExportDesign(with, {Format::kVtu, level, ""}));
+    io::testing::WriteTextFile(vtu_path, v.bytes);
+    r = io::testing::RunMeshio(
+        vtu_path, absl::StrCat("--cell-data strain,young_modulus,density,plastic_strain "
+                               "--cell-data-sum young_modulus=", 1e5 * v.cells,
+                               ",density=", 1000.0 * v.cells, ",plastic_strain=0"));
+    EXPECT_EQ(r.exit_code, 0) << "level " << level << ": " << r.output;
+  }
+  with.positions = f.rest;
+  ASSERT_OK_AND_ASSIGN(Exported at_rest, ExportDesign(with, {Format::kVtu, 1, ""}));
+  io::testing::WriteTextFile(vtu_path, at_rest.bytes);
+  r = io::testing::RunMeshio(vtu_path, "--cell-data-sum strain=0");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  // Bent (the block sags under its weight): the cells strain.
+  with.positions = f.solid->control_positions();
+  ASSERT_OK_AND_ASSIGN(Exported bent, ExportDesign(with, {Format::kVtu, 1, ""}));
+  io::testing::WriteTextFile(vtu_path, bent.bytes);
+  r = io::testing::RunMeshio(vtu_path, "--cell-data strain");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const size_t at = r.output.find("\"strain\": [[");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const size_t comma = r.output.find("], ", at);
+  const double sum = std::stod(r.output.substr(comma + 3));
+  std::printf("bent block: the cells' strain sums to %g over %lld cells\n", sum,
+              static_cast<long long>(bent.cells));
+  EXPECT_GT(sum, 1e-6 * bent.cells);
 }
 
 TEST(DesignExportTest, TheGlbIsValidWithColours) {

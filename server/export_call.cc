@@ -69,6 +69,9 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
       return;
     }
     // The shape at a step boundary, then the export off the loop.
+    // An export subdivides to at most the cells a session's solid may have
+    // (--max_cells): no export costs more memory than a session could.
+    max_cells_ = registry.options().build.max_cells;
     (*session)->loop().Query([this](const SimCore* core) { Take(core); });
   }
 
@@ -137,6 +140,7 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     options.format = format_;
     options.level = level_;
     options.color_field = request_.color_field();
+    if (max_cells_ > 0) options.max_cells = max_cells_;
     absl::StatusOr<exporter::Exported> made = exporter::ExportDesign(
         exporter::DesignInput{discretization_.get(), positions_, rest_, materials_.get()}, options);
     if (!made.ok()) {
@@ -190,6 +194,7 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   std::shared_ptr<const Scene> design_;
   std::shared_ptr<const exporter::MaterialFields> materials_;  // VTU
   int64_t cells_ = 0;
+  int64_t max_cells_ = 0;
   int chunk_ = kDefaultChunk;
   std::shared_ptr<const scene::Discretization> discretization_;
   Points positions_, rest_;

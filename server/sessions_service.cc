@@ -6,6 +6,9 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "solver/export/design_export.h"
+#include "solver/export/section.h"
 #include "server/export_call.h"
 #include "server/grpc_status.h"
 #include "dynsolid/journal.pb.h"
@@ -71,6 +74,7 @@ SessionsService::SessionsService(SessionRegistry& registry, Replicas& replicas, 
   ParseFirst("GetStats", &SessionsService::GetStats);
   ParseFirst("Inspect", &SessionsService::Inspect);
   ParseFirst("Pick", &SessionsService::Pick);
+  ParseFirst("Section", &SessionsService::Section);
   ParseFirst("GetCommandLog", &SessionsService::GetCommandLog);
   ParseFirst("GetServerInfo", &SessionsService::GetServerInfo);
   MarkMethodCallback(MethodIndex("Commands"),
@@ -355,6 +359,86 @@ grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* con
       response->set_distance(h.distance);
     }
     reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* SessionsService::Section(grpc::CallbackServerContext* context,
+                                                   const SectionRequest* request,
+                                                   SectionReply* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  std::shared_ptr<const SolidSession> session = SessionOrFinish(request->session(), reactor);
+  if (session == nullptr) return reactor;
+  if (absl::Status s = scene::ValidateValues(*request, "request"); !s.ok()) {
+    reactor->Finish(ToGrpcStatus(s));
+    return reactor;
+  }
+  struct Job {
+    Eigen::Vector3d point, normal;
+    std::string field;
+    std::shared_ptr<solid::Solid> solid;  // keeps its discretization alive
+    Points positions, rest;
+    std::optional<exporter::MaterialFields> materials;
+    int64_t step = 0;
+  };
+  auto job = std::make_shared<Job>();
+  job->point = Eigen::Vector3d(request->point().x(), request->point().y(), request->point().z());
+  job->normal = Eigen::Vector3d(request->normal().x(), request->normal().y(), request->normal().z());
+  job->field = request->field();
+  const auto& fields = exporter::SectionFields();
+  if (!job->field.empty() && std::find(fields.begin(), fields.end(), job->field) == fields.end()) {
+    reactor->Finish(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
+        "request.field: \"", job->field, "\" is not one of ", absl::StrJoin(fields, ", ")))));
+    return reactor;
+  }
+  // The shape at a step boundary (and, for stiffness, the materials as
+  // painted: a walk over the samples), then the cut off the loop.
+  session->loop().Query([this, reactor, response, job](const SimCore* core) {
+    if (core == nullptr) {
+      reactor->Finish(ToGrpcStatus(absl::UnavailableError("the session is closed")));
+      return;
+    }
+    job->solid = core->shared_solid();
+    job->positions = job->solid->control_positions();
+    job->rest = job->solid->discretization().control().positions();
+    job->step = core->steps();
+    if (job->field == "stiffness") {
+      absl::StatusOr<exporter::MaterialFields> m =
+          exporter::MaterialFieldsOf(job->solid->discretization(), job->solid->SaveDesign());
+      if (m.ok()) job->materials = *std::move(m);
+    }
+    builds_.Post([reactor, response, job](bool run) {
+      if (!run) {
+        reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+        return;
+      }
+      exporter::SectionInput in{&job->solid->discretization(), job->positions, job->rest,
+                                job->materials.has_value() ? &*job->materials : nullptr};
+      absl::StatusOr<exporter::Section> cut = exporter::CutSection(in, job->point, job->normal, job->field);
+      if (!cut.ok()) {
+        reactor->Finish(ToGrpcStatus(absl::Status(cut.status().code(),
+                                                  absl::StrCat("request.", cut.status().message()))));
+        return;
+      }
+      // A reply must fit in one message (4 MiB by default): a cut through a
+      // solid of a million cells could be larger.
+      constexpr size_t kMaxSectionFloats = 3u << 18;  // 3 MiB of floats, values included
+      if (cut->positions.size() + cut->values.size() > kMaxSectionFloats) {
+        reactor->Finish(ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat(
+            "the section cuts ", cut->cells_cut, " cells into ", cut->values.size() / 3,
+            " triangles, more than one reply carries; cut a smaller solid or level"))));
+        return;
+      }
+      response->set_step(job->step);
+      response->mutable_positions()->Assign(cut->positions.begin(), cut->positions.end());
+      response->mutable_values()->Assign(cut->values.begin(), cut->values.end());
+      response->set_field(cut->field);
+      response->set_unit(cut->unit);
+      response->set_min(cut->min);
+      response->set_max(cut->max);
+      response->set_cells_cut(cut->cells_cut);
+      reactor->Finish(grpc::Status::OK);
+    });
   });
   return reactor;
 }

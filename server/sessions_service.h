@@ -49,6 +49,10 @@ class SessionsService final
                                     const InspectRequest* request, InspectReply* response) override;
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
+  // Section: the shape taken on the loop, the cut made on the builds queue.
+  grpc::ServerUnaryReactor* Section(grpc::CallbackServerContext* context,
+                                    const SectionRequest* request,
+                                    SectionReply* response) override;
 
   grpc::ServerUnaryReactor* GetServerInfo(grpc::CallbackServerContext* context,
                                           const google::protobuf::Empty* request,

@@ -1,5 +1,7 @@
 #include "clients/lib/watcher.h"
 
+#include <cstdio>
+
 #include <algorithm>
 #include <utility>
 
@@ -156,6 +158,24 @@ void Watcher::Record(const Surface& s) {
     written.push_back(stem + ".vtu");
   }
   absl::MutexLock lock(&mu_);
+  if (status.ok() && options_.write_vtu) {
+    // The index of the frames so far: ParaView opens it as one animation
+    // (frames as the stream delivered them: some steps skipped when the
+    // network was slow, positions quantized; dynsolid-replay gives every
+    // frame exactly, docs/export.md).
+    absl::StrAppendFormat(&pvd_entries_, "    <DataSet timestep=\"%.17g\" part=\"0\" file=\"%s\"/>\n",
+                          s.time, absl::StrFormat("frame_%08d.vtu", s.step));
+    const std::string pvd = absl::StrCat(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n  <Collection>\n",
+        pvd_entries_, "  </Collection>\n</VTKFile>\n");
+    const std::string path = options_.frames_dir + "/frames.pvd";
+    std::FILE* f = std::fopen((path + ".tmp").c_str(), "wb");
+    bool ok = f != nullptr && std::fwrite(pvd.data(), 1, pvd.size(), f) == pvd.size();
+    if (f != nullptr) ok = std::fclose(f) == 0 && ok;
+    if (!ok || std::rename((path + ".tmp").c_str(), path.c_str()) != 0) {
+      status = absl::UnavailableError(absl::StrCat("cannot write ", path));
+    }
+  }
   if (!status.ok()) {
     if (error_.ok()) error_ = status;
     return;

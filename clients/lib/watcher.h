@@ -101,6 +101,9 @@ class Watcher {
   SurfaceDecoder decoder_ ABSL_GUARDED_BY(mu_);
   Surface first_ ABSL_GUARDED_BY(mu_);
   WatcherCounts counts_ ABSL_GUARDED_BY(mu_);
+  // The recorded VTU frames' index (frames.pvd: ParaView's collection,
+  // each frame at its session time), rewritten after each frame.
+  std::string pvd_entries_ ABSL_GUARDED_BY(mu_);
   std::chrono::steady_clock::time_point first_time_ ABSL_GUARDED_BY(mu_);
   bool stop_ ABSL_GUARDED_BY(mu_) = false;
   bool ended_ ABSL_GUARDED_BY(mu_) = false;

@@ -249,6 +249,14 @@ def run(args, tmp):
             expect(abs(max(p[a] for p in v) - surface["bbox_max"][a]) < 1e-12, "bbox_max")
         recorded = [f for f in os.listdir(frames) if re.fullmatch(r"frame_\d{8}\.(obj|vtu)", f)]
         expect_equal("recorded frame files", len(recorded), 2 * watch["frames_written"])
+        # frames.pvd indexes the recorded VTU frames, in order, by time.
+        sets = ET.parse(os.path.join(frames, "frames.pvd")).getroot().findall("Collection/DataSet")
+        listed = [x.get("file") for x in sets]
+        expect_equal("frames.pvd files", listed,
+                     sorted(f for f in recorded if f.endswith(".vtu")))
+        times = [float(x.get("timestep")) for x in sets]
+        expect(times == sorted(times) and len(set(times)) == len(times),
+               "frames.pvd times %r" % times)
         for out in ("median", "p99", "frames/s"):
             expect(out in r.stdout, "stdout lacks %r: %r" % (out, r.stdout))
         expect(report["session"]["closed"], "the session was not closed")

@@ -147,6 +147,12 @@ def run(args, tmp):
         r = export(args, server, ref, "--format", "obj", "--level", "7", "--out", "bad.obj")
         expect(r.returncode == 2 and "INVALID_ARGUMENT" in r.stderr and
                "request.level: 7 is not in [0, 6]" in r.stderr, "level 7: %d %s" % (r.returncode, r.stderr))
+        # Six levels of block3 are 27 * 8^6 = 7.1 million cells: more than
+        # a session may have (the server's --max_cells, 1 million).
+        r = export(args, server, ref, "--format", "stl", "--level", "6", "--out", "huge.stl")
+        expect(r.returncode == 2 and "more than the export limit of 1000000" in r.stderr,
+               "level 6: %d %s" % (r.returncode, r.stderr))
+        expect(not os.path.exists("huge.stl"), "a refused export wrote a file")
         r = export(args, server, ref, "--format", "glb", "--color_field", "strain", "--out", "bad.glb")
         expect(r.returncode == 2 and "request.color_field" in r.stderr,
                "colour field: %d %s" % (r.returncode, r.stderr))

@@ -479,7 +479,7 @@ TEST_F(SessionsServiceTest, UnparsableRequestsAreInvalidArgumentOnEveryMethod) {
   const google::protobuf::ServiceDescriptor* service =
       google::protobuf::DescriptorPool::generated_pool()->FindServiceByName("dynsolid.Sessions");
   ASSERT_NE(service, nullptr);
-  ASSERT_EQ(service->method_count(), 13);
+  ASSERT_EQ(service->method_count(), 14);
   // Tag 0 with wire type 7; a length-delimited field 1 claiming 100 bytes
   // of 1; a varint that never ends. None parses as any message.
   const std::vector<std::string> garbage = {std::string("\x07", 1), std::string("\x0a\x64\x01", 3),
@@ -521,6 +521,43 @@ TEST_F(SessionsServiceTest, UnparsableRequestsAreInvalidArgumentOnEveryMethod) {
   // The server still serves.
   Session again;
   EXPECT_THAT(CreateBuiltin("block3", &again, 0), GrpcOk());
+}
+
+// The cut-away: a horizontal plane through block3 gives triangles on it,
+// with the field asked for; bad planes and fields are refused naming them.
+TEST_F(SessionsServiceTest, SectionCutsTheSolidWhereThePlaneIs) {
+  Session s;
+  ASSERT_THAT(CreateBuiltin("block3", &s, 1), GrpcOk());
+  auto section = [&](const std::string& field, double nz, SectionReply* reply) {
+    SectionRequest r;
+    r.mutable_session()->set_id(s.id());
+    r.mutable_session()->set_token(s.token());
+    r.mutable_point()->set_x(1.5);
+    r.mutable_point()->set_y(1.5);
+    r.mutable_point()->set_z(1.4);
+    r.mutable_normal()->set_z(nz);
+    r.set_field(field);
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    return stub_->Section(&context, r, reply);
+  };
+  SectionReply cut;
+  ASSERT_THAT(section("", 1, &cut), GrpcOk());
+  EXPECT_EQ(cut.field(), "strain");
+  EXPECT_EQ(cut.unit(), "1");
+  EXPECT_GT(cut.cells_cut(), 0);
+  ASSERT_GT(cut.values_size(), 0);
+  EXPECT_EQ(cut.positions_size(), 3 * cut.values_size());
+  for (int i = 2; i < cut.positions_size(); i += 3) EXPECT_NEAR(cut.positions(i), 1.4, 1e-5);
+  SectionReply k;
+  ASSERT_THAT(section("stiffness", 1, &k), GrpcOk());
+  EXPECT_EQ(k.unit(), "Pa");
+  EXPECT_GT(k.min(), 0);
+  SectionReply bad;
+  EXPECT_THAT(section("stress", 1, &bad),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("request.field: \"stress\"")));
+  EXPECT_THAT(section("strain", 0, &bad),
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("request.normal")));
 }
 
 TEST_F(SessionsServiceTest, ShutdownWithOpenSessionsCompletesAndRefusesNewCalls) {

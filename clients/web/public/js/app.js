@@ -14,6 +14,7 @@ import { bindKeys, wheelNudge } from './keys.js';
 import { statusText } from './status.js';
 import * as S from './sizing.js';
 import { Keep } from './keep.js';
+import { CutAway } from './cutaway.js';
 import { FaceHover } from './hover.js';
 import { Help } from './help.js';
 import { ScenePicker } from './scenes.js';
@@ -51,6 +52,7 @@ class App {
     this.pointer = null;        // the last pointer position over the canvas (client px)
     this.bindUi();
     this.keep = new Keep(this);  // Download and Record (keep.js)
+    this.cutaway = new CutAway(this);  // the cut-away (cutaway.js)
     this.bindConnection();
     this.bindPointer();
     this.view.attachControls();
@@ -284,6 +286,7 @@ class App {
     $('share').textContent = '';
     $('bake').disabled = true;
     this.keep.setSession(null);
+    this.view.setSection(null);
     this.askClose(false);
   }
 

@@ -446,6 +446,38 @@ export class View {
     }
   }
 
+  // The cut-away (cutaway.js): the surface clipped on the plane's normal
+  // side, and the section's triangles (positions, 9 per triangle; colours,
+  // 3 per vertex) drawn on the plane. null: none.
+  setSection(section) {
+    this.needsRender = true;
+    if (this.sectionMesh) {
+      this.scene.remove(this.sectionMesh);
+      this.sectionMesh.geometry.dispose();
+      this.sectionMesh = null;
+    }
+    if (!section) {
+      this.surfaceMaterial.clippingPlanes = [];
+      this.surfaceMaterial.needsUpdate = true;
+      return;
+    }
+    this.renderer.localClippingEnabled = true;
+    const n = new THREE.Vector3(section.plane.normal.x, section.plane.normal.y, section.plane.normal.z).normalize();
+    const p = new THREE.Vector3(section.plane.point.x, section.plane.point.y, section.plane.point.z);
+    // Kept: n . x <= n . p (three.js keeps a plane's positive side).
+    this.surfaceMaterial.clippingPlanes = [new THREE.Plane(n.clone().negate(), n.dot(p))];
+    this.surfaceMaterial.needsUpdate = true;
+    if (section.positions.length === 0) return;
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(section.positions, 3));
+    g.setAttribute('color', new THREE.BufferAttribute(section.colors, 3));
+    if (!this.sectionMaterial) {
+      this.sectionMaterial = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
+    }
+    this.sectionMesh = new THREE.Mesh(g, this.sectionMaterial);
+    this.scene.add(this.sectionMesh);
+  }
+
   // Draws if anything changed; returns whether it drew.
   render(force = false) {
     if (!this.needsRender && !force) return false;

@@ -74,16 +74,18 @@ before(async () => {
 
 after(() => env && env.close());
 
-test('the Download menu offers each format at the session\'s level and two finer ones', async () => {
+test('the Download menu offers each format at the session\'s level and two finer ones (a scene file: its own)', async () => {
   assert.equal(await page.isDisabled('#download'), false);
   await page.click('#download');
   const menu = await page.evaluate(() => [...document.querySelectorAll('#download-formats .download-row')].map((r) => ({
     format: r.querySelector('button').dataset.format, text: r.querySelector('button').textContent,
     levels: [...r.querySelectorAll('option')].map((o) => Number(o.value)), chosen: Number(r.querySelector('select').value),
   })));
-  assert.deepEqual(menu.map((m) => m.format), ['obj', 'stl', 'ply', 'glb', 'vtu']);
+  assert.deepEqual(menu.map((m) => m.format), ['obj', 'stl', 'ply', 'glb', 'vtu', 'scene']);
   for (const m of menu) {
-    assert.deepEqual(m.levels, [levels, levels + 1, levels + 2].filter((l) => l <= 6), m.format);
+    // A scene file is saved at the session's level only.
+    const want = m.format === 'scene' ? [levels] : [levels, levels + 1, levels + 2].filter((l) => l <= 6);
+    assert.deepEqual(m.levels, want, m.format);
     assert.equal(m.chosen, levels);
   }
 });

@@ -14,6 +14,7 @@ import { bindKeys, wheelNudge } from './keys.js';
 import { statusText } from './status.js';
 import * as S from './sizing.js';
 import { Keep } from './keep.js';
+import { HistoryPanel } from './history.js';
 import { FaceHover } from './hover.js';
 import { Help } from './help.js';
 import { ScenePicker } from './scenes.js';
@@ -51,6 +52,7 @@ class App {
     this.pointer = null;        // the last pointer position over the canvas (client px)
     this.bindUi();
     this.keep = new Keep(this);  // Download and Record (keep.js)
+    this.historyPanel = new HistoryPanel(this);  // the undo history and Revert to scene (history.js)
     this.bindConnection();
     this.bindPointer();
     this.view.attachControls();
@@ -272,6 +274,7 @@ class App {
     $('share').title = location.href;
     $('bake').disabled = false;
     this.keep.setSession(info);
+    this.historyPanel.setSession(info);
     this.refreshSessions();
   }
 
@@ -284,6 +287,7 @@ class App {
     $('share').textContent = '';
     $('bake').disabled = true;
     this.keep.setSession(null);
+    this.historyPanel.setSession(null);
     this.askClose(false);
   }
 

@@ -2,13 +2,15 @@
 // gives it (service.proto; longs as numbers) seen by one page: its own
 // entries marked "you", others' under a stable "person N" label (never the
 // client id), undone entries flagged, which entry this page's Undo and
-// Redo act on next, the memory line, the last rows only, an empty history.
+// Redo act on next, the memory line, the last rows only, an empty history;
+// undo and redo refusals in plain words.
 // No browser.
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { labelPeople, historyView, memoryLine, sizeText, buttonTitles, MAX_ROWS } from '../../public/js/history.js';
 import { revertToScene } from '../../public/js/commands.js';
+import { explain } from '../../public/js/explain.js';
 
 const ME = 'web-aaaaaaaaaaaa';
 const B = 'web-bbbbbbbbbbbb';
@@ -138,4 +140,20 @@ test('only the newest rows are shown, oldest first; the rest are counted; my nex
 
 test('Revert to scene is the revert_to_scene command', () => {
   assert.deepEqual(revertToScene(), { revert_to_scene: {} });
+});
+
+test('undo and redo refusals in plain words, the server\'s words kept as details', () => {
+  const refused = (message) => explain({ codeName: 'FAILED_PRECONDITION', message });
+  const none = refused('command.undo: you have nothing to undo (0 of your actions to undo, 1 to redo; ' +
+    'undo takes back only your own actions)');
+  assert.deepEqual([none.text, none.hint], ['You have nothing to undo.', 'Undo takes back only your own actions; others\' stay.']);
+  assert.match(none.detail, /^refused \(FAILED_PRECONDITION\): command\.undo: you have nothing to undo/);
+  assert.equal(refused('command.redo: you have nothing to redo (1 of your actions to undo, 0 to redo; ' +
+    'undo takes back only your own actions)').text, 'You have nothing to redo.');
+  // An entry named like another tool's refusal is still an undo's.
+  const under = refused('command.undo: cannot undo "merge faces 3 and 5" (entry 4): another person (web-0123456789ab): ' +
+    '"revert to the scene" (entry 6) came after it and would be taken away too; that has to be undone first. Nothing changed.');
+  assert.match(under.text, /^A later change builds on that one/);
+  assert.match(refused('command.redo: cannot redo "extrude face 85" (entry 2): you changed the control mesh since; ' +
+    'the edit was made on the one before. Nothing changed.').text, /^The session changed since/);
 });

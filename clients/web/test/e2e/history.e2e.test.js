@@ -20,6 +20,7 @@ let b;      // page B (joins by the share link)
 let grpc;
 let ref;
 let cells0;  // block3's control cells
+let vertices0;  // and its surface vertices as page A draws them
 
 const said = (p) => p.evaluate(() => window.__dynsolid.metrics.messages.map((m) => m.text).slice(-6));
 // Waits like harness.until; a timeout also says what both pages said.
@@ -59,6 +60,7 @@ before(async () => {
   await drawn(a);
   ref = await a.evaluate(() => window.__dynsolid.session);
   cells0 = (await stats()).control_cells;
+  vertices0 = await a.evaluate(() => window.__dynsolid.decoder.vertexCount);
   b = await openViewer(env.browser, a.url());
   await drawn(b);
 });
@@ -125,7 +127,7 @@ test('A\'s Undo takes back A\'s pin only: struck through on the panel, B\'s extr
   const h = await serverHistory();
   assert.deepEqual(h.entries.map((e) => e.undone), [true, false]);
   assert.equal((await stats()).control_cells, cells0 + 1);
-  await until(async () => /^undo: pin/.test((await said(a)).slice(-1)[0] || ''), 'the undo message');
+  await until(async () => (await said(a)).some((m) => /^undo: pin/.test(m)), 'the undo message');
   await sleep(300);
   await shot(a, '01_undone');
 });
@@ -157,7 +159,7 @@ test('Revert to scene asks first; "Keep it" sends nothing; "Revert" puts the ses
   const y = await panelWhen(b, (rows) => rows.some((r) => r.what === 'revert to the scene'), 'the revert in B\'s panel');
   assert.equal(y.rows[y.rows.length - 1].who, 'person 1');
   assert.ok(y.rows[y.rows.length - 1].classes.includes('other'));
-  await until(() => a.evaluate((n) => window.__dynsolid.decoder.topologyVersion >= n, 0), 'A drawing');
+  await until(() => a.evaluate((n) => window.__dynsolid.decoder.vertexCount === n, vertices0), 'A drawing block3 as created');
   await sleep(500);
   await shot(a, '03_reverted');
   // "You can undo this": A's Undo puts B's extruded cell back.

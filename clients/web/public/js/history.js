@@ -216,7 +216,7 @@ export class HistoryPanel {
       const li = document.createElement('li');
       li.className = row.classes.join(' ');
       li.dataset.serial = String(row.serial);
-      li.title = row.title;
+      li.title = `${row.what}: ${row.title}`;  // the whole name, when the row cuts it
       li.append(span('serial', String(row.serial)), span('what', row.what), span('who', row.who));
       if (row.nextUndo) li.appendChild(span('mark', 'undo next'));
       if (row.nextRedo) li.appendChild(span('mark', 'redo next'));

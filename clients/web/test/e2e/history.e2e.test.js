@@ -97,6 +97,7 @@ test('A pins, B extrudes: A\'s panel lists both, its own as "you", B\'s greyed a
   assert.equal(pin.who, 'you');
   assert.ok(pin.classes.includes('mine') && pin.classes.includes('next-undo'), pin.classes.join());
   assert.equal(pin.mark, 'undo next');
+  assert.match(pin.title, /^pin.*: yours: Undo takes it back next$/);
   assert.match(extrude.what, /^extrude face \d+$/);
   assert.equal(extrude.who, 'person 1');
   assert.ok(extrude.classes.includes('other') && !extrude.classes.includes('next-undo'), extrude.classes.join());

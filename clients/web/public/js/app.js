@@ -15,6 +15,7 @@ import { statusText } from './status.js';
 import * as S from './sizing.js';
 import { Keep } from './keep.js';
 import { CutAway } from './cutaway.js';
+import { HistoryPanel } from './history.js';
 import { FaceHover } from './hover.js';
 import { Help } from './help.js';
 import { ScenePicker } from './scenes.js';
@@ -53,6 +54,7 @@ class App {
     this.bindUi();
     this.keep = new Keep(this);  // Download and Record (keep.js)
     this.cutaway = new CutAway(this);  // the cut-away (cutaway.js)
+    this.historyPanel = new HistoryPanel(this);  // the undo history and Revert to scene (history.js)
     this.bindConnection();
     this.bindPointer();
     this.view.attachControls();
@@ -274,6 +276,7 @@ class App {
     $('share').title = location.href;
     $('bake').disabled = false;
     this.keep.setSession(info);
+    this.historyPanel.setSession(info);
     this.refreshSessions();
   }
 
@@ -287,6 +290,7 @@ class App {
     $('bake').disabled = true;
     this.keep.setSession(null);
     this.view.setSection(null);
+    this.historyPanel.setSession(null);
     this.askClose(false);
   }
 

@@ -118,6 +118,10 @@ export function sharpEdge(v0, v1, sharp) {
 // rest_positions).
 export const bake = () => ({ edit: { bake: {} } });
 
+// The whole session back to the scene it was created from (undoable by
+// the sender).
+export const revertToScene = () => ({ revert_to_scene: {} });
+
 export const undo = () => ({ undo: {} });
 export const redo = () => ({ redo: {} });
 export const pause = () => ({ pause: {} });

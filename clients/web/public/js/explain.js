@@ -3,6 +3,18 @@
 // details line and title), for logs, tests and bug reports.
 
 const RULES = [
+  // Undo and redo (per person, last first; the History panel). First: the
+  // entry's name may be "merge faces 3 and 5" and so on.
+  [/command\.undo: you have nothing to undo/,
+    'You have nothing to undo.', 'Undo takes back only your own actions; others\' stay.'],
+  [/command\.redo: you have nothing to redo/,
+    'You have nothing to redo.', 'Redo brings back what you undid, until you do something new.'],
+  [/command\.undo: cannot undo .*Nothing changed/,
+    'A later change builds on that one, so Undo cannot take it back yet; nothing changed.',
+    'That change has to be undone first (the History panel shows whose it is).'],
+  [/command\.redo: cannot redo .*Nothing changed/,
+    'The session changed since, so Redo cannot bring that back; nothing changed.',
+    'Undo the later change first, or do it again by hand.'],
   // Downloads (Export, issue 38).
   [/export limit|request\.level: -?\d+ is not in/i,
     'That level is too fine to export for this solid.', 'Pick a lower level in the Download menu.'],

@@ -119,9 +119,10 @@ test('the clay back pulled up keeps a bend after its release', async () => {
 
 test('the cut-away shows the inside: the section where the surface was, its field and plane', async () => {
   await tool('view');
+  await page.selectOption('#field', '');  // the plain surface (the stroke showed stiffness)
   await park();
   const a = await project(INSIDE_SEAT);
-  const c0 = await colourAt(page, await canvasShot(page, null), a);
+  const c0 = await colourAt(page, await canvasShot(page, path.join(out, '00_before_cutaway.png')), a);
   await page.check('#cutaway');
   await page.selectOption('#cut-axis', 'x');
   await until(() => app(() => window.__dynsolid.metrics.section && window.__dynsolid.metrics.section.triangles > 0),
@@ -150,7 +151,12 @@ test('the cut-away shows the inside: the section where the surface was, its fiel
   await page.fill('#cut-pos', '50');
   await page.dispatchEvent('#cut-pos', 'input');
   await until(() => app(() => Math.abs(window.__dynsolid.metrics.section.point.x - 0.25) < 0.05), 'the plane back');
-  await sleep(400);
+  // The picture: the section face on (the side view looks along -x), a
+  // little from above.
+  await page.click('#view-buttons [data-view=side]');
+  await app(() => { const v = window.__dynsolid.view; v.camera.position.z += 0.4; v.camera.lookAt(0.25, 0.25, 0.55); v.needsRender = true; });
+  await until(() => app(() => window.__dynsolid.metrics.section.normal.x > 0), 'the section facing the side view');
+  await sleep(600);
   const file = path.join(out, 'viewer-cutaway.png');
   await page.screenshot({ path: file });
   if (process.env.DYNSOLID_DOCS_PICTURES === '1') fs.copyFileSync(file, path.join(REPO, 'docs/viewer-cutaway.png'));

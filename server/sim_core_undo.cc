@@ -198,9 +198,21 @@ absl::Status SimCore::Record(const CommandRequest& request, const Before& before
     default:
       break;
   }
-  // Plain names: the action's, a stroke's with its dabs.
+  // Plain names: the action's, a stroke's with its dabs, a held load's
+  // release ("inflate, released": a press-and-hold gesture).
+  auto releases_own_load = [&] {
+    if (c.kind_case() != Command::kRemoveLoad) return false;
+    for (const persist::UndoChange& ch : e->changes()) {
+      if (ch.has_load_added() && history_.Resolve(ch.load_added().id()) == c.remove_load().load_id()) {
+        return true;
+      }
+    }
+    return false;
+  };
   if (IsPaintOnly(*e)) {
     e->set_what(StrokeName(c, e->commands()));
+  } else if (!first && e->commands() == 2 && releases_own_load()) {
+    e->set_what(absl::StrCat(e->what(), ", released"));
   } else if (first) {
     e->set_what(ActionName(c));
   } else if (e->commands() == 2) {

@@ -273,6 +273,25 @@ TEST(UndoCoreTest, AReleasedDragUndoneDoesNotPullAgain) {
   EXPECT_EQ(s.t.core->last_error(), "");
 }
 
+// An inflate held and let go (the viewer sends both with one gesture) is
+// one entry; its undo and redo leave no pressure that nobody holds.
+TEST(UndoCoreTest, AHeldPressureReleasedIsOneEntryAndItsUndoPutsNoLoadBack) {
+  Live s = Make(/*paused=*/false);
+  const CommandReply p = Send(s, "ivy", R"(add_pressure { region { sphere {
+      center { x: 1.5 y: 1.5 z: 3 } radius: 0.8 } } pascals: 3000 })", /*gesture=*/7);
+  Ok(p);
+  Steps(s, 20);
+  Ok(Send(s, "ivy", absl::StrCat("remove_load { load_id: ", p.load_id(), " }"), 7));
+  HistoryInfo h;
+  s.t.core->DescribeHistory(&h);
+  ASSERT_EQ(h.entries_size(), 1);
+  EXPECT_EQ(h.entries(0).what(), "inflate, released");
+  Ok(Send(s, "ivy", "undo {}"));
+  EXPECT_TRUE(s.t.core->solid().ActiveLoads().empty()) << "no pressure came back";
+  Ok(Send(s, "ivy", "redo {}"));
+  EXPECT_TRUE(s.t.core->solid().ActiveLoads().empty()) << "nor on redo";
+}
+
 // 50 actions of three people: loads, pins, paints and strokes, gravity,
 // drags, edits, removals of each other's loads.
 void Script(Live& s) {

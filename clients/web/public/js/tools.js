@@ -233,11 +233,15 @@ export class Tools {
     const hit = await this.pick(press.x, press.y);
     if (!hit) return;
     const sign = this.tool === 'inflate' ? 1 : -1;
-    const cmd = this.conn.command(C.pressure(hit.material_point, this.params.radius, sign * this.params.pressure));
+    // Held and let go: one action for undo (Command.gesture), which leaves
+    // no pressure behind that nobody holds.
+    const gesture = this.nextGesture();
+    const cmd = this.conn.command({ ...C.pressure(hit.material_point, this.params.radius,
+      sign * this.params.pressure), gesture });
     cmd.catch(() => {});
     press.onUp = async () => {
       const reply = await cmd;
-      await this.conn.command(C.removeLoad(reply.load_id));
+      await this.conn.command({ ...C.removeLoad(reply.load_id), gesture });
     };
     if (press.done) press.onUp().catch((err) => this.app.showError(err));
     await cmd;
@@ -249,11 +253,13 @@ export class Tools {
     const tool = this.tool;
     let busy = false;
     let moved = false;
+    // The stroke's dabs are one action for undo (Command.gesture).
+    const gesture = this.nextGesture();
     const once = async (x, y) => {
       busy = true;
       try {
         const hit = await this.pick(x, y);
-        if (hit) await this.conn.command(this.brushCommand(tool, hit.material_point));
+        if (hit) await this.conn.command({ ...this.brushCommand(tool, hit.material_point), gesture });
       } finally {
         busy = false;
       }
@@ -268,6 +274,13 @@ export class Tools {
         await once(press.last.clientX, press.last.clientY);
       }
     }
+  }
+
+  // A new gesture id (Command.gesture: this page's consecutive commands with
+  // the same id are one entry of its undo history).
+  nextGesture() {
+    this.gestures = (this.gestures || 0) + 1;
+    return this.gestures;
   }
 
   // A dab of brush `tool` at a material point, with the panel's parameters.

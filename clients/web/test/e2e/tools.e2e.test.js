@@ -107,6 +107,11 @@ test('inflate while held: a pressure load, removed on release', async () => {
   await page.mouse.up();
   const e = await logged(n, 'remove_load');
   assert.deepEqual(e.map((x) => [x.kind, x.code]), [['add_pressure', 0], ['remove_load', 0]]);
+  // Held and let go: one undo entry (one gesture), not a "remove load"
+  // whose undo would put back a pressure nobody holds.
+  const h = (await grpc.call('Inspect', { session: ref, history: true })).history;
+  const last = h.entries[h.entries.length - 1];
+  assert.equal(last.what, 'inflate, released', JSON.stringify(h.entries.map((x) => x.what)));
 });
 
 test('the mass brush paints density: the mass field changes', async () => {

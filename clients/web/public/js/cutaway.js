@@ -6,6 +6,7 @@
 // them to the page.
 
 import { colorize, fieldRange, formatValue } from './colormap.js';
+import { bounds } from './sizing.js';
 
 export const SECTION_FIELDS = [
   { key: 'strain', label: 'strain', what: 'the largest stretch between two corners of each cell' },
@@ -95,18 +96,10 @@ export class CutAway {
   }
 
   plane() {
-    const positions = this.app.decoder && this.app.decoder.positions;
-    if (!positions || positions.length < 3) return null;
-    const min = [Infinity, Infinity, Infinity];
-    const max = [-Infinity, -Infinity, -Infinity];
-    for (let i = 0; i + 2 < positions.length; i += 3) {
-      for (let a = 0; a < 3; ++a) {
-        min[a] = Math.min(min[a], positions[i + a]);
-        max[a] = Math.max(max[a], positions[i + a]);
-      }
-    }
+    const b = this.app.decoder && this.app.decoder.positions ? bounds(this.app.decoder.positions) : null;
+    if (!b) return null;
     const c = this.app.view.camera.position;
-    return cutPlane($('cut-axis').value, Number($('cut-pos').value) / 100, { min, max }, [c.x, c.y, c.z]);
+    return cutPlane($('cut-axis').value, Number($('cut-pos').value) / 100, b, [c.x, c.y, c.z]);
   }
 
   async request() {

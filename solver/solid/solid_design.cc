@@ -8,10 +8,12 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "solver/common/status_macros.h"
 #include "solver/fem/element_data.h"
 #include "solver/solid/design.h"
 #include "solver/solid/solid.h"
@@ -172,42 +174,74 @@ absl::StatusOr<std::unique_ptr<DesignMaterials>> DesignMaterials::Make(
     tables[kind] = fem::MakeKindTable(static_cast<fem::ElementKind>(kind));
     total += static_cast<int64_t>(counts[kind]) * tables[kind].points;
   }
-  std::vector<const Design::Sample*> stream;
-  stream.reserve(total);
-  for (int i = 0; i < design.sample_runs_size(); i += 2) {
-    const int32_t length = design.sample_runs(i), m = design.sample_runs(i + 1);
-    if (length < 1 || length > total - static_cast<int64_t>(stream.size())) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "design.sample_runs[", i, "]: run length ", length, " is not in [1, ",
-          total - static_cast<int64_t>(stream.size()), "] (the samples left of ", total, ")"));
+  // The runs are read as the elements take their samples; equal arrays are
+  // kept once (an unpainted design is one array per kind), so a design
+  // costs memory for what was painted, not for every sample.
+  int run = 0;           // index of the current (length, material) pair
+  int32_t left = 0;      // samples left in it
+  int64_t taken = 0;
+  const Design::Sample* current = nullptr;
+  auto next_sample = [&]() -> absl::StatusOr<const Design::Sample*> {
+    while (left == 0) {
+      if (2 * run >= design.sample_runs_size()) {
+        return absl::InvalidArgumentError(absl::StrCat("design.sample_runs: ", taken,
+                                                       " samples, this scene's elements have ", total));
+      }
+      const int32_t length = design.sample_runs(2 * run), m = design.sample_runs(2 * run + 1);
+      if (length < 1 || length > total - taken) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "design.sample_runs[", 2 * run, "]: run length ", length, " is not in [1, ",
+            total - taken, "] (the samples left of ", total, ")"));
+      }
+      if (m < 0 || m >= design.materials_size()) {
+        return absl::InvalidArgumentError(absl::StrCat("design.sample_runs[", 2 * run + 1,
+                                                       "]: material ", m, " is out of range [0, ",
+                                                       design.materials_size(), ")"));
+      }
+      current = &design.materials(m);
+      left = length;
+      ++run;
     }
-    if (m < 0 || m >= design.materials_size()) {
-      return absl::InvalidArgumentError(absl::StrCat("design.sample_runs[", i + 1, "]: material ", m,
-                                                     " is out of range [0, ", design.materials_size(), ")"));
-    }
-    stream.insert(stream.end(), length, &design.materials(m));
-  }
-  if (static_cast<int64_t>(stream.size()) != total) {
-    return absl::InvalidArgumentError(absl::StrCat("design.sample_runs: ", stream.size(),
-                                                   " samples, this scene's elements have ", total));
-  }
-  size_t at = 0;
+    --left;
+    ++taken;
+    return current;
+  };
+  std::unordered_map<uint64_t, std::vector<int32_t>> interned;  // content hash -> arrays
+  std::vector<models::MaterialPoint> samples;
   for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const int points = tables[kind].points, nodes = tables[kind].nodes;
     const std::vector<int32_t>& ids = NodesOf(elements, kind);
     fem::NodeMatrixX3 x(nodes, 3);
     for (int32_t e = 0; e < counts[kind]; ++e) {
-      std::vector<models::MaterialPoint> samples(points);
-      for (int q = 0; q < points; ++q, ++at) {
-        const Design::Sample& s = *stream[at];
-        samples[q] = {s.young_modulus(), s.poisson_ratio(), s.density(), s.damping()};
+      samples.resize(points);
+      Hash128 h;
+      for (int q = 0; q < points; ++q) {
+        ASSIGN_OR_RETURN(const Design::Sample* s, next_sample());
+        samples[q] = {s->young_modulus(), s->poisson_ratio(), s->density(), s->damping()};
+        h.Doubles(&samples[q].young, 1);
+        h.Doubles(&samples[q].poisson, 1);
+        h.Doubles(&samples[q].density, 1);
+        h.Doubles(&samples[q].damping, 1);
+      }
+      std::vector<int32_t>& same = interned[h.value().first];
+      int32_t index = -1;
+      for (int32_t k : same) {
+        if (out->arrays_[k] == samples) index = k;
+      }
+      if (index < 0) {
+        index = static_cast<int32_t>(out->arrays_.size());
+        out->arrays_.push_back(samples);
+        same.push_back(index);
       }
       for (int i = 0; i < nodes; ++i) x.row(i) = rest.row(ids[static_cast<size_t>(e) * nodes + i]);
       Key128 key = NodeSetKey(x);
       key.first ^= static_cast<uint64_t>(kind);
-      out->by_nodes_.emplace(key, static_cast<int32_t>(out->arrays_.size()));
-      out->arrays_.push_back(std::move(samples));
+      out->by_nodes_.emplace(key, index);
     }
+  }
+  if (taken != total || left != 0 || 2 * run != design.sample_runs_size()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "design.sample_runs: more samples than this scene's elements have (", total, ")"));
   }
   return out;
 }

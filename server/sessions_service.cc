@@ -9,6 +9,7 @@
 #include "absl/strings/str_join.h"
 #include "solver/export/design_export.h"
 #include "solver/export/section.h"
+#include "solver/subdivision/cell_count.h"
 #include "server/export_call.h"
 #include "server/grpc_status.h"
 #include "dynsolid/journal.pb.h"
@@ -75,6 +76,7 @@ SessionsService::SessionsService(SessionRegistry& registry, Replicas& replicas, 
   ParseFirst("Inspect", &SessionsService::Inspect);
   ParseFirst("Pick", &SessionsService::Pick);
   ParseFirst("Section", &SessionsService::Section);
+  ParseFirst("ListScenes", &SessionsService::ListScenes);
   ParseFirst("GetCommandLog", &SessionsService::GetCommandLog);
   ParseFirst("GetServerInfo", &SessionsService::GetServerInfo);
   MarkMethodCallback(MethodIndex("Commands"),
@@ -358,6 +360,50 @@ grpc::ServerUnaryReactor* SessionsService::Pick(grpc::CallbackServerContext* con
       response->set_control_face(h.control_face);
       response->set_distance(h.distance);
     }
+    reactor->Finish(grpc::Status::OK);
+  });
+  return reactor;
+}
+
+namespace {
+
+// The built-in scenes as a picker shows them (a scene that does not load
+// is listed with its error as its description: the server still serves).
+SceneList MakeSceneList() {
+  SceneList out;
+  for (const std::string& name : scene::BuiltinSceneNames()) {
+    SceneList::Entry* e = out.add_scenes();
+    e->set_name(name);
+    absl::StatusOr<Scene> scene = scene::BuiltinScene(name);
+    if (!scene.ok()) {
+      e->set_description(std::string(scene.status().message()));
+      continue;
+    }
+    e->set_description(scene->description());
+    e->set_levels(scene->subdivision().levels());
+    absl::StatusOr<mesh::MeshInput> mesh = scene::ControlMeshInput(*scene, scene::BuiltinSceneDir());
+    if (!mesh.ok() || mesh->vertices.rows() == 0) continue;
+    const std::vector<int32_t> refine(scene->mesh().refine_cells().begin(),
+                                      scene->mesh().refine_cells().end());
+    e->set_control_cells(static_cast<int32_t>(mesh->cells.size()) +
+                         static_cast<int32_t>(7 * refine.size()));
+    e->set_cells(subdivision::EstimateFineCells(*mesh, refine, scene->subdivision().levels()));
+    const Eigen::RowVector3d size = mesh->vertices.colwise().maxCoeff() - mesh->vertices.colwise().minCoeff();
+    *e->mutable_size() = ToVec3(size.transpose());
+  }
+  return out;
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* SessionsService::ListScenes(grpc::CallbackServerContext* context,
+                                                      const google::protobuf::Empty* request,
+                                                      SceneList* response) {
+  (void)request;
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  OnBuilds(reactor, [reactor, response] {
+    static const SceneList* list = new SceneList(MakeSceneList());
+    *response = *list;
     reactor->Finish(grpc::Status::OK);
   });
   return reactor;

@@ -49,6 +49,11 @@ class SessionsService final
                                     const InspectRequest* request, InspectReply* response) override;
   grpc::ServerUnaryReactor* Pick(grpc::CallbackServerContext* context, const PickRequest* request,
                                  PickReply* response) override;
+  // ListScenes: the built-in scenes' names, descriptions and sizes (made
+  // once, on the builds queue).
+  grpc::ServerUnaryReactor* ListScenes(grpc::CallbackServerContext* context,
+                                       const google::protobuf::Empty* request,
+                                       SceneList* response) override;
   // Section: the shape taken on the loop, the cut made on the builds queue.
   grpc::ServerUnaryReactor* Section(grpc::CallbackServerContext* context,
                                     const SectionRequest* request,

@@ -16,6 +16,7 @@
 #include "live_fixture.h"
 #include "server/server.h"
 #include "server/solid_builder.h"
+#include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
@@ -479,7 +480,7 @@ TEST_F(SessionsServiceTest, UnparsableRequestsAreInvalidArgumentOnEveryMethod) {
   const google::protobuf::ServiceDescriptor* service =
       google::protobuf::DescriptorPool::generated_pool()->FindServiceByName("dynsolid.Sessions");
   ASSERT_NE(service, nullptr);
-  ASSERT_EQ(service->method_count(), 14);
+  ASSERT_EQ(service->method_count(), 15);
   // Tag 0 with wire type 7; a length-delimited field 1 claiming 100 bytes
   // of 1; a varint that never ends. None parses as any message.
   const std::vector<std::string> garbage = {std::string("\x07", 1), std::string("\x0a\x64\x01", 3),
@@ -558,6 +559,34 @@ TEST_F(SessionsServiceTest, SectionCutsTheSolidWhereThePlaneIs) {
               GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("request.field: \"stress\"")));
   EXPECT_THAT(section("strain", 0, &bad),
               GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("request.normal")));
+}
+
+// What a scene picker shows before anything is built: every built-in
+// scene with its own description and its size.
+TEST_F(SessionsServiceTest, ListScenesNamesEveryBuiltinSceneWithItsSize) {
+  SceneList list;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  ASSERT_THAT(stub_->ListScenes(&context, google::protobuf::Empty(), &list), GrpcOk());
+  std::vector<std::string> names;
+  for (const SceneList::Entry& e : list.scenes()) names.push_back(e.name());
+  EXPECT_EQ(names, scene::BuiltinSceneNames());
+  for (const SceneList::Entry& e : list.scenes()) {
+    EXPECT_FALSE(e.description().empty()) << e.name();
+    EXPECT_GT(e.cells(), 0) << e.name();
+    EXPECT_GT(e.control_cells(), 0) << e.name();
+    if (e.name() == "block3") {
+      EXPECT_EQ(e.control_cells(), 27);
+      EXPECT_EQ(e.levels(), 2);
+      EXPECT_EQ(e.cells(), 1728);  // what CreateSession builds (above)
+      EXPECT_DOUBLE_EQ(e.size().x(), 3.0);
+    }
+    if (e.name() == "chair") {
+      EXPECT_EQ(e.control_cells(), 76);
+      EXPECT_EQ(e.cells(), 4864);
+      EXPECT_THAT(e.description(), HasSubstr("chair"));
+    }
+  }
 }
 
 TEST_F(SessionsServiceTest, ShutdownWithOpenSessionsCompletesAndRefusesNewCalls) {

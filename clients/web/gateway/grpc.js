@@ -13,7 +13,7 @@ export const DEFAULT_PROTO_ROOT = path.resolve(here, '../../../proto');
 
 // Unary calls a page may make, as service.proto names them.
 export const UNARY_METHODS = new Set([
-  'CreateSession', 'GetSession', 'ListSessions', 'CloseSession', 'GetStats', 'Inspect', 'Pick', 'Section',
+  'CreateSession', 'GetSession', 'ListSessions', 'CloseSession', 'GetStats', 'Inspect', 'Pick', 'Section', 'ListScenes',
 ]);
 
 export function loadService(protoRoot = DEFAULT_PROTO_ROOT) {

@@ -394,7 +394,10 @@ class App {
     };
     this.conn.onState = (state) => {
       if (state === 'closed') this.startReconnect('the gateway went away; reconnecting…');
-      if (state === 'open') this.refreshSessions();
+      if (state === 'open') {
+        this.refreshSessions();
+        this.scenes.fetch(this.conn);
+      }
     };
     this.conn.onError = (text) => this.banner(`gateway: ${text}`, 'error');
   }

@@ -49,7 +49,7 @@ function fakeClient() {
       return s;
     },
   };
-  for (const name of ['CreateSession', 'GetSession', 'ListSessions', 'CloseSession', 'GetStats', 'Inspect', 'Pick', 'GetServerInfo']) {
+  for (const name of ['CreateSession', 'GetSession', 'ListSessions', 'CloseSession', 'GetStats', 'Inspect', 'Pick', 'Section', 'ListScenes', 'GetServerInfo']) {
     client[name] = (request, options, cb) => {
       try {
         methods[name].requestSerialize(request);

@@ -176,3 +176,11 @@ test('scene picker: the size as last built here, or that it is not known yet', a
   assert.equal(aboutText('chair', k), 'chair as last built here: 120 control cells, 260 control points; 7.7k cells and 4.9k surface quads at level 2, corotational_cells');
   assert.match(aboutText('torus', null), /not built in this browser yet/);
 });
+
+test('scene picker: what the server lists (ListScenes) says what a scene is for and its size', async () => {
+  const { serverOptionText, serverAboutText } = await import('../../public/js/scenes.js');
+  const chair = { name: 'chair', description: 'A chair built from 76 voxel cells.', control_cells: 76, levels: 2,
+    cells: '4864', size: { x: 0.5, y: 0.5, z: 1.2 } };
+  assert.equal(serverOptionText(chair), 'chair · 4.9k cells');
+  assert.equal(serverAboutText(chair), 'A chair built from 76 voxel cells. (76 control cells, 4.9k cells at level 2; 0.50 x 0.50 x 1.2 m)');
+});

@@ -98,11 +98,10 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
     positions_ = s.control_positions();
     rest_ = s.discretization().control().positions();
     if (format_ == exporter::Format::kVtu && !scene_file_) {
-      // The materials as painted (a walk over the samples) for the
-      // volume's cell data.
-      absl::StatusOr<exporter::MaterialFields> fields =
-          exporter::MaterialFieldsOf(s.discretization(), s.SaveDesign());
-      if (fields.ok()) materials_ = std::make_shared<exporter::MaterialFields>(*std::move(fields));
+      // The samples as painted, for the volume's cell data (their means
+      // are taken off the loop, on the solid kept alive here).
+      solid_ = core->shared_solid();
+      design_samples_ = s.SaveDesign();
     }
     discretization_ = std::move(d);
     step_ = core->steps();
@@ -135,6 +134,11 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
       MakeSceneFile();
       WriteNext();
       return;
+    }
+    if (solid_ != nullptr) {
+      absl::StatusOr<exporter::MaterialFields> fields =
+          exporter::MaterialFieldsOf(solid_->discretization(), design_samples_);
+      if (fields.ok()) materials_ = std::make_shared<exporter::MaterialFields>(*std::move(fields));
     }
     exporter::ExportOptions options;
     options.format = format_;
@@ -192,7 +196,11 @@ class ExportCall final : public grpc::ServerWriteReactor<ExportChunk> {
   exporter::Format format_ = exporter::Format::kGlb;
   bool scene_file_ = false;  // SCENE: design_ as text
   std::shared_ptr<const Scene> design_;
-  std::shared_ptr<const exporter::MaterialFields> materials_;  // VTU
+  // VTU: the solid (its discretization) and its samples, taken on the
+  // loop; their means, made off it.
+  std::shared_ptr<const solid::Solid> solid_;
+  Design design_samples_;
+  std::shared_ptr<const exporter::MaterialFields> materials_;
   int64_t cells_ = 0;
   int64_t max_cells_ = 0;
   int chunk_ = kDefaultChunk;

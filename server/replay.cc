@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 #include <optional>
 #include <utility>
@@ -22,14 +21,6 @@
 
 namespace dynsolid::server {
 namespace {
-
-absl::Status WriteFile(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  f.close();
-  if (!f) return absl::UnavailableError(absl::StrCat("cannot write ", path));
-  return absl::OkStatus();
-}
 
 std::string Stem(const std::string& name) {
   std::string out;
@@ -53,14 +44,13 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
   }
   if (!o.pvd && !o.obj && !o.glb) return absl::InvalidArgumentError("--format: no format to write");
   // The session as it was created, and its whole journal.
-  std::string manifest_bytes;
-  {
-    std::ifstream f(dir + "/manifest.binpb", std::ios::binary);
-    if (!f) return absl::NotFoundError(absl::StrCat(dir, "/manifest.binpb: not a session directory"));
-    manifest_bytes.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  absl::StatusOr<std::string> manifest_bytes = ReadWholeFile(dir + "/manifest.binpb");
+  if (!manifest_bytes.ok()) {
+    return absl::NotFoundError(absl::StrCat(dir, "/manifest.binpb: not a session directory (",
+                                            manifest_bytes.status().message(), ")"));
   }
   persist::Manifest manifest;
-  if (!manifest.ParseFromString(manifest_bytes) || manifest.format() != 1) {
+  if (!manifest.ParseFromString(*manifest_bytes) || manifest.format() != 1) {
     return absl::DataLossError(absl::StrCat(dir, "/manifest.binpb is not a format-1 manifest"));
   }
   ASSIGN_OR_RETURN(JournalContents journal, ReadJournal(dir + "/journal", 0));
@@ -141,7 +131,7 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
         return absl::Status(made.status().code(), absl::StrCat("--", made.status().message()));
       }
       const std::string file = absl::StrCat(base, volume ? ".vtu" : ".obj");
-      RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, made->bytes));
+      RETURN_IF_ERROR(WriteFileAtomically(o.out_dir, file, made->bytes, 0644));
       rep.files.push_back(file);
       if (volume) {
         absl::StrAppend(&pvd, "    <DataSet timestep=\"", absl::StrFormat("%.17g", s.time()),
@@ -243,13 +233,13 @@ absl::StatusOr<ReplayReport> ReplayAnimation(const std::string& dir, const Repla
     std::string bytes;
     RETURN_IF_ERROR(io::GlbBytes(*glb_first, g, &bytes));
     const std::string file = stem + ".glb";
-    RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, bytes));
+    RETURN_IF_ERROR(WriteFileAtomically(o.out_dir, file, bytes, 0644));
     rep.files.push_back(file);
   }
   if (o.pvd) {
     absl::StrAppend(&pvd, "  </Collection>\n</VTKFile>\n");
     const std::string file = stem + ".pvd";
-    RETURN_IF_ERROR(WriteFile(o.out_dir + "/" + file, pvd));
+    RETURN_IF_ERROR(WriteFileAtomically(o.out_dir, file, pvd, 0644));
     rep.files.push_back(file);
   }
   rep.frames = static_cast<int>(rep.frame_steps.size());

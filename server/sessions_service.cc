@@ -6,7 +6,6 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_join.h"
 #include "solver/export/design_export.h"
 #include "solver/export/section.h"
 #include "solver/subdivision/cell_count.h"
@@ -424,21 +423,19 @@ grpc::ServerUnaryReactor* SessionsService::Section(grpc::CallbackServerContext* 
     std::string field;
     std::shared_ptr<solid::Solid> solid;  // keeps its discretization alive
     Points positions, rest;
-    std::optional<exporter::MaterialFields> materials;
+    std::optional<Design> design;  // stiffness: the samples as painted
     int64_t step = 0;
   };
   auto job = std::make_shared<Job>();
   job->point = Eigen::Vector3d(request->point().x(), request->point().y(), request->point().z());
   job->normal = Eigen::Vector3d(request->normal().x(), request->normal().y(), request->normal().z());
   job->field = request->field();
-  const auto& fields = exporter::SectionFields();
-  if (!job->field.empty() && std::find(fields.begin(), fields.end(), job->field) == fields.end()) {
-    reactor->Finish(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
-        "request.field: \"", job->field, "\" is not one of ", absl::StrJoin(fields, ", ")))));
+  if (absl::Status s = exporter::CheckSectionField(job->field); !s.ok()) {
+    reactor->Finish(ToGrpcStatus(absl::Status(s.code(), absl::StrCat("request.", s.message()))));
     return reactor;
   }
-  // The shape at a step boundary (and, for stiffness, the materials as
-  // painted: a walk over the samples), then the cut off the loop.
+  // The shape at a step boundary (and, for stiffness, the design's
+  // samples), then the materials' means and the cut off the loop.
   session->loop().Query([this, reactor, response, job](const SimCore* core) {
     if (core == nullptr) {
       reactor->Finish(ToGrpcStatus(absl::UnavailableError("the session is closed")));
@@ -448,18 +445,16 @@ grpc::ServerUnaryReactor* SessionsService::Section(grpc::CallbackServerContext* 
     job->positions = job->solid->control_positions();
     job->rest = job->solid->discretization().control().positions();
     job->step = core->steps();
-    if (job->field == "stiffness") {
-      absl::StatusOr<exporter::MaterialFields> m =
-          exporter::MaterialFieldsOf(job->solid->discretization(), job->solid->SaveDesign());
-      if (m.ok()) job->materials = *std::move(m);
-    }
-    builds_.Post([reactor, response, job](bool run) {
-      if (!run) {
-        reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-        return;
+    if (job->field == "stiffness") job->design = job->solid->SaveDesign();
+    OnBuilds(reactor, [reactor, response, job] {
+      std::optional<exporter::MaterialFields> materials;
+      if (job->design.has_value()) {
+        absl::StatusOr<exporter::MaterialFields> m =
+            exporter::MaterialFieldsOf(job->solid->discretization(), *job->design);
+        if (m.ok()) materials = *std::move(m);
       }
       exporter::SectionInput in{&job->solid->discretization(), job->positions, job->rest,
-                                job->materials.has_value() ? &*job->materials : nullptr};
+                                materials.has_value() ? &*materials : nullptr};
       absl::StatusOr<exporter::Section> cut = exporter::CutSection(in, job->point, job->normal, job->field);
       if (!cut.ok()) {
         reactor->Finish(ToGrpcStatus(absl::Status(cut.status().code(),

@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "solver/common/status_macros.h"
 
 namespace dynsolid::exporter {
 namespace {
@@ -81,6 +82,15 @@ const std::vector<std::string>& SectionFields() {
   return kFields;
 }
 
+absl::Status CheckSectionField(const std::string& field) {
+  const auto& known = SectionFields();
+  if (field.empty() || std::find(known.begin(), known.end(), field) != known.end()) {
+    return absl::OkStatus();
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("field: \"", field, "\" is not one of ", absl::StrJoin(known, ", ")));
+}
+
 absl::StatusOr<Section> CutSection(const SectionInput& in, const Eigen::Vector3d& point,
                                    const Eigen::Vector3d& normal, const std::string& field_name) {
   if (in.discretization == nullptr) return absl::InvalidArgumentError("no discretization");
@@ -89,20 +99,16 @@ absl::StatusOr<Section> CutSection(const SectionInput& in, const Eigen::Vector3d
   if (!std::isfinite(length) || !(length > 0)) {
     return absl::InvalidArgumentError("normal: must be finite and not zero");
   }
-  Field field;
-  std::string unit;
+  RETURN_IF_ERROR(CheckSectionField(field_name));
+  Field field = Field::kStrain;
+  std::string unit = "1";
   const std::string name = field_name.empty() ? "strain" : field_name;
-  if (name == "strain") {
-    field = Field::kStrain, unit = "1";
-  } else if (name == "displacement") {
+  if (name == "displacement") {
     field = Field::kDisplacement, unit = "m";
   } else if (name == "stiffness") {
     field = Field::kStiffness, unit = "Pa";
   } else if (name == "distortion") {
     field = Field::kDistortion, unit = "1";
-  } else {
-    return absl::InvalidArgumentError(absl::StrCat("field: \"", field_name, "\" is not one of ",
-                                                   absl::StrJoin(SectionFields(), ", ")));
   }
   if (field == Field::kStiffness && in.materials == nullptr) {
     return absl::InvalidArgumentError("field: stiffness needs the design's materials");

@@ -55,6 +55,9 @@ struct Section {
 
 // The fields CutSection knows.
 const std::vector<std::string>& SectionFields();
+// OK for one of them or "" (strain); InvalidArgument naming the field
+// ("field: \"stress\" is not one of strain, ...") otherwise.
+absl::Status CheckSectionField(const std::string& field);
 
 // InvalidArgument naming the field: a zero or non-finite normal, a
 // non-finite point, an unknown field (the message lists them), stiffness

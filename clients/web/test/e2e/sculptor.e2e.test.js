@@ -58,7 +58,10 @@ test('creating the chair shows progress; its tools are sized to it', async () =>
   assert.ok(p.pressure >= 1e4 && p.pressure <= 1e5, `pressure ${p.pressure}`);
   await tool('extrude');
   assert.equal(await page.inputValue('#params input[data-param=extrudeDistance]'), '0.1');
-  // The status line fits the 1280 px window; the full one is its tooltip.
+  // The status line fits the 1280 px window; the full one is its tooltip
+  // (refreshed by the page's half-second poll: waited for).
+  await until(() => app(() => / corotational_cells \/ central_difference/.test(document.getElementById('status').title)),
+    'the status line for the chair');
   const fits = await app(() => { const s = document.getElementById('status'); return [s.scrollWidth, s.clientWidth, s.title]; });
   assert.ok(fits[0] <= fits[1], `status ${fits[0]} px in ${fits[1]} px`);
   assert.match(fits[2], /chair .* corotational_cells \/ central_difference/);

@@ -282,9 +282,9 @@ void Solid::Impl::ControlForces(const Points& p, const Points& prev, Points& out
     out = -out;
     phases.project = MsSince(t0);
   }
-  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) {
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) {
     t0 = Clock::now();
-    if (has_const_force) out += f_const;
+    if (loads.has_constant_force()) out += loads.constant_forces();
     if (contact.active) out += contact.force;
     for (size_t s = 0; s < spring_point.size(); ++s) {
       const int32_t i = spring_point[s];
@@ -333,8 +333,8 @@ void Solid::Impl::ImplicitForces(const Points& p, const Points& prev, Points& ou
 void Solid::Impl::ExternalForces(const Points& p, const Points& prev, Points& out,
                                  Points& pressure, PhaseTimes& phases) {
   const auto t0 = Clock::now();
-  if (has_const_force) {
-    out = f_const;
+  if (loads.has_constant_force()) {
+    out = loads.constant_forces();
   } else {
     out.setZero(p.rows(), 3);
   }
@@ -344,7 +344,7 @@ void Solid::Impl::ExternalForces(const Points& p, const Points& prev, Points& ou
   }
   if (contact.active) out += contact.force;
   loads_changed = false;
-  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) {
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) {
     phases.loads = MsSince(t0);
   }
 }
@@ -356,7 +356,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // has them: the deformation measure is the local-frame model's; the
   // per-cell corotation has no node positions and no projection.
   sum.stiffness = sum.solve = 0;
-  if (has_const_force || !spring_point.empty() || has_pressure || contact.active) sum.loads = 0;
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) sum.loads = 0;
   auto accumulate = [](double& total, double t) {
     if (t >= 0) total = std::max(total, 0.0) + t;
   };
@@ -453,7 +453,9 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
       springs += 0.5 * spring_k[s] *
                  (p_next.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
     }
-    if (has_const_force) ledger.work += (f_const.array() * (p_next - p).array()).sum();
+    if (loads.has_constant_force()) {
+      ledger.work += (loads.constant_forces().array() * (p_next - p).array()).sum();
+    }
     if (contact.active) ledger.work += ContactWork(p, p_next);
     // Follower pressure: trapezoidal work over the sub-step.
     if (has_pressure) {
@@ -534,7 +536,7 @@ void Solid::SetAtRest(const Points& p) {
   Impl& im = *impl_;
   p_ = p;
   for (int64_t i = 0; i < p_.rows(); ++i) {
-    if (im.fixed[i]) p_.row(i) = im.hold.row(i);
+    if (im.fixed[i]) p_.row(i) = im.loads.held_at().row(i);
   }
   p_prev_ = p_;
   im.model->ResetFrames();
@@ -636,9 +638,9 @@ absl::StatusOr<Points> Solid::SolveStaticLinear() {
   const int32_t nc = static_cast<int32_t>(d_.node_matrix.cols());
   std::vector<Eigen::Triplet<double, int32_t>> t = im.StiffnessTriplets();
   Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * nc);
-  if (im.has_const_force) {
+  if (im.loads.has_constant_force()) {
     for (int32_t i = 0; i < nc; ++i)
-      for (int c = 0; c < 3; ++c) f[3 * i + c] = im.f_const(i, c);
+      for (int c = 0; c < 3; ++c) f[3 * i + c] = im.loads.constant_forces()(i, c);
   }
   // Fixed points: identity rows and columns, zero load.
   for (auto& x : t) {

@@ -488,10 +488,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
     if (clay.has_value()) im.InstallParts({}, std::move(clay));
   }
 
-  // Constraints: the scene's fixed regions, held at rest.
-  im.fix_count.assign(nc, 0);
-  im.fixed.assign(nc, 0);
-  im.hold = im.rest_control;
+  // Penalty springs: the scene's elastic constraints.
   for (const PenaltySpring& spring : scene.constraints().springs()) {
     for (int32_t i = 0; i < nc; ++i) {
       bool in = InShape(spring.region(), im.rest_control.row(i).transpose());
@@ -507,7 +504,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   }
   rep.penalty_springs = static_cast<int32_t>(im.spring_point.size());
 
-  // Loads, with ids: point forces, then pressures (then fixed regions).
+  // Loads, with ids: point forces, then pressures, then the scene's fixed
+  // regions (held at rest), then gravity.
+  LoadSet::Contents loads;
   const bool snap = im.settings.snap_forces_to_quadrature();
   for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
     const PointForce& pf = scene.loads().point_forces(i);
@@ -516,7 +515,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
       return absl::InvalidArgumentError(
           absl::StrCat("loads.point_forces[", i, "].position: ", at.status().message()));
     }
-    im.point_loads.push_back({im.next_id++, pf, *at});
+    loads.point_loads.push_back({loads.next_id++, pf, *at});
   }
   for (int i = 0; i < scene.loads().pressures_size(); ++i) {
     const Pressure& pr = scene.loads().pressures(i);
@@ -526,22 +525,19 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
           "loads.pressures[", i, "].region selects no boundary face (no face has its rest "
           "centroid in the region or its cell in control_cells)"));
     }
-    im.pressures.push_back({im.next_id++, pr, std::move(quads)});
+    loads.pressures.push_back({loads.next_id++, pr, std::move(quads)});
   }
   for (const Region& r : scene.constraints().fixed()) {
-    Impl::FixConstraint fix{im.next_id++, r, im.SelectControlPoints(r)};
-    for (int32_t i : fix.points) {
-      ++im.fix_count[i];
-      im.fixed[i] = 1;
-    }
-    im.fixes.push_back(std::move(fix));
+    loads.fixes.push_back({loads.next_id++, r, im.SelectControlPoints(r)});
   }
+  loads.gravity = V(scene.loads().gravity());
+  im.loads = LoadSet(std::move(loads), im.rest_control);
+  im.fixed = im.loads.FixedFlags();
   rep.fixed_control_points = static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
-  im.gravity = V(scene.loads().gravity());
   {
     // Loads within physics (load_bounds.h), named by their scene field.
     const LoadScale scale = s->load_scale();
-    RETURN_IF_ERROR(CheckGravity(scale, im.gravity.stableNorm(), "loads.gravity"));
+    RETURN_IF_ERROR(CheckGravity(scale, im.loads.gravity().stableNorm(), "loads.gravity"));
     for (int i = 0; i < scene.loads().point_forces_size(); ++i) {
       RETURN_IF_ERROR(CheckForce(scale, V(scene.loads().point_forces(i).force()).stableNorm(),
                                  absl::StrCat("loads.point_forces[", i, "].force")));
@@ -556,8 +552,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CreateWith(
   RETURN_IF_ERROR(im.MakeEnvironment(scene, s->surface_));
   im.RebuildConstantLoads();
   im.RebuildPressure();
-  rep.point_forces = static_cast<int32_t>(im.point_loads.size());
-  rep.gravity = im.gravity.squaredNorm() > 0;
+  rep.point_forces = static_cast<int32_t>(im.loads.point_loads().size());
+  rep.gravity = im.loads.has_gravity();
 
   // Traced points.
   for (int i = 0; i < static_cast<int>(scene.traced_size()); ++i) {

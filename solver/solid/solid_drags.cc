@@ -2,7 +2,6 @@
 // from material points to targets a client moves. They are follower loads
 // (solid_loads.cc PressureForces adds them): evaluated at every force
 // evaluation, their work counted trapezoidally in the energy ledger.
-#include <cstring>
 #include <algorithm>
 #include <map>
 #include <string>
@@ -54,25 +53,6 @@ std::vector<Eigen::Vector3d> Points3(const google::protobuf::RepeatedPtrField<Ve
 
 }  // namespace
 
-Solid::Impl::KnownPoints::Key Solid::Impl::KnownPoints::KeyOf(const Eigen::Vector3d& x) {
-  Key k;
-  std::memcpy(k.data(), x.data(), sizeof(k));
-  return k;
-}
-
-Solid::Impl::KnownPoints Solid::Impl::CurrentPoints() const {
-  KnownPoints known;
-  for (const PointLoad& l : point_loads) {
-    known.forces.emplace(KnownPoints::KeyOf(V(l.msg.position())), std::pair(l.at, l.row));
-  }
-  for (const DragLoad& d : drags) {
-    for (size_t s = 0; s < d.material.size(); ++s) {
-      known.rows.emplace(KnownPoints::KeyOf(d.material[s]), &d.rows[s]);
-    }
-  }
-  return known;
-}
-
 absl::StatusOr<Solid::Impl::ControlWeights> Solid::Impl::ControlRow(
     const Eigen::Vector3d& x, const KnownPoints* known) const {
   if (known != nullptr) {
@@ -96,11 +76,11 @@ Solid::Impl::ControlWeights Solid::Impl::ControlRowAt(const MaterialLocation& at
   return ControlWeights(w.begin(), w.end());
 }
 
-absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
+absl::StatusOr<LoadSet::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
                                                             const KnownPoints* known) const {
   RETURN_IF_ERROR(scene::ValidateValues(d, "drag"));
   RETURN_IF_ERROR(CheckStiffness(d.stiffness(), "drag"));
-  DragLoad load;
+  LoadSet::DragLoad load;
   load.drag = d;
   load.stiffness = d.stiffness();
   load.material = {V(d.material_point())};
@@ -114,7 +94,7 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeDrag(const Drag& d,
   return load;
 }
 
-absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c,
+absl::StatusOr<LoadSet::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c,
                                                              const KnownPoints* known) const {
   RETURN_IF_ERROR(scene::ValidateValues(c, "curve"));
   RETURN_IF_ERROR(CheckStiffness(c.stiffness(), "curve"));
@@ -140,7 +120,7 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c,
   if (!(length > 0)) {
     return absl::InvalidArgumentError("curve.material_points: the polyline has zero length");
   }
-  DragLoad load;
+  LoadSet::DragLoad load;
   load.curve = true;
   load.shape = c;
   load.stiffness = c.stiffness();
@@ -157,42 +137,28 @@ absl::StatusOr<Solid::Impl::DragLoad> Solid::Impl::MakeCurve(const CurveDrag& c,
   return load;
 }
 
-void Solid::Impl::AddDragForces(const Points& p, Points& out) const {
-  for (const DragLoad& load : drags) {
-    for (size_t s = 0; s < load.rows.size(); ++s) {
-      Eigen::RowVector3d x = Eigen::RowVector3d::Zero();
-      for (const auto& [i, w] : load.rows[s]) x += w * p.row(i);
-      const Eigen::RowVector3d f = load.stiffness * (load.targets[s].transpose() - x);
-      for (const auto& [i, w] : load.rows[s]) out.row(i) += w * f;
-    }
-  }
-}
-
 absl::StatusOr<int64_t> Solid::AddDrag(const Drag& d) {
   Impl& im = *impl_;
-  ASSIGN_OR_RETURN(Impl::DragLoad load, im.MakeDrag(d));
-  load.id = im.next_id++;
-  im.drags.push_back(std::move(load));
+  ASSIGN_OR_RETURN(LoadSet::DragLoad load, im.MakeDrag(d));
+  const int64_t id = im.loads.Add(std::move(load));
   im.RebuildPressure();
   im.LoadsChanged();
-  return im.drags.back().id;
+  return id;
 }
 
 absl::StatusOr<int64_t> Solid::AddCurveDrag(const CurveDrag& c) {
   Impl& im = *impl_;
-  ASSIGN_OR_RETURN(Impl::DragLoad load, im.MakeCurve(c));
-  load.id = im.next_id++;
-  im.drags.push_back(std::move(load));
+  ASSIGN_OR_RETURN(LoadSet::DragLoad load, im.MakeCurve(c));
+  const int64_t id = im.loads.Add(std::move(load));
   im.RebuildPressure();
   im.LoadsChanged();
-  return im.drags.back().id;
+  return id;
 }
 
 absl::Status Solid::MoveDrag(int64_t id, const std::vector<Eigen::Vector3d>& targets) {
   Impl& im = *impl_;
-  auto it = std::find_if(im.drags.begin(), im.drags.end(),
-                         [id](const Impl::DragLoad& l) { return l.id == id; });
-  if (it == im.drags.end()) {
+  LoadSet::DragLoad* it = im.loads.FindDrag(id);
+  if (it == nullptr) {
     return absl::NotFoundError(absl::StrCat("move_drag.load_id: no drag or curve ", id));
   }
   for (size_t i = 0; i < targets.size(); ++i) {

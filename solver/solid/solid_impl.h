@@ -38,7 +38,9 @@
 #include "solver/fem/shape.h"
 #include "solver/models/internal_force.h"
 #include "solver/scene/scene_loader.h"
+#include "solver/solid/load_set.h"
 #include "solver/solid/solid.h"
+#include "solver/solid/surface_pressure.h"
 #include "solver/subdivision/mcj.h"
 
 namespace dynsolid::solid {
@@ -105,13 +107,6 @@ inline models::MaterialPoint ToPoint(const Material& m) {
   const Material r = scene::ResolvedMaterial(m);
   return {r.young_modulus(), r.poisson_ratio(), r.density(), r.damping()};
 }
-
-// A material point: an element and its parametric coordinates.
-struct MaterialLocation {
-  int kind = 0;
-  int32_t element = 0;
-  Eigen::Vector3d uvw;
-};
 
 // What depends on the material samples: rebuilt together by Create,
 // PaintMaterial and RestoreState (one path).
@@ -209,15 +204,14 @@ struct Solid::Impl {
   double ahead_energy = 0;             // E_R(a), J
   double ahead_ms = 0;
   int64_t element_passes = 0, frame_passes = 0;  // counters for StepStats
+  // The fixed set as the integrators see it (1: held): loads.FixedFlags()
+  // as of the last ApplyFixed, install or remesh.
   std::vector<uint8_t> fixed;
-  // Constant external control forces (point forces, gravity): #control x 3.
-  Points f_const;
   // A^T w, w_i = int mu N_i dV (= Mt 1): the control-space body force per
-  // unit acceleration (RebuildConstantLoads). Empty until needed; cleared
+  // unit acceleration (the load set's gravity). Empty until needed; cleared
   // when the material changes.
   Eigen::VectorXd gravity_mass;
   const Eigen::VectorXd& GravityMass();
-  bool has_const_force = false;
   // Penalty springs on control points.
   std::vector<int32_t> spring_point;
   std::vector<double> spring_k;
@@ -240,58 +234,13 @@ struct Solid::Impl {
   // hashed once per build, beside its cell partials.
   std::pair<uint64_t, uint64_t> geometry_key;
 
-  // ---- Runtime loads and constraints (ids from one counter, ascending).
-  // A control point's weight in a material point (ControlRowAt), ascending
-  // by control point.
-  using ControlWeights = std::vector<std::pair<int32_t, double>>;
-  struct PointLoad {
-    int64_t id;
-    PointForce msg;
-    MaterialLocation at;
-    // ControlRowAt(at), made when first needed (RebuildConstantLoads) and
-    // carried by a restore that keeps the point (KnownPoints).
-    std::shared_ptr<const ControlWeights> row = nullptr;
-  };
-  struct PressureLoad {
-    int64_t id;
-    Pressure msg;
-    std::vector<int32_t> quads;  // selected surface quads
-  };
-  struct FixConstraint {
-    int64_t id;
-    Region region;
-    std::vector<int32_t> points;  // control points, ascending
-  };
-  // A drag, or a curve (several springs under one id): spring s pulls the
-  // material point x_s = rows[s] . p (control-point weights) towards
-  // targets[s] with force stiffness (targets[s] - x_s).
-  struct DragLoad {
-    int64_t id;
-    bool curve = false;
-    Drag drag;        // a drag's message (target kept current)
-    CurveDrag shape;  // a curve's message (targets kept current)
-    double stiffness = 0;
-    std::vector<Eigen::Vector3d> material;  // rest positions of the springs' points
-    std::vector<Eigen::Vector3d> targets;
-    std::vector<ControlWeights> rows;
-  };
-  std::vector<PointLoad> point_loads;
-  std::vector<PressureLoad> pressures;
-  std::vector<FixConstraint> fixes;
-  std::vector<DragLoad> drags;
-  // Rest positions this solid's loads already located (bit for bit), so
-  // that a restore (an undo) locates again only the points it does not
-  // have: Locate and ControlRow are functions of the position alone, and
-  // a search over the elements each.
-  struct KnownPoints {
-    using Key = std::array<uint64_t, 3>;
-    static Key KeyOf(const Eigen::Vector3d& x);
-    // Point forces' Locate (snap setting applied) and control row.
-    std::map<Key, std::pair<MaterialLocation, std::shared_ptr<const ControlWeights>>> forces;
-    std::map<Key, const ControlWeights*> rows;  // drag springs' ControlRow
-  };
-  // Those of the current loads.
-  KnownPoints CurrentPoints() const;
+  // ---- Runtime loads and constraints: a part with its own state
+  // (load_set.h). Impl locates what it keeps (Locate, ControlRow,
+  // SelectQuads, SelectControlPoints) and turns its lists into the forces
+  // the step adds (RebuildConstantLoads, RebuildPressure).
+  LoadSet loads;
+  using ControlWeights = LoadSet::ControlWeights;
+  using KnownPoints = LoadSet::KnownPoints;
   // The control-point weights of the material point at rest position x
   // (its element's shape values times the node matrix rows), ascending by
   // control point; taken from `known` when it has x.
@@ -300,14 +249,10 @@ struct Solid::Impl {
   // The same weights at a located material point.
   ControlWeights ControlRowAt(const MaterialLocation& at) const;
   // A drag or curve from its message, located on this solid (ids unset).
-  absl::StatusOr<DragLoad> MakeDrag(const Drag& d, const KnownPoints* known = nullptr) const;
-  absl::StatusOr<DragLoad> MakeCurve(const CurveDrag& c, const KnownPoints* known = nullptr) const;
-  // out += the drag springs' forces at p.
-  void AddDragForces(const Points& p, Points& out) const;
-  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
-  int64_t next_id = 1;
-  std::vector<int32_t> fix_count;  // per control point: active constraints holding it
-  Points hold;                     // rows of fixed points: where they are held
+  absl::StatusOr<LoadSet::DragLoad> MakeDrag(const Drag& d,
+                                             const KnownPoints* known = nullptr) const;
+  absl::StatusOr<LoadSet::DragLoad> MakeCurve(const CurveDrag& c,
+                                              const KnownPoints* known = nullptr) const;
 
   // ---- Haptic contact (solid_contact.cc). `force` is the control-space
   // sum J_c^T f of the contact loads (#control x 3; non-zero only on
@@ -363,17 +308,14 @@ struct Solid::Impl {
   std::vector<int32_t> quad_cell;             // level-L cell of each quad
   std::vector<Eigen::Vector3d> quad_centroid; // rest centroid of the quad's face
   Points surface_rest;                        // #surface vertices x 3
-  // Pressure: total pascals per quad, the quads with a non-zero one (their
-  // corners numbered among the pressed quads' vertices, whose rows of
-  // surface_rows are pressed_rows), the pressed vertices' positions and
-  // forces, and the control forces at p and at the next state (for the
+  // Pressure (surface_pressure.h), a part with its own state, rebuilt from
+  // the load set's pressures (RebuildPressure). has_pressure: some follower
+  // load is there (pressures, drags, the environment); f_press and
+  // f_press_next: their control forces at p and at the next state (for the
   // ledger's work).
-  std::vector<double> quad_pascals;
-  std::vector<int32_t> pressed;
-  std::vector<std::array<int32_t, 4>> pressed_corners;
-  SparseMatrix pressed_rows;
+  SurfacePressure pressure;
   bool has_pressure = false;
-  Points surf_x, surf_f, f_press, f_press_next;
+  Points f_press, f_press_next;
 
   // ---- The environment: the floor and obstacles (scene.environment), a
   // part with its own state (solver/contact/obstacle_contact.h); null when
@@ -641,7 +583,7 @@ struct Solid::Impl {
   // Counts InstallMaterial calls: a prepared paint is for one material.
   uint64_t material_epoch = 0;
   PreparedFor PreparedForNow() const {
-    return {material_epoch, omega_max, substeps, fix_count};
+    return {material_epoch, omega_max, substeps, loads.fix_count()};
   }
   // Backward Euler's CG products in single precision when the tolerance
   // allows (kSinglePrecisionCgTolerance); after the model or use_implicit
@@ -659,8 +601,8 @@ struct Solid::Impl {
   int SubstepsFor(double omega) const;
   // The fewest sub-steps the environment's contact needs (1 without one).
   int MinSubsteps() const { return environment != nullptr ? environment->min_substeps() : 1; }
-  // Loads from the lists (in id order), from scratch: f_const (point forces
-  // then gravity) and the per-quad pressure.
+  // The load set's forces from its lists (in id order), from scratch: its
+  // constant forces (point forces then gravity) and the per-quad pressure.
   void RebuildConstantLoads();
   void RebuildPressure();
   void PressureForces(const Points& p, Points& out);
@@ -701,16 +643,10 @@ class Solid::PreparedState {
   double strain = 0;
   bool rebase = false;
   Impl::Ledger ledger;
-  Points p, p_prev, f, f_press, hold;
+  Points p, p_prev, f, f_press;
   integrators::BackwardEuler::History warm;
   std::string omega_fixed_bytes;
-  int64_t next_id = 0;
-  Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
-  std::vector<Impl::PointLoad> point_loads;
-  std::vector<Impl::PressureLoad> pressures;
-  std::vector<Impl::FixConstraint> fixes;
-  std::vector<int32_t> fix_count;
-  std::vector<Impl::DragLoad> drags;
+  LoadSet loads;  // held positions included
   std::vector<contact::ObstacleContact::Touch> touches;  // the environment's
   std::optional<material::Plasticity::State> plastic;  // clay's
   models::InternalForceModel::Frames frames;

@@ -14,27 +14,9 @@
 namespace dynsolid::solid {
 
 void Solid::Impl::RebuildConstantLoads() {
-  has_const_force = !point_loads.empty() || gravity.squaredNorm() > 0;
-  if (!has_const_force) {
-    f_const.resize(0, 3);
-    return;
-  }
-  // f = sum over the loads, in order, of their control rows times their
-  // forces (A^T N F, N the shape values at the load's material point): a
-  // function of the load list alone, made without touching the solid's
-  // other nodes (a point force added or removed holds the loop for this).
-  f_const = Points::Zero(rest_control.rows(), 3);
-  for (PointLoad& load : point_loads) {
-    if (load.row == nullptr) load.row = std::make_shared<const ControlWeights>(ControlRowAt(load.at));
-    const Eigen::RowVector3d force = V(load.msg.force()).transpose();
-    for (const auto& [c, w] : *load.row) f_const.row(c) += w * force;
-  }
-  if (gravity.squaredNorm() > 0) {
-    // Body force mu g: f = A^T w g^T with w_i = int mu N_i dV, kept per
-    // material (GravityMass), so that a new force or gravity costs no
-    // integration over the solid.
-    f_const += GravityMass() * gravity.transpose();
-  }
+  loads.RebuildConstantForces(
+      rest_control.rows(), [this](const MaterialLocation& at) { return ControlRowAt(at); },
+      [this]() -> const Eigen::VectorXd& { return GravityMass(); });
 }
 
 const Eigen::VectorXd& Solid::Impl::GravityMass() {
@@ -51,92 +33,18 @@ const Eigen::VectorXd& Solid::Impl::GravityMass() {
 void Solid::Impl::RebuildPressure() {
   // The follower loads: pressures and drag springs (forces that depend on
   // the positions; work counted trapezoidally in the ledger).
-  has_pressure = !pressures.empty() || !drags.empty() || environment != nullptr;
-  quad_pascals.assign(quad_cell.size(), 0.0);
-  for (const PressureLoad& load : pressures) {
-    for (int32_t q : load.quads) quad_pascals[q] += load.msg.pascals();
-  }
-  pressed.clear();
-  for (size_t q = 0; q < quad_pascals.size(); ++q) {
-    if (quad_pascals[q] != 0) pressed.push_back(static_cast<int32_t>(q));
-  }
-  // The pressed quads' vertices (ascending) and their rows of S: the step
-  // evaluates the pressure there, not over the whole surface.
-  std::vector<int32_t> vertices;
-  for (int32_t q : pressed) {
-    for (int32_t v : surface->quads[q]) vertices.push_back(v);
-  }
-  std::sort(vertices.begin(), vertices.end());
-  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
-  pressed_corners.clear();
-  for (int32_t q : pressed) {
-    std::array<int32_t, 4> local;
-    for (int k = 0; k < 4; ++k) {
-      local[k] = static_cast<int32_t>(
-          std::lower_bound(vertices.begin(), vertices.end(), surface->quads[q][k]) - vertices.begin());
-    }
-    pressed_corners.push_back(local);
-  }
-  std::vector<Eigen::Triplet<double, int32_t>> t;
-  for (size_t i = 0; i < vertices.size(); ++i) {
-    for (SparseMatrix::InnerIterator it(surface_rows, vertices[i]); it; ++it) {
-      t.emplace_back(static_cast<int32_t>(i), static_cast<int32_t>(it.col()), it.value());
-    }
-  }
-  pressed_rows.resize(static_cast<Eigen::Index>(vertices.size()), surface_rows.cols());
-  pressed_rows.setFromTriplets(t.begin(), t.end());
-  pressed_rows.makeCompressed();
-  const int64_t nc = rest_control.rows(), ns = static_cast<int64_t>(vertices.size());
+  has_pressure = !loads.pressures().empty() || !loads.drags().empty() || environment != nullptr;
+  pressure.Rebuild(surface->quads, surface_rows, loads.pressures());
   if (has_pressure) {
-    surf_x.setZero(ns, 3);
-    surf_f.setZero(ns, 3);
+    const int64_t nc = rest_control.rows();
     f_press.setZero(nc, 3);
     f_press_next.setZero(nc, 3);
   }
 }
 
-// out = S^T f_s with f_s the consistent nodal forces of the pressure on the
-// surface quads at the current surface positions x_s = S p (S: the surface
-// rows of A). Each quad is a bilinear patch x(u, v) = sum N_i x_i over its
-// loop (a boundary face of a linear or pyramid element, so the element's own
-// interpolation): f_i = P int N_i (x_u x x_v) du dv, exact with 2 x 2 Gauss
-// points (the integrand has degree 2 in u and in v). x_u x x_v follows the
-// outward loop, so P > 0 pushes outward. The forces sum to P times the
-// quad's vector area; over a closed surface to zero.
 void Solid::Impl::PressureForces(const Points& p, Points& out) {
-  if (pressed.empty()) {
-    out.setZero(p.rows(), 3);
-    AddDragForces(p, out);
-    return;
-  }
-  surf_x.noalias() = pressed_rows * p;
-  surf_f.setZero();
-  const double g0 = 0.5 - 0.5 / std::sqrt(3.0), g1 = 0.5 + 0.5 / std::sqrt(3.0);
-  const double gp[2] = {g0, g1};
-  for (size_t j = 0; j < pressed.size(); ++j) {
-    const int32_t q = pressed[j];
-    const std::array<int32_t, 4>& v = pressed_corners[j];
-    const Eigen::Vector3d x0 = surf_x.row(v[0]).transpose(), x1 = surf_x.row(v[1]).transpose(),
-                          x2 = surf_x.row(v[2]).transpose(), x3 = surf_x.row(v[3]).transpose();
-    Eigen::Vector3d fn[4] = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-                             Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
-    for (double u : gp) {
-      for (double w : gp) {
-        // N0 = (1-u)(1-w), N1 = u(1-w), N2 = u w, N3 = (1-u) w.
-        const Eigen::Vector3d xu = (1 - w) * (x1 - x0) + w * (x2 - x3);
-        const Eigen::Vector3d xw = (1 - u) * (x3 - x0) + u * (x2 - x1);
-        const Eigen::Vector3d n = 0.25 * xu.cross(xw);  // Gauss weights 1/2 x 1/2
-        fn[0] += ((1 - u) * (1 - w)) * n;
-        fn[1] += (u * (1 - w)) * n;
-        fn[2] += (u * w) * n;
-        fn[3] += ((1 - u) * w) * n;
-      }
-    }
-    const double pa = quad_pascals[q];
-    for (int k = 0; k < 4; ++k) surf_f.row(v[k]) += (pa * fn[k]).transpose();
-  }
-  out.noalias() = pressed_rows.transpose() * surf_f;
-  AddDragForces(p, out);
+  pressure.Forces(p, out);
+  loads.AddDragForces(p, out);
 }
 
 std::vector<int32_t> Solid::Impl::SelectControlPoints(const Region& r) const {
@@ -187,7 +95,7 @@ absl::Status Solid::Impl::CheckControlCells(const Region& r, std::string_view fi
 
 void Solid::ApplyFixed() {
   Impl& im = *impl_;
-  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  im.fixed = im.loads.FixedFlags();
   report_.fixed_control_points =
       static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   ++im.contact.epoch;  // the contact stiffness depends on the fixed set
@@ -210,11 +118,10 @@ absl::StatusOr<int64_t> Solid::AddPointForce(const PointForce& f) {
     return absl::InvalidArgumentError(
         absl::StrCat("point_force.position: ", at.status().message()));
   }
-  const int64_t id = im.next_id++;
-  im.point_loads.push_back({id, f, *at});
+  const int64_t id = im.loads.Add(LoadSet::PointLoad{0, f, *at});
   im.RebuildConstantLoads();
   im.LoadsChanged();
-  report_.point_forces = static_cast<int32_t>(im.point_loads.size());
+  report_.point_forces = static_cast<int32_t>(im.loads.point_loads().size());
   return id;
 }
 
@@ -229,8 +136,7 @@ absl::StatusOr<int64_t> Solid::AddPressure(const Pressure& p) {
         "pressure.region selects no boundary face (no face has its rest centroid in the region "
         "or its cell in control_cells)");
   }
-  const int64_t id = im.next_id++;
-  im.pressures.push_back({id, p, std::move(quads)});
+  const int64_t id = im.loads.Add(LoadSet::PressureLoad{0, p, std::move(quads)});
   im.RebuildPressure();
   im.LoadsChanged();
   return id;
@@ -240,78 +146,43 @@ absl::Status Solid::SetGravity(const Vec3& g) {
   Impl& im = *impl_;
   RETURN_IF_ERROR(scene::ValidateValues(g, "gravity"));
   RETURN_IF_ERROR(CheckGravity(load_scale(), V(g).stableNorm(), "gravity"));
-  im.gravity = V(g);
+  im.loads.SetGravity(V(g));
   im.RebuildConstantLoads();
   im.LoadsChanged();
-  report_.gravity = im.gravity.squaredNorm() > 0;
+  report_.gravity = im.loads.has_gravity();
   return absl::OkStatus();
 }
 
-namespace {
-template <typename T>
-std::string IdList(const std::vector<T>& items) {
-  if (items.empty()) return "none";
-  std::string out;
-  for (const T& x : items) absl::StrAppend(&out, out.empty() ? "" : ", ", x.id);
-  return out;
-}
-}  // namespace
-
 absl::Status Solid::RemoveLoad(int64_t id) {
   Impl& im = *impl_;
-  auto pf = std::find_if(im.point_loads.begin(), im.point_loads.end(),
-                         [id](const Impl::PointLoad& l) { return l.id == id; });
-  if (pf != im.point_loads.end()) {
-    im.point_loads.erase(pf);
-    im.RebuildConstantLoads();
-    im.LoadsChanged();
-    report_.point_forces = static_cast<int32_t>(im.point_loads.size());
-    return absl::OkStatus();
+  switch (im.loads.RemoveLoad(id)) {
+    case LoadSet::Kind::kPointForce:
+      im.RebuildConstantLoads();
+      report_.point_forces = static_cast<int32_t>(im.loads.point_loads().size());
+      break;
+    case LoadSet::Kind::kPressure:
+    case LoadSet::Kind::kDrag:
+      im.RebuildPressure();
+      break;
+    case LoadSet::Kind::kNone:
+      return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active ",
+                                              im.loads.DescribeLoadIds(), ")"));
   }
-  auto pr = std::find_if(im.pressures.begin(), im.pressures.end(),
-                         [id](const Impl::PressureLoad& l) { return l.id == id; });
-  if (pr != im.pressures.end()) {
-    im.pressures.erase(pr);
-    im.RebuildPressure();
-    im.LoadsChanged();
-    return absl::OkStatus();
-  }
-  auto dr = std::find_if(im.drags.begin(), im.drags.end(),
-                         [id](const Impl::DragLoad& l) { return l.id == id; });
-  if (dr != im.drags.end()) {
-    im.drags.erase(dr);
-    im.RebuildPressure();
-    im.LoadsChanged();
-    return absl::OkStatus();
-  }
-  return absl::NotFoundError(absl::StrCat("load id ", id, " not found (active point forces: ",
-                                          IdList(im.point_loads), "; pressures: ",
-                                          IdList(im.pressures), "; drags: ", IdList(im.drags),
-                                          ")"));
+  im.LoadsChanged();
+  return absl::OkStatus();
 }
 
-std::vector<int64_t> Solid::load_ids() const {
-  std::vector<int64_t> ids;
-  for (const auto& l : impl_->point_loads) ids.push_back(l.id);
-  for (const auto& l : impl_->pressures) ids.push_back(l.id);
-  for (const auto& l : impl_->drags) ids.push_back(l.id);
-  std::sort(ids.begin(), ids.end());
-  return ids;
-}
+std::vector<int64_t> Solid::load_ids() const { return impl_->loads.LoadIds(); }
 
-std::vector<int64_t> Solid::constraint_ids() const {
-  std::vector<int64_t> ids;
-  for (const auto& c : impl_->fixes) ids.push_back(c.id);
-  return ids;
-}
+std::vector<int64_t> Solid::constraint_ids() const { return impl_->loads.ConstraintIds(); }
 
-Eigen::Vector3d Solid::gravity() const { return impl_->gravity; }
+Eigen::Vector3d Solid::gravity() const { return impl_->loads.gravity(); }
 
 std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
   const Impl& im = *impl_;
   std::vector<LoadInfo> out;
   std::vector<double> shape;
-  for (const Impl::PointLoad& load : im.point_loads) {
+  for (const LoadSet::PointLoad& load : im.loads.point_loads()) {
     LoadInfo info;
     info.id = load.id;
     info.kind = LoadInfo::Kind::kPointForce;
@@ -320,7 +191,7 @@ std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
     info.force = V(load.msg.force());
     out.push_back(std::move(info));
   }
-  for (const Impl::PressureLoad& load : im.pressures) {
+  for (const LoadSet::PressureLoad& load : im.loads.pressures()) {
     LoadInfo info;
     info.id = load.id;
     info.kind = LoadInfo::Kind::kPressure;
@@ -329,7 +200,7 @@ std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
     info.quads = load.quads;
     out.push_back(std::move(info));
   }
-  for (const Impl::DragLoad& load : im.drags) {
+  for (const LoadSet::DragLoad& load : im.loads.drags()) {
     LoadInfo info;
     info.id = load.id;
     info.kind = load.curve ? LoadInfo::Kind::kCurve : LoadInfo::Kind::kDrag;
@@ -351,7 +222,9 @@ std::vector<Solid::LoadInfo> Solid::ActiveLoads() const {
 
 std::vector<Solid::ConstraintInfo> Solid::ActiveConstraints() const {
   std::vector<ConstraintInfo> out;
-  for (const Impl::FixConstraint& c : impl_->fixes) out.push_back({c.id, c.region, c.points});
+  for (const LoadSet::FixConstraint& c : impl_->loads.fixes()) {
+    out.push_back({c.id, c.region, c.points});
+  }
   std::sort(out.begin(), out.end(),
             [](const ConstraintInfo& a, const ConstraintInfo& b) { return a.id < b.id; });
   return out;
@@ -370,14 +243,9 @@ absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {
         "region selects no control point (no control point's rest position lies in it)");
   }
   // Newly held points stay where they are, with zero velocity.
-  for (int32_t i : points) {
-    if (im.fix_count[i]++ == 0) {
-      im.hold.row(i) = p_.row(i);
-      p_prev_.row(i) = p_.row(i);
-    }
-  }
-  const int64_t id = im.next_id++;
-  im.fixes.push_back({id, r, std::move(points)});
+  std::vector<int32_t> newly_held;
+  const int64_t id = im.loads.AddFix(r, std::move(points), p_, &newly_held);
+  for (int32_t i : newly_held) p_prev_.row(i) = p_.row(i);
   ApplyFixed();
   im.forces_valid = false;
   im.ledger_rebase = true;
@@ -392,18 +260,15 @@ absl::Status Solid::Unfix(int64_t constraint_id) {
 absl::StatusOr<std::shared_ptr<Solid::PreparedUnfix>> Solid::PrepareUnfix(
     int64_t constraint_id) const {
   const Impl& im = *impl_;
-  auto it = std::find_if(im.fixes.begin(), im.fixes.end(),
-                         [constraint_id](const Impl::FixConstraint& c) { return c.id == constraint_id; });
-  if (it == im.fixes.end()) {
+  if (im.loads.FindFix(constraint_id) == nullptr) {
     return absl::NotFoundError(absl::StrCat("constraint id ", constraint_id,
                                             " not found (active fixed regions: ",
-                                            IdList(im.fixes), ")"));
+                                            im.loads.DescribeConstraintIds(), ")"));
   }
   auto out = std::make_shared<PreparedUnfix>();
   out->constraint_id = constraint_id;
   out->made_for = im.PreparedForNow();
-  out->count = im.fix_count;
-  for (int32_t i : it->points) --out->count[i];
+  out->count = im.loads.CountsWithout(constraint_id);
   // The stable-step estimate holds while every point it was made with
   // fixed stays fixed; otherwise estimate again, on a model of this call's
   // own (the live one may be stepping on another thread).
@@ -443,11 +308,7 @@ absl::Status Solid::ApplyUnfix(PreparedUnfix& prepared) {
     p = again.get();
   }
   p->used = true;
-  auto it = std::find_if(im.fixes.begin(), im.fixes.end(), [p](const Impl::FixConstraint& c) {
-    return c.id == p->constraint_id;
-  });
-  im.fix_count = std::move(p->count);
-  im.fixes.erase(it);
+  im.loads.RemoveFix(p->constraint_id);  // the counts p->count has
   if (p->reestimate) {
     im.omega_max = p->omega;
     im.stable_step = p->omega > 0 ? 2.0 / p->omega : INFINITY;

@@ -139,7 +139,7 @@ Scene CleanScene(const Scene& scene, const std::vector<int32_t>& cell_source) {
 }  // namespace
 
 absl::Status Solid::CanBake() const {
-  for (const Impl::PressureLoad& l : impl_->pressures) {
+  for (const LoadSet::PressureLoad& l : impl_->loads.pressures()) {
     if (l.msg.region().shape_case() != Region::SHAPE_NOT_SET) {
       return absl::FailedPreconditionError(absl::StrCat(
           "bake: pressure ", l.id,
@@ -324,7 +324,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   Impl& im = *out->impl_;
   if (!im.use_implicit) {
     const std::vector<uint8_t> scene_fixed = im.fixed;
-    for (const Impl::FixConstraint& c : old.fixes) {
+    for (const LoadSet::FixConstraint& c : old.loads.fixes()) {
       if (baked != nullptr) {
         for (int32_t i : c.points) im.fixed[i] = 1;  // a bake keeps the points
         continue;
@@ -404,8 +404,9 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   }
 
   // Loads, drags and constraints, with their ids.
-  im.next_id = old.next_id;
-  im.gravity = old.gravity;
+  LoadSet::Contents loads;
+  loads.next_id = old.loads.next_id();
+  loads.gravity = old.loads.gravity();
   const bool snap = im.settings.snap_forces_to_quadrature();
   // A bake moves rest positions: a material point's new one is its control
   // row times the baked positions.
@@ -419,35 +420,35 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     out.set_z(b->z());
     return out;
   };
-  for (const Impl::PointLoad& l : old.point_loads) {
+  for (const LoadSet::PointLoad& l : old.loads.point_loads()) {
     PointForce msg = l.msg;
     *msg.mutable_position() = moved(msg.position());
     absl::StatusOr<MaterialLocation> at = im.Locate(V(msg.position()), snap);
     if (at.ok()) {
-      im.point_loads.push_back({l.id, std::move(msg), *at});
+      loads.point_loads.push_back({l.id, std::move(msg), *at});
     } else {
       rep.dropped_loads.push_back(l.id);
     }
   }
-  for (const Impl::PressureLoad& l : old.pressures) {
+  for (const LoadSet::PressureLoad& l : old.loads.pressures()) {
     Pressure msg = l.msg;
     *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source, nullptr);
     std::vector<int32_t> quads = im.SelectQuads(msg.region());
     if (quads.empty()) {
       rep.dropped_loads.push_back(l.id);
     } else {
-      im.pressures.push_back({l.id, std::move(msg), std::move(quads)});
+      loads.pressures.push_back({l.id, std::move(msg), std::move(quads)});
     }
   }
-  for (const Impl::DragLoad& l : old.drags) {
+  for (const LoadSet::DragLoad& l : old.loads.drags()) {
     Drag drag = l.drag;
     CurveDrag shape = l.shape;
     *drag.mutable_material_point() = moved(drag.material_point());
     for (Vec3& x : *shape.mutable_material_points()) x = moved(x);
-    absl::StatusOr<Impl::DragLoad> carried = l.curve ? im.MakeCurve(shape) : im.MakeDrag(drag);
+    absl::StatusOr<LoadSet::DragLoad> carried = l.curve ? im.MakeCurve(shape) : im.MakeDrag(drag);
     if (carried.ok()) {
       carried->id = l.id;
-      im.drags.push_back(*std::move(carried));
+      loads.drags.push_back(*std::move(carried));
     } else {
       rep.dropped_loads.push_back(l.id);
     }
@@ -460,7 +461,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   for (int32_t v = 0; v < nv; ++v) {
     was_fixed[v] = point_source[v] >= 0 && old.fixed[point_source[v]] != 0;
   }
-  for (const Impl::FixConstraint& c : old.fixes) {
+  for (const LoadSet::FixConstraint& c : old.loads.fixes()) {
     Region region;
     if (t.baked != nullptr) {
       // The same control points, whatever their new rest positions.
@@ -473,8 +474,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
       rep.dropped_constraints.push_back(c.id);
       continue;
     }
-    for (int32_t i : points) ++im.fix_count[i];
-    im.fixes.push_back({c.id, std::move(region), std::move(points)});
+    loads.fixes.push_back({c.id, std::move(region), std::move(points)});
   }
   for (int i = 0; i < scene.traced_size(); ++i) {
     absl::StatusOr<MaterialLocation> at =
@@ -489,13 +489,16 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   }
 
   // Positions and velocities.
-  s.p_ = t.current;
-  im.hold = t.current;
+  Points held = t.current;
   for (int32_t v = 0; v < nv; ++v) {
-    if (was_fixed[v]) im.hold.row(v) = old.hold.row(point_source[v]);
-    if (im.fix_count[v] > 0) s.p_.row(v) = im.hold.row(v);
+    if (was_fixed[v]) held.row(v) = old.loads.held_at().row(point_source[v]);
   }
-  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  im.loads = LoadSet(std::move(loads), std::move(held));
+  s.p_ = t.current;
+  for (int32_t v = 0; v < nv; ++v) {
+    if (im.loads.held(v)) s.p_.row(v) = im.loads.held_at().row(v);
+  }
+  im.fixed = im.loads.FixedFlags();
   im.SetSubsteps(im.substeps, s.h_);
   s.p_prev_ = s.p_;
   for (int32_t v = 0; v < nv; ++v) {
@@ -514,8 +517,8 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   s.steps_ = steps_;
   s.rollbacks_ = rollbacks_;
   s.topology_version_ = topology_version_ + 1;
-  s.report_.point_forces = static_cast<int32_t>(im.point_loads.size());
-  s.report_.gravity = im.gravity.squaredNorm() > 0;
+  s.report_.point_forces = static_cast<int32_t>(im.loads.point_loads().size());
+  s.report_.gravity = im.loads.has_gravity();
   s.report_.fixed_control_points =
       static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   // (The geometry it covers was hashed by the build: only the scene here.)

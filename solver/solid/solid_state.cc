@@ -247,7 +247,7 @@ SavedState Solid::SaveStateParts() const {
   }
   w.Put<uint8_t>(im.has_pressure);
   if (im.has_pressure) w.Matrix(im.f_press);
-  w.Matrix(im.hold);
+  w.Matrix(im.loads.held_at());
   w.Put<uint8_t>(im.use_implicit);
   if (im.use_implicit) {
     const integrators::BackwardEuler::History& warm = im.implicit.history();
@@ -257,25 +257,25 @@ SavedState Solid::SaveStateParts() const {
   }
   w.Bytes(std::string_view(reinterpret_cast<const char*>(im.omega_fixed.data()),
                            im.omega_fixed.size()));
-  w.Put<int64_t>(im.next_id);
-  w.Vec(im.gravity);
-  w.Put<uint64_t>(im.point_loads.size());
-  for (const auto& l : im.point_loads) {
+  w.Put<int64_t>(im.loads.next_id());
+  w.Vec(im.loads.gravity());
+  w.Put<uint64_t>(im.loads.point_loads().size());
+  for (const auto& l : im.loads.point_loads()) {
     w.Put<int64_t>(l.id);
     w.Bytes(l.msg.SerializeAsString());
   }
-  w.Put<uint64_t>(im.pressures.size());
-  for (const auto& l : im.pressures) {
+  w.Put<uint64_t>(im.loads.pressures().size());
+  for (const auto& l : im.loads.pressures()) {
     w.Put<int64_t>(l.id);
     w.Bytes(l.msg.SerializeAsString());
   }
-  w.Put<uint64_t>(im.fixes.size());
-  for (const auto& c : im.fixes) {
+  w.Put<uint64_t>(im.loads.fixes().size());
+  for (const auto& c : im.loads.fixes()) {
     w.Put<int64_t>(c.id);
     w.Bytes(c.region.SerializeAsString());
   }
-  w.Put<uint64_t>(im.drags.size());
-  for (const auto& d : im.drags) {
+  w.Put<uint64_t>(im.loads.drags().size());
+  for (const auto& d : im.loads.drags()) {
     w.Put<int64_t>(d.id);
     w.Put<uint8_t>(d.curve);
     w.Bytes(d.curve ? d.shape.SerializeAsString() : d.drag.SerializeAsString());
@@ -325,6 +325,115 @@ absl::Status Solid::RestoreStateAtClock(std::string_view bytes, double time, int
   const std::pair<double, int64_t> clock{time, steps};
   return Restore(bytes, &clock);
 }
+
+namespace {
+
+// A saved state's loads and constraints (its gravity aside), validated and
+// located again on `im`'s solid (points its current loads have are not
+// searched for again). A fault is left in `r`.
+LoadSet::Contents ReadLoads(StateReader& r, const Solid::Impl& im, int64_t next_id) {
+  LoadSet::Contents out;
+  out.next_id = next_id;
+  const LoadSet::KnownPoints known = im.loads.CurrentPoints();
+  const bool snap = im.settings.snap_forces_to_quadrature();
+  int64_t last_id = 0;
+  auto check_id = [&](int64_t id, const char* what) {
+    if (r.ok() && (id <= last_id || id >= next_id)) {
+      r.Fail(absl::StrCat(what, " id ", id, " out of order or not below the next id ", next_id));
+    }
+    last_id = std::max(last_id, id);
+  };
+  std::vector<LoadSet::PointLoad>& point_loads = out.point_loads;
+  const int64_t n_forces = r.Count("point forces", next_id);
+  for (int64_t k = 0; k < n_forces && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("point force id");
+    check_id(id, "point force");
+    PointForce msg;
+    if (!msg.ParseFromString(r.Bytes("point force")) && r.ok()) r.Fail("point force: bad message");
+    if (!r.ok()) break;
+    const auto was = known.forces.find(LoadSet::KnownPoints::KeyOf(V(msg.position())));
+    absl::StatusOr<MaterialLocation> at =
+        was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second.first)
+                                  : im.Locate(V(msg.position()), snap);
+    if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
+      r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
+      break;
+    }
+    // The control row here, off the loop, unless the solid has it.
+    std::shared_ptr<const LoadSet::ControlWeights> row =
+        was != known.forces.end() && was->second.second != nullptr
+            ? was->second.second
+            : std::make_shared<const LoadSet::ControlWeights>(im.ControlRowAt(*at));
+    point_loads.push_back({id, std::move(msg), *at, std::move(row)});
+  }
+  last_id = 0;
+  std::vector<LoadSet::PressureLoad>& pressures = out.pressures;
+  const int64_t n_pressures = r.Count("pressures", next_id);
+  for (int64_t k = 0; k < n_pressures && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("pressure id");
+    check_id(id, "pressure");
+    Pressure msg;
+    if (!msg.ParseFromString(r.Bytes("pressure")) && r.ok()) r.Fail("pressure: bad message");
+    if (!r.ok()) break;
+    std::vector<int32_t> quads;
+    if (scene::ValidatePressure(msg, "pressure").ok() &&
+        im.CheckControlCells(msg.region(), "pressure.region").ok()) {
+      quads = im.SelectQuads(msg.region());
+    }
+    if (quads.empty()) {
+      r.Fail(absl::StrCat("pressure ", id, " is invalid for this solid"));
+      break;
+    }
+    pressures.push_back({id, std::move(msg), std::move(quads)});
+  }
+  last_id = 0;
+  std::vector<LoadSet::FixConstraint>& fixes = out.fixes;
+  const int64_t n_fixes = r.Count("fixed regions", next_id);
+  for (int64_t k = 0; k < n_fixes && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("fixed region id");
+    check_id(id, "fixed region");
+    Region region;
+    if (!region.ParseFromString(r.Bytes("fixed region")) && r.ok()) r.Fail("fixed region: bad message");
+    if (!r.ok()) break;
+    std::vector<int32_t> points;
+    if (scene::ValidateValues(region, "region").ok() && scene::ValidateRegion(region, "region").ok() &&
+        im.CheckControlCells(region, "region").ok()) {
+      points = im.SelectControlPoints(region);
+    }
+    if (points.empty()) {
+      r.Fail(absl::StrCat("fixed region ", id, " is invalid for this solid"));
+      break;
+    }
+    fixes.push_back({id, std::move(region), std::move(points)});
+  }
+  last_id = 0;
+  std::vector<LoadSet::DragLoad>& drags = out.drags;
+  const int64_t n_drags = r.Count("drags", next_id);
+  for (int64_t k = 0; k < n_drags && r.ok(); ++k) {
+    const int64_t id = r.Get<int64_t>("drag id");
+    check_id(id, "drag");
+    const bool curve = r.Get<uint8_t>("drag kind") != 0;
+    const std::string bytes = r.Bytes("drag");
+    if (!r.ok()) break;
+    absl::StatusOr<LoadSet::DragLoad> load = absl::InvalidArgumentError("bad message");
+    if (curve) {
+      CurveDrag msg;
+      if (msg.ParseFromString(bytes)) load = im.MakeCurve(msg, &known);
+    } else {
+      Drag msg;
+      if (msg.ParseFromString(bytes)) load = im.MakeDrag(msg, &known);
+    }
+    if (!load.ok()) {
+      r.Fail(absl::StrCat("drag ", id, " is invalid for this solid: ", load.status().message()));
+      break;
+    }
+    load->id = id;
+    drags.push_back(*std::move(load));
+  }
+  return out;
+}
+
+}  // namespace
 
 absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
     std::string_view bytes) const {
@@ -424,108 +533,13 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   }
   RETURN_IF_ERROR(r.status());
 
-  // Loads and constraints: parsed, validated and located again (points the
-  // current loads have are not searched for again).
-  const Impl::KnownPoints known = im.CurrentPoints();
-  const bool snap = im.settings.snap_forces_to_quadrature();
-  int64_t last_id = 0;
-  auto check_id = [&](int64_t id, const char* what) {
-    if (r.ok() && (id <= last_id || id >= next_id)) {
-      r.Fail(absl::StrCat(what, " id ", id, " out of order or not below the next id ", next_id));
-    }
-    last_id = std::max(last_id, id);
-  };
-  std::vector<Impl::PointLoad> point_loads;
-  const int64_t n_forces = r.Count("point forces", next_id);
-  for (int64_t k = 0; k < n_forces && r.ok(); ++k) {
-    const int64_t id = r.Get<int64_t>("point force id");
-    check_id(id, "point force");
-    PointForce msg;
-    if (!msg.ParseFromString(r.Bytes("point force")) && r.ok()) r.Fail("point force: bad message");
-    if (!r.ok()) break;
-    const auto was = known.forces.find(Impl::KnownPoints::KeyOf(V(msg.position())));
-    absl::StatusOr<MaterialLocation> at =
-        was != known.forces.end() ? absl::StatusOr<MaterialLocation>(was->second.first)
-                                  : im.Locate(V(msg.position()), snap);
-    if (!scene::ValidatePointForce(msg, "point_force").ok() || !at.ok()) {
-      r.Fail(absl::StrCat("point force ", id, " is invalid for this solid"));
-      break;
-    }
-    // The control row here, off the loop, unless the solid has it.
-    std::shared_ptr<const Impl::ControlWeights> row =
-        was != known.forces.end() && was->second.second != nullptr
-            ? was->second.second
-            : std::make_shared<const Impl::ControlWeights>(im.ControlRowAt(*at));
-    point_loads.push_back({id, std::move(msg), *at, std::move(row)});
-  }
-  last_id = 0;
-  std::vector<Impl::PressureLoad> pressures;
-  const int64_t n_pressures = r.Count("pressures", next_id);
-  for (int64_t k = 0; k < n_pressures && r.ok(); ++k) {
-    const int64_t id = r.Get<int64_t>("pressure id");
-    check_id(id, "pressure");
-    Pressure msg;
-    if (!msg.ParseFromString(r.Bytes("pressure")) && r.ok()) r.Fail("pressure: bad message");
-    if (!r.ok()) break;
-    std::vector<int32_t> quads;
-    if (scene::ValidatePressure(msg, "pressure").ok() &&
-        im.CheckControlCells(msg.region(), "pressure.region").ok()) {
-      quads = im.SelectQuads(msg.region());
-    }
-    if (quads.empty()) {
-      r.Fail(absl::StrCat("pressure ", id, " is invalid for this solid"));
-      break;
-    }
-    pressures.push_back({id, std::move(msg), std::move(quads)});
-  }
-  last_id = 0;
-  std::vector<Impl::FixConstraint> fixes;
-  std::vector<int32_t> fix_count(nc, 0);
-  const int64_t n_fixes = r.Count("fixed regions", next_id);
-  for (int64_t k = 0; k < n_fixes && r.ok(); ++k) {
-    const int64_t id = r.Get<int64_t>("fixed region id");
-    check_id(id, "fixed region");
-    Region region;
-    if (!region.ParseFromString(r.Bytes("fixed region")) && r.ok()) r.Fail("fixed region: bad message");
-    if (!r.ok()) break;
-    std::vector<int32_t> points;
-    if (scene::ValidateValues(region, "region").ok() && scene::ValidateRegion(region, "region").ok() &&
-        im.CheckControlCells(region, "region").ok()) {
-      points = im.SelectControlPoints(region);
-    }
-    if (points.empty()) {
-      r.Fail(absl::StrCat("fixed region ", id, " is invalid for this solid"));
-      break;
-    }
-    for (int32_t i : points) ++fix_count[i];
-    fixes.push_back({id, std::move(region), std::move(points)});
-  }
-  last_id = 0;
-  std::vector<Impl::DragLoad> drags;
-  const int64_t n_drags = r.Count("drags", next_id);
-  for (int64_t k = 0; k < n_drags && r.ok(); ++k) {
-    const int64_t id = r.Get<int64_t>("drag id");
-    check_id(id, "drag");
-    const bool curve = r.Get<uint8_t>("drag kind") != 0;
-    const std::string bytes = r.Bytes("drag");
-    if (!r.ok()) break;
-    absl::StatusOr<Impl::DragLoad> load = absl::InvalidArgumentError("bad message");
-    if (curve) {
-      CurveDrag msg;
-      if (msg.ParseFromString(bytes)) load = im.MakeCurve(msg, &known);
-    } else {
-      Drag msg;
-      if (msg.ParseFromString(bytes)) load = im.MakeDrag(msg, &known);
-    }
-    if (!load.ok()) {
-      r.Fail(absl::StrCat("drag ", id, " is invalid for this solid: ", load.status().message()));
-      break;
-    }
-    load->id = id;
-    drags.push_back(*std::move(load));
-  }
-  if (r.ok() &&
-      saved_pressure != (!(pressures.empty() && drags.empty()) || im.environment != nullptr)) {
+  // Loads and constraints: parsed, validated and located again.
+  LoadSet::Contents loads = ReadLoads(r, im, next_id);
+  RETURN_IF_ERROR(r.status());
+  loads.gravity = gravity;
+  LoadSet load_set(std::move(loads), std::move(hold));
+  if (r.ok() && saved_pressure != (!(load_set.pressures().empty() && load_set.drags().empty()) ||
+                                    im.environment != nullptr)) {
     r.Fail("follower forces without pressures, drags or an environment");
   }
   // Version 6: the environment's contacts and clay's state.
@@ -658,8 +672,7 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   // K0 (made here, off the loop when a server prepares an undo).
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
   if (im.use_implicit) {
-    std::vector<uint8_t> fixed(fix_count.size());
-    for (size_t i = 0; i < fixed.size(); ++i) fixed[i] = fix_count[i] > 0 ? 1 : 0;
+    std::vector<uint8_t> fixed = load_set.FixedFlags();
     const SparseMatrix& mt = build ? build->mt : im.mt;
     const bool damped = build ? build->has_damping : im.has_damping;
     const SparseMatrix& dt = build ? build->dt : im.dt;
@@ -685,16 +698,9 @@ absl::StatusOr<std::shared_ptr<Solid::PreparedState>> Solid::PrepareStateView(
   out->p_prev = std::move(p_prev);
   out->f = std::move(f);
   out->f_press = std::move(f_press);
-  out->hold = std::move(hold);
   out->warm = std::move(warm);
   out->omega_fixed_bytes = omega_fixed_bytes;
-  out->next_id = next_id;
-  out->gravity = gravity;
-  out->point_loads = std::move(point_loads);
-  out->pressures = std::move(pressures);
-  out->fixes = std::move(fixes);
-  out->fix_count = std::move(fix_count);
-  out->drags = std::move(drags);
+  out->loads = std::move(load_set);
   out->touches = std::move(touches);
   out->plastic = std::move(plastic);
   out->frames = std::move(frames);
@@ -750,22 +756,15 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
     if (s.taken_back) ++report_.materials_taken_back;
   }
   im.model->set_frames(s.frames);
-  im.point_loads = std::move(s.point_loads);
-  im.pressures = std::move(s.pressures);
-  im.fixes = std::move(s.fixes);
-  im.drags = std::move(s.drags);
+  im.loads = std::move(s.loads);
   im.InstallParts(std::move(s.touches), std::move(s.plastic));
-  im.fix_count = std::move(s.fix_count);
-  im.next_id = s.next_id;
-  im.gravity = s.gravity;
   im.RebuildConstantLoads();
   im.RebuildPressure();
   if (im.has_pressure) im.f_press = std::move(s.f_press);
-  im.hold = std::move(s.hold);
   im.omega_fixed.assign(s.omega_fixed_bytes.begin(), s.omega_fixed_bytes.end());
   im.omega_max = s.omega;
   im.stable_step = s.stable;
-  for (size_t i = 0; i < im.fixed.size(); ++i) im.fixed[i] = im.fix_count[i] > 0 ? 1 : 0;
+  im.fixed = im.loads.FixedFlags();
   im.SetSubsteps(s.substeps, h_, &s.implicit_setup);
   if (im.use_implicit) im.implicit.set_history(std::move(s.warm));  // checked above
   p_ = std::move(s.p);
@@ -784,8 +783,8 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   report_.substeps = s.substeps;
   report_.omega_max = s.omega;
   report_.stable_step = s.stable;
-  report_.point_forces = static_cast<int32_t>(im.point_loads.size());
-  report_.gravity = im.gravity.squaredNorm() > 0;
+  report_.point_forces = static_cast<int32_t>(im.loads.point_loads().size());
+  report_.gravity = im.loads.has_gravity();
   report_.fixed_control_points =
       static_cast<int32_t>(std::count(im.fixed.begin(), im.fixed.end(), 1));
   last_step_ = StepStats();

@@ -723,7 +723,10 @@ class Solid {
       const std::function<const std::vector<models::MaterialPoint>*(
           int, const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>&, int32_t)>* whole =
           nullptr);  // models::ElementMaterials
-  // Makes impl_->fixed follow fix_count and re-sets the integrators up.
+  // CreateWith's phases, in order (solid_build.cc).
+  class Builder;
+  // Makes impl_->fixed follow the load set's fix counts and re-sets the
+  // integrators up.
   void ApplyFixed();
 
   scene::Discretization d_;

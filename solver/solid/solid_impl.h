@@ -437,6 +437,9 @@ struct Solid::Impl {
     bool operator==(const SetupFor&) const = default;
   };
   std::optional<SetupFor> explicit_setup;
+  // Backward Euler's operators over this solid: the linearized stiffness
+  // product (stiffness_op) and the folded right-hand side (force_ahead).
+  void MakeImplicitOperators();
   // Runs the sub-steps of one scene step from (p, p_prev); error when the
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);

@@ -14,13 +14,12 @@
 #include <unistd.h>
 
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "clients/lib/channel.h"
 #include "clients/lib/command_channel.h"
-#include "clients/lib/stats.h"
 #include "clients/lib/watcher.h"
 #include "clients/load/mix.h"
+#include "clients/load/report.h"
 #include "clients/load/server_process.h"
 #include "dynsolid/service.grpc.pb.h"
 
@@ -30,71 +29,28 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using client::ChannelFactory;
 
-double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
-
-std::string CodeName(int code) {
-  static const char* kNames[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
-                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
-                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
-                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
-  return code >= 0 && code <= 16 ? kNames[code] : absl::StrCat("CODE_", code);
-}
-
-Percentiles Summarize(std::vector<double> v) {
-  Percentiles p;
-  p.count = static_cast<int64_t>(v.size());
-  if (v.empty()) return p;
-  std::sort(v.begin(), v.end());
-  p.p50 = client::Percentile(v, 0.5);
-  p.p99 = client::Percentile(v, 0.99);
-  p.p999 = client::Percentile(v, 0.999);
-  p.max = v.back();
-  return p;
-}
-
-// The command's kind as its field name ("add_point_force"; "none" unset).
-std::string KindName(const Command& c) {
-  const google::protobuf::FieldDescriptor* f =
-      Command::descriptor()->FindFieldByNumber(c.kind_case());
-  return f != nullptr ? f->name() : "none";
-}
-
-// Whether a command never builds a solid on the server: not a paint, an
-// edit, an unfix, an undo or a redo (those may build for tens to hundreds
-// of ms, and their command is visible only after).
-bool BuildsNothing(const Command& c) {
-  switch (c.kind_case()) {
-    case Command::kPaintMaterial:
-    case Command::kEdit:
-    case Command::kUnfix:
-    case Command::kUndo:
-    case Command::kRedo:
-      return false;
-    default:
-      return true;
-  }
-}
-
-struct ClientResult {
-  std::vector<client::CommandRecord> records;
-  std::vector<std::pair<int64_t, Clock::time_point>> frames;
-  client::WatcherCounts watch;
-  int reconnects = 0;
-  std::vector<std::string> problems;
-  std::map<std::string, int64_t> fault_codes;
-};
-
 // The client's own loads and drags (by the seq that made them).
 struct Owned {
   std::vector<uint64_t> loads, drags, fixes;
   std::vector<std::pair<uint64_t, int>> curves;  // seq, points
 };
 
+// The threads beside the clients that inject faults, and what they found
+// (results[0]: malformed traffic, results[1]: the burst).
+struct FaultRun {
+  std::atomic<bool> stop{false};
+  std::vector<ClientResult> results = std::vector<ClientResult>(2);
+  std::vector<client::CommandRecord> burst_records;
+  std::vector<std::thread> threads;
+};
+
 class LoadRun {
  public:
   explicit LoadRun(const Options& o) : o_(o) {}
 
+  // Starts (or finds) the server, opens the sessions, measures the unloaded
+  // step rate, runs the clients and the faults, then collects the figures,
+  // checks the journals and stops everything.
   absl::StatusOr<Report> Run();
 
  private:
@@ -109,7 +65,25 @@ class LoadRun {
     if (session != nullptr) f.Follow(*session);
     return f;
   }
+  // The TLS roots, and the server: one started here (with a temporary data
+  // directory unless one is given) or the address given.
+  absl::Status Connect();
+  // The sessions (one shared, or one per client) and the box and material
+  // points the commands aim at, from the first.
+  absl::Status OpenSessions(Report& rep);
   absl::StatusOr<Session> CreateSession();
+  SessionStats Stats(const Session& s) const;
+  std::thread StartSampler(std::atomic<bool>* sampling, Report* rep);
+  std::vector<std::thread> StartClients(std::vector<ClientResult>* results);
+  void StartFaults(FaultRun* f);
+  void Burst(FaultRun* f);
+  // The restart fault: SIGKILL at `restart_at` of the run, then the server
+  // started again on its data directory and port.
+  void KillAndRestart(Report& rep);
+  void VerifyJournals(const std::vector<ClientResult>& results, const FaultRun& faults, Report& rep);
+  // Closes the sessions, stops a server started here (a clean exit is
+  // expected), checks its resident maximum and removes the temporary data.
+  void Finish(Report& rep);
   void Client(int i, const Session& session, const Box& box, ClientResult* out);
   void Malformed(int i, const Session& session, std::atomic<bool>* stop, ClientResult* out);
   Command Next(Mix& mix, client::CommandChannel& ch, Owned& owned);
@@ -124,6 +98,9 @@ class LoadRun {
   std::unique_ptr<ServerProcess> server_;
   std::atomic<int> restarts_{0};
   Clock::time_point start_;
+  std::string temp_dir_;  // a data directory this tool made (removed at the end)
+  std::vector<Session> sessions_;
+  Box box_;
 };
 
 absl::StatusOr<Session> LoadRun::CreateSession() {
@@ -427,11 +404,7 @@ void LoadRun::Verify(const Session& session, const std::string& client_id,
   for (std::string& p : CheckAgainstJournal(client_id, records, log)) problems->push_back(std::move(p));
 }
 
-absl::StatusOr<Report> LoadRun::Run() {
-  Report rep;
-  rep.options = o_;
-  const auto wall0 = Clock::now();
-  std::string temp_dir;
+absl::Status LoadRun::Connect() {
   if (!o_.tls_ca.empty()) {
     std::ifstream f(o_.tls_ca);
     tls_roots_.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
@@ -442,7 +415,7 @@ absl::StatusOr<Report> LoadRun::Run() {
     if (dir.empty()) {
       char tmpl[] = "/tmp/dynsolid_load_XXXXXX";
       if (mkdtemp(tmpl) == nullptr) return absl::InternalError("mkdtemp failed");
-      dir = temp_dir = tmpl;
+      dir = temp_dir_ = tmpl;
     }
     server_ = std::make_unique<ServerProcess>(o_.server_binary, dir, o_.server_args);
     if (absl::Status s = server_->Start(); !s.ok()) return s;
@@ -454,231 +427,129 @@ absl::StatusOr<Report> LoadRun::Run() {
       return absl::InvalidArgumentError("--faults=restart needs --server_binary (a server this tool starts)");
     }
   }
+  return absl::OkStatus();
+}
 
+absl::Status LoadRun::OpenSessions(Report& rep) {
   // Sessions: one shared, or one per client.
-  std::vector<Session> sessions;
   for (int k = 0; k < (o_.shared ? 1 : o_.clients); ++k) {
     absl::StatusOr<Session> s = CreateSession();
     if (!s.ok()) return s.status();
-    sessions.push_back(*s);
+    sessions_.push_back(*s);
   }
-  for (const Session& s : sessions) ++rep.sessions_per_replica[s.replica()];
-  absl::StatusOr<Box> box = RestBox(*Sessions::NewStub(Factory(&sessions[0])()), RefOf(sessions[0]));
+  for (const Session& s : sessions_) ++rep.sessions_per_replica[s.replica()];
+  absl::StatusOr<Box> box = RestBox(*Sessions::NewStub(Factory(&sessions_[0])()), RefOf(sessions_[0]));
   if (!box.ok()) return box.status();
-  box->inside = MaterialPoints(*Sessions::NewStub(Factory(&sessions[0])()), RefOf(sessions[0]),
-                               *box, 256, o_.seed);
-  Log(absl::StrCat(box->inside.size(), " material points inside the solid for the commands"));
-  auto stats = [&](const Session& s) {
-    SessionStats st;
-    auto stub = Sessions::NewStub(Factory(&s)());
-    (void)Retrying([&] {
-      grpc::ClientContext c;
-      c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-      return stub->GetStats(&c, RefOf(s), &st);
-    });
-    return st;
-  };
-  // The unloaded step rate: a second and a half with nobody connected.
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
-  rep.unloaded_steps_per_second = stats(sessions[0]).steps_per_second();
-  const SessionStats before = stats(sessions[0]);
+  box_ = *std::move(box);
+  box_.inside = MaterialPoints(*Sessions::NewStub(Factory(&sessions_[0])()), RefOf(sessions_[0]),
+                               box_, 256, o_.seed);
+  Log(absl::StrCat(box_.inside.size(), " material points inside the solid for the commands"));
+  return absl::OkStatus();
+}
 
-  // CPU and memory of a server started here.
-  std::atomic<bool> sampling{true};
-  std::thread sampler;
-  start_ = Clock::now();
-  if (server_ != nullptr) {
-    sampler = std::thread([&] {
-      double last_cpu = -1;
-      auto last_t = Clock::now();
-      while (sampling.load()) {
-        double cpu = 0;
-        long rss = 0;
-        const auto now = Clock::now();
-        if (server_->Sample(&cpu, &rss)) {
-          const double dt = std::chrono::duration<double>(now - last_t).count();
-          const double pct = last_cpu >= 0 && dt > 0 && cpu >= last_cpu ? 100 * (cpu - last_cpu) / dt : 0;
-          if (last_cpu >= 0) {
-            rep.server_samples.push_back({std::chrono::duration<double>(now - start_).count(), pct,
-                                          static_cast<double>(rss)});
-          }
-          last_cpu = cpu;
-          last_t = now;
-          rep.server_rss_max_kb = std::max<int64_t>(rep.server_rss_max_kb, rss);
-        } else {
-          last_cpu = -1;  // restarting
+SessionStats LoadRun::Stats(const Session& s) const {
+  SessionStats st;
+  auto stub = Sessions::NewStub(Factory(&s)());
+  (void)Retrying([&] {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    return stub->GetStats(&c, RefOf(s), &st);
+  });
+  return st;
+}
+
+// CPU and memory of a server started here, every quarter second until
+// `sampling` goes false. Only this thread touches the report's samples and
+// resident maximum until it is joined.
+std::thread LoadRun::StartSampler(std::atomic<bool>* sampling, Report* rep) {
+  if (server_ == nullptr) return std::thread();
+  return std::thread([this, sampling, rep] {
+    double last_cpu = -1;
+    auto last_t = Clock::now();
+    while (sampling->load()) {
+      double cpu = 0;
+      long rss = 0;
+      const auto now = Clock::now();
+      if (server_->Sample(&cpu, &rss)) {
+        const double dt = std::chrono::duration<double>(now - last_t).count();
+        const double pct = last_cpu >= 0 && dt > 0 && cpu >= last_cpu ? 100 * (cpu - last_cpu) / dt : 0;
+        if (last_cpu >= 0) {
+          rep->server_samples.push_back({std::chrono::duration<double>(now - start_).count(), pct,
+                                         static_cast<double>(rss)});
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(250));
+        last_cpu = cpu;
+        last_t = now;
+        rep->server_rss_max_kb = std::max<int64_t>(rep->server_rss_max_kb, rss);
+      } else {
+        last_cpu = -1;  // restarting
       }
-    });
-  }
+      std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    }
+  });
+}
 
-  const pid_t server_pid = server_ != nullptr ? server_->pid() : 0;
-  const CpuSnapshot server_cpu0 = TakeCpuSnapshot(server_pid);
-  const CpuSnapshot tool_cpu0 = TakeCpuSnapshot(getpid());
-
-  std::vector<ClientResult> results(o_.clients);
+std::vector<std::thread> LoadRun::StartClients(std::vector<ClientResult>* results) {
   std::vector<std::thread> threads;
   for (int i = 0; i < o_.clients; ++i) {
-    threads.emplace_back([&, i] {
-      Client(i, sessions[o_.shared ? 0 : i], *box, &results[i]);
+    threads.emplace_back([this, i, results] {
+      Client(i, sessions_[o_.shared ? 0 : i], box_, &(*results)[i]);
     });
   }
-  // Faults beside the clients.
-  std::atomic<bool> stop_faults{false};
-  std::vector<ClientResult> fault_results(2);
-  std::vector<std::thread> fault_threads;
+  return threads;
+}
+
+void LoadRun::StartFaults(FaultRun* f) {
   if (o_.faults.malformed) {
-    fault_threads.emplace_back([&] { Malformed(0, sessions[0], &stop_faults, &fault_results[0]); });
+    f->threads.emplace_back([this, f] { Malformed(0, sessions_[0], &f->stop, &f->results[0]); });
   }
-  std::vector<client::CommandRecord> burst_records;
-  if (o_.faults.burst) {
-    fault_threads.emplace_back([&] {
-      client::CommandChannel ch(Factory(&sessions[0]), RefOf(sessions[0]), "burst");
-      for (int k = 0; k < o_.burst_commands; ++k) {
-        Command c;
-        *c.mutable_set_gravity() = V(0, 0, -9.81 * (k % 2));
-        (void)ch.Send(c, "burst");
-      }
-      if (absl::Status s = ch.WaitAll(absl::Seconds(90)); !s.ok()) {
-        fault_results[1].problems.push_back(absl::StrCat("burst: ", s.ToString()));
-      }
-      (void)ch.Close(absl::Seconds(10));
-      burst_records = ch.Records();
-    });
-  }
-  if (o_.faults.restart) {
-    std::this_thread::sleep_until(start_ + std::chrono::duration<double>(o_.seconds * o_.restart_at));
-    Log("SIGKILL to the server");
-    server_->Kill();
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    if (absl::Status s = server_->Start(); !s.ok()) {
-      rep.problems.push_back(absl::StrCat("restart: ", s.ToString()));
-    } else {
-      ++restarts_;
-      Log(absl::StrCat("restarted on ", server_->address()));
-    }
-  }
-  // Where the CPU went: the threads' times just before the clients end
-  // (a thread that has ended takes its run-queue time with it).
-  std::this_thread::sleep_until(start_ + std::chrono::duration<double>(o_.seconds) -
-                                std::chrono::milliseconds(100));
-  const double cpu_seconds = std::chrono::duration<double>(Clock::now() - start_).count();
-  const CpuSnapshot server_cpu1 = TakeCpuSnapshot(restarts_ > 0 ? 0 : server_pid);
-  const CpuSnapshot tool_cpu1 = TakeCpuSnapshot(getpid());
-  for (std::thread& t : threads) t.join();
-  stop_faults = true;
-  for (std::thread& t : fault_threads) t.join();
-  const double run_seconds = std::chrono::duration<double>(Clock::now() - start_).count();
-  const SessionStats after = stats(sessions[0]);
-  sampling = false;
-  if (sampler.joinable()) sampler.join();
+  if (o_.faults.burst) f->threads.emplace_back([this, f] { Burst(f); });
+}
 
-  // Figures.
-  std::vector<double> ack, visible, visible_no_build;
-  std::map<std::string, std::vector<double>> visible_by_kind;
-  double fps_sum = 0;
-  for (int i = 0; i < o_.clients; ++i) {
-    ClientResult& r = results[i];
-    for (const std::string& p : r.problems) rep.problems.push_back(p);
-    std::sort(r.frames.begin(), r.frames.end(),
-              [](const auto& a, const auto& b) { return a.second < b.second; });
-    for (const client::CommandRecord& rec : r.records) {
-      ++rep.sent;
-      rep.resends += rec.writes - 1;
-      rep.rate_limited += rec.rate_limited;
-      if (!rec.answered) continue;
-      ++rep.codes[CodeName(rec.reply.code())];
-      if (rec.reply.applied_step() < 0) continue;
-      ++rep.acknowledged;
-      (rec.reply.code() == 0 ? rep.applied : rep.rejected) += 1;
-      const std::string kind = KindName(rec.command);
-      if (rec.reply.code() != 0 && o_.verbose) {
-        Log(absl::StrCat("refused ", kind, ": ", rec.reply.message()));
-      }
-      if (!rec.reply.duplicate()) {
-        Report::Hold& h = rep.hold[kind];
-        ++h.count;
-        h.total_ms += rec.reply.hold_ms();
-        h.max_ms = std::max(h.max_ms, rec.reply.hold_ms());
-      }
-      ack.push_back(rec.latency_ms);
-      // Visible: the first frame at or after the applied step received
-      // after the command was sent; for applied commands only (a refused
-      // one changed nothing there is to see: its ack is its answer).
-      if (rec.reply.code() != 0) continue;
-      for (const auto& [step, at] : r.frames) {
-        if (at >= rec.sent && step >= rec.reply.applied_step()) {
-          const double ms = Ms(at - rec.sent);
-          visible.push_back(ms);
-          visible_by_kind[kind].push_back(ms);
-          if (BuildsNothing(rec.command)) visible_no_build.push_back(ms);
-          break;
-        }
-      }
-    }
-    rep.frames += r.watch.frames;
-    rep.frames_skipped += r.watch.skipped;
-    rep.reconnects += r.reconnects + r.watch.reconnects;
-    if (r.watch.seconds > 0) fps_sum += (r.watch.frames - 1) / r.watch.seconds;
+// The burst fault: one client sending all its commands at once, above the
+// server's rate limit (the channel resends what is rate limited).
+void LoadRun::Burst(FaultRun* f) {
+  client::CommandChannel ch(Factory(&sessions_[0]), RefOf(sessions_[0]), "burst");
+  for (int k = 0; k < o_.burst_commands; ++k) {
+    Command c;
+    *c.mutable_set_gravity() = V(0, 0, -9.81 * (k % 2));
+    (void)ch.Send(c, "burst");
   }
-  for (ClientResult& f : fault_results) {
-    for (const std::string& p : f.problems) rep.problems.push_back(p);
-    for (const auto& [k, v] : f.fault_codes) rep.codes[k] += v;
+  if (absl::Status s = ch.WaitAll(absl::Seconds(90)); !s.ok()) {
+    f->results[1].problems.push_back(absl::StrCat("burst: ", s.ToString()));
   }
-  for (const client::CommandRecord& rec : burst_records) {
-    rep.rate_limited += rec.rate_limited;
-    if (rec.answered) ++rep.codes[absl::StrCat("burst: ", CodeName(rec.reply.code()))];
-  }
-  rep.frames_per_second = o_.clients > 0 ? fps_sum / o_.clients : 0;
-  rep.commands_per_second = run_seconds > 0 ? rep.acknowledged / run_seconds : 0;
-  rep.ack_ms = Summarize(ack);
-  rep.visible_ms = Summarize(visible);
-  rep.visible_no_build_ms = Summarize(visible_no_build);
-  for (auto& [kind, v] : visible_by_kind) rep.visible_by_kind_ms[kind] = Summarize(v);
-  rep.loaded_steps_per_second =
-      run_seconds > 0 ? (after.step() - before.step()) / run_seconds : 0;
-  rep.step_ms_median = after.step_ms_median();
-  rep.step_ms_p99 = after.step_ms_p99();
-  rep.steps_dropped = after.steps_dropped() - (restarts_ > 0 ? 0 : before.steps_dropped());
-  rep.overruns = after.overruns() - (restarts_ > 0 ? 0 : before.overruns());
-  rep.time_step = after.time_step();
-  rep.restarts = restarts_;
-  double cpu = 0;
-  for (const auto& s : rep.server_samples) cpu += s[1];
-  rep.server_cpu_percent = rep.server_samples.empty() ? 0 : cpu / rep.server_samples.size();
-  if (!rep.server_samples.empty()) rep.server_rss_end_kb = static_cast<int64_t>(rep.server_samples.back()[2]);
-  rep.busy_cores = BusyCoresBetween(tool_cpu0, tool_cpu1);
-  rep.cores = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
-  for (const auto& [name, use] : CpuBetween(tool_cpu0, tool_cpu1, cpu_seconds)) {
-    rep.load_tool.Add(use);
-  }
-  if (restarts_ == 0 && run_seconds > 0) {
-    rep.build_busy_ms_per_s = (after.build_ms_total() - before.build_ms_total()) / run_seconds;
-    rep.builds.cpu_ms_per_s = (after.build_cpu_ms_total() - before.build_cpu_ms_total()) / run_seconds;
-    rep.builds.wait_ms_per_s =
-        (after.build_wait_ms_total() - before.build_wait_ms_total()) / run_seconds;
-    rep.builds.runs_per_s = (after.builds() - before.builds()) / run_seconds;
-    rep.builds.threads = 1;
-  }
-  if (server_pid > 0 && restarts_ == 0) {
-    for (const auto& [name, use] : CpuBetween(server_cpu0, server_cpu1, cpu_seconds)) {
-      const bool own = name == "sim" || name == "encode" || name == "journal";
-      rep.server_threads[own ? name : "gRPC and other"].Add(use);
-    }
-  }
+  (void)ch.Close(absl::Seconds(10));
+  f->burst_records = ch.Records();
+}
 
+void LoadRun::KillAndRestart(Report& rep) {
+  std::this_thread::sleep_until(start_ + std::chrono::duration<double>(o_.seconds * o_.restart_at));
+  Log("SIGKILL to the server");
+  server_->Kill();
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  if (absl::Status s = server_->Start(); !s.ok()) {
+    rep.problems.push_back(absl::StrCat("restart: ", s.ToString()));
+  } else {
+    ++restarts_;
+    Log(absl::StrCat("restarted on ", server_->address()));
+  }
+}
+
+void LoadRun::VerifyJournals(const std::vector<ClientResult>& results, const FaultRun& faults,
+                             Report& rep) {
   // Nothing lost: every client against the journal.
   if (server_ != nullptr || !o_.server.empty()) {
     std::vector<std::string> problems;
     for (int i = 0; i < o_.clients; ++i) {
-      Verify(sessions[o_.shared ? 0 : i], absl::StrCat("load-", i), results[i].records, &problems);
+      Verify(sessions_[o_.shared ? 0 : i], absl::StrCat("load-", i), results[i].records, &problems);
     }
-    if (o_.faults.burst) Verify(sessions[0], "burst", burst_records, &problems);
+    if (o_.faults.burst) Verify(sessions_[0], "burst", faults.burst_records, &problems);
     rep.verified = true;
     for (const std::string& p : problems) rep.problems.push_back(p);
   }
-  for (const Session& s : sessions) {
+}
+
+void LoadRun::Finish(Report& rep) {
+  for (const Session& s : sessions_) {
     grpc::ClientContext c;
     c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
     google::protobuf::Empty e;
@@ -693,7 +564,53 @@ absl::StatusOr<Report> LoadRun::Run() {
                                         rep.server_rss_max_kb / 1024, " MB (bound ", o_.max_rss_mb,
                                         " MB)"));
   }
-  if (!temp_dir.empty()) std::system(absl::StrCat("rm -rf '", temp_dir, "'").c_str());
+  if (!temp_dir_.empty()) std::system(absl::StrCat("rm -rf '", temp_dir_, "'").c_str());
+}
+
+absl::StatusOr<Report> LoadRun::Run() {
+  Report rep;
+  rep.options = o_;
+  const auto wall0 = Clock::now();
+  if (absl::Status s = Connect(); !s.ok()) return s;
+  if (absl::Status s = OpenSessions(rep); !s.ok()) return s;
+  // The unloaded step rate: a second and a half with nobody connected.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  rep.unloaded_steps_per_second = Stats(sessions_[0]).steps_per_second();
+  const SessionStats before = Stats(sessions_[0]);
+
+  std::atomic<bool> sampling{true};
+  start_ = Clock::now();
+  std::thread sampler = StartSampler(&sampling, &rep);
+  CpuWindow cpu;
+  cpu.server_pid = server_ != nullptr ? server_->pid() : 0;
+  cpu.server0 = TakeCpuSnapshot(cpu.server_pid);
+  cpu.tool0 = TakeCpuSnapshot(getpid());
+
+  std::vector<ClientResult> results(o_.clients);
+  std::vector<std::thread> threads = StartClients(&results);
+  // Faults beside the clients.
+  FaultRun faults;
+  StartFaults(&faults);
+  if (o_.faults.restart) KillAndRestart(rep);
+  // Where the CPU went: the threads' times just before the clients end
+  // (a thread that has ended takes its run-queue time with it).
+  std::this_thread::sleep_until(start_ + std::chrono::duration<double>(o_.seconds) -
+                                std::chrono::milliseconds(100));
+  cpu.seconds = std::chrono::duration<double>(Clock::now() - start_).count();
+  cpu.server1 = TakeCpuSnapshot(restarts_ > 0 ? 0 : cpu.server_pid);
+  cpu.tool1 = TakeCpuSnapshot(getpid());
+  for (std::thread& t : threads) t.join();
+  faults.stop = true;
+  for (std::thread& t : faults.threads) t.join();
+  const double run_seconds = std::chrono::duration<double>(Clock::now() - start_).count();
+  const SessionStats after = Stats(sessions_[0]);
+  sampling = false;
+  if (sampler.joinable()) sampler.join();
+
+  ClientFigures(o_, results, faults.results, faults.burst_records, run_seconds, rep);
+  ServerFigures(before, after, cpu, restarts_, run_seconds, rep);
+  VerifyJournals(results, faults, rep);
+  Finish(rep);
   rep.wall_seconds = std::chrono::duration<double>(Clock::now() - wall0).count();
   return rep;
 }
@@ -786,139 +703,5 @@ absl::StatusOr<Report> Run(const Options& options) {
   return run.Run();
 }
 
-std::string ReportJson(const Report& r) {
-  auto pct = [](const Percentiles& p) {
-    return absl::StrFormat("{\"count\": %d, \"p50\": %.3f, \"p99\": %.3f, \"p999\": %.3f, \"max\": %.3f}",
-                           p.count, p.p50, p.p99, p.p999, p.max);
-  };
-  std::string codes;
-  for (const auto& [k, v] : r.codes) absl::StrAppend(&codes, codes.empty() ? "" : ", ", "\"", k, "\": ", v);
-  std::string placed;
-  for (const auto& [k, v] : r.sessions_per_replica) {
-    absl::StrAppend(&placed, placed.empty() ? "" : ", ", "\"", k, "\": ", v);
-  }
-  std::string hold;
-  for (const auto& [k, h] : r.hold) {
-    absl::StrAppend(&hold, hold.empty() ? "" : ", ",
-                    absl::StrFormat("\"%s\": {\"count\": %d, \"total_ms\": %.1f, \"max_ms\": %.2f}",
-                                    k, h.count, h.total_ms, h.max_ms));
-  }
-  std::string by_kind;
-  for (const auto& [k, p] : r.visible_by_kind_ms) {
-    absl::StrAppend(&by_kind, by_kind.empty() ? "" : ", ", "\"", k, "\": ", pct(p));
-  }
-  std::string samples;
-  for (const auto& s : r.server_samples) {
-    absl::StrAppend(&samples, samples.empty() ? "" : ", ", absl::StrFormat("[%.3f, %.1f, %.0f]", s[0], s[1], s[2]));
-  }
-  auto use = [](const CpuUse& u) {
-    return absl::StrFormat(
-        "{\"threads\": %d, \"cpu_ms_per_s\": %.1f, \"wait_ms_per_s\": %.1f, \"runs_per_s\": %.0f}",
-        u.threads, u.cpu_ms_per_s, u.wait_ms_per_s, u.runs_per_s);
-  };
-  std::string threads;
-  for (const auto& [name, u] : r.server_threads) {
-    absl::StrAppend(&threads, threads.empty() ? "" : ", ", "\"", name, "\": ", use(u));
-  }
-  std::string problems;
-  for (const std::string& p : r.problems) {
-    std::string q = p;
-    for (size_t k = 0; (k = q.find('"', k)) != std::string::npos; k += 2) q.replace(k, 1, "\\\"");
-    absl::StrAppend(&problems, problems.empty() ? "" : ", ", "\"", q, "\"");
-  }
-  const Options& o = r.options;
-  return absl::StrCat(
-      "{\n  \"scene\": \"", o.scene, "\", \"clients\": ", o.clients, ", \"shared\": ",
-      o.shared ? "true" : "false", ", \"seconds\": ", o.seconds, ", \"rate\": ", o.rate,
-      ", \"seed\": ", o.seed, ", \"edits\": ", o.edits ? "true" : "false",
-      ",\n  \"faults\": {\"disconnect\": ", o.faults.disconnect ? "true" : "false",
-      ", \"stop_reading\": ", o.faults.stop_reading ? "true" : "false",
-      ", \"malformed\": ", o.faults.malformed ? "true" : "false",
-      ", \"burst\": ", o.faults.burst ? "true" : "false",
-      ", \"restart\": ", o.faults.restart ? "true" : "false", "}",
-      ",\n  \"sent\": ", r.sent, ", \"acknowledged\": ", r.acknowledged, ", \"applied\": ", r.applied,
-      ", \"rejected\": ", r.rejected, ", \"commands_per_second\": ", absl::StrFormat("%.1f", r.commands_per_second),
-      ",\n  \"ack_ms\": ", pct(r.ack_ms), ",\n  \"visible_ms\": ", pct(r.visible_ms),
-      ",\n  \"visible_no_build_ms\": ", pct(r.visible_no_build_ms),
-      ",\n  \"visible_by_kind_ms\": {", by_kind, "}",
-      ",\n  \"codes\": {", codes, "}", ",\n  \"hold\": {", hold, "}",
-      ",\n  \"frames\": ", r.frames, ", \"frames_skipped\": ", r.frames_skipped,
-      ", \"frames_per_second\": ", absl::StrFormat("%.1f", r.frames_per_second),
-      ", \"reconnects\": ", r.reconnects, ", \"resends\": ", r.resends, ", \"rate_limited\": ", r.rate_limited,
-      ",\n  \"time_step\": ", r.time_step,
-      ", \"unloaded_steps_per_second\": ", absl::StrFormat("%.1f", r.unloaded_steps_per_second),
-      ", \"loaded_steps_per_second\": ", absl::StrFormat("%.1f", r.loaded_steps_per_second),
-      ", \"step_ms_median\": ", absl::StrFormat("%.3f", r.step_ms_median),
-      ", \"step_ms_p99\": ", absl::StrFormat("%.3f", r.step_ms_p99),
-      ", \"steps_dropped\": ", r.steps_dropped, ", \"overruns\": ", r.overruns,
-      ",\n  \"server_cpu_percent\": ", absl::StrFormat("%.1f", r.server_cpu_percent),
-      ", \"server_rss_max_kb\": ", r.server_rss_max_kb, ", \"server_rss_end_kb\": ", r.server_rss_end_kb,
-      ", \"restarts\": ", r.restarts, ", \"sessions_per_replica\": {", placed, "}",
-      ",\n  \"server_samples\": [", samples, "]",
-      ",\n  \"server_threads\": {", threads, "}, \"load_tool\": ", use(r.load_tool),
-      ", \"busy_cores\": ", absl::StrFormat("%.2f", r.busy_cores), ", \"cores\": ", r.cores,
-      ",\n  \"builds\": ", use(r.builds),
-      ", \"build_busy_ms_per_s\": ", absl::StrFormat("%.1f", r.build_busy_ms_per_s),
-      ",\n  \"verified\": ", r.verified ? "true" : "false", ", \"problems\": [", problems, "]",
-      ",\n  \"wall_seconds\": ", absl::StrFormat("%.1f", r.wall_seconds), "\n}\n");
-}
-
-std::string ReportMarkdown(const Report& r) {
-  const Options& o = r.options;
-  std::string faults;
-  for (const auto& [on, name] : {std::pair{o.faults.disconnect, "disconnect"},
-                                 std::pair{o.faults.stop_reading, "stop_reading"},
-                                 std::pair{o.faults.malformed, "malformed"},
-                                 std::pair{o.faults.burst, "burst"},
-                                 std::pair{o.faults.restart, "restart"}}) {
-    if (on) absl::StrAppend(&faults, faults.empty() ? "" : ", ", name);
-  }
-  std::string out = absl::StrFormat(
-      "| scene | clients | sessions | faults | commands/s | ack p50 / p99 / p99.9 / max (ms) | "
-      "visible p50 / p99 / p99.9 / max (ms) | visible p50 / p99 of commands that build nothing "
-      "(ms) | steps/s unloaded -> loaded (h = %g s) | step ms "
-      "median / p99 | dropped | frames/s per watcher | skipped | server CPU %% / RSS max (MB) | "
-      "lost, duplicated, reordered |\n"
-      "| --- | ---: | --- | --- | ---: | --- | --- | --- | --- | --- | ---: | ---: | ---: | --- | "
-      "--- |\n",
-      r.time_step);
-  absl::StrAppend(
-      &out,
-      absl::StrFormat("| %s | %d | %s | %s | %.1f | %.2f / %.2f / %.2f / %.2f | %.2f / %.2f / %.2f / "
-                      "%.2f | %.2f / %.2f | %.0f -> %.0f | %.3f / %.3f | %d | %.1f | %d | %.0f / "
-                      "%.0f | %s |\n",
-                      o.scene, o.clients, o.shared ? "one shared" : "one each",
-                      faults.empty() ? "none" : faults, r.commands_per_second, r.ack_ms.p50,
-                      r.ack_ms.p99, r.ack_ms.p999, r.ack_ms.max, r.visible_ms.p50, r.visible_ms.p99,
-                      r.visible_ms.p999, r.visible_ms.max, r.visible_no_build_ms.p50,
-                      r.visible_no_build_ms.p99, r.unloaded_steps_per_second,
-                      r.loaded_steps_per_second, r.step_ms_median, r.step_ms_p99, r.steps_dropped,
-                      r.frames_per_second, r.frames_skipped, r.server_cpu_percent,
-                      r.server_rss_max_kb / 1024.0,
-                      !r.verified ? "not checked" : r.problems.empty() ? "none" : "**see problems**"));
-  if (r.cores > 0) {
-    // Where the CPU went: a second table, after a blank line.
-    auto cell = [](const CpuUse& u) {
-      const double mean_us = u.runs_per_s > 0 ? 1e3 * u.wait_ms_per_s / u.runs_per_s : 0;
-      return absl::StrFormat("%.0f / %.0f, %.0f us (%d)", u.cpu_ms_per_s, u.wait_ms_per_s, mean_us,
-                             u.threads);
-    };
-    std::string head = "| busy cores | dynsolid-load (clients) | server builds: busy / CPU / wait (builds/s) |",
-                rule = "| ---: | --- | --- |";
-    std::string row = absl::StrFormat("| %.2f of %d | %s | %.0f / %.0f / %.0f (%.1f) |", r.busy_cores,
-                                      r.cores, cell(r.load_tool), r.build_busy_ms_per_s,
-                                      r.builds.cpu_ms_per_s, r.builds.wait_ms_per_s,
-                                      r.builds.runs_per_s);
-    for (const auto& [name, u] : r.server_threads) {
-      absl::StrAppend(&head, " server ", name, " |");
-      absl::StrAppend(&rule, " --- |");
-      absl::StrAppend(&row, " ", cell(u), " |");
-    }
-    absl::StrAppend(&out, "\nCPU per second of the run: ms on a CPU / ms ready but waiting for one, "
-                          "the mean wait each time it was woken (threads):\n\n", head, "\n", rule,
-                    "\n", row, "\n");
-  }
-  return out;
-}
 
 }  // namespace dynsolid::load

@@ -1,5 +1,5 @@
 // Stability report data (issue 4): the stiff and extreme cases of
-// bench/stability_cases.h, each with both integrators at several time
+// solver/tools/stability_cases.h, each with both integrators at several time
 // steps, and the largest stable step against Young's modulus. CSV on stdout.
 //
 //   stability_bench cases [scale=1] [max_steps=4000] [max_substeps=20000]
@@ -22,7 +22,7 @@
 
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_replace.h"
-#include "bench/stability_cases.h"
+#include "solver/tools/stability_cases.h"
 
 namespace {
 

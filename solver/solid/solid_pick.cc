@@ -5,7 +5,7 @@
 #include <limits>
 
 #include "absl/strings/str_cat.h"
-#include "solver/sculpt/pick.h"
+#include "solver/mesh/pick.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/solid_impl.h"
 
@@ -45,7 +45,7 @@ absl::StatusOr<std::optional<Solid::PickHit>> Solid::Pick(const Eigen::Vector3d&
                                                           const Eigen::Vector3d& direction) const {
   const Impl& im = *impl_;
   const Points x = SurfacePositions();
-  absl::StatusOr<sculpt::PickHit> hit = sculpt::PickQuads(surface_.quads, x, {origin, direction});
+  absl::StatusOr<mesh::PickHit> hit = mesh::PickQuads(surface_.quads, x, {origin, direction});
   if (absl::IsNotFound(hit.status())) return std::nullopt;
   if (!hit.ok()) return hit.status();
 
@@ -54,7 +54,7 @@ absl::StatusOr<std::optional<Solid::PickHit>> Solid::Pick(const Eigen::Vector3d&
   out.point = hit->point;
   out.distance = hit->distance;
   const std::array<int32_t, 4>& q = surface_.quads[out.quad];
-  out.material_point = sculpt::BilinearPoint(q, im.surface_rest, hit->s, hit->t);
+  out.material_point = mesh::BilinearPoint(q, im.surface_rest, hit->s, hit->t);
   out.normal = QuadNormal(q, x);
   const std::vector<int32_t>& cc = d_.hierarchy.control_cell;
   const int32_t fine_cell = im.quad_cell[out.quad];

@@ -1,6 +1,6 @@
 // Issue 42: central differences solve their constant matrix with a factor
 // made once (solver.explicit_solve FACTORED, the default) instead of a CG a
-// step. On the accuracy cases (bench/stability_cases.h) and on a block
+// step. On the accuracy cases (solver/tools/stability_cases.h) and on a block
 // large enough for the CG to run on its incomplete Cholesky preconditioner,
 // the factored path gives the CG path's answer (CG to 1e-13), and the same
 // bits for 1, 2 and 3 threads.
@@ -12,7 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "absl/strings/str_format.h"
-#include "bench/stability_cases.h"
+#include "solver/tools/stability_cases.h"
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"

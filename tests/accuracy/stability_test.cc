@@ -1,5 +1,5 @@
 // Stiff and extreme cases (issue 4, small sizes; the cases and the energy
-// account are bench/stability_cases.h, which the stability report runs at
+// account are solver/tools/stability_cases.h, which the stability report runs at
 // more steps): backward Euler stays bounded (no energy growth beyond
 // round-off); central difference either runs (sub-stepping) or refuses /
 // rolls back and says why; no NaN ever reaches the state or the outputs.
@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "absl/strings/str_format.h"
-#include "bench/stability_cases.h"
+#include "solver/tools/stability_cases.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::stability {

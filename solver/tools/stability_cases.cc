@@ -1,4 +1,4 @@
-#include "bench/stability_cases.h"
+#include "solver/tools/stability_cases.h"
 
 #include <algorithm>
 #include <array>

@@ -22,7 +22,7 @@
 #include "absl/status/statusor.h"
 #include "solver/mesh/points.h"
 
-namespace dynsolid::sculpt {
+namespace dynsolid::mesh {
 
 struct Ray {
   Eigen::Vector3d origin;     // metres
@@ -47,4 +47,4 @@ absl::StatusOr<PickHit> PickQuads(const std::vector<std::array<int32_t, 4>>& qua
 Eigen::Vector3d BilinearPoint(const std::array<int32_t, 4>& quad, const Points& positions, double s,
                               double t);
 
-}  // namespace dynsolid::sculpt
+}  // namespace dynsolid::mesh

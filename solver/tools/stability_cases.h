@@ -1,4 +1,4 @@
-// The stiff and extreme cases of issue 4's stability report, and one
+// The stiff and extreme cases of the stability report (bench/reports/stability.md), and one
 // runner that steps a case and keeps the energy account from outside the
 // solver (public Solid API only). Shared by bench/stability_bench (the
 // report, larger runs) and tests/accuracy/stability_test (small runs).

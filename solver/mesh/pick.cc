@@ -1,6 +1,6 @@
 // Ray picking on quads: Moller-Trumbore per triangle, then an inverse
 // bilinear solve for (s, t).
-#include "solver/sculpt/pick.h"
+#include "solver/mesh/pick.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@
 
 #include "absl/strings/str_cat.h"
 
-namespace dynsolid::sculpt {
+namespace dynsolid::mesh {
 namespace {
 
 using Vec = Eigen::Vector3d;
@@ -145,4 +145,4 @@ absl::StatusOr<PickHit> PickQuads(const std::vector<std::array<int32_t, 4>>& qua
   return best;
 }
 
-}  // namespace dynsolid::sculpt
+}  // namespace dynsolid::mesh

@@ -1,5 +1,5 @@
 // Ray picking on quad surfaces.
-#include "solver/sculpt/pick.h"
+#include "solver/mesh/pick.h"
 
 #include <cmath>
 
@@ -10,7 +10,7 @@
 
 #include "tests/testing/status_matchers.h"
 
-namespace dynsolid::sculpt {
+namespace dynsolid::mesh {
 namespace {
 
 using ::dynsolid::testing::StatusIs;
@@ -120,4 +120,4 @@ TEST(PickTest, TriangleAsDegenerateQuad) {
 }
 
 }  // namespace
-}  // namespace dynsolid::sculpt
+}  // namespace dynsolid::mesh

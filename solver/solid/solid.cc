@@ -282,10 +282,10 @@ void Solid::Impl::ControlForces(const Points& p, const Points& prev, Points& out
     out = -out;
     phases.project = MsSince(t0);
   }
-  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) {
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || probe.active()) {
     t0 = Clock::now();
     if (loads.has_constant_force()) out += loads.constant_forces();
-    if (contact.active) out += contact.force;
+    probe.AddTo(out);
     for (size_t s = 0; s < spring_point.size(); ++s) {
       const int32_t i = spring_point[s];
       out.row(i) -= spring_k[s] * (p.row(i) - rest_control.row(i));
@@ -342,9 +342,9 @@ void Solid::Impl::ExternalForces(const Points& p, const Points& prev, Points& ou
     PositionForces(p, prev, pressure);
     out += pressure;
   }
-  if (contact.active) out += contact.force;
+  probe.AddTo(out);
   loads_changed = false;
-  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) {
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || probe.active()) {
     phases.loads = MsSince(t0);
   }
 }
@@ -356,7 +356,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
   // has them: the deformation measure is the local-frame model's; the
   // per-cell corotation has no node positions and no projection.
   sum.stiffness = sum.solve = 0;
-  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || contact.active) sum.loads = 0;
+  if (loads.has_constant_force() || !spring_point.empty() || has_pressure || probe.active()) sum.loads = 0;
   auto accumulate = [](double& total, double t) {
     if (t >= 0) total = std::max(total, 0.0) + t;
   };
@@ -456,7 +456,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     if (loads.has_constant_force()) {
       ledger.work += (loads.constant_forces().array() * (p_next - p).array()).sum();
     }
-    if (contact.active) ledger.work += ContactWork(p, p_next);
+    if (probe.active()) ledger.work += probe.Work(p, p_next);
     // Follower pressure: trapezoidal work over the sub-step.
     if (has_pressure) {
       ledger.work += 0.5 * ((f_press + f_press_next).array() * (p_next - p).array()).sum();

@@ -512,36 +512,16 @@ absl::Status Solid::SetContactLoads(const std::vector<ContactLoad>& loads) {
       return absl::InvalidArgumentError(absl::StrCat("contact load ", k, ": force must be finite"));
     }
   }
-  const int64_t nc = p_.rows();
-  if (im.contact.force.rows() != nc) im.contact.force.setZero(nc, 3);
-  // The change, patched into the carried forces (which include the old set).
-  Points old_rows(im.contact.rows.size(), 3);
-  for (size_t r = 0; r < im.contact.rows.size(); ++r) {
-    old_rows.row(r) = im.contact.force.row(im.contact.rows[r]);
-  }
-  const std::vector<int32_t> old = im.contact.rows;
-  for (int32_t i : old) im.contact.force.row(i).setZero();
-  im.contact.rows.clear();
+  std::vector<ProbeLoads::Load> weighted;
+  weighted.reserve(loads.size());
   for (const ContactLoad& l : loads) {
-    if (l.force.squaredNorm() == 0) continue;
-    for (const auto& [i, w] : SurfaceRow(im.surface_rows, surface_.quads[l.quad], l.u, l.v)) {
-      im.contact.force.row(i) += w * l.force.transpose();
-      im.contact.rows.push_back(i);
-    }
+    weighted.emplace_back(SurfaceRow(im.surface_rows, surface_.quads[l.quad], l.u, l.v), l.force);
   }
-  std::sort(im.contact.rows.begin(), im.contact.rows.end());
-  im.contact.rows.erase(std::unique(im.contact.rows.begin(), im.contact.rows.end()),
-                        im.contact.rows.end());
-  const bool was_active = im.contact.active;
-  im.contact.active = !im.contact.rows.empty();
-  if (im.forces_valid && im.f.rows() == nc) {
-    for (size_t r = 0; r < old.size(); ++r) im.f.row(old[r]) -= old_rows.row(r);
-    for (int32_t i : im.contact.rows) im.f.row(i) += im.contact.force.row(i);
-  }
-  (void)was_active;
+  const int64_t nc = p_.rows();
+  im.probe.Set(nc, weighted, im.forces_valid && im.f.rows() == nc ? &im.f : nullptr);
   return absl::OkStatus();
 }
 
-bool Solid::has_contact_loads() const { return impl_->contact.active; }
+bool Solid::has_contact_loads() const { return impl_->probe.active(); }
 
 }  // namespace dynsolid::solid

@@ -39,6 +39,7 @@
 #include "solver/models/internal_force.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/load_set.h"
+#include "solver/solid/probe_loads.h"
 #include "solver/solid/solid.h"
 #include "solver/solid/surface_pressure.h"
 #include "solver/subdivision/mcj.h"
@@ -254,12 +255,12 @@ struct Solid::Impl {
   absl::StatusOr<LoadSet::DragLoad> MakeCurve(const CurveDrag& c,
                                               const KnownPoints* known = nullptr) const;
 
-  // ---- Haptic contact (solid_contact.cc). `force` is the control-space
-  // sum J_c^T f of the contact loads (#control x 3; non-zero only on
-  // `rows`), added to the external forces in ControlForces and
-  // ExternalForces; the carried `f` includes it (SetContactLoads patches it
-  // by the change). `epoch` counts changes of what the contact stiffness
-  // depends on (material, fixed set); the cache is rebuilt when it moved.
+  // ---- Haptic contact (solid_contact.cc). The probe's loads are a part
+  // (probe_loads.h), added to the external forces in ControlForces and
+  // ExternalForces; the carried `f` includes them (SetContactLoads patches
+  // it by the change). `contact.epoch` counts changes of what the contact
+  // stiffness depends on (material, fixed set); the cache is rebuilt when
+  // it moved.
   struct ContactCache;  // solid_contact.cc
   // What building the contact stiffness reads: the K triplets
   // (corotational) or the internal forces at `p` (local frame).
@@ -280,28 +281,12 @@ struct Solid::Impl {
   // triplets left to the caller).
   ContactInputs ContactInputsNow(const Points& p) const;
   static absl::Status BuildContactCache(const ContactInputs& in, ContactCache& cache);
-  struct ContactState {
-    bool active = false;
-    Points force;
-    std::vector<int32_t> rows;
+  ProbeLoads probe;
+  struct ContactStiffness {
     int64_t epoch = 0;
     std::shared_ptr<ContactCache> cache;
   };
-  ContactState contact;
-  // Work of the contact loads over a move from p to p_next (constant
-  // forces: exact).
-  double ContactWork(const Points& p, const Points& p_next) const {
-    double w = 0;
-    for (int32_t i : contact.rows) w += contact.force.row(i).dot(p_next.row(i) - p.row(i));
-    return w;
-  }
-  // Drops the contact loads without touching `f` (after a restore, whose
-  // `f` has none).
-  void ClearContact() {
-    for (int32_t i : contact.rows) contact.force.row(i).setZero();
-    contact.rows.clear();
-    contact.active = false;
-  }
+  ContactStiffness contact;
 
   // ---- Boundary surface (quads of Solid::surface_).
   SparseMatrix surface_rows;                  // node_matrix rows of the surface vertices

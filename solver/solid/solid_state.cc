@@ -63,8 +63,8 @@ SavedState Solid::SaveStateParts() const {
   w.Put<uint8_t>(im.ledger.started);
   w.Matrix(p_);
   w.Matrix(p_prev_);
-  if (im.contact.active && im.f.rows() == im.contact.force.rows()) {
-    w.Matrix(im.f - im.contact.force);  // contact loads are not state
+  if (im.probe.active() && im.f.rows() == im.probe.force().rows()) {
+    w.Matrix(im.f - im.probe.force());  // contact loads are not state
   } else {
     w.Matrix(im.f);
   }
@@ -564,7 +564,7 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   p_prev_ = std::move(s.p_prev);
   im.f = std::move(s.f);
   im.forces_valid = s.forces_valid;
-  im.ClearContact();  // the restored `f` carries no contact load
+  im.probe.Clear();  // the restored `f` carries no contact load
   ++im.contact.epoch;      // and its fixed set or material may differ
   im.loads_changed = true;  // not saved: recomputing the loads changes no bit
   im.last_strain_energy = s.strain;

@@ -1,11 +1,11 @@
-// Accuracy against run time (issue 4): a cantilever under a tip load
-// (static tip deflection against Timoshenko beam theory), a bar in tension
-// (end displacement against F L / E A) and a vibrating cantilever (first
-// bending frequency against Euler-Bernoulli), for both models, over
-// subdivision levels x integrator x CG tolerance x time step, and central
-// difference with a lumped mass at the default settings (integrator
-// "central_difference_lumped"). CSV on stdout, one row per problem and
-// configuration:
+// Accuracy against run time (bench/reports/accuracy.md): a cantilever
+// under a tip load (static tip deflection against Timoshenko beam theory),
+// a bar in tension (end displacement against F L / E A) and a vibrating
+// cantilever (first bending frequency against Euler-Bernoulli), for both
+// models, over subdivision levels x integrator x CG tolerance x time step,
+// and central difference with a lumped mass at the default settings
+// (integrator "central_difference_lumped"). CSV on stdout, one row per
+// problem and configuration:
 //
 //   problem,model,levels,integrator,cg_tolerance,time_step,substeps,value,
 //   analytic,error_percent,wall_per_sim_s,simulated_s,wall_s,cg_per_step,

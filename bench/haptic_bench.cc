@@ -1,5 +1,5 @@
 // haptic_bench: the bridge's 1 kHz loop against a real dynsolid-server on
-// the same machine (issue 18's benchmark; docs/haptic.md "Benchmark").
+// the same machine (docs/haptic.md, "Benchmark").
 //
 // Starts dynsolid-server, opens a session of block3 (its own levels unless
 // --levels), attaches one watcher (a decoding client on its own

@@ -1,4 +1,4 @@
-// Issue 4's implicit speed clause: block3 with the corotational model and
+// The implicit speed target: block3 with the corotational model and
 // backward Euler, at least 200 steps per second on this machine, with the
 // CG iteration counts printed. Measured on a block that MOVES (a block at
 // rest costs no CG iteration and says nothing about the implicit solve):

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The load report (issue 20): dynsolid-load with 1, 8, 32, 64 and 128
+# The load report: dynsolid-load with 1, 8, 32, 64 and 128
 # clients on block3 and on the chair, each client on its own channel in
 # one shared session, 10 commands/s each for SECONDS (10) seconds, no
 # faults; then the table and the plots. Writes bench/reports/load/

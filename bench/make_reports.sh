@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Issue 4's reports, one command: builds the bench targets (Release) if
-# needed, runs them and writes bench/reports/:
+# The accuracy and stability reports, one command: builds the bench targets
+# (Release) if needed, runs them and writes bench/reports/:
 #   accuracy.csv, accuracy_<problem>.png, accuracy.md   (error against run time)
 #   stability.csv, stable_step.csv, stable_step.png, stability.md
 # About 15-25 minutes on 2 cores (the accuracy sweep is most of it).

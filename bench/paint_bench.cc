@@ -17,7 +17,8 @@ int main(int argc, char** argv) {
   auto scene = dynsolid::scene::BuiltinScene(argc > 1 ? argv[1] : "block3");
   if (!scene.ok()) { std::printf("%s\n", std::string(scene.status().message()).c_str()); return 1; }
   if (argc > 2 && std::string(argv[2]) != "-") {
-    // The brush figures name a model: block3 with the local frame.
+    // The brush speed figures (docs/sculpt.md, "Brush speed") are for
+    // block3 with the local frame.
     const std::string model = argv[2];
     dynsolid::SolverSettings* s = scene->mutable_solver();
     s->set_model(model == "local_frame" ? dynsolid::SolverSettings::LOCAL_FRAME

@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Issue 4's reports from the bench CSVs: plots (PNG) and markdown.
+"""The accuracy and stability reports from the bench CSVs: plots (PNG) and
+markdown.
 
 Reads DIR/accuracy.csv (accuracy_bench), DIR/stability.csv and
 DIR/stable_step.csv (stability_bench); writes DIR/accuracy_<problem>.png,
@@ -166,7 +167,7 @@ def fmt(x, digits=3):
 
 
 def accuracy_md(rows, args):
-    out = header("Error against run time (issue 4)", args, "accuracy_bench")
+    out = header("Error against run time", args, "accuracy_bench")
     lev = sorted({int(r["levels"]) for r in rows})
     statics = {}
     for r in rows:
@@ -377,7 +378,7 @@ VERDICT_NOTE = {
 
 
 def stability_md(rows, steps, args):
-    out = header("Stability on stiff and extreme cases (issue 4)", args, "stability_bench")
+    out = header("Stability on stiff and extreme cases", args, "stability_bench")
     out += [
         "Each case is a small corotational solid (mostly a 2 x 1 x 1 block at 1 level, clamped at "
         "x = 0), run with central difference and with backward Euler at scene steps 1e-4, 1e-3, "

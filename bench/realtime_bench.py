@@ -1,4 +1,4 @@
-"""realtime_bench: does each built-in scene keep up with the clock? (issue 22)
+"""realtime_bench: does each built-in scene keep up with the clock?
 
 For every built-in scene, with the scene's own model, integrator, time
 step and loads:
@@ -34,8 +34,8 @@ from loopback import fail, first_line  # noqa: E402
 
 SCENES = ["block3", "beam", "chair", "torus", "bridge", "nozzle", "block4", "mixed", "clay"]
 # Scenes whose contact (a floor) and plasticity (clay) are measured against
-# the same scene without them (issue 37: at most 25 % of the step), and
-# block3 given a floor under it and a clay top.
+# the same scene without them (the clay and floor budget: at most 25 % of
+# the step), and block3 given a floor under it and a clay top.
 SHARE_SCENES = ["chair", "clay", "block3+floor+clay"]
 
 

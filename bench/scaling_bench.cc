@@ -1,6 +1,6 @@
-// Scaling with the control mesh (issue 42): an n^3-cell block of 3 m at
-// level 0 ((n+1)^3 control points), corotational with a frame per control
-// cell, E 1e5 Pa, nu 0.3, density 1000, mass-proportional damping 2/s,
+// Scaling with the control mesh (bench/reports/scaling.md): an n^3-cell
+// block of 3 m at level 0 ((n+1)^3 control points), corotational with a
+// frame per control cell, E 1e5 Pa, nu 0.3, density 1000, mass-proportional damping 2/s,
 // consistent mass, bottom face fixed, 20 kN sideways spread over the top
 // face's control points, h = 1 ms. For each size and solver: build time,
 // median ms per step (and its solve phase) after a warm-up, and the peak

@@ -5,7 +5,7 @@
 //                extrude, delete, subdivide, sharp or merge alone]
 //                [repetitions=3]
 // Each edit is applied to the scene's solid after 20 steps, timed over the
-// repetitions (median and best printed, and the best against the issue's
+// repetitions (median and best printed, and the best against the
 // 50 ms target for an edit of the chair at two levels), with where the
 // last one's time went. The first line names the CPU: figures differ
 // between machines (and a shared VM's vary from run to run: compare bests).

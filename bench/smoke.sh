@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Bench smoke (issue 42): runs every benchmark binary built in bench/ with
+# Bench smoke: runs every benchmark binary built in bench/ with
 # tiny arguments, so none can break silently. Checks only that each runs to
 # its end (exit 0, no "failed" row); never times anything. CTest runs it
 # as `bench_smoke` (label bench_smoke): bench/CMakeLists.txt.

@@ -1,6 +1,7 @@
-// Stability report data (issue 4): the stiff and extreme cases of
-// solver/tools/stability_cases.h, each with both integrators at several time
-// steps, and the largest stable step against Young's modulus. CSV on stdout.
+// Stability report data (bench/reports/stability.md): the stiff and
+// extreme cases of solver/tools/stability_cases.h, each with both
+// integrators at several time steps, and the largest stable step against
+// Young's modulus. CSV on stdout.
 //
 //   stability_bench cases [scale=1] [max_steps=4000] [max_substeps=20000]
 //     runs each case for scale x its duration (at most max_steps steps)

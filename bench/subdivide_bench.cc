@@ -1,4 +1,4 @@
-// Subdivision benchmark (issue 2): a 20 x 20 x 20 control block subdivided
+// Subdivision benchmark: a 20 x 20 x 20 control block subdivided
 // to level 2 (512,000 cells) and its elements classified. Prints the time of
 // each phase and the process's peak resident memory. Target on the 2-core
 // reference machine: under 3 s and under 2 GB.

@@ -1,4 +1,4 @@
-// Table-1 benchmark (issue 3): every built-in scene analogue stepped with
+// Table-1 benchmark: every built-in scene analogue stepped with
 // the paper's local-frame model and central-difference scheme, printed side
 // by side with the paper's row where we have it; the FLOP rate of the
 // stiffness application against a dense Eigen matrix product measured in
@@ -226,7 +226,7 @@ int main(int argc, char** argv) {
       continue;
     }
     // The only paper figure we hold: 310 ms per step for its 3x3x3 cube at
-    // two levels (quoted in issue 3). The rest of Table 1 was not readable.
+    // two levels. The rest of Table 1 was not readable.
     PrintRow(name, r, name == "block3");
     if (name == "block3") {
       block3_stiffness_rate = r.stiffness_flops / (r.stiffness_ms * 1e6);

@@ -1,5 +1,5 @@
 // Undo that belongs to the person who acted (service.proto Undo, Redo,
-// RevertToScene; issue 40).
+// RevertToScene).
 //
 // Design:
 //  - An entry is ONE action of ONE client (its client_id): a command, a

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 42: dynsolid against VegaFEM on the same block, side by side in one run.
+# dynsolid against VegaFEM on the same block, side by side in one run.
 # See bench/vega/README.md.
 #
 #   bench/vega/compare.sh [--vega-src=DIR] [--build-dir=DIR] [--sizes="8 12 16"]

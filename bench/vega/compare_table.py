@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Issue 42: turns compare.sh's raw lines into markdown tables (and a plot).
+"""The VegaFEM comparison (bench/reports/scaling.md): turns compare.sh's raw
+lines into markdown tables (and a plot).
 
   compare_table.py RAW [--plot=FILE.png]
 

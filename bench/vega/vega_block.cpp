@@ -1,6 +1,7 @@
-// Issue 42: VegaFEM's side of the block comparison. Our own driver, written
-// against VegaFEM's public API; it is compiled only by bench/vega/compare.sh,
-// outside the repository, against a VegaFEM checkout (no Vega code lives here).
+// VegaFEM's side of the block comparison (bench/vega/README.md). Our own
+// driver, written against VegaFEM's public API; it is compiled only by
+// bench/vega/compare.sh, outside the repository, against a VegaFEM checkout
+// (no Vega code lives here).
 //
 // The case matches bench/scaling_bench.cc: a 3 m block of n^3 cubic cells
 // ((n+1)^3 nodes), E 1e5 Pa, nu 0.3, density 1000, Rayleigh damping 2 * M,

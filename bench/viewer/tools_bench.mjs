@@ -1,5 +1,5 @@
-// The viewer's tools benchmark (issue 41; viewer_bench.mjs beside it
-// measures the draw rate, first picture and drag round trip, issue 19): on
+// The viewer's tools benchmark (viewer_bench.mjs beside it measures the
+// draw rate, first picture and drag round trip): on
 // block3 and the chair at 1280x800 in headless Chromium with SwiftShader
 // (software WebGL, as the e2e tests), against a real dynsolid-server and
 // the gateway on loopback:

@@ -1,5 +1,5 @@
 #!/usr/bin/env node
-// The viewer's benchmark (issue 19): in headless Chromium on this machine
+// The viewer's benchmark: in headless Chromium on this machine
 // (WebGL on SwiftShader: no GPU), against a real dynsolid-server and the
 // gateway:
 //   1. frame time drawing block3 at 2 levels while it moves (requestAnimationFrame

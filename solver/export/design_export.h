@@ -1,5 +1,5 @@
 // Export of a design: the solid's current shape, at any subdivision level,
-// in the formats other tools open (issue 38). A pure function of the
+// in the formats other tools open (docs/export.md). A pure function of the
 // control mesh (its topology and sharp tags), the control points now and
 // at rest: no solid, no network. The server takes those at a step boundary
 // and calls this off the simulation loop.

@@ -1,4 +1,4 @@
-// A cut-away (issue 41; the paper's Fig. 13): where a plane cuts the solid
+// A cut-away (the paper's Fig. 13): where a plane cuts the solid
 // at its simulated level, as triangles coloured by a field of the cells
 // they cross. A pure function of the discretization and the control points
 // now and at rest (and, for stiffness, the design's materials): no solid,

@@ -1,7 +1,8 @@
-// Accuracy against analytic answers (issue 4, small sizes): a cantilever
-// under a tip load against Timoshenko beam theory and a bar in tension
-// against F L / (E A), both with the corotational model at 2 levels,
-// solved statically (linear, about rest).
+// Accuracy against analytic answers (the problems of
+// bench/reports/accuracy.md, at small sizes): a cantilever under a tip
+// load against Timoshenko beam theory and a bar in tension against
+// F L / (E A), both with the corotational model at 2 levels, solved
+// statically (linear, about rest).
 #include <cmath>
 
 #include <Eigen/Geometry>

@@ -1,4 +1,4 @@
-// Issue 42: central differences solve their constant matrix with a factor
+// Central differences solve their constant matrix with a factor
 // made once (solver.explicit_solve FACTORED, the default) instead of a CG a
 // step. On the accuracy cases (solver/tools/stability_cases.h) and on a block
 // large enough for the CG to run on its incomplete Cholesky preconditioner,

@@ -1,4 +1,4 @@
-// Stiff and extreme cases (issue 4, small sizes; the cases and the energy
+// Stiff and extreme cases (small sizes; the cases and the energy
 // account are solver/tools/stability_cases.h, which the stability report runs at
 // more steps): backward Euler stays bounded (no energy growth beyond
 // round-off); central difference either runs (sub-stepping) or refuses /

@@ -1,4 +1,4 @@
-"""dynsolid-client export against a real dynsolid-server (issue 38).
+"""dynsolid-client export against a real dynsolid-server.
 
 On a block3 session that has been pulled out of shape:
 1. OBJ at the session's own level: the vertices and faces the session

@@ -1,4 +1,4 @@
-"""Keeping the work against a real dynsolid-server (issue 38): "save as"
+"""Keeping the work against a real dynsolid-server: "save as"
 and animations from the journal.
 
 A `clay` session (started paused, so its steps come from the scripts) is

@@ -5,7 +5,7 @@
 // reference's answer, keeps fixed rows, and falls back to incomplete
 // Cholesky where the matrix is not positive definite. The explicit step's
 // factor (ReducedCholesky) solves the reduced system to rounding, and
-// CentralDifference with it steps as with CG (issue 42).
+// CentralDifference with it steps as with CG.
 #include "solver/integrators/cg.h"
 #include "solver/integrators/central_difference.h"
 #include "solver/integrators/reduced_cholesky.h"

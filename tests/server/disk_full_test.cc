@@ -1,4 +1,4 @@
-// A full data disk (issue 39): the real dynsolid-server binary with its
+// A full data disk: the real dynsolid-server binary with its
 // --data_dir on a small tmpfs that the test fills.
 //
 //  - A command that cannot be journaled is refused (RESOURCE_EXHAUSTED, "no

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""A session too big for the machine is refused before it is built (issue 39).
+"""A session too big for the machine is refused before it is built.
 
   memory_budget_test.py --server PATH --client PATH
 

@@ -1,4 +1,4 @@
-// Per-person undo in a session's core (server/history.h, issue 40): each
+// Per-person undo in a session's core (server/history.h): each
 // client undoes its own actions, applied to the solid as it is now; a
 // stroke and a drag are one action each; conflicts are refused with the
 // state unchanged; undo a lot then redo it all and the design is the same;

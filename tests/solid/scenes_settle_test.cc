@@ -1,4 +1,4 @@
-// Scenes that stand (issue: design that stays): in every built-in scene a
+// Scenes that stand (docs/sculpt.md, "Designs that stay"): in every built-in scene a
 // drag pulled for half a second and released settles (kinetic energy below
 // 1e-3 of its peak) within 3 s; the chair stands on its floor under
 // gravity, its back's top moving less than 2 % of its height; the clay

@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""--help and address checks of the five binaries (issue 39, "Command line").
+"""--help and address checks of the five binaries (bench/reports/reliability.md,
+sections 1 and 2).
 
   cmdline_test.py server=PATH client=PATH sim=PATH haptic=PATH load=PATH
 

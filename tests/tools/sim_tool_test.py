@@ -78,7 +78,7 @@ with tempfile.TemporaryDirectory() as tmp:
         check(s["ms_per_step"] > 0 and s["steps_per_second"] > 0, "step timings present")
         check("stiffness" in s["phases_ms"] and "solve" in s["phases_ms"], f"phases {s['phases_ms']}")
         check("damping" not in s["phases_ms"], "no separate damping phase")
-        # Central differences solve with the factor made at set-up (issue 42): no CG.
+        # Central differences solve with the factor made at set-up: no CG.
         check(s["cg_iterations"]["max_single_solve"] == 0,
               f"the factored explicit solve iterates not: {s['cg_iterations']}")
         check(s["energy_j"]["kinetic"] > 0, f"the loaded beam moves: {s['energy_j']}")

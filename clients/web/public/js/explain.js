@@ -15,7 +15,7 @@ const RULES = [
   [/command\.redo: cannot redo .*Nothing changed/,
     'The session changed since, so Redo cannot bring that back; nothing changed.',
     'Undo the later change first, or do it again by hand.'],
-  // Downloads (Export, issue 38).
+  // Downloads (Export).
   [/export limit|request\.level: -?\d+ is not in/i,
     'That level is too fine to export for this solid.', 'Pick a lower level in the Download menu.'],
   [/request\.format/i,

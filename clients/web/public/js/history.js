@@ -1,4 +1,4 @@
-// The History panel (issue 41): the session's undo history as the server
+// The History panel: the session's undo history as the server
 // keeps it (Inspect with history: true; service.proto HistoryInfo), one row
 // per action in session order, newest at the bottom: yours marked "you",
 // others' greyed under a short label ("person 1", never their client id),

@@ -1,4 +1,4 @@
-// Keeping the work (issue 38): the Download menu (the design as a file,
+// Keeping the work: the Download menu (the design as a file,
 // made by the server's Export and relayed by the gateway in pieces, with
 // progress) and the Record button (what the canvas shows, as WebM, made in
 // the browser by MediaRecorder). The helpers at the top are pure (tested

@@ -1,4 +1,4 @@
-// A sculptor's session on the chair, end to end (issue 41), asserting on
+// A sculptor's session on the chair, end to end, asserting on
 // the server's state and on the pixels: a stiffness stroke on the seat and
 // its undo; a cell extruded from the seat; the clay back pulled, keeping a
 // bend after the release; the cut-away, whose section shows the inside

@@ -1,4 +1,4 @@
-// Clay and Bake in the viewer (issue 37), through the page's own controls:
+// Clay and Bake in the viewer, through the page's own controls:
 // the Material brush paints block3 clay, a pull stays after its release,
 // Bake makes the pulled shape the rest shape (the status says "baked") and
 // Undo takes it back; clay on a local-frame session is refused with the

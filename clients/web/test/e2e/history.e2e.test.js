@@ -1,4 +1,4 @@
-// The History panel (issue 41) in a real browser against a real server and
+// The History panel in a real browser against a real server and
 // gateway: two pages on one block3 session. Page A pins the top, page B
 // extrudes a side face; A's panel lists both, its own as "you", B's greyed
 // as another person (never B's client id). A's Undo strikes its pin through

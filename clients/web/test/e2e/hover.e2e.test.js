@@ -1,4 +1,4 @@
-// Issue 41's hints on block3, asserted on pixels and the page's state, not
+// The viewer's hints on block3, asserted on pixels and the page's state, not
 // on time: the help overlay on a first visit (remembered, reopened with
 // ?), the scene picker's size of a scene built here, Extrude and Merge lighting the control face under the pointer (green:
 // taken, blue: merge's first, red: refused with the reason by the pointer),

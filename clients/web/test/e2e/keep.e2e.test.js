@@ -1,4 +1,4 @@
-// Keeping the work (issue 38) in a real browser against a real server and
+// Keeping the work in a real browser against a real server and
 // gateway: block3 downloaded through the Download menu as glTF (the file's
 // glTF header) and STL (84 + 50 n bytes) with the progress bar at 100 %,
 // and the Record button: a non-empty WebM download, or disabled with its

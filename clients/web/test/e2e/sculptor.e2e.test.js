@@ -1,4 +1,4 @@
-// The viewer as a sculptor meets it (issue 41), on the chair, asserting on
+// The viewer as a sculptor meets it, on the chair, asserting on
 // the camera and the pixels, not only on messages: the tools sized to the
 // chair, a missed press that leaves the camera where it was, the orbit
 // above the floor, the view presets, the brush disc under the pointer,

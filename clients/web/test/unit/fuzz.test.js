@@ -1,4 +1,4 @@
-// A fuzz pass over the gateway's message handling (issue 39): random and
+// A fuzz pass over the gateway's message handling: random and
 // mutated page messages into a Bridge whose fake server serializes each
 // request with the real service.proto (as @grpc/grpc-js does, so a request
 // it cannot encode fails as it would). Seeded: the same messages each run.

@@ -1,5 +1,5 @@
 // The real gateway process (gateway/main.js) in front of a fake
-// dynsolid-server, on 127.0.0.1 (gatewayproc.js): the doors of issue 39 as
+// dynsolid-server, on 127.0.0.1 (gatewayproc.js): the gateway's doors as
 // a browser or a script meets them. No C++ server, no clock: every step
 // waits for the answer it needs.
 

@@ -1,4 +1,4 @@
-// The gateway's doors (gateway/guard.js, issue 39): which WebSocket
+// The gateway's doors (gateway/guard.js): which WebSocket
 // upgrades are taken (Origin, loopback, access token), which request paths
 // can be read, and the token bucket of the rate limit, on a fake clock.
 

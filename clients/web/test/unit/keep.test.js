@@ -1,4 +1,4 @@
-// Keeping the work on the page (issue 38): the Download menu's choices and
+// Keeping the work on the page: the Download menu's choices and
 // request, the connection putting a download together from the gateway's
 // pieces (and refusing pieces out of place), refusals in plain words, and
 // the Record button's checks (no MediaRecorder, no WebM codec) and file

@@ -1,4 +1,4 @@
-// A page's bridge (gateway/bridge.js) against issue 39, in process: its
+// A page's bridge (gateway/bridge.js) against a hostile page, in process: its
 // session list holds only its own sessions, malformed messages are
 // answered, and the per-connection rate limit refuses clearly (a fake
 // clock). The old gateway shared one token map between its pages; these

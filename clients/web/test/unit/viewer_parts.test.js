@@ -1,4 +1,4 @@
-// The page's pure parts from issue 41: refusals in plain words, the status
+// The page's pure parts: refusals in plain words, the status
 // line that fits 1280 px, the keys, the camera's rules and the creased
 // normals and matcap of the shading.
 

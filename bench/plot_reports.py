@@ -383,7 +383,7 @@ def stability_md(rows, steps, args):
         "Each case is a small corotational solid (mostly a 2 x 1 x 1 block at 1 level, clamped at "
         "x = 0), run with central difference and with backward Euler at scene steps 1e-4, 1e-3, "
         "1e-2 and 1/30 s, for its duration (1 s; the inverting load 3 s) or at most 4000 steps. "
-        "Cases and the energy account: `bench/stability_cases.{h,cc}` (the same code the tests in "
+        "Cases and the energy account: `solver/tools/stability_cases.{h,cc}` (the same code the tests in "
         "`tests/accuracy/stability_test.cc` run at smaller sizes).",
         "",
         "Energy: H = kinetic + strain + penalty springs - work of the constant loads, kept from "

@@ -5,90 +5,19 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <limits>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "solver/common/status_macros.h"
 #include "solver/solid/solid.h"
-#include "solver/common/hash128.h"
+#include "solver/solid/material_transfer.h"
 #include "solver/solid/solid_impl.h"
 
 namespace dynsolid::solid {
 namespace {
-
-// The material samples of one old control cell, binned on a uniform grid
-// for nearest-sample queries.
-class CellSamples {
- public:
-  void Add(const Eigen::Vector3d& x, const models::MaterialPoint& m) {
-    xs_.push_back(x);
-    ms_.push_back(m);
-  }
-  void Index() {
-    if (xs_.empty()) return;
-    lo_ = hi_ = xs_[0];
-    for (const Eigen::Vector3d& x : xs_) {
-      lo_ = lo_.cwiseMin(x);
-      hi_ = hi_.cwiseMax(x);
-    }
-    const double extent = std::max((hi_ - lo_).maxCoeff(), 1e-12);
-    n_ = std::clamp(static_cast<int>(std::cbrt(static_cast<double>(xs_.size()))), 1, 64);
-    bin_ = extent / n_ * (1 + 1e-9);
-    bins_.assign(static_cast<size_t>(n_) * n_ * n_, {});
-    for (size_t k = 0; k < xs_.size(); ++k) bins_[Bin(Cell(xs_[k]))].push_back(static_cast<int32_t>(k));
-  }
-  // The material of the sample nearest x (ties: the lowest index).
-  const models::MaterialPoint& Nearest(const Eigen::Vector3d& x) const {
-    const Eigen::Vector3i c = Cell(x);
-    double best = std::numeric_limits<double>::infinity();
-    int32_t best_k = 0;
-    for (int r = 0; r <= n_; ++r) {
-      // Every sample in rings beyond r is at least (r - 1) bins away... stop
-      // once the best is closer than the ring's inner distance.
-      if (best_k >= 0 && std::isfinite(best) && (r - 1) * bin_ > std::sqrt(best)) break;
-      for (int i = c.x() - r; i <= c.x() + r; ++i) {
-        for (int j = c.y() - r; j <= c.y() + r; ++j) {
-          for (int k = c.z() - r; k <= c.z() + r; ++k) {
-            if (std::max({std::abs(i - c.x()), std::abs(j - c.y()), std::abs(k - c.z())}) != r) continue;
-            if (i < 0 || j < 0 || k < 0 || i >= n_ || j >= n_ || k >= n_) continue;
-            for (int32_t s : bins_[Bin({i, j, k})]) {
-              const double d = (xs_[s] - x).squaredNorm();
-              if (d < best || (d == best && s < best_k)) {
-                best = d;
-                best_k = s;
-              }
-            }
-          }
-        }
-      }
-    }
-    return ms_[best_k];
-  }
-
- private:
-  Eigen::Vector3i Cell(const Eigen::Vector3d& x) const {
-    Eigen::Vector3i c;
-    for (int a = 0; a < 3; ++a) {
-      c[a] = std::clamp(static_cast<int>(std::floor((x[a] - lo_[a]) / bin_)), 0, n_ - 1);
-    }
-    return c;
-  }
-  size_t Bin(const Eigen::Vector3i& c) const {
-    return (static_cast<size_t>(c.z()) * n_ + c.y()) * n_ + c.x();
-  }
-  std::vector<Eigen::Vector3d> xs_;
-  std::vector<models::MaterialPoint> ms_;
-  Eigen::Vector3d lo_, hi_;
-  int n_ = 1;
-  double bin_ = 1;
-  std::vector<std::vector<int32_t>> bins_;
-};
 
 // A region's control cells mapped to the new mesh: every new cell whose
 // source is one of them.
@@ -192,125 +121,20 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   for (size_t k = 0; uniform && k < layout.materials[0].size(); ++k) {
     uniform = layout.materials[0][k] == base;
   }
-  // Painted: an element whose rest nodes are, bit for bit, those of an old
-  // element in its source cell keeps that element's samples (the edit left
-  // it alone); any other sample takes the material of the nearest old
-  // sample in its source cell. A source cell of one material throughout
-  // gives every element of its new cells that material at every point.
-  // The layout calls the callbacks on its pool threads: what they read is
-  // made first, for the source cells the new cells name (a cell of one
-  // material needs no keys nor bins), but for a cell's sample bins, made
-  // once when first needed (std::call_once: most cells never need them).
-  std::vector<std::vector<std::pair<int, int32_t>>> old_elements(old_cells);
-  std::unordered_map<Key128, std::pair<int, int32_t>, Key128Hash> by_nodes;
-  // The key of an element's rest nodes: kind, then node row(i) for i < n.
-  auto nodes_key = [](int kind, int n, const auto& row) {
-    Hash128 h;
-    h.Mix(static_cast<uint64_t>(kind));
-    for (int i = 0; i < n; ++i) h.Doubles(row(i), 3);
-    return h.value();
-  };
-  std::vector<CellSamples> by_cell;
-  std::unique_ptr<std::once_flag[]> binned;
-  std::function<models::MaterialPoint(const Eigen::Vector3d&, int32_t)> sampler;
+  // Painted: the old samples carried onto the new cells
+  // (material_transfer.h).
+  std::unique_ptr<MaterialTransfer> transfer;
+  models::MaterialSampler sampler;
   models::ElementMaterials whole;
-  // Per old cell: its arrays of one material (by kind), when it is of one
-  // (else empty).
-  std::vector<std::array<std::vector<models::MaterialPoint>, 3>> uniform_arrays;
   if (!uniform) {
-    for (int kind = 0; kind < fem::kElementKinds; ++kind) {
-      const models::ElementBlock& block = layout.blocks[kind];
-      for (int32_t e = 0; e < block.size(); ++e) {
-        old_elements[d_.hierarchy.control_cell[block.cell[e]]].push_back({kind, e});
-      }
-    }
-    by_cell.resize(old_cells);
-    binned = std::make_unique<std::once_flag[]>(old_cells);
-    uniform_arrays.resize(old_cells);
-    std::vector<uint8_t> named(old_cells, 0);
-    for (int32_t src : cell_source) {
-      if (src >= 0) named[src] = 1;
-    }
-    // Per material array: every sample equal to its first (arrays are
-    // distinct by content, so a cell is of one material when its elements'
-    // arrays are each of one and those agree).
-    std::vector<uint8_t> constant(layout.materials.size(), 0);
-    for (size_t m = 0; m < layout.materials.size(); ++m) {
-      const std::vector<models::MaterialPoint>& a = layout.materials[m];
-      constant[m] = !a.empty() && std::all_of(a.begin(), a.end(),
-                                              [&](const models::MaterialPoint& p) { return p == a[0]; });
-    }
-    for (int32_t src = 0; src < old_cells; ++src) {
-      if (!named[src] || old_elements[src].empty()) continue;
-      const models::MaterialPoint* first = nullptr;
-      bool same = true;
-      for (const auto& [k, e] : old_elements[src]) {
-        const models::ElementBlock& block = layout.blocks[k];
-        const int32_t m = block.groups[block.group[e]].material;
-        if (!constant[m]) {
-          same = false;
-          break;
-        }
-        if (first == nullptr) first = &layout.materials[m][0];
-        if (!(layout.materials[m][0] == *first)) {
-          same = false;
-          break;
-        }
-      }
-      if (same && first != nullptr) {
-        for (int kind = 0; kind < fem::kElementKinds; ++kind) {
-          uniform_arrays[src][kind].assign(layout.tables[kind].points, *first);
-        }
-        continue;
-      }
-      // Its elements keyed by their rest nodes.
-      for (const auto& [k, e] : old_elements[src]) {
-        const int32_t* ids = layout.blocks[k].element_nodes(e);
-        by_nodes.try_emplace(nodes_key(k, layout.blocks[k].nodes,
-                                       [&](int i) { return old_nodes.row(ids[i]).data(); }),
-                             k, e);
-      }
-    }
-    // (The callbacks outlive this block: they capture only what is
-    // declared before it.)
-    sampler = [&](const Eigen::Vector3d& x, int32_t cell) -> models::MaterialPoint {
-      const int32_t src = cell_source[cell];
-      if (src < 0 || old_elements[src].empty()) return base;
-      std::call_once(binned[src], [&] {
-        for (const auto& [k, e] : old_elements[src]) {
-          const models::ElementBlock& block = layout.blocks[k];
-          const fem::KindTable& table = layout.tables[k];
-          const int32_t* ids = block.element_nodes(e);
-          const std::vector<models::MaterialPoint>& array =
-              layout.materials[block.groups[block.group[e]].material];
-          for (int q = 0; q < table.points; ++q) {
-            Eigen::Vector3d p = Eigen::Vector3d::Zero();
-            for (int i = 0; i < block.nodes; ++i) {
-              p += table.N(q)[i] * old_nodes.row(ids[i]).transpose();
-            }
-            by_cell[src].Add(p, array[q]);
-          }
-        }
-        by_cell[src].Index();
-      });
-      return by_cell[src].Nearest(x);
+    transfer = std::make_unique<MaterialTransfer>(layout, old_nodes, old.rest_nodes,
+                                                  d_.hierarchy.control_cell, old_cells,
+                                                  cell_source, base);
+    sampler = [&transfer](const Eigen::Vector3d& x, int32_t cell) {
+      return transfer->Sample(x, cell);
     };
-    whole = [&](int kind, const fem::NodeMatrixX3& x,
-                int32_t cell) -> const std::vector<models::MaterialPoint>* {
-      const int32_t src = cell_source[cell];
-      if (src < 0 || old_elements[src].empty()) return nullptr;
-      if (!uniform_arrays[src][kind].empty()) return &uniform_arrays[src][kind];
-      auto it = by_nodes.find(nodes_key(kind, static_cast<int>(x.rows()),
-                                        [&](int i) { return x.row(i).data(); }));
-      if (it == by_nodes.end()) return nullptr;
-      const auto [k, e] = it->second;
-      const models::ElementBlock& block = layout.blocks[k];
-      if (d_.hierarchy.control_cell[block.cell[e]] != cell_source[cell]) return nullptr;
-      const int32_t* ids = block.element_nodes(e);
-      for (Eigen::Index i = 0; i < x.rows(); ++i) {
-        if (x.row(i) != old.rest_nodes.row(ids[i])) return nullptr;
-      }
-      return &layout.materials[block.groups[block.group[e]].material];
+    whole = [&transfer](int kind, const fem::NodeMatrixX3& x, int32_t cell) {
+      return transfer->Whole(kind, x, cell);
     };
   }
   ASSIGN_OR_RETURN(std::unique_ptr<Solid> out,
@@ -336,6 +160,75 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::BuildRemeshed(
   }
   return out;
 }
+
+namespace {
+
+// The old solid's loads, drags and constraints (with their ids) located on
+// the new one, `im`, whose rest positions are the old ones moved by
+// `moved` (a bake moves them; else the identity); what no longer finds its
+// place is listed in the report's dropped loads and constraints.
+LoadSet::Contents CarryLoads(const Solid::Impl& old, const Solid::Impl& im,
+                             const Solid::TopologyTransfer& t,
+                             const std::vector<int32_t>& point_map,
+                             const std::function<Vec3(const Vec3&)>& moved,
+                             Solid::TransferReport& rep) {
+  LoadSet::Contents loads;
+  loads.next_id = old.loads.next_id();
+  loads.gravity = old.loads.gravity();
+  const bool snap = im.settings.snap_forces_to_quadrature();
+  for (const LoadSet::PointLoad& l : old.loads.point_loads()) {
+    PointForce msg = l.msg;
+    *msg.mutable_position() = moved(msg.position());
+    absl::StatusOr<MaterialLocation> at = im.Locate(V(msg.position()), snap);
+    if (at.ok()) {
+      loads.point_loads.push_back({l.id, std::move(msg), *at});
+    } else {
+      rep.dropped_loads.push_back(l.id);
+    }
+  }
+  for (const LoadSet::PressureLoad& l : old.loads.pressures()) {
+    Pressure msg = l.msg;
+    *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source, nullptr);
+    std::vector<int32_t> quads = im.SelectQuads(msg.region());
+    if (quads.empty()) {
+      rep.dropped_loads.push_back(l.id);
+    } else {
+      loads.pressures.push_back({l.id, std::move(msg), std::move(quads)});
+    }
+  }
+  for (const LoadSet::DragLoad& l : old.loads.drags()) {
+    Drag drag = l.drag;
+    CurveDrag shape = l.shape;
+    *drag.mutable_material_point() = moved(drag.material_point());
+    for (Vec3& x : *shape.mutable_material_points()) x = moved(x);
+    absl::StatusOr<LoadSet::DragLoad> carried = l.curve ? im.MakeCurve(shape) : im.MakeDrag(drag);
+    if (carried.ok()) {
+      carried->id = l.id;
+      loads.drags.push_back(*std::move(carried));
+    } else {
+      rep.dropped_loads.push_back(l.id);
+    }
+  }
+  std::sort(rep.dropped_loads.begin(), rep.dropped_loads.end());
+  for (const LoadSet::FixConstraint& c : old.loads.fixes()) {
+    Region region;
+    if (t.baked != nullptr) {
+      // The same control points, whatever their new rest positions.
+      for (int32_t i : c.points) region.add_control_points(i);
+    } else {
+      region = RemapRegion(c.region, t.cell_source, &point_map);
+    }
+    std::vector<int32_t> points = im.SelectControlPoints(region);
+    if (points.empty()) {
+      rep.dropped_constraints.push_back(c.id);
+      continue;
+    }
+    loads.fixes.push_back({c.id, std::move(region), std::move(points)});
+  }
+  return loads;
+}
+
+}  // namespace
 
 absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> out,
                                                         const Scene& scene,
@@ -404,10 +297,6 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   }
 
   // Loads, drags and constraints, with their ids.
-  LoadSet::Contents loads;
-  loads.next_id = old.loads.next_id();
-  loads.gravity = old.loads.gravity();
-  const bool snap = im.settings.snap_forces_to_quadrature();
   // A bake moves rest positions: a material point's new one is its control
   // row times the baked positions.
   auto moved = [&](const Vec3& x) -> Vec3 {
@@ -420,61 +309,13 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
     out.set_z(b->z());
     return out;
   };
-  for (const LoadSet::PointLoad& l : old.loads.point_loads()) {
-    PointForce msg = l.msg;
-    *msg.mutable_position() = moved(msg.position());
-    absl::StatusOr<MaterialLocation> at = im.Locate(V(msg.position()), snap);
-    if (at.ok()) {
-      loads.point_loads.push_back({l.id, std::move(msg), *at});
-    } else {
-      rep.dropped_loads.push_back(l.id);
-    }
-  }
-  for (const LoadSet::PressureLoad& l : old.loads.pressures()) {
-    Pressure msg = l.msg;
-    *msg.mutable_region() = RemapRegion(msg.region(), t.cell_source, nullptr);
-    std::vector<int32_t> quads = im.SelectQuads(msg.region());
-    if (quads.empty()) {
-      rep.dropped_loads.push_back(l.id);
-    } else {
-      loads.pressures.push_back({l.id, std::move(msg), std::move(quads)});
-    }
-  }
-  for (const LoadSet::DragLoad& l : old.loads.drags()) {
-    Drag drag = l.drag;
-    CurveDrag shape = l.shape;
-    *drag.mutable_material_point() = moved(drag.material_point());
-    for (Vec3& x : *shape.mutable_material_points()) x = moved(x);
-    absl::StatusOr<LoadSet::DragLoad> carried = l.curve ? im.MakeCurve(shape) : im.MakeDrag(drag);
-    if (carried.ok()) {
-      carried->id = l.id;
-      loads.drags.push_back(*std::move(carried));
-    } else {
-      rep.dropped_loads.push_back(l.id);
-    }
-  }
-  std::sort(rep.dropped_loads.begin(), rep.dropped_loads.end());
+  LoadSet::Contents loads = CarryLoads(old, im, t, point_map, moved, rep);
   // A survivor held before is held where it was. (A new point whose only
   // source is a held point, such as an extruded copy of a pinned face's
   // vertex, is not that point: it is held where it is, if a pin takes it.)
   std::vector<uint8_t> was_fixed(nv, 0);
   for (int32_t v = 0; v < nv; ++v) {
     was_fixed[v] = point_source[v] >= 0 && old.fixed[point_source[v]] != 0;
-  }
-  for (const LoadSet::FixConstraint& c : old.loads.fixes()) {
-    Region region;
-    if (t.baked != nullptr) {
-      // The same control points, whatever their new rest positions.
-      for (int32_t i : c.points) region.add_control_points(i);
-    } else {
-      region = RemapRegion(c.region, t.cell_source, &point_map);
-    }
-    std::vector<int32_t> points = im.SelectControlPoints(region);
-    if (points.empty()) {
-      rep.dropped_constraints.push_back(c.id);
-      continue;
-    }
-    loads.fixes.push_back({c.id, std::move(region), std::move(points)});
   }
   for (int i = 0; i < scene.traced_size(); ++i) {
     absl::StatusOr<MaterialLocation> at =

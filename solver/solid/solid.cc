@@ -382,10 +382,7 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
     ExternalForces(p, p_prev, f, f_press, sub);
     if (sub.loads >= 0) sum.loads += sub.loads;
   }
-  if (ledger_rebase) {
-    RebaseLedger(p, p_prev);
-    ledger_rebase = false;
-  }
+  if (ledger.rebase_requested()) RebaseLedger(p, p_prev);
   for (int k = 0; k < substeps; ++k) {
     const auto t0 = Clock::now();
     integrators::CgStats cg;
@@ -454,23 +451,14 @@ absl::Status Solid::Impl::Advance(Points& p, Points& p_prev, StepStats& stats,
                  (p_next.row(spring_point[s]) - rest_control.row(spring_point[s])).squaredNorm();
     }
     if (loads.has_constant_force()) {
-      ledger.work += (loads.constant_forces().array() * (p_next - p).array()).sum();
+      ledger.AddWork((loads.constant_forces().array() * (p_next - p).array()).sum());
     }
-    if (probe.active()) ledger.work += probe.Work(p, p_next);
+    if (probe.active()) ledger.AddWork(probe.Work(p, p_next));
     // Follower pressure: trapezoidal work over the sub-step.
     if (has_pressure) {
-      ledger.work += 0.5 * ((f_press + f_press_next).array() * (p_next - p).array()).sum();
+      ledger.AddWork(0.5 * ((f_press + f_press_next).array() * (p_next - p).array()).sum());
     }
-    const double mech = kinetic + last_strain_energy + springs;
-    const double hamiltonian = mech - ledger.work;
-    ledger.peak = std::max(ledger.peak, mech);
-    if (!std::isfinite(hamiltonian) ||
-        hamiltonian - ledger.h_min > 0.5 * ledger.peak + 1e-12 * (1.0 + ledger.peak)) {
-      return absl::InternalError(absl::StrCat(
-          "energy grew without external work at sub-step ", k, " (H rose by ",
-          hamiltonian - ledger.h_min, " J over a peak of ", ledger.peak, " J)"));
-    }
-    ledger.h_min = std::min(ledger.h_min, hamiltonian);
+    RETURN_IF_ERROR(ledger.Close(kinetic + last_strain_energy + springs, k));
     p_prev.swap(p);
     p.swap(p_next);
     f.swap(f_next);
@@ -490,10 +478,9 @@ absl::Status Solid::Step() {
   StepStats stats;
   im.backup_p = p_;
   im.backup_prev = p_prev_;
-  const Impl::Ledger ledger_at_start = im.ledger;
+  const EnergyLedger::Values ledger_at_start = im.ledger.values();
   if (im.environment != nullptr) im.environment->Checkpoint();
   if (im.plasticity != nullptr) im.plasticity->Checkpoint();
-  const bool rebase_at_start = im.ledger_rebase;
   const int64_t passes_at_start = im.element_passes, frames_at_start = im.frame_passes;
   const int64_t rechecks_at_start = im.implicit.rechecked_starts();
   for (int attempt = 0;; ++attempt) {
@@ -506,8 +493,7 @@ absl::Status Solid::Step() {
     // Stability guard: back to the step's start, halve the sub-step, retry.
     p_ = im.backup_p;
     p_prev_ = im.backup_prev;
-    im.ledger = ledger_at_start;
-    im.ledger_rebase = rebase_at_start;
+    im.ledger.set_values(ledger_at_start);
     if (im.environment != nullptr) im.environment->Rollback();
     if (im.plasticity != nullptr) im.plasticity->Rollback();
     im.model->ResetFrames();
@@ -542,11 +528,7 @@ void Solid::SetAtRest(const Points& p) {
   im.model->ResetFrames();
   if (im.use_implicit) im.implicit.ResetWarmStart();
   im.forces_valid = false;
-  im.ledger = Impl::Ledger();
-  im.ledger.started = true;
-  im.ledger.h_min = StrainEnergy(p_);
-  im.ledger.peak = im.ledger.h_min;
-  im.ledger_rebase = false;
+  im.ledger.Start(StrainEnergy(p_));
 }
 
 int Solid::threads() const { return impl_->pool->size(); }

@@ -382,9 +382,7 @@ void Solid::Builder::StartAtRest() {
   im.velocity = (s_.p_ - s_.p_prev_) / im.h_sub;
   im.mass_velocity = im.mt * im.velocity;
   // The ledger starts from the initial kinetic energy (no strain at rest).
-  im.ledger.started = true;
-  im.ledger.h_min = 0.5 * (im.velocity.array() * im.mass_velocity.array()).sum();
-  im.ledger.peak = im.ledger.h_min;
+  im.ledger.Start(0.5 * (im.velocity.array() * im.mass_velocity.array()).sum());
 }
 
 void Solid::Impl::MakeImplicitOperators() {

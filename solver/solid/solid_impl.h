@@ -38,6 +38,7 @@
 #include "solver/fem/shape.h"
 #include "solver/models/internal_force.h"
 #include "solver/scene/scene_loader.h"
+#include "solver/solid/energy_ledger.h"
 #include "solver/solid/load_set.h"
 #include "solver/solid/probe_loads.h"
 #include "solver/solid/solid.h"
@@ -375,19 +376,8 @@ struct Solid::Impl {
     return x;
   }
 
-  // Energy bookkeeping for the stability guard: H = kinetic + strain +
-  // spring energy - work of the external forces never grows for a
-  // stable run (damping only lowers it).
-  struct Ledger {
-    double work = 0;       // J, cumulative external work
-    double h_min = 0;      // lowest H so far
-    double peak = 0;       // highest kinetic + strain + spring energy so far
-    bool started = false;
-  };
-  Ledger ledger;
-  // Re-baseline the ledger at the start of the next step (after a fix,
-  // unfix or paint changed what the energies mean).
-  bool ledger_rebase = false;
+  // The stability guard's energy account: a part (energy_ledger.h).
+  EnergyLedger ledger;
   Points velocity, mass_velocity, f_next;
   bool forces_valid = false;
 
@@ -609,10 +599,7 @@ struct Solid::Impl {
     const Points v = (p - p_prev) / h_sub;
     const Points mv = mt * v;
     const double mech = 0.5 * (v.array() * mv.array()).sum() + last_strain_energy + SpringEnergy(p);
-    ledger.work = 0;
-    ledger.h_min = mech;
-    ledger.peak = std::max(ledger.peak, mech);
-    ledger.started = true;
+    ledger.Rebase(mech);
   }
 };
 
@@ -629,8 +616,7 @@ class Solid::PreparedState {
   double omega = 0, stable = 0;
   bool forces_valid = false;
   double strain = 0;
-  bool rebase = false;
-  Impl::Ledger ledger;
+  EnergyLedger::Values ledger;  // its rebase flag included
   Points p, p_prev, f, f_press;
   integrators::BackwardEuler::History warm;
   std::string omega_fixed_bytes;

@@ -248,7 +248,7 @@ absl::StatusOr<int64_t> Solid::FixRegion(const Region& r) {
   for (int32_t i : newly_held) p_prev_.row(i) = p_.row(i);
   ApplyFixed();
   im.forces_valid = false;
-  im.ledger_rebase = true;
+  im.ledger.RequestRebase();
   return id;
 }
 
@@ -325,7 +325,7 @@ absl::Status Solid::ApplyUnfix(PreparedUnfix& prepared) {
   }
   ApplyFixed();
   im.forces_valid = false;
-  im.ledger_rebase = true;
+  im.ledger.RequestRebase();
   return absl::OkStatus();
 }
 

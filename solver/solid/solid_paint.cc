@@ -282,7 +282,7 @@ absl::Status Solid::ApplyPaint(PreparedPaint& prepared) {
   report_.stable_step = im.stable_step;
   report_.substeps = im.substeps;
   im.forces_valid = false;
-  im.ledger_rebase = true;
+  im.ledger.RequestRebase();
   return absl::OkStatus();
 }
 

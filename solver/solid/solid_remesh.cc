@@ -353,7 +353,7 @@ absl::StatusOr<std::unique_ptr<Solid>> Solid::CarryOver(std::unique_ptr<Solid> o
   im.RebuildConstantLoads();
   im.RebuildPressure();
   im.forces_valid = false;
-  im.ledger_rebase = true;
+  im.ledger.RequestRebase();
   s.time_ = time_;
   s.steps_ = steps_;
   s.rollbacks_ = rollbacks_;

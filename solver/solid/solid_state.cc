@@ -56,11 +56,12 @@ SavedState Solid::SaveStateParts() const {
   w.Put<double>(im.stable_step);
   w.Put<uint8_t>(im.forces_valid);
   w.Put<double>(im.last_strain_energy);
-  w.Put<uint8_t>(im.ledger_rebase);
-  w.Put<double>(im.ledger.work);
-  w.Put<double>(im.ledger.h_min);
-  w.Put<double>(im.ledger.peak);
-  w.Put<uint8_t>(im.ledger.started);
+  const EnergyLedger::Values& ledger = im.ledger.values();
+  w.Put<uint8_t>(ledger.rebase);
+  w.Put<double>(ledger.work);
+  w.Put<double>(ledger.h_min);
+  w.Put<double>(ledger.peak);
+  w.Put<uint8_t>(ledger.started);
   w.Matrix(p_);
   w.Matrix(p_prev_);
   if (im.probe.active() && im.f.rows() == im.probe.force().rows()) {
@@ -282,7 +283,7 @@ MotionRest ReadMotion(StateReader& r, const Solid::Impl& im, int64_t nc,
   out.stable = r.Get<double>("stable_step");
   out.forces_valid = r.Get<uint8_t>("forces_valid") != 0;
   out.strain = r.Get<double>("strain energy");
-  out.rebase = r.Get<uint8_t>("ledger rebase") != 0;
+  out.ledger.rebase = r.Get<uint8_t>("ledger rebase") != 0;
   out.ledger.work = r.Get<double>("ledger");
   out.ledger.h_min = r.Get<double>("ledger");
   out.ledger.peak = r.Get<double>("ledger");
@@ -568,8 +569,7 @@ absl::Status Solid::Install(PreparedState& prepared, const std::pair<double, int
   ++im.contact.epoch;      // and its fixed set or material may differ
   im.loads_changed = true;  // not saved: recomputing the loads changes no bit
   im.last_strain_energy = s.strain;
-  im.ledger = s.ledger;
-  im.ledger_rebase = s.rebase;
+  im.ledger.set_values(s.ledger);
   time_ = clock != nullptr ? clock->first : s.time;
   steps_ = clock != nullptr ? clock->second : s.steps;
   rollbacks_ = s.rollbacks;

@@ -10,43 +10,12 @@
 #include "absl/time/time.h"
 #include "dynsolid/journal.pb.h"
 #include "server/log.h"
-#include "solver/common/stats.h"
 #include "server/thread_priority.h"
 
 namespace dynsolid::server {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-constexpr size_t kStepWindow = 1000;
-
-void PushWindow(std::deque<double>& d, double v) {
-  d.push_back(v);
-  if (d.size() > kStepWindow) d.pop_front();
-}
-
-// The control mesh with the ids topology edits take.
-void FillControlMesh(const scene::Discretization& d, ControlMeshInfo* out) {
-  const mesh::CellComplex& c = d.control();
-  const Points& p = c.positions();
-  out->mutable_rest_positions()->Reserve(static_cast<int>(p.size()));
-  for (int32_t v = 0; v < c.num_vertices(); ++v) {
-    for (int a = 0; a < 3; ++a) out->add_rest_positions(p(v, a));
-  }
-  out->add_face_offsets(0);
-  for (int32_t f = 0; f < c.num_faces(); ++f) {
-    for (int32_t v : c.face_vertices(f)) out->add_face_vertices(v);
-    out->add_face_offsets(out->face_vertices_size());
-    out->add_face_cells(c.face_cells(f)[0]);
-    out->add_face_cells(c.face_cells(f)[1]);
-  }
-  for (int32_t e = 0; e < c.num_edges(); ++e) {
-    out->add_edge_vertices(c.edge_vertices(e)[0]);
-    out->add_edge_vertices(c.edge_vertices(e)[1]);
-    out->add_edge_sharp(static_cast<size_t>(e) < d.control_sharp.size() && d.control_sharp[e] != 0);
-  }
-  out->set_cells(c.num_cells());
-}
 
 }  // namespace
 
@@ -256,207 +225,42 @@ void SessionLoop::RemoveWatcher(WatchSink* sink) {
   counters_.gone_bytes += w.bytes_sent();
 }
 
-void SessionLoop::Inspect(const InspectRequest& request,
-                          std::function<void(absl::StatusOr<InspectReply>)> done,
-                          std::function<bool()> cancelled) {
-  {
-    absl::MutexLock lock(&mu_);
-    if (!stop_) {
-      inspects_.push_back(PendingInspect{request, std::move(done), std::move(cancelled), nullptr});
-      wake_.Signal();
-      return;
-    }
-  }
-  done(absl::UnavailableError("the session is closed"));
-}
-
-void SessionLoop::Query(std::function<void(const SimCore*)> fn) {
-  {
-    absl::MutexLock lock(&mu_);
-    if (!stop_) {
-      inspects_.push_back(PendingInspect{InspectRequest(), nullptr, nullptr, std::move(fn)});
-      wake_.Signal();
-      return;
-    }
-  }
-  fn(nullptr);
-}
-
 // ---- Simulation thread ----
 
 void SessionLoop::Run() {
   NameThisThread("sim");
-  using std::chrono::duration;
-  const auto h = std::chrono::duration_cast<Clock::duration>(duration<double>(time_step_));
+  Schedule schedule;
+  schedule.h =
+      std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time_step_));
   // The most real-time debt the loop catches up rather than drops (a step,
   // if that is longer).
-  const Clock::duration catch_up =
-      std::max<Clock::duration>(h, std::chrono::duration_cast<Clock::duration>(kCatchUp));
-  Clock::time_point next_step{};
-  bool anchored = false;
-  Clock::time_point rate_start = Clock::now();
-  int64_t rate_steps = 0;
+  schedule.catch_up = std::max<Clock::duration>(
+      schedule.h, std::chrono::duration_cast<Clock::duration>(kCatchUp));
+  schedule.rate_start = Clock::now();
   next_publish_ = Clock::now();
-  Clock::time_point next_probe_refresh{};  // while paused: probes refresh every h
   for (;;) {
-    std::deque<PendingCommand> commands;
-    bool stop = false;
-    bool publish_requested = false;
-    bool has_watchers = false;
-    {
-      absl::MutexLock lock(&mu_);
-      for (;;) {
-        if (stop_ || !commands_.empty() || !inspects_.empty() || build_done_ ||
-            !ended_streams_.empty()) {
-          break;
-        }
-        const Clock::time_point now = Clock::now();
-        Clock::time_point deadline = Clock::time_point::max();
-        if (core_->WantsStep()) {
-          deadline = anchored ? next_step : now;
-        } else if (probes_.busy()) {
-          deadline = next_probe_refresh;
-        }
-        const bool dirty = publish_requested_ || core_->steps() != last_published_step_ ||
-                           core_->fields_version() != last_published_fields_;
-        if (!watchers_.empty() && dirty) deadline = std::min(deadline, next_publish_);
-        if (deadline <= now) break;
-        const absl::Duration wait = deadline == Clock::time_point::max()
-                                        ? absl::Seconds(1)
-                                        : absl::FromChrono(deadline - now);
-        wake_.WaitWithTimeout(&mu_, wait);
-      }
-      stop = stop_;
-      commands.swap(commands_);
-      for (ReplySink* ended : ended_streams_) streams_to_release_.push_back(ended);
-      ended_streams_.clear();
-      for (PendingInspect& i : inspects_) waiting_inspects_.push_back(std::move(i));
-      inspects_.clear();
-      publish_requested = publish_requested_;
-      has_watchers = !watchers_.empty();
-    }
-    if (stop) {
-      // Commands not yet applied are not answered (the client resends): a
-      // build under way is waited for and dropped.
-      std::deque<PendingCommand> unapplied;
-      if (building_.has_value()) {
-        builder_.join();
-        unapplied.push_back(*std::move(building_));
-        building_.reset();
-      }
-      for (PendingCommand& c : held_) unapplied.push_back(std::move(c));
-      held_.clear();
-      held_clients_.clear();
-      for (PendingCommand& c : commands) unapplied.push_back(std::move(c));
-      absl::MutexLock lock(&mu_);
-      built_.reset();
-      build_done_ = false;
-      for (PendingCommand& c : commands_) unapplied.push_back(std::move(c));
-      commands_.swap(unapplied);
+    Wakeup wakeup = WaitForWork(schedule);
+    if (wakeup.stop) {
+      RequeueUnapplied(wakeup.commands);
       break;
     }
-    std::shared_ptr<SimCore::Prebuilt> finished;
-    {
-      absl::MutexLock lock(&mu_);
-      if (build_done_) {
-        finished = std::move(built_);
-        build_done_ = false;
-      }
-    }
-    if (finished != nullptr) {
-      // The build is done: its command first, then the ones held behind it.
-      builder_.join();
-      std::deque<PendingCommand> next;
-      next.push_back(*std::move(building_));
-      building_.reset();
-      for (PendingCommand& c : held_) next.push_back(std::move(c));
-      held_.clear();
-      held_clients_.clear();
-      for (PendingCommand& c : commands) next.push_back(std::move(c));
-      commands.swap(next);
-    } else if (building_.has_value()) {
-      HoldBehindBuild(commands);
-    }
-    // Releases wait for a build (the drags it holds back are not acting yet).
-    if (!building_.has_value() || finished != nullptr) ReleaseDragsOf(commands);
-    ApplyCommands(commands, std::move(finished));
+    std::shared_ptr<SimCore::Prebuilt> finished = OrderCommands(wakeup.commands);
+    ApplyCommands(wakeup.commands, std::move(finished));
     AnswerInspects(false);
 
     Clock::time_point now = Clock::now();
     if (core_->WantsStep()) {
-      if (!anchored) {
-        next_step = now;  // resuming: no debt from the paused time
-        anchored = true;
-      }
-      if (now >= next_step) {
-        UpdateProbes();  // before the step: its loads act during it
-        const Clock::time_point t0 = Clock::now();
-        if (absl::Status s = core_->StepOnce(); !s.ok()) {
-          SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
-        }
-        const Clock::time_point t1 = Clock::now();
-        RecordStep(duration<double, std::milli>(t1 - t0).count());
-        UpdateCounters();
-        ++rate_steps;
-        next_step += h;
-        const Clock::duration lag = t1 - next_step;
-        int64_t behind = 0;
-        int64_t dropped = 0;
-        bool overrun = false;
-        if (lag > Clock::duration::zero()) behind = lag / h;
-        if (lag > catch_up) {
-          // Further behind than it may catch up: give the debt up and
-          // re-anchor. Below that, the next steps run back to back until
-          // the loop is on time again (a first step that warms its caches,
-          // an edit installed, a moment without the CPU cost no step).
-          overrun = true;
-          dropped = behind;
-          next_step = t1;
-        }
-        {
-          absl::MutexLock lock(&stats_mu_);
-          counters_.steps_behind = behind;
-          counters_.steps_dropped += dropped;
-          if (overrun) ++counters_.overruns;
-        }
-        AnswerInspects(false);
-        if (!dir_.empty() && options_.snapshot_every_steps > 0 &&
-            core_->steps() - std::max<int64_t>(last_snapshot_step_, 0) >=
-                options_.snapshot_every_steps) {
-          PersistBatch batch;
-          batch.snapshot = MakeSnapshotBytes();
-          batch.snapshot_step = core_->steps();
-          Deliver(std::move(batch));
-        }
-        now = Clock::now();
-      }
+      now = StepIfDue(schedule, now);
     } else {
-      anchored = false;
-      if (probes_.busy() && now >= next_probe_refresh) {
+      schedule.anchored = false;
+      if (probes_.busy() && now >= schedule.next_probe_refresh) {
         UpdateProbes();
-        next_probe_refresh = now + std::min<Clock::duration>(h, std::chrono::milliseconds(2));
+        schedule.next_probe_refresh =
+            now + std::min<Clock::duration>(schedule.h, std::chrono::milliseconds(2));
       }
     }
-    if (now - rate_start >= std::chrono::seconds(1)) {
-      absl::MutexLock lock(&stats_mu_);
-      counters_.steps_per_second =
-          rate_steps / duration<double>(now - rate_start).count();
-      rate_start = now;
-      rate_steps = 0;
-    }
-    if (has_watchers) {
-      // Every watcher at the rate asked for; the commanding clients' after
-      // the next step (frame_for_command_).
-      const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
-                         core_->fields_version() != last_published_fields_;
-      const bool early_dirty = core_->steps() != last_early_step_ ||
-                               core_->fields_version() != last_early_fields_;
-      if (dirty && (publish_requested || now >= next_publish_)) {
-        Publish(now, /*early=*/false);
-      } else if (frame_for_command_ && early_dirty && now >= earliest_publish_) {
-        Publish(now, /*early=*/true);
-      }
-    }
+    CountStepRate(schedule, now);
+    if (wakeup.has_watchers) PublishIfDue(now, wakeup.publish_requested);
   }
   // Shutdown: a last snapshot makes the next start quick.
   if (!dir_.empty() && core_->steps() != last_snapshot_step_) {
@@ -466,6 +270,152 @@ void SessionLoop::Run() {
     Deliver(std::move(batch));
   }
   AnswerInspects(true);
+}
+
+SessionLoop::Wakeup SessionLoop::WaitForWork(const Schedule& schedule) {
+  Wakeup wakeup;
+  absl::MutexLock lock(&mu_);
+  for (;;) {
+    if (stop_ || !commands_.empty() || !inspects_.empty() || build_done_ ||
+        !ended_streams_.empty()) {
+      break;
+    }
+    const Clock::time_point now = Clock::now();
+    Clock::time_point deadline = Clock::time_point::max();
+    if (core_->WantsStep()) {
+      deadline = schedule.anchored ? schedule.next_step : now;
+    } else if (probes_.busy()) {
+      deadline = schedule.next_probe_refresh;
+    }
+    const bool dirty = publish_requested_ || core_->steps() != last_published_step_ ||
+                       core_->fields_version() != last_published_fields_;
+    if (!watchers_.empty() && dirty) deadline = std::min(deadline, next_publish_);
+    if (deadline <= now) break;
+    const absl::Duration wait = deadline == Clock::time_point::max()
+                                    ? absl::Seconds(1)
+                                    : absl::FromChrono(deadline - now);
+    wake_.WaitWithTimeout(&mu_, wait);
+  }
+  wakeup.stop = stop_;
+  wakeup.commands.swap(commands_);
+  for (ReplySink* ended : ended_streams_) streams_to_release_.push_back(ended);
+  ended_streams_.clear();
+  for (PendingInspect& i : inspects_) waiting_inspects_.push_back(std::move(i));
+  inspects_.clear();
+  wakeup.publish_requested = publish_requested_;
+  wakeup.has_watchers = !watchers_.empty();
+  return wakeup;
+}
+
+void SessionLoop::RequeueUnapplied(std::deque<PendingCommand>& commands) {
+  // Commands not yet applied are not answered (the client resends): a
+  // build under way is waited for and dropped.
+  std::deque<PendingCommand> unapplied;
+  if (building_.has_value()) {
+    builder_.join();
+    unapplied.push_back(*std::move(building_));
+    building_.reset();
+  }
+  for (PendingCommand& c : held_) unapplied.push_back(std::move(c));
+  held_.clear();
+  held_clients_.clear();
+  for (PendingCommand& c : commands) unapplied.push_back(std::move(c));
+  absl::MutexLock lock(&mu_);
+  built_.reset();
+  build_done_ = false;
+  for (PendingCommand& c : commands_) unapplied.push_back(std::move(c));
+  commands_.swap(unapplied);
+}
+
+std::shared_ptr<SimCore::Prebuilt> SessionLoop::OrderCommands(
+    std::deque<PendingCommand>& commands) {
+  std::shared_ptr<SimCore::Prebuilt> finished;
+  {
+    absl::MutexLock lock(&mu_);
+    if (build_done_) {
+      finished = std::move(built_);
+      build_done_ = false;
+    }
+  }
+  if (finished != nullptr) {
+    // The build is done: its command first, then the ones held behind it.
+    builder_.join();
+    std::deque<PendingCommand> next;
+    next.push_back(*std::move(building_));
+    building_.reset();
+    for (PendingCommand& c : held_) next.push_back(std::move(c));
+    held_.clear();
+    held_clients_.clear();
+    for (PendingCommand& c : commands) next.push_back(std::move(c));
+    commands.swap(next);
+  } else if (building_.has_value()) {
+    HoldBehindBuild(commands);
+  }
+  // Releases wait for a build (the drags it holds back are not acting yet).
+  if (!building_.has_value() || finished != nullptr) ReleaseDragsOf(commands);
+  return finished;
+}
+
+Clock::time_point SessionLoop::StepIfDue(Schedule& schedule, Clock::time_point now) {
+  if (!schedule.anchored) {
+    schedule.next_step = now;  // resuming: no debt from the paused time
+    schedule.anchored = true;
+  }
+  if (now < schedule.next_step) return now;
+  UpdateProbes();  // before the step: its loads act during it
+  const Clock::time_point t0 = Clock::now();
+  if (absl::Status s = core_->StepOnce(); !s.ok()) {
+    SessionLog().warn("session {}: {}; paused", id_, core_->last_error());
+  }
+  const Clock::time_point t1 = Clock::now();
+  RecordStep(std::chrono::duration<double, std::milli>(t1 - t0).count());
+  UpdateCounters();
+  ++schedule.rate_steps;
+  schedule.next_step += schedule.h;
+  const Clock::duration lag = t1 - schedule.next_step;
+  int64_t behind = 0;
+  int64_t dropped = 0;
+  bool overrun = false;
+  if (lag > Clock::duration::zero()) behind = lag / schedule.h;
+  if (lag > schedule.catch_up) {
+    // Further behind than it may catch up: give the debt up and
+    // re-anchor. Below that, the next steps run back to back until
+    // the loop is on time again (a first step that warms its caches,
+    // an edit installed, a moment without the CPU cost no step).
+    overrun = true;
+    dropped = behind;
+    schedule.next_step = t1;
+  }
+  {
+    absl::MutexLock lock(&stats_mu_);
+    counters_.steps_behind = behind;
+    counters_.steps_dropped += dropped;
+    if (overrun) ++counters_.overruns;
+  }
+  AnswerInspects(false);
+  if (!dir_.empty() && options_.snapshot_every_steps > 0 &&
+      core_->steps() - std::max<int64_t>(last_snapshot_step_, 0) >=
+          options_.snapshot_every_steps) {
+    PersistBatch batch;
+    batch.snapshot = MakeSnapshotBytes();
+    batch.snapshot_step = core_->steps();
+    Deliver(std::move(batch));
+  }
+  return Clock::now();
+}
+
+void SessionLoop::PublishIfDue(Clock::time_point now, bool publish_requested) {
+  // Every watcher at the rate asked for; the commanding clients' after
+  // the next step (frame_for_command_).
+  const bool dirty = publish_requested || core_->steps() != last_published_step_ ||
+                     core_->fields_version() != last_published_fields_;
+  const bool early_dirty = core_->steps() != last_early_step_ ||
+                           core_->fields_version() != last_early_fields_;
+  if (dirty && (publish_requested || now >= next_publish_)) {
+    Publish(now, /*early=*/false);
+  } else if (frame_for_command_ && early_dirty && now >= earliest_publish_) {
+    Publish(now, /*early=*/true);
+  }
 }
 
 void SessionLoop::ApplyCommands(std::deque<PendingCommand>& commands,
@@ -669,72 +619,6 @@ void SessionLoop::Publish(Clock::time_point now, bool early) {
   ++counters_.frames_published;
 }
 
-void SessionLoop::AnswerInspects(bool all_unavailable) {
-  if (waiting_inspects_.empty()) return;
-  std::vector<PendingInspect> keep;
-  for (PendingInspect& i : waiting_inspects_) {
-    if (i.query != nullptr) {
-      i.query(all_unavailable ? nullptr : core_.get());
-      continue;
-    }
-    if (all_unavailable) {
-      i.done(absl::UnavailableError("the session is closed"));
-      continue;
-    }
-    if (i.request.wait_for_step() > core_->steps()) {
-      if (i.cancelled != nullptr && i.cancelled()) {
-        i.done(absl::CancelledError("the client cancelled the inspection"));
-      } else {
-        keep.push_back(std::move(i));
-      }
-      continue;
-    }
-    InspectReply r;
-    const solid::Solid& s = core_->solid();
-    r.set_step(s.steps());
-    r.set_time(s.time());
-    r.set_paused(core_->paused());
-    r.set_steps_remaining(core_->steps_remaining());
-    r.set_topology_version(s.topology_version());
-    r.set_surface_vertices(static_cast<int32_t>(s.BoundarySurface().nodes.size()));
-    if (i.request.surface_positions()) {
-      const Points p = s.SurfacePositions();
-      r.mutable_surface_positions()->Assign(p.data(), p.data() + p.size());
-    }
-    if (i.request.control_positions()) {
-      const Points& p = s.control_positions();
-      r.mutable_control_positions()->Assign(p.data(), p.data() + p.size());
-    }
-    if (i.request.control_mesh()) FillControlMesh(s.discretization(), r.mutable_control_mesh());
-    if (i.request.loads()) core_->DescribeLoads(&r);
-    if (i.request.history()) core_->DescribeHistory(r.mutable_history());
-    i.done(std::move(r));
-  }
-  waiting_inspects_ = std::move(keep);
-}
-
-void SessionLoop::UpdateCounters() {
-  absl::MutexLock lock(&stats_mu_);
-  counters_.step = core_->steps();
-  counters_.time = core_->solid().time();
-  counters_.paused = core_->paused();
-  counters_.steps_remaining = core_->steps_remaining();
-  counters_.last_error = core_->last_error();
-  counters_.rollbacks = core_->solid().rollbacks();
-  counters_.fields_version = core_->fields_version();
-  counters_.applied = core_->commands_applied();
-  counters_.rejected = core_->commands_rejected();
-  const UndoHistory& h = core_->history();
-  counters_.undo_depth = h.undo_depth();
-  counters_.redo_depth = h.redo_depth();
-  counters_.history_bytes = h.bytes();
-  counters_.history_limit = h.limit_bytes();
-  counters_.topology_version = core_->solid().topology_version();
-  counters_.hold_ms = core_->last_hold_ms();
-  counters_.control_cells = core_->solid().discretization().control().num_cells();
-  counters_.control_vertices = core_->solid().discretization().control().num_vertices();
-}
-
 void SessionLoop::UpdateProbes() {
   const ProbeHub::UpdateResult r = probes_.Update(*core_);
   contact_ms_ = r.ms;
@@ -744,26 +628,6 @@ void SessionLoop::UpdateProbes() {
     batch.snapshot = MakeSnapshotBytes();
     batch.snapshot_step = core_->steps();
     Deliver(std::move(batch));
-  }
-}
-
-void SessionLoop::RecordStep(double ms) {
-  const solid::PhaseTimes& p = core_->solid().last_phases();
-  const std::pair<const char*, double> phases[] = {
-      {"nodes", p.nodes},         {"measure", p.measure}, {"stiffness", p.stiffness},
-      {"project", p.project},     {"loads", p.loads},     {"damping", p.damping},
-      {"solve", p.solve},         {"contact", contact_ms_}};
-  absl::MutexLock lock(&stats_mu_);
-  PushWindow(counters_.step_ms, ms);
-  for (const auto& [name, value] : phases) {
-    if (value < 0) continue;  // absent in this scene
-    auto it = std::find_if(counters_.phases.begin(), counters_.phases.end(),
-                           [n = name](const auto& e) { return e.first == n; });
-    if (it == counters_.phases.end()) {
-      counters_.phases.emplace_back(name, std::deque<double>());
-      it = counters_.phases.end() - 1;
-    }
-    PushWindow(it->second, value);
   }
 }
 
@@ -842,85 +706,6 @@ void SessionLoop::Persist() {
       if (sink != nullptr) sink->Reply(reply);
     }
   }
-}
-
-// ---- Stats ----
-
-SessionStats SessionLoop::Stats() const {
-  SessionStats s;
-  std::vector<WatcherStats> watchers;
-  {
-    absl::MutexLock lock(&mu_);
-    for (const auto& [ptr, entry] : watchers_) {
-      WatcherStats w = entry.sink->Stats();
-      w.set_watcher_id(entry.id);
-      watchers.push_back(std::move(w));
-    }
-  }
-  std::sort(watchers.begin(), watchers.end(),
-            [](const WatcherStats& a, const WatcherStats& b) {
-              return a.watcher_id() < b.watcher_id();
-            });
-  absl::MutexLock lock(&stats_mu_);
-  const Counters& c = counters_;
-  s.set_step(c.step);
-  s.set_time(c.time);
-  s.set_paused(c.paused);
-  s.set_steps_remaining(c.steps_remaining);
-  s.set_time_step(time_step_);
-  std::vector<double> ms(c.step_ms.begin(), c.step_ms.end());
-  s.set_step_ms_median(Percentile(ms, 0.5));
-  s.set_step_ms_p99(Percentile(ms, 0.99));
-  s.set_steps_measured(static_cast<int64_t>(ms.size()));
-  for (const auto& [name, values] : c.phases) {
-    PhaseTime* p = s.add_phases();
-    p->set_name(name);
-    p->set_median_ms(Percentile(std::vector<double>(values.begin(), values.end()), 0.5));
-  }
-  s.set_steps_behind(c.steps_behind);
-  s.set_overruns(c.overruns);
-  s.set_steps_dropped(c.steps_dropped);
-  s.set_steps_per_second(c.steps_per_second);
-  s.set_watchers(static_cast<int32_t>(watchers.size()));
-  int64_t sent = c.gone_sent, skipped = c.gone_skipped, keys = c.gone_keyframes,
-          bytes = c.gone_bytes;
-  for (WatcherStats& w : watchers) {
-    sent += w.frames_sent();
-    skipped += w.frames_skipped();
-    keys += w.keyframes_sent();
-    bytes += w.bytes_sent();
-    *s.add_watcher_details() = std::move(w);
-  }
-  s.set_frames_published(c.frames_published);
-  s.set_frames_sent(sent);
-  s.set_frames_skipped(skipped);
-  s.set_keyframes_sent(keys);
-  s.set_bytes_sent(bytes);
-  s.set_commands_applied(c.applied);
-  s.set_commands_rejected(c.rejected);
-  s.set_commands_duplicate(c.duplicates);
-  s.set_commands_rate_limited(rate_limited_.load());
-  s.set_journal_records(c.journal_records);
-  s.set_journal_bytes(c.journal_bytes);
-  s.set_snapshots(c.snapshots);
-  s.set_last_snapshot_step(c.last_snapshot_step);
-  s.set_rollbacks(c.rollbacks);
-  s.set_last_error(c.last_error);
-  s.set_fields_version(c.fields_version);
-  s.set_undo_depth(c.undo_depth);
-  s.set_redo_depth(c.redo_depth);
-  s.set_history_bytes(c.history_bytes);
-  s.set_history_limit_bytes(c.history_limit);
-  s.set_topology_version(c.topology_version);
-  s.set_last_command_hold_ms(c.hold_ms);
-  s.set_control_cells(c.control_cells);
-  s.set_control_vertices(c.control_vertices);
-  s.set_builds(c.builds);
-  s.set_build_ms_total(c.build_ms);
-  s.set_build_cpu_ms_total(c.build_cpu_ms);
-  s.set_build_wait_ms_total(c.build_wait_ms);
-  probes_.FillStats(&s);
-  return s;
 }
 
 }  // namespace dynsolid::server

@@ -191,6 +191,49 @@ class SessionLoop {
     std::vector<std::pair<std::shared_ptr<ReplySink>, CommandReply>> replies;
   };
 
+  // The simulation thread (Run) in steps. Its real-time clock: a step h,
+  // the debt it catches up (kCatchUp), when the next step is due (anchored:
+  // counted from a step, not from a pause), and the steps counted for
+  // steps_per_second since rate_start.
+  struct Schedule {
+    std::chrono::steady_clock::duration h{};
+    std::chrono::steady_clock::duration catch_up{};
+    std::chrono::steady_clock::time_point next_step{};
+    bool anchored = false;
+    std::chrono::steady_clock::time_point rate_start{};
+    int64_t rate_steps = 0;
+    // While paused: probes refresh every h.
+    std::chrono::steady_clock::time_point next_probe_refresh{};
+  };
+  // What a wake-up of the simulation thread takes from the queues.
+  struct Wakeup {
+    bool stop = false;
+    std::deque<PendingCommand> commands;
+    bool publish_requested = false;
+    bool has_watchers = false;
+  };
+  // Waits until there is work (a command, an inspection, a finished build,
+  // an ended stream, a step or a frame due, a stop) and takes it.
+  Wakeup WaitForWork(const Schedule& schedule);
+  // At a stop: every command not applied (the building one, the held ones,
+  // `commands`) goes back to the front of commands_, in order.
+  void RequeueUnapplied(std::deque<PendingCommand>& commands);
+  // Puts `commands` in the order they apply: after a finished build (which
+  // it returns) its command and those held behind it first; with a build
+  // under way only those that may go ahead of it; then the releases of
+  // ended streams' drags.
+  std::shared_ptr<SimCore::Prebuilt> OrderCommands(std::deque<PendingCommand>& commands);
+  // Steps once if a step is due at `now` (after a pause the clock starts
+  // again from `now`), then counts the lag, answers the inspections waiting
+  // for the step and writes a periodic snapshot. Returns the time now
+  // (after the step, if one ran).
+  std::chrono::steady_clock::time_point StepIfDue(Schedule& schedule,
+                                                  std::chrono::steady_clock::time_point now);
+  // A frame to the watchers if one is due (Publish).
+  void PublishIfDue(std::chrono::steady_clock::time_point now, bool publish_requested);
+  // SessionStats.steps_per_second, once a second.
+  void CountStepRate(Schedule& schedule, std::chrono::steady_clock::time_point now);
+
   // Simulation-thread helpers. ApplyCommands applies commands in order
   // until one needs a solid built (SimCore::NeedsBuild): that one starts its
   // build on a thread of its own, and it and the commands after it wait

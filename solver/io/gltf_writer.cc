@@ -64,6 +64,24 @@ struct View {
   int target = 0;
 };
 
+// The bounds of a morph target's POSITION offsets.
+struct Target {
+  float lo[3], hi[3];
+};
+
+// The BIN chunk as it is written, and what the JSON says of it: its
+// views, in order, the bounds of the positions and of each morph target,
+// and the range of the colour field.
+struct Bin {
+  std::string bytes;
+  std::vector<View> views;
+  float lo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                 std::numeric_limits<float>::max()};
+  float hi[3] = {-lo[0], -lo[1], -lo[2]};
+  double range[2] = {0.0, 0.0};
+  std::vector<Target> morph;
+};
+
 // The scalar each vertex is coloured by: the value, or the magnitude of a
 // field of several components.
 absl::Status ColourScalars(const mesh::BoundarySurface& surface, const std::string& name,
@@ -99,51 +117,10 @@ absl::Status ColourScalars(const mesh::BoundarySurface& surface, const std::stri
   return absl::OkStatus();
 }
 
-}  // namespace
 
-std::array<float, 3> ViridisLinearRgb(double t) {
-  if (!(t > 0.0)) t = 0.0;  // also NaN
-  if (t > 1.0) t = 1.0;
-  constexpr int kLast = static_cast<int>(std::size(kViridisStops)) - 1;
-  const double x = t * kLast;
-  const int i = std::min(static_cast<int>(x), kLast - 1);
-  const double f = x - i;
-  std::array<float, 3> rgb;
-  for (int k = 0; k < 3; ++k) {
-    const double a = kViridisStops[i][k];
-    const double b = kViridisStops[i + 1][k];
-    rgb[k] = static_cast<float>(SrgbToLinear(a + f * (b - a)));
-  }
-  return rgb;
-}
-
-absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& options,
-                      std::string* out) {
-  RETURN_IF_ERROR(internal::CheckSurface(
-      surface, {.need_faces = true, .finite_positions = true, .float32_positions = true}));
-  const Points& p = surface.positions;
-  const int64_t nv = p.rows();
-  const int64_t nt = internal::FanTriangleCount(surface);
-
-  std::vector<double> scalars;
-  const mesh::VertexField* colour = nullptr;
-  if (!options.color_field.empty()) {
-    RETURN_IF_ERROR(ColourScalars(surface, options.color_field, scalars, &colour));
-  }
-
-  // Sizes first: GLB lengths are uint32.
-  const size_t vec3_bytes = 12 * static_cast<size_t>(nv);
-  const size_t index_bytes = 12 * static_cast<size_t>(nt);
-  const size_t bin_bytes = (colour != nullptr ? 3 : 2) * vec3_bytes + index_bytes;
-  // The JSON is a few kilobytes; 64 KiB is a generous bound for the check.
-  if (bin_bytes + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
-    return absl::InvalidArgumentError(Cat("surface of ", nv, " vertices and ", nt,
-                                          " triangles needs ", bin_bytes,
-                                          " bytes of buffer: beyond GLB's 4 GiB"));
-  }
-
-  // The animation's frames: the surface's vertices each, finite and
-  // within float32, at increasing finite times.
+// The animation's frames: the surface's vertices each, finite and
+// within float32, at increasing finite times.
+absl::Status CheckAnimation(const GlbOptions& options, int64_t nv) {
   const size_t targets = options.morph_frames.size();
   if (targets > 0 || !options.morph_times.empty()) {
     if (options.morph_times.size() != targets + 1) {
@@ -169,118 +146,130 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
       }
     }
   }
+  return absl::OkStatus();
+}
 
-  // Vertex normals: the sum over the vertex's fan triangles of their
-  // (b - a) x (c - a), i.e. normals weighted by area; unit length (a
-  // vertex on no face or only on degenerate triangles has no normal; glTF
-  // requires unit normals, so it gets +z).
-  auto unit_normals = [&](const Points& q) {
-    Points normals = Points::Zero(nv, 3);
-    internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
-      const Eigen::Vector3d a = q.row(ia).transpose();
-      const Eigen::Vector3d b = q.row(ib).transpose();
-      const Eigen::Vector3d c = q.row(ic).transpose();
-      const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
-      normals.row(ia) += n;
-      normals.row(ib) += n;
-      normals.row(ic) += n;
-    });
-    for (int64_t i = 0; i < nv; ++i) {
-      const double length = normals.row(i).norm();
-      if (length > 0.0 && std::isfinite(length)) {
-        normals.row(i) /= length;
-      } else {
-        normals.row(i) = Eigen::RowVector3d(0, 0, 1);
-      }
+// Vertex normals: the sum over the vertex's fan triangles of their
+// (b - a) x (c - a), i.e. normals weighted by area; unit length (a
+// vertex on no face or only on degenerate triangles has no normal; glTF
+// requires unit normals, so it gets +z). `q` is the surface's positions
+// or a frame's.
+Points UnitNormals(const mesh::BoundarySurface& surface, const Points& q) {
+  const int64_t nv = surface.positions.rows();
+  Points normals = Points::Zero(nv, 3);
+  internal::ForEachFanTriangle(surface, [&](int32_t ia, int32_t ib, int32_t ic) {
+    const Eigen::Vector3d a = q.row(ia).transpose();
+    const Eigen::Vector3d b = q.row(ib).transpose();
+    const Eigen::Vector3d c = q.row(ic).transpose();
+    const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+    normals.row(ia) += n;
+    normals.row(ib) += n;
+    normals.row(ic) += n;
+  });
+  for (int64_t i = 0; i < nv; ++i) {
+    const double length = normals.row(i).norm();
+    if (length > 0.0 && std::isfinite(length)) {
+      normals.row(i) /= length;
+    } else {
+      normals.row(i) = Eigen::RowVector3d(0, 0, 1);
     }
-    return normals;
-  };
-  const Points normals = unit_normals(p);
+  }
+  return normals;
+}
 
-  // BIN chunk: positions, normals, colours, indices (all 4-byte multiples).
-  std::string bin;
-  bin.reserve(bin_bytes);
-  float lo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
-                 std::numeric_limits<float>::max()};
-  float hi[3] = {-lo[0], -lo[1], -lo[2]};
-  std::vector<View> views;
-  views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+// BIN chunk: positions, normals, colours (with `scalars`, the colour
+// field's), indices (all 4-byte multiples).
+void AppendSurfaceBuffers(const mesh::BoundarySurface& surface, const Points& normals,
+                          const std::vector<double>* scalars, int64_t nt, Bin& bin) {
+  const Points& p = surface.positions;
+  const int64_t nv = p.rows();
+  const size_t vec3_bytes = 12 * static_cast<size_t>(nv);
+  const size_t index_bytes = 12 * static_cast<size_t>(nt);
+  bin.views.push_back({bin.bytes.size(), vec3_bytes, kArrayBuffer});
   for (int64_t i = 0; i < nv; ++i) {
     for (int k = 0; k < 3; ++k) {
       const float x = static_cast<float>(p(i, k));
-      lo[k] = std::min(lo[k], x);
-      hi[k] = std::max(hi[k], x);
-      AppendF32(bin, x);
+      bin.lo[k] = std::min(bin.lo[k], x);
+      bin.hi[k] = std::max(bin.hi[k], x);
+      AppendF32(bin.bytes, x);
     }
   }
-  views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+  bin.views.push_back({bin.bytes.size(), vec3_bytes, kArrayBuffer});
   for (int64_t i = 0; i < nv; ++i) {
-    for (int k = 0; k < 3; ++k) AppendF32(bin, static_cast<float>(normals(i, k)));
+    for (int k = 0; k < 3; ++k) AppendF32(bin.bytes, static_cast<float>(normals(i, k)));
   }
-  double range[2] = {0.0, 0.0};
-  if (colour != nullptr) {
-    range[0] = *std::min_element(scalars.begin(), scalars.end());
-    range[1] = *std::max_element(scalars.begin(), scalars.end());
-    const double span = range[1] - range[0];
-    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+  if (scalars != nullptr) {
+    bin.range[0] = *std::min_element(scalars->begin(), scalars->end());
+    bin.range[1] = *std::max_element(scalars->begin(), scalars->end());
+    const double span = bin.range[1] - bin.range[0];
+    bin.views.push_back({bin.bytes.size(), vec3_bytes, kArrayBuffer});
     for (int64_t i = 0; i < nv; ++i) {
-      const double t = span > 0.0 ? (scalars[i] - range[0]) / span : 0.5;
-      for (float c : ViridisLinearRgb(t)) AppendF32(bin, c);
+      const double t = span > 0.0 ? ((*scalars)[i] - bin.range[0]) / span : 0.5;
+      for (float c : ViridisLinearRgb(t)) AppendF32(bin.bytes, c);
     }
   }
-  views.push_back({bin.size(), index_bytes, kElementArrayBuffer});
+  bin.views.push_back({bin.bytes.size(), index_bytes, kElementArrayBuffer});
   internal::ForEachFanTriangle(surface, [&](int32_t a, int32_t b, int32_t c) {
-    AppendU32(bin, static_cast<uint32_t>(a));
-    AppendU32(bin, static_cast<uint32_t>(b));
-    AppendU32(bin, static_cast<uint32_t>(c));
+    AppendU32(bin.bytes, static_cast<uint32_t>(a));
+    AppendU32(bin.bytes, static_cast<uint32_t>(b));
+    AppendU32(bin.bytes, static_cast<uint32_t>(c));
   });
-  // The animation: per target its POSITION and NORMAL offsets (float32 of
-  // the double differences) with their bounds, then the key times and the
-  // weights (frame k: target k - 1 at 1, the rest 0).
-  struct Target {
-    float lo[3], hi[3];
-  };
-  std::vector<Target> morph(targets);
+}
+
+// The animation: per target its POSITION and NORMAL offsets (float32 of
+// the double differences) with their bounds, then the key times and the
+// weights (frame k: target k - 1 at 1, the rest 0).
+void AppendAnimationBuffers(const mesh::BoundarySurface& surface, const Points& normals,
+                            const GlbOptions& options, Bin& bin) {
+  const Points& p = surface.positions;
+  const int64_t nv = p.rows();
+  const size_t vec3_bytes = 12 * static_cast<size_t>(nv);
+  const size_t targets = options.morph_frames.size();
+  bin.morph.resize(targets);
   for (size_t k = 0; k < targets; ++k) {
     const Points& f = options.morph_frames[k];
-    const Points fn = unit_normals(f);
-    Target& t = morph[k];
+    const Points fn = UnitNormals(surface, f);
+    Target& t = bin.morph[k];
     for (int c = 0; c < 3; ++c) {
       t.lo[c] = std::numeric_limits<float>::max();
       t.hi[c] = -t.lo[c];
     }
-    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+    bin.views.push_back({bin.bytes.size(), vec3_bytes, kArrayBuffer});
     for (int64_t i = 0; i < nv; ++i) {
       for (int c = 0; c < 3; ++c) {
         const float d = static_cast<float>(f(i, c) - p(i, c));
         t.lo[c] = std::min(t.lo[c], d);
         t.hi[c] = std::max(t.hi[c], d);
-        AppendF32(bin, d);
+        AppendF32(bin.bytes, d);
       }
     }
-    views.push_back({bin.size(), vec3_bytes, kArrayBuffer});
+    bin.views.push_back({bin.bytes.size(), vec3_bytes, kArrayBuffer});
     for (int64_t i = 0; i < nv; ++i) {
-      for (int c = 0; c < 3; ++c) AppendF32(bin, static_cast<float>(fn(i, c) - normals(i, c)));
+      for (int c = 0; c < 3; ++c) {
+        AppendF32(bin.bytes, static_cast<float>(fn(i, c) - normals(i, c)));
+      }
     }
   }
   if (targets > 0) {
-    views.push_back({bin.size(), 4 * (targets + 1), 0});
-    for (double t : options.morph_times) AppendF32(bin, static_cast<float>(t));
-    views.push_back({bin.size(), 4 * (targets + 1) * targets, 0});
+    bin.views.push_back({bin.bytes.size(), 4 * (targets + 1), 0});
+    for (double t : options.morph_times) AppendF32(bin.bytes, static_cast<float>(t));
+    bin.views.push_back({bin.bytes.size(), 4 * (targets + 1) * targets, 0});
     for (size_t k = 0; k <= targets; ++k) {
-      for (size_t m = 0; m < targets; ++m) AppendF32(bin, k > 0 && m == k - 1 ? 1.0f : 0.0f);
+      for (size_t m = 0; m < targets; ++m) {
+        AppendF32(bin.bytes, k > 0 && m == k - 1 ? 1.0f : 0.0f);
+      }
     }
   }
-  if (bin.size() + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
-    return absl::InvalidArgumentError(
-        Cat("animation of ", targets + 1, " frames needs ", bin.size(), " bytes: beyond GLB's 4 GiB"));
-  }
-  while (bin.size() % 4 != 0) bin.push_back('\0');  // (already aligned)
+}
 
-  // JSON chunk. Accessors follow the views: 0 POSITION, 1 NORMAL,
-  // [2 COLOR_0], then the indices.
+// JSON: the asset, the scene and its node, the material, and the mesh
+// with its primitive (its attributes, its morph targets' accessors and the
+// colour field in its extras). Accessors follow the views: 0 POSITION,
+// 1 NORMAL, [2 COLOR_0], then the indices.
+void AppendMeshJson(std::string& j, const GlbOptions& options, const mesh::VertexField* colour,
+                    const Bin& bin) {
+  const size_t targets = options.morph_frames.size();
   const int index_accessor = colour != nullptr ? 3 : 2;
-  std::string j;
   j += "{\"asset\":{\"version\":\"2.0\",\"generator\":";
   j += JsonWriter::Quote(options.generator);
   j += "},\"scene\":0,\"scenes\":[{\"name\":\"dynsolid\",\"nodes\":[0]}],";
@@ -330,60 +319,75 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
     j += ",\"color_field_components\":";
     JsonInt(j, colour->components);
     j += ",\"color_range\":[";
-    JsonNumber(j, range[0]);
+    JsonNumber(j, bin.range[0]);
     j += ",";
-    JsonNumber(j, range[1]);
+    JsonNumber(j, bin.range[1]);
     j += "],\"colormap\":\"viridis\"}";
   }
-  j += "}],\"accessors\":[";
-  auto accessor = [&](int view, int component_type, int64_t count, const char* type) {
-    j += "{\"bufferView\":";
-    JsonInt(j, view);
-    j += ",\"componentType\":";
-    JsonInt(j, component_type);
-    j += ",\"count\":";
-    JsonInt(j, count);
-    j += ",\"type\":\"";
-    j += type;
-    j += "\"";
-  };
-  accessor(0, kFloat, nv, "VEC3");
+  j += "}]";
+}
+
+// An accessor's object up to its type; the caller adds min and max, if
+// any, and closes it.
+void AppendAccessor(std::string& j, int view, int component_type, int64_t count,
+                    const char* type) {
+  j += "{\"bufferView\":";
+  JsonInt(j, view);
+  j += ",\"componentType\":";
+  JsonInt(j, component_type);
+  j += ",\"count\":";
+  JsonInt(j, count);
+  j += ",\"type\":\"";
+  j += type;
+  j += "\"";
+}
+
+// JSON: the accessors (accessor k reads view k), the animation of the
+// morph targets' weights, the views and the buffer.
+void AppendBufferJson(std::string& j, const GlbOptions& options, const mesh::VertexField* colour,
+                      int64_t nv, int64_t nt, const Bin& bin) {
+  const size_t targets = options.morph_frames.size();
+  const int index_accessor = colour != nullptr ? 3 : 2;
+  const int first_target = index_accessor + 1;
+  j += ",\"accessors\":[";
+  AppendAccessor(j, 0, kFloat, nv, "VEC3");
   j += ",\"min\":";
-  JsonVec3(j, lo);
+  JsonVec3(j, bin.lo);
   j += ",\"max\":";
-  JsonVec3(j, hi);
+  JsonVec3(j, bin.hi);
   j += "},";
-  accessor(1, kFloat, nv, "VEC3");
+  AppendAccessor(j, 1, kFloat, nv, "VEC3");
   j += "},";
   if (colour != nullptr) {
-    accessor(2, kFloat, nv, "VEC3");
+    AppendAccessor(j, 2, kFloat, nv, "VEC3");
     j += "},";
   }
-  accessor(index_accessor, kUnsignedInt, 3 * nt, "SCALAR");
+  AppendAccessor(j, index_accessor, kUnsignedInt, 3 * nt, "SCALAR");
   j += "}";
   // Views after the indices' (index_accessor is also its view): two per
   // target, then the times and the weights.
   for (size_t k = 0; k < targets; ++k) {
     j += ",";
-    accessor(first_target + 2 * static_cast<int>(k), kFloat, nv, "VEC3");
+    AppendAccessor(j, first_target + 2 * static_cast<int>(k), kFloat, nv, "VEC3");
     j += ",\"min\":";
-    JsonVec3(j, morph[k].lo);
+    JsonVec3(j, bin.morph[k].lo);
     j += ",\"max\":";
-    JsonVec3(j, morph[k].hi);
+    JsonVec3(j, bin.morph[k].hi);
     j += "},";
-    accessor(first_target + 2 * static_cast<int>(k) + 1, kFloat, nv, "VEC3");
+    AppendAccessor(j, first_target + 2 * static_cast<int>(k) + 1, kFloat, nv, "VEC3");
     j += "}";
   }
   const int times_accessor = first_target + 2 * static_cast<int>(targets);
   if (targets > 0) {
     j += ",";
-    accessor(times_accessor, kFloat, static_cast<int64_t>(targets + 1), "SCALAR");
+    AppendAccessor(j, times_accessor, kFloat, static_cast<int64_t>(targets + 1), "SCALAR");
     j += ",\"min\":[";
     JsonNumber(j, static_cast<double>(static_cast<float>(options.morph_times.front())));
     j += "],\"max\":[";
     JsonNumber(j, static_cast<double>(static_cast<float>(options.morph_times.back())));
     j += "]},";
-    accessor(times_accessor + 1, kFloat, static_cast<int64_t>((targets + 1) * targets), "SCALAR");
+    AppendAccessor(j, times_accessor + 1, kFloat, static_cast<int64_t>((targets + 1) * targets),
+                   "SCALAR");
     j += "}";
   }
   j += "],";
@@ -396,21 +400,26 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
          "\"path\":\"weights\"}}]}],";
   }
   j += "\"bufferViews\":[";
-  for (size_t v = 0; v < views.size(); ++v) {
+  for (size_t v = 0; v < bin.views.size(); ++v) {
     if (v > 0) j += ",";
     j += "{\"buffer\":0,\"byteOffset\":";
-    JsonInt(j, static_cast<int64_t>(views[v].offset));
+    JsonInt(j, static_cast<int64_t>(bin.views[v].offset));
     j += ",\"byteLength\":";
-    JsonInt(j, static_cast<int64_t>(views[v].length));
-    if (views[v].target != 0) {
+    JsonInt(j, static_cast<int64_t>(bin.views[v].length));
+    if (bin.views[v].target != 0) {
       j += ",\"target\":";
-      JsonInt(j, views[v].target);
+      JsonInt(j, bin.views[v].target);
     }
     j += "}";
   }
   j += "],\"buffers\":[{\"byteLength\":";
-  JsonInt(j, static_cast<int64_t>(bin.size()));
+  JsonInt(j, static_cast<int64_t>(bin.bytes.size()));
   j += "}]}";
+}
+
+// The file: the 12-byte header, the JSON chunk (padded with spaces), the
+// BIN chunk.
+absl::Status AppendGlbFile(std::string& j, const std::string& bin, std::string* out) {
   while (j.size() % 4 != 0) j.push_back(' ');
 
   const size_t total = 12 + 8 + j.size() + 8 + bin.size();
@@ -430,6 +439,67 @@ absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& op
   AppendU32(o, kChunkBin);
   o += bin;
   return absl::OkStatus();
+}
+
+}  // namespace
+
+std::array<float, 3> ViridisLinearRgb(double t) {
+  if (!(t > 0.0)) t = 0.0;  // also NaN
+  if (t > 1.0) t = 1.0;
+  constexpr int kLast = static_cast<int>(std::size(kViridisStops)) - 1;
+  const double x = t * kLast;
+  const int i = std::min(static_cast<int>(x), kLast - 1);
+  const double f = x - i;
+  std::array<float, 3> rgb;
+  for (int k = 0; k < 3; ++k) {
+    const double a = kViridisStops[i][k];
+    const double b = kViridisStops[i + 1][k];
+    rgb[k] = static_cast<float>(SrgbToLinear(a + f * (b - a)));
+  }
+  return rgb;
+}
+
+absl::Status GlbBytes(const mesh::BoundarySurface& surface, const GlbOptions& options,
+                      std::string* out) {
+  RETURN_IF_ERROR(internal::CheckSurface(
+      surface, {.need_faces = true, .finite_positions = true, .float32_positions = true}));
+  const int64_t nv = surface.positions.rows();
+  const int64_t nt = internal::FanTriangleCount(surface);
+
+  std::vector<double> scalars;
+  const mesh::VertexField* colour = nullptr;
+  if (!options.color_field.empty()) {
+    RETURN_IF_ERROR(ColourScalars(surface, options.color_field, scalars, &colour));
+  }
+
+  // Sizes first: GLB lengths are uint32.
+  const size_t vec3_bytes = 12 * static_cast<size_t>(nv);
+  const size_t index_bytes = 12 * static_cast<size_t>(nt);
+  const size_t bin_bytes = (colour != nullptr ? 3 : 2) * vec3_bytes + index_bytes;
+  // The JSON is a few kilobytes; 64 KiB is a generous bound for the check.
+  if (bin_bytes + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(Cat("surface of ", nv, " vertices and ", nt,
+                                          " triangles needs ", bin_bytes,
+                                          " bytes of buffer: beyond GLB's 4 GiB"));
+  }
+  RETURN_IF_ERROR(CheckAnimation(options, nv));
+
+  const Points normals = UnitNormals(surface, surface.positions);
+  Bin bin;
+  bin.bytes.reserve(bin_bytes);
+  AppendSurfaceBuffers(surface, normals, colour != nullptr ? &scalars : nullptr, nt, bin);
+  AppendAnimationBuffers(surface, normals, options, bin);
+  const size_t targets = options.morph_frames.size();
+  if (bin.bytes.size() + (1u << 16) > std::numeric_limits<uint32_t>::max()) {
+    return absl::InvalidArgumentError(Cat("animation of ", targets + 1, " frames needs ",
+                                          bin.bytes.size(), " bytes: beyond GLB's 4 GiB"));
+  }
+  while (bin.bytes.size() % 4 != 0) bin.bytes.push_back('\0');  // (already aligned)
+
+  std::string j;
+  AppendMeshJson(j, options, colour, bin);
+  AppendBufferJson(j, options, colour, nv, nt, bin);
+  return AppendGlbFile(j, bin.bytes, out);
 }
 
 absl::Status WriteGlb(const std::string& path, const mesh::BoundarySurface& surface,

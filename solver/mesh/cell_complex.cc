@@ -82,6 +82,186 @@ Csr ComposeUnique(const Csr& outer, const Csr& inner) {
   return out;
 }
 
+// face -> cells from the cells' faces. Boundary faces are stored outward
+// for their one cell: a face whose only user sees it reversed has its loop
+// turned round in face_vertices and that use unflipped in
+// cell_face_flipped.
+absl::Status LinkFaceCells(const Csr& cell_faces, std::vector<uint8_t>& cell_face_flipped,
+                           Csr& face_vertices, std::vector<std::array<int32_t, 2>>& face_cells) {
+  const int32_t nf = face_vertices.rows();
+  const int32_t nc = cell_faces.rows();
+  face_cells.assign(nf, {-1, -1});
+  for (int32_t c = 0; c < nc; ++c) {
+    for (int32_t i = cell_faces.offsets[c]; i < cell_faces.offsets[c + 1]; ++i) {
+      const int32_t f = cell_faces.items[i];
+      if (f < 0 || f >= nf) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("cell ", c, ": face index ", f, " out of range"));
+      }
+      const int slot = cell_face_flipped[i] ? 1 : 0;
+      if (face_cells[f][slot] >= 0) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "face ", f, " ", LoopString(face_vertices.row(f)), " is used by cells ",
+            face_cells[f][slot], " and ", c,
+            " with the same orientation or by more than two cells"));
+      }
+      face_cells[f][slot] = c;
+    }
+  }
+  for (int32_t f = 0; f < nf; ++f) {
+    if (face_cells[f][0] >= 0) continue;
+    if (face_cells[f][1] < 0) {
+      return absl::InvalidArgumentError(absl::StrCat("face ", f, " belongs to no cell"));
+    }
+    // Only a reversed user: store the loop the other way round.
+    const int32_t c = face_cells[f][1];
+    auto* loop = face_vertices.items.data() + face_vertices.offsets[f];
+    std::reverse(loop + 1, loop + face_vertices.row_size(f));
+    face_cells[f] = {c, -1};
+    for (int32_t i = cell_faces.offsets[c]; i < cell_faces.offsets[c + 1]; ++i) {
+      if (cell_faces.items[i] == f) cell_face_flipped[i] = 0;
+    }
+  }
+  return absl::OkStatus();
+}
+
+// Edges: bucket the loop sides by their smaller vertex, number them in
+// (min, max) order so that ids are deterministic. Fills face -> edges
+// (the same layout as the face loops) and the edges' end vertices.
+absl::Status NumberEdges(const Csr& face_vertices, int32_t nv, Csr& face_edges,
+                         std::vector<std::array<int32_t, 2>>& edge_vertices) {
+  const int32_t nf = face_vertices.rows();
+  const int64_t sides = static_cast<int64_t>(face_vertices.items.size());
+  std::vector<int32_t> bucket(nv + 1, 0);
+  for (int32_t f = 0; f < nf; ++f) {
+    const auto loop = face_vertices.row(f);
+    const size_t n = loop.size();
+    for (size_t i = 0; i < n; ++i) {
+      const int32_t a = loop[i], b = loop[(i + 1) % n];
+      if (a < 0 || a >= nv) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("face ", f, ": vertex index ", a, " out of range"));
+      }
+      ++bucket[std::min(a, b) + 1];
+    }
+  }
+  for (int32_t v = 0; v < nv; ++v) bucket[v + 1] += bucket[v];
+  std::vector<std::pair<int32_t, int32_t>> entries(sides);  // (max vertex, side)
+  {
+    std::vector<int32_t> fill(bucket.begin(), bucket.end() - 1);
+    for (int32_t f = 0; f < nf; ++f) {
+      const int32_t off = face_vertices.offsets[f];
+      const auto loop = face_vertices.row(f);
+      const size_t n = loop.size();
+      for (size_t i = 0; i < n; ++i) {
+        const int32_t a = loop[i], b = loop[(i + 1) % n];
+        entries[fill[std::min(a, b)]++] = {std::max(a, b), off + static_cast<int32_t>(i)};
+      }
+    }
+  }
+  face_edges.offsets = face_vertices.offsets;
+  face_edges.items.assign(sides, -1);
+  edge_vertices.clear();
+  for (int32_t v = 0; v < nv; ++v) {
+    auto first = entries.begin() + bucket[v];
+    auto last = entries.begin() + bucket[v + 1];
+    std::sort(first, last);
+    for (auto it = first; it != last; ++it) {
+      if (it == first || it->first != (it - 1)->first) {
+        edge_vertices.push_back({v, it->first});
+      }
+      face_edges.items[it->second] = static_cast<int32_t>(edge_vertices.size()) - 1;
+    }
+  }
+  return absl::OkStatus();
+}
+
+// The cells of edges [e0, e1) in radial order, from one call of
+// RadialOrder.
+struct RadialCells {
+  std::vector<int32_t> count, items;  // per edge of the range; its cells
+};
+
+// Radial order of edges [e0, e1): writes their faces in place into
+// edge_faces_out.items (whose offsets are those of `edge_faces`, the
+// unordered edge -> faces), marks boundary edges in edge_boundary, and
+// lists their cells in `out`. Ranges that do not overlap may run at once.
+void RadialOrder(const Csr& edge_faces, const std::vector<std::array<int32_t, 2>>& face_cells,
+                 int32_t e0, int32_t e1, Csr& edge_faces_out,
+                 std::vector<uint8_t>& edge_boundary, RadialCells& out) {
+  out.count.assign(e1 - e0, 0);
+  out.items.clear();
+  out.items.reserve(edge_faces.offsets[e1] - edge_faces.offsets[e0]);
+  // Per face of the edge (its slot in the edge's face list): its two
+  // cells and whether the walk has passed it.
+  std::vector<int32_t> cell0, cell1;
+  std::vector<uint8_t> used;
+  for (int32_t e = e0; e < e1; ++e) {
+    const auto faces = edge_faces.row(e);
+    const int k = static_cast<int>(faces.size());
+    const size_t cells_before = out.items.size();
+    cell0.resize(k);
+    cell1.resize(k);
+    used.assign(k, 0);
+    for (int i = 0; i < k; ++i) {
+      cell0[i] = face_cells[faces[i]][0];
+      cell1[i] = face_cells[faces[i]][1];
+      if (cell1[i] < 0) edge_boundary[e] = 1;
+    }
+    int32_t at = edge_faces_out.offsets[e];
+    // Walk face -> cell -> the cell's other face at e, from boundary faces
+    // first, then from any face left (interior edges).
+    while (true) {
+      int start = -1;
+      for (int i = 0; i < k && start < 0; ++i) {
+        if (!used[i] && cell1[i] < 0) start = i;
+      }
+      for (int i = 0; i < k && start < 0; ++i) {
+        if (!used[i]) start = i;
+      }
+      if (start < 0) break;
+      int i = start;
+      int32_t prev_cell = -1;
+      while (true) {
+        used[i] = 1;
+        edge_faces_out.items[at++] = faces[i];
+        int32_t cell = -1;
+        if (cell0[i] >= 0 && cell0[i] != prev_cell) {
+          cell = cell0[i];
+        } else if (cell1[i] >= 0 && cell1[i] != prev_cell) {
+          cell = cell1[i];
+        }
+        if (cell < 0) break;
+        // The first other face of the edge on that cell.
+        int next = -1;
+        for (int j = 0; j < k && next < 0; ++j) {
+          if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
+        }
+        if (next < 0) break;  // open cell: reported by CheckCellsClosed
+        out.items.push_back(cell);
+        if (used[next]) break;
+        prev_cell = cell;
+        i = next;
+      }
+    }
+    out.count[e - e0] = static_cast<int32_t>(out.items.size() - cells_before);
+  }
+}
+
+// Vertex -> edges: the edges as rows of their two vertices, inverted.
+Csr VertexEdges(const std::vector<std::array<int32_t, 2>>& edge_vertices, int32_t nv) {
+  const int32_t ne = static_cast<int32_t>(edge_vertices.size());
+  Csr edge_rows;
+  edge_rows.offsets.resize(ne + 1);
+  edge_rows.items.resize(2 * static_cast<size_t>(ne));
+  for (int32_t e = 0; e < ne; ++e) {
+    edge_rows.offsets[e + 1] = 2 * (e + 1);
+    edge_rows.items[2 * e] = edge_vertices[e][0];
+    edge_rows.items[2 * e + 1] = edge_vertices[e][1];
+  }
+  return Invert(edge_rows, nv);
+}
+
 }  // namespace
 
 int32_t DropUnusedVertices(MeshInput& input) {
@@ -241,83 +421,10 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   const int32_t nc = num_cells();
 
   // face -> cells. Boundary faces are stored outward for their one cell.
-  face_cells_.assign(nf, {-1, -1});
-  for (int32_t c = 0; c < nc; ++c) {
-    for (int32_t i = cell_faces_.offsets[c]; i < cell_faces_.offsets[c + 1]; ++i) {
-      const int32_t f = cell_faces_.items[i];
-      if (f < 0 || f >= nf) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("cell ", c, ": face index ", f, " out of range"));
-      }
-      const int slot = cell_face_flipped_[i] ? 1 : 0;
-      if (face_cells_[f][slot] >= 0) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "face ", f, " ", LoopString(face_vertices_.row(f)), " is used by cells ",
-            face_cells_[f][slot], " and ", c,
-            " with the same orientation or by more than two cells"));
-      }
-      face_cells_[f][slot] = c;
-    }
-  }
-  for (int32_t f = 0; f < nf; ++f) {
-    if (face_cells_[f][0] >= 0) continue;
-    if (face_cells_[f][1] < 0) {
-      return absl::InvalidArgumentError(absl::StrCat("face ", f, " belongs to no cell"));
-    }
-    // Only a reversed user: store the loop the other way round.
-    const int32_t c = face_cells_[f][1];
-    auto* loop = face_vertices_.items.data() + face_vertices_.offsets[f];
-    std::reverse(loop + 1, loop + face_vertices_.row_size(f));
-    face_cells_[f] = {c, -1};
-    for (int32_t i = cell_faces_.offsets[c]; i < cell_faces_.offsets[c + 1]; ++i) {
-      if (cell_faces_.items[i] == f) cell_face_flipped_[i] = 0;
-    }
-  }
+  RETURN_IF_ERROR(LinkFaceCells(cell_faces_, cell_face_flipped_, face_vertices_, face_cells_));
 
-  // Edges: bucket the loop sides by their smaller vertex, number them in
-  // (min, max) order so that ids are deterministic.
-  const int64_t sides = static_cast<int64_t>(face_vertices_.items.size());
-  std::vector<int32_t> bucket(nv + 1, 0);
-  for (int32_t f = 0; f < nf; ++f) {
-    const auto loop = face_vertices_.row(f);
-    const size_t n = loop.size();
-    for (size_t i = 0; i < n; ++i) {
-      const int32_t a = loop[i], b = loop[(i + 1) % n];
-      if (a < 0 || a >= nv) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("face ", f, ": vertex index ", a, " out of range"));
-      }
-      ++bucket[std::min(a, b) + 1];
-    }
-  }
-  for (int32_t v = 0; v < nv; ++v) bucket[v + 1] += bucket[v];
-  std::vector<std::pair<int32_t, int32_t>> entries(sides);  // (max vertex, side)
-  {
-    std::vector<int32_t> fill(bucket.begin(), bucket.end() - 1);
-    for (int32_t f = 0; f < nf; ++f) {
-      const int32_t off = face_vertices_.offsets[f];
-      const auto loop = face_vertices_.row(f);
-      const size_t n = loop.size();
-      for (size_t i = 0; i < n; ++i) {
-        const int32_t a = loop[i], b = loop[(i + 1) % n];
-        entries[fill[std::min(a, b)]++] = {std::max(a, b), off + static_cast<int32_t>(i)};
-      }
-    }
-  }
-  face_edges_.offsets = face_vertices_.offsets;
-  face_edges_.items.assign(sides, -1);
-  edge_vertices_.clear();
-  for (int32_t v = 0; v < nv; ++v) {
-    auto first = entries.begin() + bucket[v];
-    auto last = entries.begin() + bucket[v + 1];
-    std::sort(first, last);
-    for (auto it = first; it != last; ++it) {
-      if (it == first || it->first != (it - 1)->first) {
-        edge_vertices_.push_back({v, it->first});
-      }
-      face_edges_.items[it->second] = static_cast<int32_t>(edge_vertices_.size()) - 1;
-    }
-  }
+  // Edges, numbered in (min, max) vertex order.
+  RETURN_IF_ERROR(NumberEdges(face_vertices_, nv, face_edges_, edge_vertices_));
   const int32_t ne = num_edges();
 
   // Edge -> faces (unordered first), then radial order with cells, edges
@@ -327,67 +434,8 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   edge_faces_.offsets = edge_faces.offsets;
   edge_faces_.items.resize(edge_faces.items.size());
   edge_boundary_.assign(ne, 0);
-  struct RadialCells {
-    std::vector<int32_t> count, items;  // per edge of the range; its cells
-  };
   auto radial = [this, &edge_faces](int32_t e0, int32_t e1, RadialCells& out) {
-    out.count.assign(e1 - e0, 0);
-    out.items.clear();
-    out.items.reserve(edge_faces.offsets[e1] - edge_faces.offsets[e0]);
-    // Per face of the edge (its slot in the edge's face list): its two
-    // cells and whether the walk has passed it.
-    std::vector<int32_t> cell0, cell1;
-    std::vector<uint8_t> used;
-    for (int32_t e = e0; e < e1; ++e) {
-      const auto faces = edge_faces.row(e);
-      const int k = static_cast<int>(faces.size());
-      const size_t cells_before = out.items.size();
-      cell0.resize(k);
-      cell1.resize(k);
-      used.assign(k, 0);
-      for (int i = 0; i < k; ++i) {
-        cell0[i] = face_cells_[faces[i]][0];
-        cell1[i] = face_cells_[faces[i]][1];
-        if (cell1[i] < 0) edge_boundary_[e] = 1;
-      }
-      int32_t at = edge_faces_.offsets[e];
-      // Walk face -> cell -> the cell's other face at e, from boundary faces
-      // first, then from any face left (interior edges).
-      while (true) {
-        int start = -1;
-        for (int i = 0; i < k && start < 0; ++i) {
-          if (!used[i] && cell1[i] < 0) start = i;
-        }
-        for (int i = 0; i < k && start < 0; ++i) {
-          if (!used[i]) start = i;
-        }
-        if (start < 0) break;
-        int i = start;
-        int32_t prev_cell = -1;
-        while (true) {
-          used[i] = 1;
-          edge_faces_.items[at++] = faces[i];
-          int32_t cell = -1;
-          if (cell0[i] >= 0 && cell0[i] != prev_cell) {
-            cell = cell0[i];
-          } else if (cell1[i] >= 0 && cell1[i] != prev_cell) {
-            cell = cell1[i];
-          }
-          if (cell < 0) break;
-          // The first other face of the edge on that cell.
-          int next = -1;
-          for (int j = 0; j < k && next < 0; ++j) {
-            if (j != i && (cell0[j] == cell || cell1[j] == cell)) next = j;
-          }
-          if (next < 0) break;  // open cell: reported by CheckCellsClosed
-          out.items.push_back(cell);
-          if (used[next]) break;
-          prev_cell = cell;
-          i = next;
-        }
-      }
-      out.count[e - e0] = static_cast<int32_t>(out.items.size() - cells_before);
-    }
+    RadialOrder(edge_faces, face_cells_, e0, e1, edge_faces_, edge_boundary_, out);
   };
 
   // The rest reads the faces' edges and writes members of its own. The
@@ -422,15 +470,7 @@ absl::Status CellComplex::BuildAdjacency(bool check_closed) {
   cell_vertices_ = ComposeUnique(cell_faces_, face_vertices_);
 
   // Vertex -> edges, faces, cells.
-  Csr edge_rows;
-  edge_rows.offsets.resize(ne + 1);
-  edge_rows.items.resize(2 * static_cast<size_t>(ne));
-  for (int32_t e = 0; e < ne; ++e) {
-    edge_rows.offsets[e + 1] = 2 * (e + 1);
-    edge_rows.items[2 * e] = edge_vertices_[e][0];
-    edge_rows.items[2 * e + 1] = edge_vertices_[e][1];
-  }
-  vertex_edges_ = Invert(edge_rows, nv);
+  vertex_edges_ = VertexEdges(edge_vertices_, nv);
   vertex_cells_ = Invert(cell_vertices_, nv);
   radial(split, ne, second);
   if (beside.joinable()) beside.join();

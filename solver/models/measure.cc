@@ -73,6 +73,158 @@ void AddCorner(int32_t n, int32_t a, int32_t b, const Points& rest,
   corners.push_back({n, a, b, ra.dot(rb) / (la * lb), ra.cross(rb).norm() / (la * lb)});
 }
 
+// The edges, corners and quadrilaterals of the whole mesh (before they are
+// handed out to the parts).
+struct Terms {
+  std::vector<Edge> edges;
+  std::vector<Corner> corners;
+  std::vector<Quad> quads;
+};
+
+// The mesh's edges (all of them first, in mesh order) and its faces'
+// corners; with a quadrilateral path, whole quadrilaterals in place of
+// their corners.
+void AddMeshTerms(const mesh::CellComplex& mesh, const Points& rest, QuadPath quad_path,
+                  Terms& terms) {
+  std::vector<Edge>& edges = terms.edges;
+  std::vector<Corner>& corners = terms.corners;
+  edges.reserve(mesh.num_edges());
+  for (int32_t e = 0; e < mesh.num_edges(); ++e) {
+    const auto& ev = mesh.edge_vertices(e);
+    AddEdge(ev[0], ev[1], rest, edges);
+  }
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    const auto loop = mesh.face_vertices(f);
+    const size_t k = loop.size();
+    const size_t first = corners.size();
+    for (size_t i = 0; i < k; ++i) {
+      AddCorner(loop[i], loop[(i + k - 1) % k], loop[(i + 1) % k], rest, corners);
+    }
+    // A quadrilateral with four distinct nodes and four proper rest corners
+    // runs as one: its corners leave the per-corner list.
+    if (quad_path == QuadPath::kPerCorner || k != 4 || corners.size() != first + 4) continue;
+    Quad q;
+    q.face = f;
+    for (int i = 0; i < 4; ++i) {
+      q.v[i] = loop[i];
+      q.cos0[i] = corners[first + i].cos0;
+      q.sin0[i] = corners[first + i].sin0;
+    }
+    if (q.v[0] == q.v[2] || q.v[1] == q.v[3]) continue;  // (adjacent ones give zero sides)
+    terms.quads.push_back(q);
+    corners.resize(first);
+  }
+}
+
+// Pyramid elements: centre-to-vertex edges and the side triangles, once each.
+void AddPyramidTerms(const mesh::CellComplex& mesh, const fem::ElementSet& elements,
+                     const Points& rest, Terms& terms) {
+  for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
+    const int32_t apex = elements.num_mesh_vertices + v;
+    for (int32_t x : mesh.cell_vertices(elements.virtual_node_cell[v])) {
+      AddEdge(apex, x, rest, terms.edges);
+    }
+  }
+  std::set<std::array<int32_t, 3>> triangles;
+  for (int32_t p = 0; p < elements.num_pyramid(); ++p) {
+    const int32_t* q = &elements.pyramid_nodes[5 * p];
+    for (int s = 0; s < 4; ++s) {
+      const int32_t a = q[s], b = q[(s + 1) % 4];
+      if (a == b) continue;  // degenerate base side (a triangle face)
+      std::array<int32_t, 3> key{std::min(a, b), std::max(a, b), q[4]};
+      if (!triangles.insert(key).second) continue;
+      AddCorner(q[4], a, b, rest, terms.corners);
+      AddCorner(a, b, q[4], rest, terms.corners);
+      AddCorner(b, q[4], a, rest, terms.corners);
+    }
+  }
+}
+
+// Every edge that is a side of a quadrilateral runs with the first such
+// quadrilateral (its stretch term computed from the side's length and
+// inverse, which the corners need anyway) and leaves the edge list. The
+// first mesh.num_edges() entries of `edges` are the mesh's edges in
+// order, so side k of a quadrilateral is edges[face_edges(face)[k]].
+// Returns, per entry of terms.edges, whether it now runs with a
+// quadrilateral.
+std::vector<uint8_t> FuseQuadSides(const mesh::CellComplex& mesh, Terms& terms) {
+  const std::vector<Edge>& edges = terms.edges;
+  std::vector<uint8_t> fused(edges.size(), 0);
+  for (Quad& q : terms.quads) {
+    const auto side_edges = mesh.face_edges(q.face);
+    for (int k = 0; k < 4; ++k) {
+      const int32_t e = side_edges[k];
+      if (fused[e]) continue;
+      fused[e] = 1;
+      q.edges |= static_cast<uint8_t>(1 << k);
+      // The side runs v[k] -> v[k+1]; the edge's term is the same either way.
+      q.l0[k] = edges[e].rest_length;
+    }
+  }
+  return fused;
+}
+
+// Ownership: cells in `parts` contiguous ranges; a node goes to the part
+// of its lowest-numbered cell. Returns each of the `nodes` nodes' part.
+std::vector<uint8_t> NodeOwners(const mesh::CellComplex& mesh, const fem::ElementSet& elements,
+                                int32_t nodes, int parts) {
+  const int64_t cells = std::max(1, mesh.num_cells());
+  auto part_of_cell = [&](int32_t c) { return static_cast<uint8_t>(c * parts / cells); };
+  std::vector<uint8_t> owner(nodes, 0);
+  for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+    int32_t lowest = cells;
+    for (int32_t c : mesh.vertex_cells(v)) lowest = std::min(lowest, c);
+    owner[v] = lowest < cells ? part_of_cell(lowest) : 0;
+  }
+  for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
+    owner[elements.num_mesh_vertices + v] = part_of_cell(elements.virtual_node_cell[v]);
+  }
+  return owner;
+}
+
+// Whether ks[t] differs from ks[0 .. t): each edge and corner is listed
+// once for every distinct part owning one of its nodes.
+bool DistinctPart(const int* ks, int t) {
+  for (int u = 0; u < t; ++u) {
+    if (ks[u] == ks[t]) return false;
+  }
+  return true;
+}
+
+// Rest lengths and quadrilateral rest corners, each distinct value (to
+// the bit) once: a regular block has one of each, so a term carries a
+// 4-byte index instead of 8 (edges) or 64 bytes (quadrilaterals), and
+// the passes stream that much less. Appends new values to the tables
+// it is given and returns their rows.
+class RestTables {
+ public:
+  RestTables(std::vector<double>& edge_rest, std::vector<double>& quad_rest)
+      : edge_rest_(edge_rest), quad_rest_(quad_rest) {}
+
+  uint32_t EdgeId(double length) {
+    auto [it, added] = edge_index_.try_emplace(length, static_cast<uint32_t>(edge_rest_.size()));
+    if (added) edge_rest_.push_back(length);
+    return it->second;
+  }
+
+  uint32_t QuadId(const Quad& q) {
+    std::array<double, kQuadRestRow> key;
+    std::copy(q.cos0.begin(), q.cos0.end(), key.begin());
+    std::copy(q.sin0.begin(), q.sin0.end(), key.begin() + 4);
+    std::copy(q.l0.begin(), q.l0.end(), key.begin() + 8);
+    auto [it, added] =
+        quad_index_.try_emplace(key, static_cast<uint32_t>(quad_rest_.size() / kQuadRestRow));
+    if (added) quad_rest_.insert(quad_rest_.end(), key.begin(), key.end());
+    return it->second;
+  }
+
+ private:
+  std::vector<double>& edge_rest_;
+  std::vector<double>& quad_rest_;
+  std::map<double, uint32_t> edge_index_;
+  std::map<std::array<double, kQuadRestRow>, uint32_t> quad_index_;
+};
+
 }  // namespace
 
 bool QuadPathRuns(QuadPath path) {
@@ -106,149 +258,53 @@ DeformationMeasure::DeformationMeasure(const mesh::CellComplex& mesh,
                                        int parts, QuadPath quads) {
   quad_path_ = QuadPathRuns(quads) ? quads : FastestQuadPath();
   quads_ = KernelsOf(quad_path_);
-  std::vector<Edge> edges;
-  std::vector<Corner> corners;
-  std::vector<Quad> quad_list;
-  edges.reserve(mesh.num_edges());
-  for (int32_t e = 0; e < mesh.num_edges(); ++e) {
-    const auto& ev = mesh.edge_vertices(e);
-    AddEdge(ev[0], ev[1], rest, edges);
-  }
-  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-    const auto loop = mesh.face_vertices(f);
-    const size_t k = loop.size();
-    const size_t first = corners.size();
-    for (size_t i = 0; i < k; ++i) {
-      AddCorner(loop[i], loop[(i + k - 1) % k], loop[(i + 1) % k], rest, corners);
-    }
-    // A quadrilateral with four distinct nodes and four proper rest corners
-    // runs as one: its corners leave the per-corner list.
-    if (quad_path_ == QuadPath::kPerCorner || k != 4 || corners.size() != first + 4) continue;
-    Quad q;
-    q.face = f;
-    for (int i = 0; i < 4; ++i) {
-      q.v[i] = loop[i];
-      q.cos0[i] = corners[first + i].cos0;
-      q.sin0[i] = corners[first + i].sin0;
-    }
-    if (q.v[0] == q.v[2] || q.v[1] == q.v[3]) continue;  // (adjacent ones give zero sides)
-    quad_list.push_back(q);
-    corners.resize(first);
-  }
-  // Pyramid elements: centre-to-vertex edges and the side triangles, once each.
-  for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
-    const int32_t apex = elements.num_mesh_vertices + v;
-    for (int32_t x : mesh.cell_vertices(elements.virtual_node_cell[v])) AddEdge(apex, x, rest, edges);
-  }
-  std::set<std::array<int32_t, 3>> triangles;
-  for (int32_t p = 0; p < elements.num_pyramid(); ++p) {
-    const int32_t* q = &elements.pyramid_nodes[5 * p];
-    for (int s = 0; s < 4; ++s) {
-      const int32_t a = q[s], b = q[(s + 1) % 4];
-      if (a == b) continue;  // degenerate base side (a triangle face)
-      std::array<int32_t, 3> key{std::min(a, b), std::max(a, b), q[4]};
-      if (!triangles.insert(key).second) continue;
-      AddCorner(q[4], a, b, rest, corners);
-      AddCorner(a, b, q[4], rest, corners);
-      AddCorner(b, q[4], a, rest, corners);
-    }
-  }
+  Terms terms;
+  AddMeshTerms(mesh, rest, quad_path_, terms);
+  AddPyramidTerms(mesh, elements, rest, terms);
+  const std::vector<uint8_t> fused = FuseQuadSides(mesh, terms);
+  const std::vector<Edge>& edges = terms.edges;
+  const std::vector<Corner>& corners = terms.corners;
+  const std::vector<Quad>& quad_list = terms.quads;
 
-  // Every edge that is a side of a quadrilateral runs with the first such
-  // quadrilateral (its stretch term computed from the side's length and
-  // inverse, which the corners need anyway) and leaves the edge list. The
-  // first mesh.num_edges() entries of `edges` are the mesh's edges in
-  // order, so side k of a quadrilateral is edges[face_edges(face)[k]].
-  std::vector<uint8_t> fused(edges.size(), 0);
-  for (Quad& q : quad_list) {
-    const auto side_edges = mesh.face_edges(q.face);
-    for (int k = 0; k < 4; ++k) {
-      const int32_t e = side_edges[k];
-      if (fused[e]) continue;
-      fused[e] = 1;
-      q.edges |= static_cast<uint8_t>(1 << k);
-      // The side runs v[k] -> v[k+1]; the edge's term is the same either way.
-      q.l0[k] = edges[e].rest_length;
-    }
-  }
-
-  // Ownership: cells in `parts` contiguous ranges; a node goes to the part
-  // of its lowest-numbered cell.
   parts = std::clamp(parts, 1, 255);
   const int32_t nodes = static_cast<int32_t>(rest.rows());
-  const int64_t cells = std::max(1, mesh.num_cells());
-  auto part_of_cell = [&](int32_t c) { return static_cast<uint8_t>(c * parts / cells); };
-  owner_.assign(nodes, 0);
-  for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
-    int32_t lowest = cells;
-    for (int32_t c : mesh.vertex_cells(v)) lowest = std::min(lowest, c);
-    owner_[v] = lowest < cells ? part_of_cell(lowest) : 0;
-  }
-  for (int32_t v = 0; v < elements.num_virtual_nodes; ++v) {
-    owner_[elements.num_mesh_vertices + v] = part_of_cell(elements.virtual_node_cell[v]);
-  }
+  owner_ = NodeOwners(mesh, elements, nodes, parts);
   parts_.assign(parts, Part{});
   for (int32_t v = 0; v < nodes; ++v) parts_[owner_[v]].nodes.push_back(v);
   // Each edge and corner is listed once for every distinct part owning one
-  // of its nodes.
-  auto distinct = [](const int* ks, int t) {
-    for (int u = 0; u < t; ++u) {
-      if (ks[u] == ks[t]) return false;
-    }
-    return true;
-  };
-  // Rest lengths and quadrilateral rest corners, each distinct value (to
-  // the bit) once: a regular block has one of each, so a term carries a
-  // 4-byte index instead of 8 (edges) or 64 bytes (quadrilaterals), and
-  // the passes stream that much less.
-  std::map<double, uint32_t> edge_index;
-  auto edge_rest_id = [&](double length) {
-    auto [it, added] = edge_index.try_emplace(length, static_cast<uint32_t>(edge_rest_.size()));
-    if (added) edge_rest_.push_back(length);
-    return it->second;
-  };
-  std::map<std::array<double, kQuadRestRow>, uint32_t> quad_index;
-  auto quad_rest_id = [&](const Quad& q) {
-    std::array<double, kQuadRestRow> key;
-    std::copy(q.cos0.begin(), q.cos0.end(), key.begin());
-    std::copy(q.sin0.begin(), q.sin0.end(), key.begin() + 4);
-    std::copy(q.l0.begin(), q.l0.end(), key.begin() + 8);
-    auto [it, added] =
-        quad_index.try_emplace(key, static_cast<uint32_t>(quad_rest_.size() / kQuadRestRow));
-    if (added) quad_rest_.insert(quad_rest_.end(), key.begin(), key.end());
-    return it->second;
-  };
+  // of its nodes (DistinctPart), with its rest values' rows (RestTables).
+  RestTables rest_tables(edge_rest_, quad_rest_);
   for (size_t e = 0; e < edges.size(); ++e) {
     if (fused[e]) continue;
     const Edge& edge = edges[e];
     const int ks[2] = {owner_[edge.i], owner_[edge.j]};
     for (int t = 0; t < 2; ++t) {
-      if (!distinct(ks, t)) continue;
+      if (!DistinctPart(ks, t)) continue;
       Part& p = parts_[ks[t]];
       p.ei.push_back(edge.i);
       p.ej.push_back(edge.j);
-      p.e_rest.push_back(edge_rest_id(edge.rest_length));
+      p.e_rest.push_back(rest_tables.EdgeId(edge.rest_length));
       p.e_owns.push_back((ks[0] == ks[t] ? 1 : 0) | (ks[1] == ks[t] ? 2 : 0));
     }
   }
   for (const Quad& q : quad_list) {
     const int ks[4] = {owner_[q.v[0]], owner_[q.v[1]], owner_[q.v[2]], owner_[q.v[3]]};
     for (int t = 0; t < 4; ++t) {
-      if (!distinct(ks, t)) continue;
+      if (!DistinctPart(ks, t)) continue;
       Part& p = parts_[ks[t]];
       uint8_t owns = 0;
       for (int i = 0; i < 4; ++i) {
         p.qv.push_back(q.v[i]);
         if (ks[i] == ks[t]) owns |= static_cast<uint8_t>(1 << i);
       }
-      p.q_rest.push_back(quad_rest_id(q));
+      p.q_rest.push_back(rest_tables.QuadId(q));
       p.q_owns.push_back(static_cast<uint8_t>(owns | (q.edges << 4)));
     }
   }
   for (const Corner& c : corners) {
     const int ks[3] = {owner_[c.a], owner_[c.b], owner_[c.n]};
     for (int t = 0; t < 3; ++t) {
-      if (!distinct(ks, t)) continue;
+      if (!DistinctPart(ks, t)) continue;
       Part& p = parts_[ks[t]];
       p.cn.push_back(c.n);
       p.ca.push_back(c.a);

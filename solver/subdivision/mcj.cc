@@ -174,30 +174,23 @@ struct Split {
   int32_t fine_vertices = 0;
 };
 
-// The subdivision matrix (fine vertices x coarse vertices), from the coarse
-// complex alone. sharp_edges: per edge, nonzero where tagged (empty: none).
-SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
-                               const std::vector<uint8_t>& sharp_edges) {
-  const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
-                nc = m.num_cells();
-  auto sharp = [&](int32_t e) { return !sharp_edges.empty() && sharp_edges[e] != 0; };
-  const std::vector<int32_t>& edge_point = split.edge_point;
-  const std::vector<int32_t>& face_point = split.face_point;
-  const std::vector<int32_t>& cell_point = split.cell_point;
-  const std::vector<uint8_t>& edge_frozen = split.edge_frozen;
-  const std::vector<uint8_t>& face_frozen = split.face_frozen;
-  const std::vector<uint8_t>& vertex_frozen = split.vertex_frozen;
-  const int32_t nv_fine = split.fine_vertices;
-  // ---- The subdivision matrix, row by row. ----
+// The rows of the subdivision matrix, appended in CSR form to outer, inner
+// and values by the steps below (old vertices' points, then edge, face and
+// cell points: the fine vertex order), each row summed by `row`.
+struct MatrixRows {
   std::vector<int32_t> outer{0}, inner;
   std::vector<double> values;
-  outer.reserve(nv_fine + 1);
-  inner.reserve(static_cast<size_t>(nv_fine) * 27);
-  values.reserve(static_cast<size_t>(nv_fine) * 27);
-  RowBuilder row(nv);
-  std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
+};
 
-  // Old vertices -> vertex points.
+// Old vertices -> vertex points. sharp_edges: per edge, nonzero where
+// tagged (empty: none).
+void AddVertexPointRows(const CellComplex& m, const Split& split,
+                        const std::vector<uint8_t>& sharp_edges, RowBuilder& row,
+                        MatrixRows& rows) {
+  const int32_t nv = m.num_vertices();
+  auto sharp = [&](int32_t e) { return !sharp_edges.empty() && sharp_edges[e] != 0; };
+  const std::vector<uint8_t>& vertex_frozen = split.vertex_frozen;
+  std::vector<int32_t> boundary_faces, boundary_edges, sharp_nbrs;
   for (int32_t v = 0; v < nv; ++v) {
     sharp_nbrs.clear();
     for (int32_t e : m.vertex_edges(v)) {
@@ -256,10 +249,19 @@ SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
       }
       row.Add(v, (n - 7.0) / n);
     }
-    row.Flush(outer, inner, values);
+    row.Flush(rows.outer, rows.inner, rows.values);
   }
+}
 
-  // Edge points.
+// Edge points, one row per split edge (sharp_edges as above).
+void AddEdgePointRows(const CellComplex& m, const Split& split,
+                      const std::vector<uint8_t>& sharp_edges, RowBuilder& row,
+                      MatrixRows& rows) {
+  const int32_t ne = m.num_edges();
+  auto sharp = [&](int32_t e) { return !sharp_edges.empty() && sharp_edges[e] != 0; };
+  const std::vector<int32_t>& edge_point = split.edge_point;
+  const std::vector<uint8_t>& edge_frozen = split.edge_frozen;
+  std::vector<int32_t> boundary_faces;
   for (int32_t e = 0; e < ne; ++e) {
     if (edge_point[e] < 0) continue;
     const auto& ev = m.edge_vertices(e);
@@ -293,10 +295,16 @@ SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
       row.Add(ev[0], (n - 3.0) / (2.0 * n));
       row.Add(ev[1], (n - 3.0) / (2.0 * n));
     }
-    row.Flush(outer, inner, values);
+    row.Flush(rows.outer, rows.inner, rows.values);
   }
+}
 
-  // Face points.
+// Face points, one row per split face.
+void AddFacePointRows(const CellComplex& m, const Split& split, RowBuilder& row,
+                      MatrixRows& rows) {
+  const int32_t nf = m.num_faces();
+  const std::vector<int32_t>& face_point = split.face_point;
+  const std::vector<uint8_t>& face_frozen = split.face_frozen;
   for (int32_t f = 0; f < nf; ++f) {
     if (face_point[f] < 0) continue;
     if (face_frozen[f] || m.face_is_boundary(f)) {
@@ -308,48 +316,60 @@ SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
       row.AddAverage(m.face_vertices(f), 0.5);
       row.AddAverage(m.cell_vertices(fc[1]), 0.25);
     }
-    row.Flush(outer, inner, values);
+    row.Flush(rows.outer, rows.inner, rows.values);
   }
-
-  // Cell points: the centroid of the cell's vertices.
-  for (int32_t c = 0; c < nc; ++c) {
-    if (cell_point[c] < 0) continue;
-    row.AddAverage(m.cell_vertices(c), 1.0);
-    row.Flush(outer, inner, values);
-  }
-  return FromCsr(nv_fine, nv, outer, inner, values);
 }
 
-}  // namespace
-
-// Coarse complexes of this many cells make their subdivision matrix on a
-// second thread (the chair's 83 control cells: its first level 0.94 to
-// 0.67-0.77 ms with the adjacency's threshold below).
-constexpr int32_t kCellsForAThread = 64;
-
-absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {
-  const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
-                nc = m.num_cells();
-  const bool has_sharp = !options.sharp_edges.empty();
-  if (has_sharp && static_cast<int32_t>(options.sharp_edges.size()) != ne) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "sharp edge tags: got ", options.sharp_edges.size(), " for ", ne, " edges"));
+// Cell points: the centroid of the cell's vertices.
+void AddCellPointRows(const CellComplex& m, const Split& split, RowBuilder& row,
+                      MatrixRows& rows) {
+  const int32_t nc = m.num_cells();
+  for (int32_t c = 0; c < nc; ++c) {
+    if (split.cell_point[c] < 0) continue;
+    row.AddAverage(m.cell_vertices(c), 1.0);
+    row.Flush(rows.outer, rows.inner, rows.values);
   }
-  auto sharp = [&](int32_t e) { return has_sharp && options.sharp_edges[e] != 0; };
+}
 
-  // Which cells are refined (all, unless a subset is given).
-  std::vector<uint8_t> refined(nc, options.cells.empty() ? 1 : 0);
-  for (int32_t c : options.cells) {
+// The subdivision matrix (fine vertices x coarse vertices), from the coarse
+// complex alone. sharp_edges: per edge, nonzero where tagged (empty: none).
+SparseMatrix SubdivisionMatrix(const CellComplex& m, const Split& split,
+                               const std::vector<uint8_t>& sharp_edges) {
+  const int32_t nv = m.num_vertices();
+  const int32_t nv_fine = split.fine_vertices;
+  // ---- The subdivision matrix, row by row. ----
+  MatrixRows rows;
+  rows.outer.reserve(nv_fine + 1);
+  rows.inner.reserve(static_cast<size_t>(nv_fine) * 27);
+  rows.values.reserve(static_cast<size_t>(nv_fine) * 27);
+  RowBuilder row(nv);
+  AddVertexPointRows(m, split, sharp_edges, row, rows);
+  AddEdgePointRows(m, split, sharp_edges, row, rows);
+  AddFacePointRows(m, split, row, rows);
+  AddCellPointRows(m, split, row, rows);
+  return FromCsr(nv_fine, nv, rows.outer, rows.inner, rows.values);
+}
+
+// Which cells a subdivision refines: all when `cells` is empty, else
+// those listed (each must be a cell of the complex).
+absl::StatusOr<std::vector<uint8_t>> RefinedCells(int32_t nc, const std::vector<int32_t>& cells) {
+  std::vector<uint8_t> refined(nc, cells.empty() ? 1 : 0);
+  for (int32_t c : cells) {
     if (c < 0 || c >= nc) {
       return absl::InvalidArgumentError(
           absl::StrCat("local subdivision: cell ", c, " is out of range [0, ", nc, ")"));
     }
     refined[c] = 1;
   }
-  const bool local = !options.cells.empty() &&
-                     std::find(refined.begin(), refined.end(), 0) != refined.end();
+  return refined;
+}
 
-  // Split faces and edges belong to a refined cell (Split).
+// Split faces and edges belong to a refined cell (Split). Fine points are
+// numbered after the coarse vertices: edge points, face points, then cell
+// points.
+Split SplitOf(const CellComplex& m, const std::vector<uint8_t>& refined) {
+  const int32_t nv = m.num_vertices(), ne = m.num_edges(), nf = m.num_faces(),
+                nc = m.num_cells();
   Split split;
   std::vector<int32_t>& edge_point = split.edge_point;
   std::vector<int32_t>& face_point = split.face_point;
@@ -382,59 +402,56 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   for (int32_t c = 0; c < nc; ++c) {
     if (refined[c]) cell_point[c] = next++;
   }
-  const int32_t nv_fine = split.fine_vertices = next;
+  split.fine_vertices = next;
   for (int32_t v = 0; v < nv; ++v) {
     for (int32_t c : m.vertex_cells(v)) vertex_frozen[v] |= refined[c] == 0;
   }
+  return split;
+}
 
-  // The subdivision matrix and the fine positions are made from the coarse
-  // complex alone: on a thread of their own beside the fine complex's
-  // topology when the complex is large (the same result either way).
-  Level level;
-  Points fine_positions;
-  auto matrix = [&] {
-    level.a = SubdivisionMatrix(m, split, options.sharp_edges);
-    fine_positions = level.a * m.positions();
-  };
-  std::thread beside;
-  struct Join {
-    std::thread& t;
-    ~Join() {
-      if (t.joinable()) t.join();
-    }
-  } join{beside};
-  if (nc >= kCellsForAThread && !options.validate_geometry) {
-    beside = std::thread(matrix);
-  } else {
-    matrix();
-  }
-
-  // ---- Topology of the fine complex. ----
-  // Face ids: children of split faces (one quad per corner, in the parent's
-  // stored orientation), then interior quads (one per refined cell and
-  // edge of that cell), then unsplit faces with split edges' points inserted.
+// The fine complex's face loops, and where each coarse face's and cell's
+// fine faces start (FineFaceLoops).
+struct FineFaces {
   Csr loops;
-  std::vector<int32_t> face_child(nf, -1), unsplit_face(nf, -1);
-  loops.items.reserve(static_cast<size_t>(nf) * 16 + static_cast<size_t>(nc) * 48);
+  // Per coarse face: its first child (split faces) or its one loop
+  // (unsplit faces of a local subdivision); -1 otherwise.
+  std::vector<int32_t> face_child, unsplit_face;
+  // Per coarse cell: its first interior quad (refined cells), else -1.
+  std::vector<int32_t> interior_base;
+};
+
+// Children of split faces: one quad per corner, in the parent's stored
+// orientation.
+void AddSplitFaceChildren(const CellComplex& m, const Split& split, FineFaces& out) {
+  const int32_t nf = m.num_faces();
+  Csr& loops = out.loops;
   for (int32_t f = 0; f < nf; ++f) {
-    if (face_point[f] < 0) continue;
-    face_child[f] = loops.rows();
+    if (split.face_point[f] < 0) continue;
+    out.face_child[f] = loops.rows();
     const auto loop = m.face_vertices(f);
     const auto edges = m.face_edges(f);
     const size_t k = loop.size();
     for (size_t i = 0; i < k; ++i) {
       const int32_t e_next = edges[i];
       const int32_t e_prev = edges[(i + k - 1) % k];
-      loops.items.insert(loops.items.end(), {loop[i], edge_point[e_next], face_point[f],
-                                             edge_point[e_prev]});
+      loops.items.insert(loops.items.end(), {loop[i], split.edge_point[e_next],
+                                             split.face_point[f], split.edge_point[e_prev]});
       loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
     }
   }
-  std::vector<int32_t> interior_base(nc, -1);
+}
+
+// Interior quads: one per refined cell and edge of that cell.
+void AddInteriorQuads(const CellComplex& m, const Split& split,
+                      const std::vector<uint8_t>& refined, FineFaces& out) {
+  const int32_t nc = m.num_cells();
+  const std::vector<int32_t>& edge_point = split.edge_point;
+  const std::vector<int32_t>& face_point = split.face_point;
+  Csr& loops = out.loops;
   std::vector<int32_t> fwd_face, bwd_face;  // per local edge of a cell
   for (int32_t c = 0; c < nc; ++c) {
     if (!refined[c]) continue;
-    interior_base[c] = loops.rows();
+    out.interior_base[c] = loops.rows();
     const auto cell_edges = m.cell_edges(c);
     fwd_face.assign(cell_edges.size(), -1);
     bwd_face.assign(cell_edges.size(), -1);
@@ -457,29 +474,66 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
       // Outward from the sub-cell at edge_vertices[0]: [F_fwd, E, F_bwd, C].
       loops.items.insert(loops.items.end(),
                          {face_point[fwd_face[j]], edge_point[cell_edges[j]],
-                          face_point[bwd_face[j]], cell_point[c]});
+                          face_point[bwd_face[j]], split.cell_point[c]});
       loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
     }
   }
-  if (local) {
-    for (int32_t f = 0; f < nf; ++f) {
-      if (face_point[f] >= 0) continue;
-      unsplit_face[f] = loops.rows();
-      const auto loop = m.face_vertices(f);
-      const auto edges = m.face_edges(f);
-      for (size_t i = 0; i < loop.size(); ++i) {
-        loops.items.push_back(loop[i]);
-        if (edge_point[edges[i]] >= 0) loops.items.push_back(edge_point[edges[i]]);
-      }
-      loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
-    }
-  }
+}
 
-  // Cells: each refined cell gives one sub-cell per vertex (faces of the
-  // parent at that corner, interior quads of the parent's edges at it);
-  // each unrefined cell stays one cell with its split faces' children.
+// Unsplit faces (local subdivision) with split edges' points inserted.
+void AddUnsplitFaces(const CellComplex& m, const Split& split, FineFaces& out) {
+  const int32_t nf = m.num_faces();
+  Csr& loops = out.loops;
+  for (int32_t f = 0; f < nf; ++f) {
+    if (split.face_point[f] >= 0) continue;
+    out.unsplit_face[f] = loops.rows();
+    const auto loop = m.face_vertices(f);
+    const auto edges = m.face_edges(f);
+    for (size_t i = 0; i < loop.size(); ++i) {
+      loops.items.push_back(loop[i]);
+      if (split.edge_point[edges[i]] >= 0) loops.items.push_back(split.edge_point[edges[i]]);
+    }
+    loops.offsets.push_back(static_cast<int32_t>(loops.items.size()));
+  }
+}
+
+// Face ids: children of split faces (one quad per corner, in the parent's
+// stored orientation), then interior quads (one per refined cell and
+// edge of that cell), then unsplit faces with split edges' points inserted.
+FineFaces FineFaceLoops(const CellComplex& m, const Split& split,
+                        const std::vector<uint8_t>& refined, bool local) {
+  const int32_t nf = m.num_faces(), nc = m.num_cells();
+  FineFaces out;
+  out.face_child.assign(nf, -1);
+  out.unsplit_face.assign(nf, -1);
+  out.interior_base.assign(nc, -1);
+  out.loops.items.reserve(static_cast<size_t>(nf) * 16 + static_cast<size_t>(nc) * 48);
+  AddSplitFaceChildren(m, split, out);
+  AddInteriorQuads(m, split, refined, out);
+  if (local) AddUnsplitFaces(m, split, out);
+  return out;
+}
+
+// The fine complex's cells as faces (FineFaceLoops' ids) and whether each
+// sees its face reversed.
+struct FineCells {
   Csr cell_faces;
   std::vector<uint8_t> cell_flip;
+};
+
+// Cells: each refined cell gives one sub-cell per vertex (faces of the
+// parent at that corner, interior quads of the parent's edges at it);
+// each unrefined cell stays one cell with its split faces' children.
+// Appends each fine cell's coarse cell to parent_cell.
+FineCells FineCellFaces(const CellComplex& m, const std::vector<uint8_t>& refined,
+                        const FineFaces& fine_faces, std::vector<int32_t>& parent_cell) {
+  const int32_t nc = m.num_cells();
+  const std::vector<int32_t>& face_child = fine_faces.face_child;
+  const std::vector<int32_t>& unsplit_face = fine_faces.unsplit_face;
+  const std::vector<int32_t>& interior_base = fine_faces.interior_base;
+  FineCells out;
+  Csr& cell_faces = out.cell_faces;
+  std::vector<uint8_t>& cell_flip = out.cell_flip;
   cell_faces.items.reserve(static_cast<size_t>(nc) * 48);
   cell_flip.reserve(static_cast<size_t>(nc) * 48);
   std::vector<std::vector<std::pair<int32_t, uint8_t>>> corner;
@@ -500,7 +554,7 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
         }
       }
       cell_faces.offsets.push_back(static_cast<int32_t>(cell_faces.items.size()));
-      level.parent_cell.push_back(c);
+      parent_cell.push_back(c);
       continue;
     }
     const auto verts = m.cell_vertices(c);
@@ -530,9 +584,81 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
         cell_flip.push_back(fl);
       }
       cell_faces.offsets.push_back(static_cast<int32_t>(cell_faces.items.size()));
-      level.parent_cell.push_back(c);
+      parent_cell.push_back(c);
     }
   }
+  return out;
+}
+
+// Sharp tags pass to both children of a split edge, or stay on an
+// unsplit one. sharp_edges: the coarse edges' tags (empty: none).
+std::vector<uint8_t> FineSharpEdges(const CellComplex& m, const std::vector<uint8_t>& sharp_edges,
+                                    const std::vector<int32_t>& edge_point,
+                                    const CellComplex& fine) {
+  std::vector<uint8_t> fine_sharp(fine.num_edges(), 0);
+  if (sharp_edges.empty()) return fine_sharp;
+  const int32_t ne = m.num_edges();
+  for (int32_t e = 0; e < ne; ++e) {
+    if (sharp_edges[e] == 0) continue;
+    const auto& ev = m.edge_vertices(e);
+    if (edge_point[e] < 0) {
+      fine_sharp[fine.FindEdge(ev[0], ev[1])] = 1;
+    } else {
+      fine_sharp[fine.FindEdge(ev[0], edge_point[e])] = 1;
+      fine_sharp[fine.FindEdge(edge_point[e], ev[1])] = 1;
+    }
+  }
+  return fine_sharp;
+}
+
+}  // namespace
+
+// Coarse complexes of this many cells make their subdivision matrix on a
+// second thread (the chair's 83 control cells: its first level 0.94 to
+// 0.67-0.77 ms with the adjacency's threshold below).
+constexpr int32_t kCellsForAThread = 64;
+
+absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptions& options) {
+  const int32_t ne = m.num_edges(), nc = m.num_cells();
+  const bool has_sharp = !options.sharp_edges.empty();
+  if (has_sharp && static_cast<int32_t>(options.sharp_edges.size()) != ne) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "sharp edge tags: got ", options.sharp_edges.size(), " for ", ne, " edges"));
+  }
+
+  // Which cells are refined (all, unless a subset is given).
+  ASSIGN_OR_RETURN(const std::vector<uint8_t> refined, RefinedCells(nc, options.cells));
+  const bool local = !options.cells.empty() &&
+                     std::find(refined.begin(), refined.end(), 0) != refined.end();
+
+  const Split split = SplitOf(m, refined);
+  const int32_t nv_fine = split.fine_vertices;
+
+  // The subdivision matrix and the fine positions are made from the coarse
+  // complex alone: on a thread of their own beside the fine complex's
+  // topology when the complex is large (the same result either way).
+  Level level;
+  Points fine_positions;
+  auto matrix = [&] {
+    level.a = SubdivisionMatrix(m, split, options.sharp_edges);
+    fine_positions = level.a * m.positions();
+  };
+  std::thread beside;
+  struct Join {
+    std::thread& t;
+    ~Join() {
+      if (t.joinable()) t.join();
+    }
+  } join{beside};
+  if (nc >= kCellsForAThread && !options.validate_geometry) {
+    beside = std::thread(matrix);
+  } else {
+    matrix();
+  }
+
+  // ---- Topology of the fine complex. ----
+  FineFaces faces = FineFaceLoops(m, split, refined, local);
+  FineCells cells = FineCellFaces(m, refined, faces, level.parent_cell);
 
   // A fine cell is made of its parent's faces (split into children or
   // with split edges' points inserted) and, for a refined cell, interior
@@ -544,33 +670,22 @@ absl::StatusOr<Level> SubdivideOnce(const CellComplex& m, const SubdivisionOptio
   const bool check_closed = options.validate_geometry;
   if (beside.joinable()) {
     // Adjacency needs the vertex count only: the positions follow.
-    ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(Points::Zero(nv_fine, 3), std::move(loops),
-                                                        std::move(cell_faces), std::move(cell_flip),
-                                                        /*validate_geometry=*/false, check_closed));
+    ASSIGN_OR_RETURN(level.fine,
+                     CellComplex::FromFaces(Points::Zero(nv_fine, 3), std::move(faces.loops),
+                                            std::move(cells.cell_faces),
+                                            std::move(cells.cell_flip),
+                                            /*validate_geometry=*/false, check_closed));
     beside.join();
     level.fine.set_positions(std::move(fine_positions));
   } else {
     ASSIGN_OR_RETURN(level.fine, CellComplex::FromFaces(std::move(fine_positions),
-                                                        std::move(loops), std::move(cell_faces),
-                                                        std::move(cell_flip),
+                                                        std::move(faces.loops),
+                                                        std::move(cells.cell_faces),
+                                                        std::move(cells.cell_flip),
                                                         options.validate_geometry, check_closed));
   }
 
-  // Sharp tags pass to both children of a split edge, or stay on an
-  // unsplit one.
-  level.sharp_edges.assign(level.fine.num_edges(), 0);
-  if (has_sharp) {
-    for (int32_t e = 0; e < ne; ++e) {
-      if (!sharp(e)) continue;
-      const auto& ev = m.edge_vertices(e);
-      if (edge_point[e] < 0) {
-        level.sharp_edges[level.fine.FindEdge(ev[0], ev[1])] = 1;
-      } else {
-        level.sharp_edges[level.fine.FindEdge(ev[0], edge_point[e])] = 1;
-        level.sharp_edges[level.fine.FindEdge(edge_point[e], ev[1])] = 1;
-      }
-    }
-  }
+  level.sharp_edges = FineSharpEdges(m, options.sharp_edges, split.edge_point, level.fine);
   return level;
 }
 

@@ -1,4 +1,4 @@
-// Animations from a session's journal (issue 38): the session replayed
+// Animations from a session's journal: the session replayed
 // offline, step by step, through the same SimCore code as the live loop
 // and crash recovery, with a frame written at each frame time. Because
 // the journal replays a session bit for bit, the frames are the shapes the

@@ -29,6 +29,7 @@ PARTS = {
     "probe": ("ProbeLoads", "probe_loads.h"),
     "environment": ("contact::ObstacleContact", "contact/obstacle_contact.h"),
     "plasticity": ("material::Plasticity", "material/plasticity.h"),
+    "ledger": ("EnergyLedger", "energy_ledger.h"),
 }
 
 

@@ -78,11 +78,11 @@ std::shared_ptr<CellPartials> SumByCell(const SparseMatrix& nm, const models::El
   return std::move(jobs[0].made);
 }
 
-void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
-                const std::vector<int32_t>& control_cell, int32_t control_cells,
-                std::vector<CellSumJob>& jobs, WorkerPool& pool,
-                const std::vector<std::function<void()>>& beside) {
-  const int32_t nc = static_cast<int32_t>(nm.cols());
+namespace {
+
+// A control cell's elements and support (Cell) for every cell.
+std::vector<Cell> CellsOf(const models::ElementLayout& layout,
+                          const std::vector<int32_t>& control_cell, int32_t control_cells) {
   std::vector<Cell> cells(control_cells);
   for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const models::ElementBlock& block = layout.blocks[kind];
@@ -92,82 +92,84 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       cells[c].elements.push_back({kind, e});
     }
   }
-  const int threads = pool.size();
-  std::vector<Scratch> scratch(threads);
-  for (Scratch& s : scratch) s.cell_mark.assign(nc, -1);
-  // Each cell's support and geometry key (its elements' kinds and node
-  // rows, the columns numbered within the cell): made here unless a job's
-  // spec.geometry has them from another sum of this build.
-  CellGeometry own;
-  CellGeometry* shared = nullptr;
-  for (const CellSumJob& job : jobs) {
-    if (job.spec->geometry != nullptr) shared = job.spec->geometry;
+  return cells;
+}
+
+// Each cell's support and geometry key (its elements' kinds and node rows,
+// the columns numbered within the cell) into `geometry`, unless it has
+// them already (from another sum of this build).
+void MakeGeometry(const SparseMatrix& nm, const models::ElementLayout& layout,
+                  const std::vector<Cell>& cells, int32_t control_cells,
+                  std::vector<Scratch>& scratch, WorkerPool& pool, CellGeometry& geometry) {
+  if (static_cast<int32_t>(geometry.keys.size()) == control_cells) return;
+  geometry.supports.assign(control_cells, {});
+  geometry.keys.assign(control_cells, {});
+  for (Scratch& s : scratch) {
+    s.node_stamp.assign(nm.rows(), -1);
+    s.node_key.resize(nm.rows());
   }
-  CellGeometry& geometry = shared != nullptr ? *shared : own;
-  if (static_cast<int32_t>(geometry.keys.size()) != control_cells) {
-    geometry.supports.assign(control_cells, {});
-    geometry.keys.assign(control_cells, {});
-    for (Scratch& s : scratch) {
-      s.node_stamp.assign(nm.rows(), -1);
-      s.node_key.resize(nm.rows());
-    }
-    Parts(pool, control_cells, [&](int t, int c) {
-      Scratch& s = scratch[t];
-      const Cell& cell = cells[c];
-      std::vector<int32_t>& support = geometry.supports[c];
-      // The cell's distinct nodes (elements of a cell share most of
-      // theirs), each row read once for the support.
-      s.nodes.clear();
-      for (const auto& [kind, e] : cell.elements) {
-        const models::ElementBlock& block = layout.blocks[kind];
-        const int32_t* ids = block.element_nodes(e);
-        for (int i = 0; i < block.nodes; ++i) {
-          if (s.node_stamp[ids[i]] == c) continue;
-          s.node_stamp[ids[i]] = c;
-          s.nodes.push_back(ids[i]);
-          for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
-            const int32_t col = static_cast<int32_t>(it.col());
-            if (s.cell_mark[col] < 0) {
-              s.cell_mark[col] = 0;
-              support.push_back(col);
-            }
+  Parts(pool, control_cells, [&](int t, int c) {
+    Scratch& s = scratch[t];
+    const Cell& cell = cells[c];
+    std::vector<int32_t>& support = geometry.supports[c];
+    // The cell's distinct nodes (elements of a cell share most of
+    // theirs), each row read once for the support.
+    s.nodes.clear();
+    for (const auto& [kind, e] : cell.elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < block.nodes; ++i) {
+        if (s.node_stamp[ids[i]] == c) continue;
+        s.node_stamp[ids[i]] = c;
+        s.nodes.push_back(ids[i]);
+        for (SparseMatrix::InnerIterator it(nm, ids[i]); it; ++it) {
+          const int32_t col = static_cast<int32_t>(it.col());
+          if (s.cell_mark[col] < 0) {
+            s.cell_mark[col] = 0;
+            support.push_back(col);
           }
         }
       }
-      std::sort(support.begin(), support.end());
-      for (size_t a = 0; a < support.size(); ++a) s.cell_mark[support[a]] = static_cast<int32_t>(a);
-      // Each node's row, its columns numbered within the cell.
-      for (int32_t node : s.nodes) s.node_key[node] = RowKey(nm, node, s.cell_mark);
-      // Four independent lanes of the elements' node rows, by node slot
-      // (as RowKey): a single hash chain of a cell's thousands of node
-      // keys waited on its multiplies.
-      Hash128 lane[4];
-      for (const auto& [kind, e] : cell.elements) {
-        const models::ElementBlock& block = layout.blocks[kind];
-        lane[0].Mix(static_cast<uint64_t>(kind));
-        const int32_t* ids = block.element_nodes(e);
-        for (int i = 0; i < block.nodes; ++i) lane[i & 3].Key(s.node_key[ids[i]]);
-      }
-      Hash128 h;
-      h.Mix(support.size());
-      h.Mix(cell.elements.size());
-      for (const Hash128& l : lane) h.Key(l.value());
-      geometry.keys[c] = h.value();
-      for (int32_t col : support) s.cell_mark[col] = -1;
-    });
-  }
-  for (int32_t c = 0; c < control_cells; ++c) cells[c].support = geometry.supports[c];
+    }
+    std::sort(support.begin(), support.end());
+    for (size_t a = 0; a < support.size(); ++a) s.cell_mark[support[a]] = static_cast<int32_t>(a);
+    // Each node's row, its columns numbered within the cell.
+    for (int32_t node : s.nodes) s.node_key[node] = RowKey(nm, node, s.cell_mark);
+    // Four independent lanes of the elements' node rows, by node slot
+    // (as RowKey): a single hash chain of a cell's thousands of node
+    // keys waited on its multiplies.
+    Hash128 lane[4];
+    for (const auto& [kind, e] : cell.elements) {
+      const models::ElementBlock& block = layout.blocks[kind];
+      lane[0].Mix(static_cast<uint64_t>(kind));
+      const int32_t* ids = block.element_nodes(e);
+      for (int i = 0; i < block.nodes; ++i) lane[i & 3].Key(s.node_key[ids[i]]);
+    }
+    Hash128 h;
+    h.Mix(support.size());
+    h.Mix(cell.elements.size());
+    for (const Hash128& l : lane) h.Key(l.value());
+    geometry.keys[c] = h.value();
+    for (int32_t col : support) s.cell_mark[col] = -1;
+  });
+}
 
-  // Per job: its cells' keys (what the spec sums, the cell's geometry and
-  // its elements' group keys) and the partials it must make (neither
-  // carried nor shared with an earlier cell of this build).
+// Per job: its cells' keys (what the spec sums, the cell's geometry and
+// its elements' group keys) and the partials it must make (neither carried
+// nor shared with an earlier cell of this build); each job's `made` started
+// with the partials it takes over.
+void KeyJobs(const models::ElementLayout& layout, const std::vector<Cell>& cells,
+             int32_t control_cells, const CellGeometry& geometry, std::vector<CellSumJob>& jobs,
+             WorkerPool& pool, std::vector<std::vector<Key128>>& keys,
+             std::vector<std::vector<uint8_t>>& makes) {
+  const int threads = pool.size();
   const int nj = static_cast<int>(jobs.size());
-  std::vector<std::vector<Key128>> keys(nj, std::vector<Key128>(control_cells));
-  std::vector<std::vector<uint8_t>> makes(nj, std::vector<uint8_t>(control_cells, 0));
+  keys.assign(nj, std::vector<Key128>(control_cells));
+  makes.assign(nj, std::vector<uint8_t>(control_cells, 0));
   for (int j = 0; j < nj; ++j) {
     CellSumJob& job = jobs[j];
     const CellSumSpec& spec = *job.spec;
-    std::array<std::vector<Key128>, 3> group_keys;
+    std::array<std::vector<Key128>, fem::kElementKinds> group_keys;
     for (int kind = 0; kind < fem::kElementKinds; ++kind) group_keys[kind].resize(layout.blocks[kind].groups.size());
     pool.Run([&](int t) {
       for (int kind = 0; kind < fem::kElementKinds; ++kind) {
@@ -199,8 +201,16 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
     }
     next.bytes = bytes;
   }
-  // The new partials, in one pass over the cells: a cell's partials of
-  // every job one after another on one thread.
+}
+
+// The partials the jobs must make, in one pass over the cells (with the
+// caller's jobs `beside` first): made[j][c].
+std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> MakePartials(
+    const models::ElementLayout& layout, const std::vector<Cell>& cells, int32_t control_cells,
+    const std::vector<CellSumJob>& jobs, const std::vector<std::vector<uint8_t>>& makes,
+    WorkerPool& pool, const std::vector<std::function<void()>>& beside) {
+  const int nj = static_cast<int>(jobs.size());
+  // A cell's partials of every job one after another on one thread.
   std::vector<int32_t> to_make;
   for (int32_t c = 0; c < control_cells; ++c) {
     for (int j = 0; j < nj; ++j) {
@@ -245,6 +255,17 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       made[j][c] = std::move(p);
     }
   });
+  return made;
+}
+
+// Each job's partials installed in its `made`, and its sums: per cell
+// (spec.per_cell) or summed in cell order into matrices or triplets.
+void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t nc,
+                std::vector<CellSumJob>& jobs, const std::vector<std::vector<Key128>>& keys,
+                const std::vector<std::vector<uint8_t>>& makes,
+                std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>>& made,
+                WorkerPool& pool) {
+  const int nj = static_cast<int>(jobs.size());
   for (int j = 0; j < nj; ++j) {
     CellSumJob& job = jobs[j];
     const CellSumSpec& spec = *job.spec;
@@ -296,6 +317,34 @@ void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
       }
     });
   }
+}
+
+}  // namespace
+
+void SumByCells(const SparseMatrix& nm, const models::ElementLayout& layout,
+                const std::vector<int32_t>& control_cell, int32_t control_cells,
+                std::vector<CellSumJob>& jobs, WorkerPool& pool,
+                const std::vector<std::function<void()>>& beside) {
+  const int32_t nc = static_cast<int32_t>(nm.cols());
+  std::vector<Cell> cells = CellsOf(layout, control_cell, control_cells);
+  const int threads = pool.size();
+  std::vector<Scratch> scratch(threads);
+  for (Scratch& s : scratch) s.cell_mark.assign(nc, -1);
+  // The cells' supports and geometry keys: made here unless a job's
+  // spec.geometry has them from another sum of this build.
+  CellGeometry own;
+  CellGeometry* shared = nullptr;
+  for (const CellSumJob& job : jobs) {
+    if (job.spec->geometry != nullptr) shared = job.spec->geometry;
+  }
+  CellGeometry& geometry = shared != nullptr ? *shared : own;
+  MakeGeometry(nm, layout, cells, control_cells, scratch, pool, geometry);
+  for (int32_t c = 0; c < control_cells; ++c) cells[c].support = geometry.supports[c];
+  std::vector<std::vector<Key128>> keys;
+  std::vector<std::vector<uint8_t>> makes;
+  KeyJobs(layout, cells, control_cells, geometry, jobs, pool, keys, makes);
+  auto made = MakePartials(layout, cells, control_cells, jobs, makes, pool, beside);
+  FinishJobs(cells, control_cells, nc, jobs, keys, makes, made, pool);
 }
 
 }  // namespace dynsolid::solid

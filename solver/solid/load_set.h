@@ -90,7 +90,6 @@ class LoadSet {
   // (one row per control point). The fix counts follow from c.fixes.
   LoadSet(Contents c, Points held);
 
-  const Contents& contents() const { return c_; }
   const std::vector<PointLoad>& point_loads() const { return c_.point_loads; }
   const std::vector<PressureLoad>& pressures() const { return c_.pressures; }
   const std::vector<FixConstraint>& fixes() const { return c_.fixes; }

@@ -515,6 +515,7 @@ absl::Status Solid::SetContactLoads(const std::vector<ContactLoad>& loads) {
   std::vector<ProbeLoads::Load> weighted;
   weighted.reserve(loads.size());
   for (const ContactLoad& l : loads) {
+    if (l.force.squaredNorm() == 0) continue;  // touches nothing: no control row needed
     weighted.emplace_back(SurfaceRow(im.surface_rows, surface_.quads[l.quad], l.u, l.v), l.force);
   }
   const int64_t nc = p_.rows();

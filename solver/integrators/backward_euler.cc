@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <climits>
 #include <cmath>
 
 
@@ -13,31 +14,54 @@ struct BackwardEuler::Flat {
 
 std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& md,
                                                           const std::vector<uint8_t>& fixed,
-                                                          double h,
-                                                          const Eigen::SparseMatrix<double>& k0) {
-  const int64_t n = md.rows();
-  std::vector<Eigen::Triplet<double, int32_t>> t;
-  t.reserve(static_cast<size_t>(3 * md.nonZeros() + k0.nonZeros()));
-  for (int64_t r = 0; r < n; ++r) {
-    for (SparseMatrix::InnerIterator it(md, r); it; ++it) {
-      for (int c = 0; c < 3; ++c) {
-        t.emplace_back(static_cast<int32_t>(3 * r + c), static_cast<int32_t>(3 * it.col() + c),
-                       it.value());
+                                                          double h, const SparseMatrix& k0) {
+  const int32_t n = static_cast<int32_t>(md.rows());
+  // P = md (x) I3 + h^2 K0, row by row: row 3 r + a merges md's row r (its
+  // columns 3 c + a) with K0's row 3 r + a, an entry in both summed as
+  // md + h^2 k.
+  const double h2 = h * h;
+  std::vector<int32_t> outer(static_cast<size_t>(3 * n) + 1, 0), inner;
+  std::vector<double> values;
+  inner.reserve(static_cast<size_t>(k0.nonZeros()));
+  values.reserve(static_cast<size_t>(k0.nonZeros()));
+  for (int32_t r = 0; r < n; ++r) {
+    for (int a = 0; a < 3; ++a) {
+      SparseMatrix::InnerIterator m(md, r), k(k0, 3 * r + a);
+      while (m || k) {
+        const int32_t mc = m ? static_cast<int32_t>(3 * m.col() + a) : INT32_MAX;
+        const int32_t kc = k ? static_cast<int32_t>(k.col()) : INT32_MAX;
+        if (mc < kc) {
+          inner.push_back(mc);
+          values.push_back(m.value());
+          ++m;
+        } else if (kc < mc) {
+          inner.push_back(kc);
+          values.push_back(h2 * k.value());
+          ++k;
+        } else {
+          // h^2 k rounded before the sum (as it was when the two were
+          // summed as separate entries): no fused multiply-add.
+          volatile double hk = h2 * k.value();
+          inner.push_back(mc);
+          values.push_back(m.value() + hk);
+          ++m;
+          ++k;
+        }
       }
-    }
-  }
-  for (int k = 0; k < k0.outerSize(); ++k) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(k0, k); it; ++it) {
-      t.emplace_back(static_cast<int32_t>(it.row()), static_cast<int32_t>(it.col()),
-                     h * h * it.value());
+      outer[3 * r + a + 1] = static_cast<int32_t>(inner.size());
     }
   }
   SparseMatrix p(3 * n, 3 * n);
-  p.setFromTriplets(t.begin(), t.end());
+  p.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), p.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), p.innerIndexPtr());
+  std::copy(values.begin(), values.end(), p.valuePtr());
+  std::vector<int32_t>().swap(inner);
+  std::vector<double>().swap(values);
   // Fixed DOFs leave the system (their rows of the solve are zero, as
   // Precondition masks them).
   std::vector<uint8_t> fixed_dofs(static_cast<size_t>(3 * n), 0);
-  for (int64_t i = 0; i < n; ++i) {
+  for (int32_t i = 0; i < n; ++i) {
     if (fixed[i]) fixed_dofs[3 * i] = fixed_dofs[3 * i + 1] = fixed_dofs[3 * i + 2] = 1;
   }
   auto flat = std::make_shared<Flat>();
@@ -45,7 +69,7 @@ std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& m
   return flat;
 }
 
-void BackwardEuler::SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>& k0) {
+void BackwardEuler::SetStiffnessPreconditioner(const SparseMatrix& k0) {
   std::shared_ptr<Flat> flat = Factor(md_, fixed_, h_, k0);
   if (flat != nullptr) flat_ = std::move(flat);  // else keep the column preconditioner
 }
@@ -62,7 +86,7 @@ void BackwardEuler::Precondition(const Points& r, Points& z) const {
 
 BackwardEuler::Prepared BackwardEuler::Prepare(const SparseMatrix& mt, const SparseMatrix* dt,
                                                double h, std::vector<uint8_t> fixed,
-                                               const Eigen::SparseMatrix<double>* k0) {
+                                               const SparseMatrix* k0) {
   Prepared p;
   p.h = h;
   p.md = mt;

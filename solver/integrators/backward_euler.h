@@ -83,7 +83,7 @@ class BackwardEuler {
     std::shared_ptr<Flat> flat;
   };
   static Prepared Prepare(const SparseMatrix& mt, const SparseMatrix* dt, double h,
-                          std::vector<uint8_t> fixed, const Eigen::SparseMatrix<double>* k0);
+                          std::vector<uint8_t> fixed, const SparseMatrix* k0);
   void Setup(const SparseMatrix* mt, const SparseMatrix* dt, Prepared prepared);
 
   // One step from (p, p_prev) to p_next. `force` = F (then F - h Kt (v + dv0)
@@ -119,7 +119,7 @@ class BackwardEuler {
 
   // K0: 3 #control square, DOFs 3 i + c (the layout of a row-major
   // #control by 3 Points). Call after Setup.
-  void SetStiffnessPreconditioner(const Eigen::SparseMatrix<double>& k0);
+  void SetStiffnessPreconditioner(const SparseMatrix& k0);
 
   double h() const { return h_; }
   // Steps whose warm start was rechecked against the exact b (see above).
@@ -144,7 +144,7 @@ class BackwardEuler {
   std::shared_ptr<Flat> flat_;
   // The factor of md + h^2 K0 (fixed DOFs identity), or null when it fails.
   static std::shared_ptr<Flat> Factor(const SparseMatrix& md, const std::vector<uint8_t>& fixed,
-                                      double h, const Eigen::SparseMatrix<double>& k0);
+                                      double h, const SparseMatrix& k0);
   void Precondition(const Points& r, Points& z) const;
   Points v_, rhs_, x_, r_, z_, p_, q_, tmp_, kx_, c_;
   History history_;

@@ -258,8 +258,144 @@ std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> MakePart
   return made;
 }
 
+// The control points each control point shares a cell with: point i's
+// neighbours (ascending) at neighbours[first[i] .. first[i + 1]).
+struct SparsePattern {
+  std::vector<int64_t> first;
+  std::vector<int32_t> neighbours;
+};
+
+SparsePattern PatternOf(const std::vector<Cell>& cells, int32_t control_cells, int32_t nc,
+                        WorkerPool& pool) {
+  // The cells of each point, ascending.
+  std::vector<int32_t> count(static_cast<size_t>(nc) + 1, 0);
+  for (int32_t c = 0; c < control_cells; ++c) {
+    for (int32_t i : cells[c].support) ++count[i + 1];
+  }
+  for (int32_t i = 0; i < nc; ++i) count[i + 1] += count[i];
+  std::vector<int32_t> cells_of(static_cast<size_t>(count[nc]));
+  {
+    std::vector<int32_t> at(count.begin(), count.end() - 1);
+    for (int32_t c = 0; c < control_cells; ++c) {
+      for (int32_t i : cells[c].support) cells_of[at[i]++] = c;
+    }
+  }
+  // Each point's neighbours: the union of its cells' supports.
+  std::vector<std::vector<int32_t>> lists(nc);
+  const int threads = pool.size();
+  pool.RunParts(threads, [&](int t) {
+    std::vector<int32_t> stamp(nc, -1);
+    const int32_t lo = static_cast<int32_t>(int64_t{nc} * t / threads);
+    const int32_t hi = static_cast<int32_t>(int64_t{nc} * (t + 1) / threads);
+    for (int32_t i = lo; i < hi; ++i) {
+      std::vector<int32_t>& list = lists[i];
+      for (int32_t k = count[i]; k < count[i + 1]; ++k) {
+        for (int32_t j : cells[cells_of[k]].support) {
+          if (stamp[j] == i) continue;
+          stamp[j] = i;
+          list.push_back(j);
+        }
+      }
+      std::sort(list.begin(), list.end());
+    }
+  });
+  SparsePattern p;
+  p.first.assign(static_cast<size_t>(nc) + 1, 0);
+  for (int32_t i = 0; i < nc; ++i) p.first[i + 1] = p.first[i] + static_cast<int64_t>(lists[i].size());
+  p.neighbours.reserve(static_cast<size_t>(p.first[nc]));
+  for (std::vector<int32_t>& list : lists) {
+    p.neighbours.insert(p.neighbours.end(), list.begin(), list.end());
+    std::vector<int32_t>().swap(list);
+  }
+  return p;
+}
+
+// Output `o` of the partials summed in cell order straight into a row-major
+// sparse matrix (dofs rows and columns per control point, 3 i + c). An
+// entry is kept where some cell's partial is non-zero (a sum that cancels
+// to zero stays, as an explicit zero), and each is summed from zero in
+// cell order: the bits and pattern Eigen's setFromTriplets gives the
+// partials' non-zero entries listed in cell order. The rows are split
+// between the pool's threads, each going through every cell in order.
+SparseMatrix SumSparse(
+    const std::vector<Cell>& cells, int32_t control_cells, const SparsePattern& pattern, int dofs,
+    const std::vector<std::shared_ptr<const std::vector<Eigen::MatrixXd>>>& partial, int o,
+    WorkerPool& pool) {
+  const int32_t nc = static_cast<int32_t>(pattern.first.size()) - 1;
+  const int64_t d = dofs;
+  // Row dofs * i + a starts at start(i, a); its columns are point i's
+  // neighbours' dofs in order.
+  auto start = [&](int32_t i, int a) {
+    const int64_t width = pattern.first[i + 1] - pattern.first[i];
+    return d * d * pattern.first[i] + a * d * width;
+  };
+  const int64_t total = d * d * pattern.first[nc];
+  std::vector<double> values(static_cast<size_t>(total), 0.0);
+  std::vector<uint8_t> kept(static_cast<size_t>(total), 0);
+  const int threads = pool.size();
+  pool.RunParts(threads, [&](int t) {
+    const int32_t lo = static_cast<int32_t>(int64_t{nc} * t / threads);
+    const int32_t hi = static_cast<int32_t>(int64_t{nc} * (t + 1) / threads);
+    std::vector<int64_t> at;  // support point jj's place among point i's neighbours
+    for (int32_t c = 0; c < control_cells; ++c) {
+      const std::vector<int32_t>& support = cells[c].support;
+      const int s = static_cast<int>(support.size());
+      const Eigen::MatrixXd& p = (*partial[c])[o];
+      for (int k = 0; k < s; ++k) {
+        const int32_t i = support[k];
+        if (i < lo || i >= hi) continue;
+        // Both ascending: one merge walk.
+        at.resize(s);
+        const int32_t* nb = pattern.neighbours.data() + pattern.first[i];
+        int64_t q = 0;
+        for (int jj = 0; jj < s; ++jj) {
+          while (nb[q] != support[jj]) ++q;
+          at[jj] = q;
+        }
+        for (int a = 0; a < dofs; ++a) {
+          const int64_t row = start(i, a);
+          for (int jj = 0; jj < s; ++jj) {
+            for (int b = 0; b < dofs; ++b) {
+              const double v = p(dofs * k + a, dofs * jj + b);
+              if (v == 0) continue;
+              const int64_t e = row + d * at[jj] + b;
+              values[e] += v;
+              kept[e] = 1;
+            }
+          }
+        }
+      }
+    }
+  });
+  // Compress: the kept entries, row by row.
+  std::vector<int32_t> outer(static_cast<size_t>(d * nc) + 1, 0);
+  std::vector<int32_t> inner;
+  std::vector<double> kept_values;
+  int64_t nnz = 0;
+  for (int64_t e = 0; e < total; ++e) nnz += kept[e];
+  inner.reserve(static_cast<size_t>(nnz));
+  kept_values.reserve(static_cast<size_t>(nnz));
+  for (int32_t i = 0; i < nc; ++i) {
+    const int64_t width = pattern.first[i + 1] - pattern.first[i];
+    const int32_t* nb = pattern.neighbours.data() + pattern.first[i];
+    for (int a = 0; a < dofs; ++a) {
+      const int64_t row = start(i, a);
+      for (int64_t q = 0; q < d * width; ++q) {
+        if (!kept[row + q]) continue;
+        inner.push_back(static_cast<int32_t>(d * nb[q / d] + q % d));
+        kept_values.push_back(values[row + q]);
+      }
+      outer[d * i + a + 1] = static_cast<int32_t>(inner.size());
+    }
+  }
+  std::vector<double>().swap(values);
+  std::vector<uint8_t>().swap(kept);
+  return subdivision::FromCsr(static_cast<int32_t>(d * nc), static_cast<int32_t>(d * nc), outer,
+                              inner, kept_values);
+}
+
 // Each job's partials installed in its `made`, and its sums: per cell
-// (spec.per_cell) or summed in cell order into matrices or triplets.
+// (spec.per_cell) or summed in cell order into dense matrices or sparse ones.
 void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t nc,
                 std::vector<CellSumJob>& jobs, const std::vector<std::vector<Key128>>& keys,
                 const std::vector<std::vector<uint8_t>>& makes,
@@ -284,7 +420,7 @@ void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t n
     out.partials.clear();
     if (spec.per_cell) {
       out.matrices.clear();
-      out.triplets.clear();
+      out.sparse.clear();
       out.supports.reserve(control_cells);
       for (int32_t c = 0; c < control_cells; ++c) out.supports.push_back(cells[c].support);
       out.partials = std::move(partial);
@@ -294,11 +430,18 @@ void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t n
     const int dofs = spec.dofs, outputs = spec.outputs;
     const int64_t n = static_cast<int64_t>(dofs) * nc;
     out.matrices.clear();
-    out.triplets.assign(outputs, {});
-    if (job.dense) out.matrices.resize(outputs);
+    out.sparse.assign(outputs, {});
+    if (!job.dense) {
+      const SparsePattern pattern = PatternOf(cells, control_cells, nc, pool);
+      for (int o = 0; o < outputs; ++o) {
+        out.sparse[o] = SumSparse(cells, control_cells, pattern, dofs, partial, o, pool);
+      }
+      continue;
+    }
+    out.matrices.resize(outputs);
     // Each output on a pool thread of its own (Mt and Dt), its cells in order.
     pool.RunParts(outputs, [&](int o) {
-      if (job.dense) out.matrices[o].setZero(n, n);
+      out.matrices[o].setZero(n, n);
       for (int32_t c = 0; c < control_cells; ++c) {
         const std::vector<int32_t>& support = cells[c].support;
         const int side = dofs * static_cast<int>(support.size());
@@ -307,11 +450,7 @@ void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t n
           const int64_t col = static_cast<int64_t>(dofs) * support[jj / dofs] + jj % dofs;
           for (int i = 0; i < side; ++i) {
             const int64_t row = static_cast<int64_t>(dofs) * support[i / dofs] + i % dofs;
-            if (job.dense) {
-              out.matrices[o](row, col) += p(i, jj);
-            } else if (p(i, jj) != 0) {
-              out.triplets[o].emplace_back(static_cast<int32_t>(row), static_cast<int32_t>(col), p(i, jj));
-            }
+            out.matrices[o](row, col) += p(i, jj);
           }
         }
       }

@@ -75,10 +75,11 @@ struct CellSumSpec {
       make_cell;
 };
 
-// The sums, dense (dofs #control square) or as triplets in cell order.
+// The sums, dense or sparse (dofs #control square; sparse: row-major,
+// compressed, the entries some cell's partial has non-zero).
 struct CellSums {
   std::vector<Eigen::MatrixXd> matrices;
-  std::vector<std::vector<Eigen::Triplet<double, int32_t>>> triplets;
+  std::vector<subdivision::SparseMatrix> sparse;
   // With CellSumSpec::per_cell, per control cell: its support (ascending
   // control points) and its partial (cells of one key share one).
   std::vector<std::vector<int32_t>> supports;

@@ -368,8 +368,8 @@ std::function<absl::StatusOr<std::shared_ptr<Solid::PreparedContact>>()> Solid::
       const auto& corot = static_cast<const models::CorotationalModel&>(*model);
       in->triplets = [&] {
         WorkerPool pool(1);
-        return Impl::StiffnessTriplets(*dd, *layout, corot, in->spring_point, in->spring_k, pool,
-                                       k0_cells.get());
+        return Impl::TripletsOf(Impl::StiffnessSparse(*dd, *layout, corot, in->spring_point,
+                                                      in->spring_k, pool, k0_cells.get()));
       };
       RETURN_IF_ERROR(Impl::BuildContactCache(*in, *out->cache));
       return out;

@@ -148,7 +148,7 @@ class Solid::PreparedPaint {
   MaterialPaint paint;
   PreparedFor made_for;
   MaterialBuild build;
-  Eigen::SparseMatrix<double> k0;  // the implicit scheme's, for build
+  SparseMatrix k0;  // the implicit scheme's, for build
   std::shared_ptr<const CellPartials> k0_cells;  // k0's (Impl::k0_cells)
   // Backward Euler's Setup for build at one sub-step, with k0.
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
@@ -419,38 +419,35 @@ struct Solid::Impl {
   // state goes non-finite or H grows (p, p_prev are then garbage).
   absl::Status Advance(Points& p, Points& p_prev, StepStats& stats, PhaseTimes& phases);
 
-  // K0 as triplets, its cells' partials taken from `previous` where their
-  // keys match and this build's stored in *next (cell_assembly.h).
-  static std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets(
+  // K0 (3 #control square, row-major), its cells' partials taken from
+  // `previous` where their keys match and this build's stored in *next
+  // (cell_assembly.h).
+  static SparseMatrix StiffnessSparse(
       const scene::Discretization& d, const models::ElementLayout& layout,
       const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
       const std::vector<double>& spring_k, WorkerPool& threads,
       const CellPartials* previous = nullptr, std::shared_ptr<const CellPartials>* next = nullptr);
+  // A sparse matrix's entries, row by row.
+  static std::vector<Eigen::Triplet<double, int32_t>> TripletsOf(const SparseMatrix& k);
+  // K0 of this solid now, as triplets.
   std::vector<Eigen::Triplet<double, int32_t>> StiffnessTriplets() const {
-    return StiffnessTriplets(*d, *layout, *corotational, spring_point, spring_k, *pool,
-                             k0_cells.get());
+    return TripletsOf(StiffnessSparse(*d, *layout, *corotational, spring_point, spring_k, *pool,
+                                      k0_cells.get()));
   }
   // The per-control-cell corotational model from its cells' partials (a
   // per-cell sum of StiffnessPartials).
   std::unique_ptr<models::CellCorotation> CellCorotationFrom(CellSums& sums,
                                                              WorkerPool& threads) const;
-  // The same as a 3 #control square sparse matrix (K0 of the implicit
-  // preconditioner) for layout `l` and its model `m`, on `threads`.
+  // K0 for layout `l` and its model `m`, on `threads`.
   // `made` (optional): partials of l made already (a build's per-cell
   // corotation, MaterialBuild::k_cells), taken first.
-  Eigen::SparseMatrix<double> StiffnessMatrix(const models::ElementLayout& l,
-                                              const models::CorotationalModel& m,
-                                              WorkerPool& threads,
-                                              std::shared_ptr<const CellPartials>* next,
-                                              const CellPartials* made = nullptr) const {
-    const std::vector<Eigen::Triplet<double, int32_t>> t = StiffnessTriplets(
-        *d, l, m, spring_point, spring_k, threads, made != nullptr ? made : k0_cells.get(), next);
-    const Eigen::Index dofs = 3 * d->node_matrix.cols();
-    Eigen::SparseMatrix<double> k(dofs, dofs);
-    k.setFromTriplets(t.begin(), t.end());
-    return k;
+  SparseMatrix StiffnessMatrix(const models::ElementLayout& l, const models::CorotationalModel& m,
+                               WorkerPool& threads, std::shared_ptr<const CellPartials>* next,
+                               const CellPartials* made = nullptr) const {
+    return StiffnessSparse(*d, l, m, spring_point, spring_k, threads,
+                           made != nullptr ? made : k0_cells.get(), next);
   }
-  Eigen::SparseMatrix<double> k0;  // rest stiffness for the implicit preconditioner
+  SparseMatrix k0;  // rest stiffness for the implicit preconditioner
   // The cells' partial sums of Mt (and Dt) and of K0 (cell_assembly.h),
   // for the next build of this solid or of one remeshed from it.
   std::shared_ptr<const CellPartials> mass_cells, k0_cells;
@@ -543,7 +540,7 @@ struct Solid::Impl {
   // same bits, as a build is a function of the material alone). One kept.
   struct RetiredMaterial {
     MaterialBuild build;
-    Eigen::SparseMatrix<double> k0;
+    SparseMatrix k0;
     std::shared_ptr<const CellPartials> k0_cells;
   };
   // The retired material when `is_it` says it is the one asked for (it is
@@ -626,7 +623,7 @@ class Solid::PreparedState {
   models::InternalForceModel::Frames frames;
   std::optional<MaterialBuild> build;  // when the material differs
   bool taken_back = false;             // build is Impl::retired's
-  Eigen::SparseMatrix<double> k0;      // with build, implicit
+  SparseMatrix k0;      // with build, implicit
   std::shared_ptr<const CellPartials> k0_cells;
   std::optional<integrators::BackwardEuler::Prepared> implicit_setup;
   // build is made on this pool (the solid's may be stepping); its model

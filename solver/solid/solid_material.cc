@@ -66,12 +66,8 @@ void Solid::Impl::ControlMatricesFrom(const CellSums& sums, bool dense, bool has
     mt = SparseOf(sums.matrices[0]);
     if (has_damping) dt = SparseOf(sums.matrices[1]);
   } else {
-    mt.resize(nc, nc);
-    mt.setFromTriplets(sums.triplets[0].begin(), sums.triplets[0].end());
-    if (has_damping) {
-      dt.resize(nc, nc);
-      dt.setFromTriplets(sums.triplets[1].begin(), sums.triplets[1].end());
-    }
+    mt = sums.sparse[0];
+    if (has_damping) dt = sums.sparse[1];
   }
   mt.makeCompressed();
   if (has_damping) dt.makeCompressed();
@@ -328,10 +324,9 @@ std::unique_ptr<models::CellCorotation> Solid::Impl::CellCorotationFrom(CellSums
   return std::make_unique<models::CellCorotation>(std::move(cells), rest_control, threads);
 }
 
-// K0 = A^T K A of the corotational model at rest, plus the penalty springs,
-// as triplets; summed cell by cell (cell_assembly.h) with the partials of
-// `previous`.
-std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
+// K0 = A^T K A of the corotational model at rest, plus the penalty springs;
+// summed cell by cell (cell_assembly.h) with the partials of `previous`.
+SparseMatrix Solid::Impl::StiffnessSparse(
     const scene::Discretization& d, const models::ElementLayout& layout,
     const models::CorotationalModel& corotational, const std::vector<int32_t>& spring_point,
     const std::vector<double>& spring_k, WorkerPool& threads, const CellPartials* previous,
@@ -340,8 +335,8 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
   CellPoints points(layout, nm, threads.size());
   StiffnessPartials blocks(layout, corotational, points, threads.size());
   const CellSumSpec& spec = blocks.spec();
-  // Control meshes are small: sum into a dense matrix (no triplet per
-  // element entry) unless it would pass 32 MiB.
+  // Control meshes are small: sum into a dense matrix unless it would pass
+  // 32 MiB.
   const int64_t dofs = 3 * static_cast<int64_t>(nm.cols());
   const bool dense = dofs <= 2048;
   CellSums sums;
@@ -349,20 +344,21 @@ std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::StiffnessTriplets(
       SumByCell(nm, layout, d.hierarchy.control_cell, d.control().num_cells(), spec, previous,
                 threads, dense, sums);
   if (next != nullptr) *next = made->bytes <= kMaxCarriedBytes ? made : nullptr;
-  std::vector<Eigen::Triplet<double, int32_t>> t;
-  if (dense) {
-    const Eigen::MatrixXd& sum = sums.matrices[0];
-    for (int64_t c = 0; c < dofs; ++c)
-      for (int64_t r = 0; r < dofs; ++r) {
-        if (sum(r, c) != 0) t.emplace_back(static_cast<int32_t>(r), static_cast<int32_t>(c), sum(r, c));
-      }
-  } else {
-    t = std::move(sums.triplets[0]);
+  SparseMatrix k = dense ? SparseOf(sums.matrices[0]) : std::move(sums.sparse[0]);
+  // The springs after the cells (a diagonal entry the cells left out is
+  // inserted: the sparse matrix is then uncompressed until the end).
+  for (size_t s = 0; s < spring_point.size(); ++s) {
+    for (int c = 0; c < 3; ++c) k.coeffRef(3 * spring_point[s] + c, 3 * spring_point[s] + c) += spring_k[s];
   }
-  for (size_t k = 0; k < spring_point.size(); ++k) {
-    for (int c = 0; c < 3; ++c) {
-      t.emplace_back(3 * spring_point[k] + c, 3 * spring_point[k] + c, spring_k[k]);
-    }
+  k.makeCompressed();
+  return k;
+}
+
+std::vector<Eigen::Triplet<double, int32_t>> Solid::Impl::TripletsOf(const SparseMatrix& k) {
+  std::vector<Eigen::Triplet<double, int32_t>> t;
+  t.reserve(static_cast<size_t>(k.nonZeros()));
+  for (int32_t r = 0; r < k.outerSize(); ++r) {
+    for (SparseMatrix::InnerIterator it(k, r); it; ++it) t.emplace_back(r, static_cast<int32_t>(it.col()), it.value());
   }
   return t;
 }

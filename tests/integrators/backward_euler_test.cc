@@ -28,7 +28,7 @@ struct System {
   Eigen::MatrixXd k;  // 3 kN square, DOFs 3 i + c
   // The preconditioner's stiffness: K with its eigenvalues off by up to 40 %
   // (as the rest stiffness is off from the rotated one): a few iterations.
-  Eigen::SparseMatrix<double> k0;
+  SparseMatrix k0;
   std::vector<uint8_t> fixed;
   Points rest;
 

@@ -16,9 +16,9 @@ std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& m
                                                           const std::vector<uint8_t>& fixed,
                                                           double h, const SparseMatrix& k0) {
   const int32_t n = static_cast<int32_t>(md.rows());
-  // P = md (x) I3 + h^2 K0, row by row: row 3 r + a merges md's row r (its
-  // columns 3 c + a) with K0's row 3 r + a, an entry in both summed as
-  // md + h^2 k.
+  // P = md (x) I3 + h^2 K0's upper triangle (all ReducedCholesky reads),
+  // row by row: row 3 r + a merges md's row r (its columns 3 c + a) with
+  // K0's row 3 r + a, an entry in both summed as md + h^2 k.
   const double h2 = h * h;
   std::vector<int32_t> outer(static_cast<size_t>(3 * n) + 1, 0), inner;
   std::vector<double> values;
@@ -26,7 +26,10 @@ std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& m
   values.reserve(static_cast<size_t>(k0.nonZeros()));
   for (int32_t r = 0; r < n; ++r) {
     for (int a = 0; a < 3; ++a) {
-      SparseMatrix::InnerIterator m(md, r), k(k0, 3 * r + a);
+      const int32_t row = 3 * r + a;
+      SparseMatrix::InnerIterator m(md, r), k(k0, row);
+      while (m && 3 * m.col() + a < row) ++m;
+      while (k && k.col() < row) ++k;
       while (m || k) {
         const int32_t mc = m ? static_cast<int32_t>(3 * m.col() + a) : INT32_MAX;
         const int32_t kc = k ? static_cast<int32_t>(k.col()) : INT32_MAX;

@@ -29,7 +29,8 @@ class ReducedCholesky {
   ReducedCholesky& operator=(ReducedCholesky&&) noexcept;
 
   // Factors S on the rows with fixed[i] == 0 (fixed may be empty: none).
-  // False, with the factor cleared, where S is not positive definite there
+  // S is symmetric and only its upper triangle (row i's entries j >= i) is
+  // read: a caller may leave the rest out. False, with the factor cleared, where S is not positive definite there
   // (or CHOLMOD runs out of memory).
   bool Factor(const SparseMatrix& s, const std::vector<uint8_t>& fixed);
   bool factored() const;

@@ -66,8 +66,17 @@ void Solid::Impl::ControlMatricesFrom(const CellSums& sums, bool dense, bool has
     mt = SparseOf(sums.matrices[0]);
     if (has_damping) dt = SparseOf(sums.matrices[1]);
   } else {
+    // The entries a dense sum keeps: a sum that cancels to zero leaves
+    // (so that the pattern does not depend on which way was summed).
+    auto nonzero = [](const Eigen::Index&, const Eigen::Index&, const double& v) {
+      return !(std::abs(v) <= 0.0);
+    };
     mt = sums.sparse[0];
-    if (has_damping) dt = sums.sparse[1];
+    mt.prune(nonzero);
+    if (has_damping) {
+      dt = sums.sparse[1];
+      dt.prune(nonzero);
+    }
   }
   mt.makeCompressed();
   if (has_damping) dt.makeCompressed();
@@ -187,7 +196,8 @@ absl::StatusOr<MaterialBuild> Solid::Impl::BuildMaterial(
   if (reuse && cell_geometry != nullptr) geometry = *cell_geometry;
   const SparseMatrix& nm = d->node_matrix;
   const bool make_mass = !(reuse && SameMassAndDamping(*l));
-  const bool dense_mass = nm.cols() <= 6000;  // small control meshes sum densely
+  // Small control meshes sum densely (up to 32 MiB a matrix).
+  const bool dense_mass = nm.cols() <= 2048;
   CellPoints points(*l, nm, threads.size());
   std::optional<StiffnessPartials> stiffness;
   std::optional<MassPartials> mass;

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "solver/fem/element_set.h"
 #include "solver/scene/build.h"
 #include "solver/solid/solid.h"
 
@@ -44,10 +45,11 @@ absl::StatusOr<ElementMaterials> MaterialsOf(const solid::Solid& solid) {
   const scene::Discretization& d = solid.discretization();
   const Points rest = d.node_matrix * d.control().positions();
   const fem::ElementSet& es = d.elements;
-  const std::vector<int32_t>* nodes[3] = {&es.cubic_nodes, &es.linear_nodes, &es.pyramid_nodes};
-  const int32_t per[3] = {64, 8, 5};
+  const std::vector<int32_t>* nodes[fem::kElementKinds] = {&es.cubic_nodes, &es.linear_nodes,
+                                                           &es.pyramid_nodes};
+  const int32_t per[fem::kElementKinds] = {64, 8, 5};
   std::string buffer;
-  for (int kind = 0; kind < 3; ++kind) {
+  for (int kind = 0; kind < fem::kElementKinds; ++kind) {
     const int32_t n = static_cast<int32_t>(nodes[kind]->size()) / per[kind];
     for (int32_t e = 0; e < n; ++e) {
       buffer.assign(1, static_cast<char>(kind));

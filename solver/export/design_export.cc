@@ -131,7 +131,7 @@ absl::StatusOr<MaterialFields> MaterialFieldsOf(const scene::Discretization& d,
   out.cell_plastic.assign(ncc, 0.0);
   std::vector<int64_t> cell_samples(ncc, 0);
   std::vector<int32_t> control(total);  // element -> control cell
-  for (int kind = 0, e0 = 0; kind < 3; e0 += counts[kind], ++kind) {
+  for (int kind = 0, e0 = 0; kind < fem::kElementKinds; e0 += counts[kind], ++kind) {
     for (int32_t e = 0; e < counts[kind]; ++e) {
       const int32_t fine = (*cells[kind])[e];
       control[e0 + e] = d.hierarchy.control_cell.empty() ? fine : d.hierarchy.control_cell[fine];
@@ -144,13 +144,13 @@ absl::StatusOr<MaterialFields> MaterialFieldsOf(const scene::Discretization& d,
     ++index;
     ++e;
     q = 0;
-    while (kind < 3 && e >= counts[kind]) {
+    while (kind < fem::kElementKinds && e >= counts[kind]) {
       e = 0;
-      if (++kind < 3) points = fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points;
+      if (++kind < fem::kElementKinds) points = fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points;
     }
   };
-  while (kind < 3 && counts[kind] == 0) {
-    if (++kind < 3) points = fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points;
+  while (kind < fem::kElementKinds && counts[kind] == 0) {
+    if (++kind < fem::kElementKinds) points = fem::MakeKindTable(static_cast<fem::ElementKind>(kind)).points;
   }
   for (int i = 0; i + 1 < design.sample_runs_size(); i += 2) {
     const int32_t m = design.sample_runs(i + 1);
@@ -159,7 +159,7 @@ absl::StatusOr<MaterialFields> MaterialFieldsOf(const scene::Discretization& d,
     }
     const Design::Sample& sample = design.materials(m);
     for (int32_t r = 0; r < design.sample_runs(i); ++r) {
-      if (kind >= 3) return absl::InvalidArgumentError("design.sample_runs: more samples than elements");
+      if (kind >= fem::kElementKinds) return absl::InvalidArgumentError("design.sample_runs: more samples than elements");
       out.young[index] += sample.young_modulus() / points;
       out.density[index] += sample.density() / points;
       out.cell_young[control[index]] += sample.young_modulus();
@@ -168,7 +168,7 @@ absl::StatusOr<MaterialFields> MaterialFieldsOf(const scene::Discretization& d,
       if (++q == points) next_element();
     }
   }
-  if (kind < 3) return absl::InvalidArgumentError("design.sample_runs: fewer samples than elements");
+  if (kind < fem::kElementKinds) return absl::InvalidArgumentError("design.sample_runs: fewer samples than elements");
   for (int32_t c = 0; c < ncc; ++c) {
     if (cell_samples[c] == 0) continue;
     out.cell_young[c] /= static_cast<double>(cell_samples[c]);

@@ -110,4 +110,25 @@ absl::StatusOr<StateHeader> ReadStateHeader(std::string_view bytes, uint32_t new
   return out;
 }
 
+bool ResealState(std::string& bytes) {
+  if (bytes.size() < kStateHeaderBytes + 8) return false;
+  const uint64_t payload = bytes.size() - kStateHeaderBytes - 8;
+  std::memcpy(bytes.data() + kStateHeaderBytes - 8, &payload, 8);
+  uint32_t version;
+  std::memcpy(&version, bytes.data() + 8, 4);
+  const std::string_view body(bytes.data(), bytes.size() - 8);
+  uint64_t sum;
+  if (version == 3 || version == 4) {
+    sum = Checksum(version, body);
+  } else {
+    uint64_t n = 0;
+    if (payload >= 8) std::memcpy(&n, bytes.data() + bytes.size() - 16, 8);
+    if (payload < 8 || n > payload - 8) return false;
+    const size_t at = bytes.size() - 16 - n;
+    sum = CombinedChecksum(WordChecksum(body.substr(0, at)), WordChecksum(body.substr(at, n)), n);
+  }
+  std::memcpy(bytes.data() + bytes.size() - 8, &sum, 8);
+  return true;
+}
+
 }  // namespace dynsolid::solid

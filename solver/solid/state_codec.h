@@ -1,7 +1,7 @@
 // The solid state's codec (Solid::SaveState, format version 6): the
 // binary encoding's writer and reader, the checksums, and the header every
 // state starts with. Plain functions over bytes; what the values mean to a
-// solid is solid_state.cc's. Private to solver/solid.
+// solid is solid_state.cc's. Private to solver/solid (and its tests and fuzzers).
 //
 // Layout: "DSOLIDST", the format version (uint32), the solid's fingerprint
 // (2 x uint64), the payload's size (uint64), the payload, and a checksum
@@ -50,6 +50,16 @@ struct StateHeader {
 // InvalidArgument for what is not a state or a version this build does not
 // read, DataLoss for a checksum that does not match.
 absl::StatusOr<StateHeader> ReadStateHeader(std::string_view bytes, uint32_t newest);
+
+// Rewrites a state's payload size and checksum to match the bytes it
+// holds (versions 3 and 4: their checksum over everything before it; any
+// other version: the combined checksum over the material section whose
+// length the payload's last 8 bytes give), for tests and fuzzers that edit
+// a state's bytes and want to reach past the header check. Does nothing to
+// bytes too short to hold a header and a checksum; false when it could not
+// make a checksum (those, or a section length that does not fit: the
+// payload size is rewritten then but not the checksum).
+bool ResealState(std::string& bytes);
 
 // Binary state encoding: fixed-width little-endian values (this build runs
 // on little-endian machines only), length-prefixed arrays.

@@ -27,6 +27,7 @@
 #include <google/protobuf/text_format.h>
 
 #include "dynsolid/journal.pb.h"
+#include "solver/solid/state_codec.h"
 #include "tests/fuzz/fuzz_core.h"
 #include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
@@ -35,41 +36,6 @@ namespace {
 
 namespace fz = dynsolid::fuzz;
 
-// The state format's checksums (solver/solid/solid_state.cc; the check
-// in LLVMFuzzerInitialize makes sure they still agree with it).
-uint64_t Mix64(uint64_t x) {
-  x ^= x >> 33;
-  x *= 0xff51afd7ed558ccdull;
-  x ^= x >> 33;
-  x *= 0xc4ceb9fe1a85ec53ull;
-  x ^= x >> 33;
-  return x;
-}
-uint64_t ByteSum(std::string_view b) {
-  uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : b) h = (h ^ c) * 1099511628211ull;
-  return h;
-}
-uint64_t WordSum(std::string_view b) {
-  uint64_t h[4] = {1469598103934665603ull, 0x9e3779b97f4a7c15ull, 0x632be59bd9b4e019ull,
-                   0xbf58476d1ce4e5b9ull};
-  const size_t n = b.size();
-  size_t i = 0;
-  for (; i + 32 <= n; i += 32) {
-    for (int k = 0; k < 4; ++k) {
-      uint64_t w;
-      std::memcpy(&w, b.data() + i + 8 * k, 8);
-      h[k] = (h[k] ^ w) * 1099511628211ull;
-    }
-  }
-  for (; i < n; ++i) h[i % 4] = (h[i % 4] ^ static_cast<unsigned char>(b[i])) * 1099511628211ull;
-  uint64_t r = n;
-  for (uint64_t x : h) r = Mix64(r ^ Mix64(x));
-  return r;
-}
-
-constexpr size_t kHeader = 8 + 4 + 16 + 8;  // magic, version, fingerprint, payload size
-
 struct Fixture {
   std::unique_ptr<dynsolid::server::SimCore> core;
   std::string state;     // SaveState of the solid
@@ -77,30 +43,12 @@ struct Fixture {
 };
 
 // `bytes` with the fingerprint of `state` (the solid's), a payload size
-// that matches and a correct checksum; unchanged when too short to have a
-// header.
+// that matches and a correct checksum (ResealState); unchanged when too
+// short to have a header.
 std::string Fix(std::string bytes, const std::string& state) {
-  if (bytes.size() < kHeader + 8) return bytes;
+  if (bytes.size() < dynsolid::solid::kStateHeaderBytes + 8) return bytes;
   std::memcpy(bytes.data() + 12, state.data() + 12, 16);
-  const uint64_t payload = bytes.size() - kHeader - 8;
-  std::memcpy(bytes.data() + 28, &payload, 8);
-  uint32_t version;
-  std::memcpy(&version, bytes.data() + 8, 4);
-  const std::string_view body(bytes.data(), bytes.size() - 8);
-  uint64_t sum;
-  if (version == 3) {
-    sum = ByteSum(body);
-  } else if (version == 4) {
-    sum = WordSum(body);
-  } else {
-    uint64_t n = 0;
-    if (payload >= 8) std::memcpy(&n, bytes.data() + bytes.size() - 16, 8);
-    if (payload < 8 || n > payload - 8) return bytes;
-    const size_t at = bytes.size() - 16 - n;
-    sum = Mix64(WordSum(body.substr(0, at)) ^
-                Mix64(WordSum(std::string_view(bytes).substr(at, n)) ^ Mix64(n)));
-  }
-  std::memcpy(bytes.data() + bytes.size() - 8, &sum, 8);
+  dynsolid::solid::ResealState(bytes);
   return bytes;
 }
 
@@ -143,8 +91,8 @@ Fixture& F() {
     f->state = f->core->solid().SaveState();
     f->snapshot = SnapshotBytes(*f->core);
     if (Fix(f->state, f->state) != f->state) {
-      std::fprintf(stderr, "solid_state_fuzz: the checksums here no longer match "
-                           "solver/solid/solid_state.cc; update Fix()\n");
+      std::fprintf(stderr, "solid_state_fuzz: ResealState no longer reproduces a saved "
+                           "state's own checksum (solver/solid/state_codec.cc)\n");
       std::abort();
     }
     return f;

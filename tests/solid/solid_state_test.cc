@@ -11,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "solver/solid/solid.h"
+#include "solver/solid/state_codec.h"
 #include "tests/testing/make_solid.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/text_proto.h"
@@ -192,6 +193,35 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   EXPECT_EQ(c->SaveState(), saved);
   v3[100] ^= 0x20;
   EXPECT_THAT(c->RestoreState(v3), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checksum")));
+}
+
+// ResealState (what fuzzers use to reach past the header) reproduces a
+// saved state's own size and checksum, and makes an edited state's
+// checksum right again, so that what is wrong with it is found further in.
+TEST(SolidRuntimeTest, ResealStateRecomputesTheChecksumOfEditedBytes) {
+  const std::string text = EditScene("LOCAL_FRAME", "CENTRAL_DIFFERENCE");
+  auto a = Make(text);
+  ASSERT_NE(a, nullptr);
+  RunScript(*a, 0, 12);
+  const std::string saved = a->SaveState();
+  std::string same = saved;
+  ASSERT_TRUE(ResealState(same));
+  EXPECT_EQ(same, saved);
+  // A flipped byte in the material section's samples: the checksum
+  // catches it; resealed, the header passes and the state reads.
+  std::string bad = saved;
+  bad[saved.size() - 40] ^= 0x01;
+  ASSERT_NE(bad, saved);
+  EXPECT_THAT(ReadStateHeader(bad, Solid::kStateFormatVersion), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checksum")));
+  ASSERT_TRUE(ResealState(bad));
+  EXPECT_OK(ReadStateHeader(bad, Solid::kStateFormatVersion));
+  // A truncated state gets the payload size that matches, but no checksum
+  // where its section length no longer fits.
+  std::string cut = saved.substr(0, 60);
+  EXPECT_FALSE(ResealState(cut));
+  std::string tiny = "DSOLIDST";
+  EXPECT_FALSE(ResealState(tiny));
+  EXPECT_EQ(tiny, "DSOLIDST");
 }
 
 }  // namespace

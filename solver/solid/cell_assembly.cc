@@ -259,25 +259,30 @@ std::vector<std::vector<std::shared_ptr<std::vector<Eigen::MatrixXd>>>> MakePart
 }
 
 // The control points each control point shares a cell with: point i's
-// neighbours (ascending) at neighbours[first[i] .. first[i + 1]).
+// neighbours (ascending) at neighbours[first[i] .. first[i + 1]), and its
+// cells (ascending) at cells_of[cell_first[i] .. cell_first[i + 1]).
 struct SparsePattern {
   std::vector<int64_t> first;
   std::vector<int32_t> neighbours;
+  std::vector<int32_t> cell_first;
+  std::vector<int32_t> cells_of;
 };
 
 SparsePattern PatternOf(const std::vector<Cell>& cells, int32_t control_cells, int32_t nc,
                         WorkerPool& pool) {
+  SparsePattern p;
   // The cells of each point, ascending.
-  std::vector<int32_t> count(static_cast<size_t>(nc) + 1, 0);
+  std::vector<int32_t>& count = p.cell_first;
+  count.assign(static_cast<size_t>(nc) + 1, 0);
   for (int32_t c = 0; c < control_cells; ++c) {
     for (int32_t i : cells[c].support) ++count[i + 1];
   }
   for (int32_t i = 0; i < nc; ++i) count[i + 1] += count[i];
-  std::vector<int32_t> cells_of(static_cast<size_t>(count[nc]));
+  p.cells_of.resize(static_cast<size_t>(count[nc]));
   {
     std::vector<int32_t> at(count.begin(), count.end() - 1);
     for (int32_t c = 0; c < control_cells; ++c) {
-      for (int32_t i : cells[c].support) cells_of[at[i]++] = c;
+      for (int32_t i : cells[c].support) p.cells_of[at[i]++] = c;
     }
   }
   // Each point's neighbours: the union of its cells' supports.
@@ -290,7 +295,7 @@ SparsePattern PatternOf(const std::vector<Cell>& cells, int32_t control_cells, i
     for (int32_t i = lo; i < hi; ++i) {
       std::vector<int32_t>& list = lists[i];
       for (int32_t k = count[i]; k < count[i + 1]; ++k) {
-        for (int32_t j : cells[cells_of[k]].support) {
+        for (int32_t j : cells[p.cells_of[k]].support) {
           if (stamp[j] == i) continue;
           stamp[j] = i;
           list.push_back(j);
@@ -299,7 +304,6 @@ SparsePattern PatternOf(const std::vector<Cell>& cells, int32_t control_cells, i
       std::sort(list.begin(), list.end());
     }
   });
-  SparsePattern p;
   p.first.assign(static_cast<size_t>(nc) + 1, 0);
   for (int32_t i = 0; i < nc; ++i) p.first[i + 1] = p.first[i] + static_cast<int64_t>(lists[i].size());
   p.neighbours.reserve(static_cast<size_t>(p.first[nc]));
@@ -315,83 +319,91 @@ SparsePattern PatternOf(const std::vector<Cell>& cells, int32_t control_cells, i
 // entry is kept where some cell's partial is non-zero (a sum that cancels
 // to zero stays, as an explicit zero), and each is summed from zero in
 // cell order: the bits and pattern Eigen's setFromTriplets gives the
-// partials' non-zero entries listed in cell order. The rows are split
-// between the pool's threads, each going through every cell in order.
+// partials' non-zero entries listed in cell order. Point by point: a
+// point's rows take its cells in ascending order (so each entry's terms
+// come in cell order) into a dense row buffer over its neighbours; the
+// points are split between the pool's threads and their rows joined in
+// point order.
 SparseMatrix SumSparse(
-    const std::vector<Cell>& cells, int32_t control_cells, const SparsePattern& pattern, int dofs,
+    const std::vector<Cell>& cells, const SparsePattern& pattern, int dofs,
     const std::vector<std::shared_ptr<const std::vector<Eigen::MatrixXd>>>& partial, int o,
     WorkerPool& pool) {
   const int32_t nc = static_cast<int32_t>(pattern.first.size()) - 1;
-  const int64_t d = dofs;
-  // Row dofs * i + a starts at start(i, a); its columns are point i's
-  // neighbours' dofs in order.
-  auto start = [&](int32_t i, int a) {
-    const int64_t width = pattern.first[i + 1] - pattern.first[i];
-    return d * d * pattern.first[i] + a * d * width;
-  };
-  const int64_t total = d * d * pattern.first[nc];
-  std::vector<double> values(static_cast<size_t>(total), 0.0);
-  std::vector<uint8_t> kept(static_cast<size_t>(total), 0);
+  const int d = dofs;
   const int threads = pool.size();
+  struct Rows {
+    std::vector<int32_t> length;  // entries of each of the part's rows
+    std::vector<int32_t> inner;
+    std::vector<double> values;
+  };
+  std::vector<Rows> parts(threads);
   pool.RunParts(threads, [&](int t) {
     const int32_t lo = static_cast<int32_t>(int64_t{nc} * t / threads);
     const int32_t hi = static_cast<int32_t>(int64_t{nc} * (t + 1) / threads);
-    std::vector<int64_t> at;  // support point jj's place among point i's neighbours
-    for (int32_t c = 0; c < control_cells; ++c) {
-      const std::vector<int32_t>& support = cells[c].support;
-      const int s = static_cast<int>(support.size());
-      const Eigen::MatrixXd& p = (*partial[c])[o];
-      for (int k = 0; k < s; ++k) {
-        const int32_t i = support[k];
-        if (i < lo || i >= hi) continue;
-        // Both ascending: one merge walk.
-        at.resize(s);
-        const int32_t* nb = pattern.neighbours.data() + pattern.first[i];
-        int64_t q = 0;
+    Rows& out = parts[t];
+    out.length.reserve(static_cast<size_t>(d) * (hi - lo));
+    std::vector<int32_t> place(nc, 0);  // a neighbour's place among point i's
+    std::vector<double> sum;
+    std::vector<uint8_t> kept;
+    for (int32_t i = lo; i < hi; ++i) {
+      const int64_t width = pattern.first[i + 1] - pattern.first[i];
+      const int32_t* nb = pattern.neighbours.data() + pattern.first[i];
+      for (int64_t q = 0; q < width; ++q) place[nb[q]] = static_cast<int32_t>(q);
+      const int64_t row_size = d * width;  // entries of one of point i's rows
+      sum.assign(static_cast<size_t>(d * row_size), 0.0);
+      kept.assign(static_cast<size_t>(d * row_size), 0);
+      for (int32_t k = pattern.cell_first[i]; k < pattern.cell_first[i + 1]; ++k) {
+        const int32_t c = pattern.cells_of[k];
+        const std::vector<int32_t>& support = cells[c].support;
+        const int s = static_cast<int>(support.size());
+        const int ki = static_cast<int>(std::lower_bound(support.begin(), support.end(), i) -
+                                        support.begin());
+        const Eigen::MatrixXd& p = (*partial[c])[o];
         for (int jj = 0; jj < s; ++jj) {
-          while (nb[q] != support[jj]) ++q;
-          at[jj] = q;
-        }
-        for (int a = 0; a < dofs; ++a) {
-          const int64_t row = start(i, a);
-          for (int jj = 0; jj < s; ++jj) {
-            for (int b = 0; b < dofs; ++b) {
-              const double v = p(dofs * k + a, dofs * jj + b);
+          const int64_t at = static_cast<int64_t>(d) * place[support[jj]];
+          for (int b = 0; b < d; ++b) {
+            const double* column = p.data() + static_cast<int64_t>(d * jj + b) * p.rows();
+            for (int a = 0; a < d; ++a) {
+              const double v = column[d * ki + a];
               if (v == 0) continue;
-              const int64_t e = row + d * at[jj] + b;
-              values[e] += v;
+              const int64_t e = a * row_size + at + b;
+              sum[e] += v;
               kept[e] = 1;
             }
           }
         }
       }
+      for (int a = 0; a < d; ++a) {
+        int32_t n = 0;
+        for (int64_t q = 0; q < row_size; ++q) {
+          if (!kept[a * row_size + q]) continue;
+          out.inner.push_back(static_cast<int32_t>(d * nb[q / d] + q % d));
+          out.values.push_back(sum[a * row_size + q]);
+          ++n;
+        }
+        out.length.push_back(n);
+      }
     }
   });
-  // Compress: the kept entries, row by row.
-  std::vector<int32_t> outer(static_cast<size_t>(d * nc) + 1, 0);
+  std::vector<int32_t> outer(static_cast<size_t>(d) * nc + 1, 0);
   std::vector<int32_t> inner;
-  std::vector<double> kept_values;
-  int64_t nnz = 0;
-  for (int64_t e = 0; e < total; ++e) nnz += kept[e];
-  inner.reserve(static_cast<size_t>(nnz));
-  kept_values.reserve(static_cast<size_t>(nnz));
-  for (int32_t i = 0; i < nc; ++i) {
-    const int64_t width = pattern.first[i + 1] - pattern.first[i];
-    const int32_t* nb = pattern.neighbours.data() + pattern.first[i];
-    for (int a = 0; a < dofs; ++a) {
-      const int64_t row = start(i, a);
-      for (int64_t q = 0; q < d * width; ++q) {
-        if (!kept[row + q]) continue;
-        inner.push_back(static_cast<int32_t>(d * nb[q / d] + q % d));
-        kept_values.push_back(values[row + q]);
-      }
-      outer[d * i + a + 1] = static_cast<int32_t>(inner.size());
+  std::vector<double> values;
+  size_t nnz = 0;
+  for (const Rows& r : parts) nnz += r.inner.size();
+  inner.reserve(nnz);
+  values.reserve(nnz);
+  int64_t row = 0;
+  for (Rows& r : parts) {
+    for (int32_t n : r.length) {
+      outer[row + 1] = outer[row] + n;
+      ++row;
     }
+    inner.insert(inner.end(), r.inner.begin(), r.inner.end());
+    values.insert(values.end(), r.values.begin(), r.values.end());
+    r = Rows();
   }
-  std::vector<double>().swap(values);
-  std::vector<uint8_t>().swap(kept);
-  return subdivision::FromCsr(static_cast<int32_t>(d * nc), static_cast<int32_t>(d * nc), outer,
-                              inner, kept_values);
+  return subdivision::FromCsr(static_cast<int32_t>(d) * nc, static_cast<int32_t>(d) * nc, outer,
+                              inner, values);
 }
 
 // Each job's partials installed in its `made`, and its sums: per cell
@@ -434,7 +446,7 @@ void FinishJobs(const std::vector<Cell>& cells, int32_t control_cells, int32_t n
     if (!job.dense) {
       const SparsePattern pattern = PatternOf(cells, control_cells, nc, pool);
       for (int o = 0; o < outputs; ++o) {
-        out.sparse[o] = SumSparse(cells, control_cells, pattern, dofs, partial, o, pool);
+        out.sparse[o] = SumSparse(cells, pattern, dofs, partial, o, pool);
       }
       continue;
     }

@@ -115,12 +115,18 @@ TEST(SolidRuntimeTest, EditsGiveTheSameBitsForAnyThreadCount) {
   EXPECT_EQ(states[0], states[2]) << "1 and 3 threads";
 }
 
+// The state of a solid of `text` after the script's first 12 steps.
+std::string StateAfterScript(const std::string& text) {
+  auto a = Make(text);
+  if (a == nullptr) return "";
+  RunScript(*a, 0, 12);
+  return a->SaveState();
+}
+
 TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
   const std::string text = EditScene("LOCAL_FRAME", "CENTRAL_DIFFERENCE");
-  auto a = Make(text);
-  ASSERT_NE(a, nullptr);
-  RunScript(*a, 0, 12);
-  const std::string saved = a->SaveState();
+  const std::string saved = StateAfterScript(text);
+  ASSERT_FALSE(saved.empty());
   auto b = Make(text);
   ASSERT_NE(b, nullptr);
   const std::string fresh = b->SaveState();
@@ -199,11 +205,8 @@ TEST(SolidRuntimeTest, CorruptOrForeignStatesAreRejectedAndChangeNothing) {
 // saved state's own size and checksum, and makes an edited state's
 // checksum right again, so that what is wrong with it is found further in.
 TEST(SolidRuntimeTest, ResealStateRecomputesTheChecksumOfEditedBytes) {
-  const std::string text = EditScene("LOCAL_FRAME", "CENTRAL_DIFFERENCE");
-  auto a = Make(text);
-  ASSERT_NE(a, nullptr);
-  RunScript(*a, 0, 12);
-  const std::string saved = a->SaveState();
+  const std::string saved = StateAfterScript(EditScene("LOCAL_FRAME", "CENTRAL_DIFFERENCE"));
+  ASSERT_FALSE(saved.empty());
   std::string same = saved;
   ASSERT_TRUE(ResealState(same));
   EXPECT_EQ(same, saved);

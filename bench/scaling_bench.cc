@@ -10,6 +10,7 @@
 // sets it beside VegaFEM's).
 //
 //   scaling_bench [--sizes=8,12,16,24] [--steps=40] [--solvers=factored,cg,backward_euler]
+//                 [--phases]
 //
 // Prints figures only; nothing here is a test (the bench smoke runs it tiny).
 #include <algorithm>
@@ -32,6 +33,7 @@
 
 ABSL_FLAG(std::string, sizes, "8,12,16,24", "cells per side, comma-separated");
 ABSL_FLAG(int, steps, 40, "measured steps per size and solver (after 5 warm-up steps)");
+ABSL_FLAG(bool, phases, false, "after each row, the build's phases (ms) from the solid's report");
 ABSL_FLAG(std::string, solvers, "factored,cg,backward_euler",
           "central differences with the factor (factored) or CG (cg), backward Euler");
 
@@ -100,6 +102,7 @@ int main(int argc, char** argv) {
         continue;
       }
       auto d = dynsolid::scene::BuildDiscretization(*scene, "", std::nullopt);
+      const double d_ms = Ms(t0);
       auto s = d.ok() ? dynsolid::solid::Solid::Create(*scene, *std::move(d))
                       : absl::StatusOr<std::unique_ptr<dynsolid::solid::Solid>>(d.status());
       if (!s.ok()) {
@@ -109,6 +112,7 @@ int main(int argc, char** argv) {
         continue;
       }
       const double build_ms = Ms(t0);
+      const double discretization_ms = d_ms;
       dynsolid::solid::Solid& solid = **s;
       const dynsolid::Points rest = solid.control_positions();
       std::vector<double> step_ms, solve_ms;
@@ -140,6 +144,15 @@ int main(int argc, char** argv) {
                   n, static_cast<long long>(dofs), solver.c_str(), build_ms / 1000.0, ms,
                   Median(solve_ms), ms / solid.time_step(), 1000.0 * ms / dofs,
                   solid.build_report().substeps, PeakRssMb(), top > 0 ? 1000.0 * top_dx / top : 0.0);
+      if (absl::GetFlag(FLAGS_phases)) {
+        const auto& ph = solid.build_report().phases;
+        std::printf("|   build phases (ms): parse and discretization %.0f, layout %.0f, model %.0f, "
+                    "mass %.0f, surface %.0f, stable step %.0f, K0 %.0f, the rest %.0f |\n",
+                    discretization_ms, ph.layout, ph.model, ph.mass, ph.surface, ph.stable_step,
+                    ph.k0,
+                    build_ms - discretization_ms - ph.layout - ph.model - ph.mass - ph.surface -
+                        ph.stable_step - ph.k0);
+      }
       std::fflush(stdout);
     }
   }

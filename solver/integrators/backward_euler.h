@@ -79,7 +79,8 @@ class BackwardEuler {
     SparseMatrix md;
     std::vector<uint8_t> fixed;
     double h = 0;
-    ColumnPreconditioner pre;
+    ColumnPreconditioner pre;  // made (pre_ready) only when flat is null
+    bool pre_ready = false;
     std::shared_ptr<Flat> flat;
   };
   static Prepared Prepare(const SparseMatrix& mt, const SparseMatrix* dt, double h,
@@ -141,6 +142,7 @@ class BackwardEuler {
   SparseMatrix md_;  // Mt + h Dt
   std::vector<uint8_t> fixed_;
   ColumnPreconditioner pre_;
+  bool pre_ready_ = false;  // pre_ made (it is, whenever flat_ is null)
   std::shared_ptr<Flat> flat_;
   // The factor of md + h^2 K0 (fixed DOFs identity), or null when it fails.
   static std::shared_ptr<Flat> Factor(const SparseMatrix& md, const std::vector<uint8_t>& fixed,

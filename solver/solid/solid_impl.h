@@ -391,8 +391,11 @@ struct Solid::Impl {
       implicit.Setup(&mt, has_damping ? &dt : nullptr, std::move(**prepared));
       prepared->reset();
     } else if (use_implicit) {
-      implicit.Setup(&mt, has_damping ? &dt : nullptr, h_sub, fixed);
-      if (k0.rows() > 0) implicit.SetStiffnessPreconditioner(k0);
+      // (The bits of Setup(h_sub, fixed) then SetStiffnessPreconditioner(k0),
+      // without the column preconditioner a factor makes unneeded.)
+      implicit.Setup(&mt, has_damping ? &dt : nullptr,
+                     integrators::BackwardEuler::Prepare(mt, has_damping ? &dt : nullptr, h_sub,
+                                                         fixed, k0.rows() > 0 ? &k0 : nullptr));
     } else if (SetupFor now{material_epoch, h_sub, fixed}; explicit_setup != now) {
       // (A restore that keeps the material, the sub-step and the fixed set,
       // as an undo of a load does, keeps the integrator's matrices and

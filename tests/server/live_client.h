@@ -5,12 +5,16 @@
 
 #include <chrono>
 #include <cstring>
+#include <initializer_list>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+
+#include "google/protobuf/text_format.h"
 
 #include "dynsolid/service.grpc.pb.h"
 
@@ -38,6 +42,20 @@ inline SessionRef RefOf(const Session& s) {
   r.set_id(s.id());
   r.set_token(s.token());
   return r;
+}
+
+// A paused session of the builtin block3 at one level.
+inline CreateSessionRequest PausedBlock3Request() {
+  CreateSessionRequest r;
+  r.set_builtin_scene("block3");
+  r.set_levels_override(1);
+  r.set_start_paused(true);
+  return r;
+}
+inline grpc::Status CreatePausedBlock3(Sessions::Stub& stub, Session* out) {
+  grpc::ClientContext context;
+  context.set_deadline(Deadline());
+  return stub.CreateSession(&context, PausedBlock3Request(), out);
 }
 
 // One Commands stream; Send writes a command and reads its reply.
@@ -113,6 +131,18 @@ inline Command ForceCommand(double x, double y, double z, double fx, double fy, 
   f->mutable_force()->set_y(fy);
   f->mutable_force()->set_z(fz);
   return c;
+}
+
+// Parses each text into the command it is paired with; fails naming the
+// first text that does not parse.
+inline ::testing::AssertionResult ParseCommands(
+    std::initializer_list<std::pair<Command*, const char*>> commands) {
+  for (const auto& [command, text] : commands) {
+    if (!google::protobuf::TextFormat::ParseFromString(text, command)) {
+      return ::testing::AssertionFailure() << "cannot parse " << text;
+    }
+  }
+  return ::testing::AssertionSuccess();
 }
 
 inline InspectReply InspectAt(Sessions::Stub& stub, const Session& s, int64_t step,

@@ -27,6 +27,7 @@
 #include <google/protobuf/text_format.h>
 
 #include "dynsolid/journal.pb.h"
+#include "solver/solid/state_codec.h"
 #include "tests/fuzz/fuzz_core.h"
 #include "tests/fuzz/fuzz_proto.h"
 #include "tests/fuzz/fuzz_util.h"
@@ -35,37 +36,13 @@ namespace {
 
 namespace fz = dynsolid::fuzz;
 
-// The state format's checksums (solver/solid/solid_state.cc; the check
-// in LLVMFuzzerInitialize makes sure they still agree with it).
-uint64_t Mix64(uint64_t x) {
-  x ^= x >> 33;
-  x *= 0xff51afd7ed558ccdull;
-  x ^= x >> 33;
-  x *= 0xc4ceb9fe1a85ec53ull;
-  x ^= x >> 33;
-  return x;
-}
+// Version 3's byte checksum (solver/solid/state_codec.cc keeps its own to
+// itself); versions 4 and later are summed with the library's
+// WordChecksum and CombinedChecksum (solver/solid/state_codec.h).
 uint64_t ByteSum(std::string_view b) {
   uint64_t h = 1469598103934665603ull;
   for (unsigned char c : b) h = (h ^ c) * 1099511628211ull;
   return h;
-}
-uint64_t WordSum(std::string_view b) {
-  uint64_t h[4] = {1469598103934665603ull, 0x9e3779b97f4a7c15ull, 0x632be59bd9b4e019ull,
-                   0xbf58476d1ce4e5b9ull};
-  const size_t n = b.size();
-  size_t i = 0;
-  for (; i + 32 <= n; i += 32) {
-    for (int k = 0; k < 4; ++k) {
-      uint64_t w;
-      std::memcpy(&w, b.data() + i + 8 * k, 8);
-      h[k] = (h[k] ^ w) * 1099511628211ull;
-    }
-  }
-  for (; i < n; ++i) h[i % 4] = (h[i % 4] ^ static_cast<unsigned char>(b[i])) * 1099511628211ull;
-  uint64_t r = n;
-  for (uint64_t x : h) r = Mix64(r ^ Mix64(x));
-  return r;
 }
 
 constexpr size_t kHeader = 8 + 4 + 16 + 8;  // magic, version, fingerprint, payload size
@@ -91,14 +68,15 @@ std::string Fix(std::string bytes, const std::string& state) {
   if (version == 3) {
     sum = ByteSum(body);
   } else if (version == 4) {
-    sum = WordSum(body);
+    sum = dynsolid::solid::WordChecksum(body);
   } else {
     uint64_t n = 0;
     if (payload >= 8) std::memcpy(&n, bytes.data() + bytes.size() - 16, 8);
     if (payload < 8 || n > payload - 8) return bytes;
     const size_t at = bytes.size() - 16 - n;
-    sum = Mix64(WordSum(body.substr(0, at)) ^
-                Mix64(WordSum(std::string_view(bytes).substr(at, n)) ^ Mix64(n)));
+    sum = dynsolid::solid::CombinedChecksum(
+        dynsolid::solid::WordChecksum(body.substr(0, at)),
+        dynsolid::solid::WordChecksum(std::string_view(bytes).substr(at, n)), n);
   }
   std::memcpy(bytes.data() + bytes.size() - 8, &sum, 8);
   return bytes;

@@ -17,6 +17,7 @@
 #include "google/protobuf/text_format.h"
 
 #include "dynsolid/service.grpc.pb.h"
+#include "tests/testing/vec3.h"
 
 namespace dynsolid::testing {
 
@@ -124,12 +125,8 @@ inline Command StepCommand(int64_t n) {
 inline Command ForceCommand(double x, double y, double z, double fx, double fy, double fz) {
   Command c;
   PointForce* f = c.mutable_add_point_force();
-  f->mutable_position()->set_x(x);
-  f->mutable_position()->set_y(y);
-  f->mutable_position()->set_z(z);
-  f->mutable_force()->set_x(fx);
-  f->mutable_force()->set_y(fy);
-  f->mutable_force()->set_z(fz);
+  SetXyz(f->mutable_position(), x, y, z);
+  SetXyz(f->mutable_force(), fx, fy, fz);
   return c;
 }
 

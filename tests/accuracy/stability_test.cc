@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "solver/tools/stability_cases.h"
 #include "tests/testing/status_matchers.h"
@@ -126,76 +128,69 @@ INSTANTIATE_TEST_SUITE_P(Cases, StabilityTest, ::testing::ValuesIn(Params()),
                            return name;
                          });
 
+// The first of Cases() named `name`; NotFound when there is none.
+absl::StatusOr<Case> CaseNamed(const std::string& name) {
+  for (const Case& c : Cases()) {
+    if (c.name == name) return c;
+  }
+  return absl::NotFoundError(absl::StrCat("no ", name, " case"));
+}
+
 // The inverting load does invert cells (a level-1 cell's signed volume
 // changes sign), and both schemes come through with finite states.
 TEST(StabilityCasesTest, InvertingLoadInvertsCells) {
-  for (const Case& base : Cases()) {
-    if (base.name != "inverting_load") continue;
-    Case c = base;
-    c.h = 1.0 / 30;
-    RunOptions o;
-    o.steps = 90;
-    for (Integrator integrator : {Integrator::kBackwardEuler, Integrator::kCentralDifference}) {
-      const Outcome out = RunCase(c, integrator, o);
-      EXPECT_TRUE(out.always_finite) << Name(integrator);
-      EXPECT_LT(out.min_volume_ratio, 0) << Name(integrator) << ": no cell inverted";
-    }
-    return;
+  ASSERT_OK_AND_ASSIGN(Case c, CaseNamed("inverting_load"));
+  c.h = 1.0 / 30;
+  RunOptions o;
+  o.steps = 90;
+  for (Integrator integrator : {Integrator::kBackwardEuler, Integrator::kCentralDifference}) {
+    const Outcome out = RunCase(c, integrator, o);
+    EXPECT_TRUE(out.always_finite) << Name(integrator);
+    EXPECT_LT(out.min_volume_ratio, 0) << Name(integrator) << ": no cell inverted";
   }
-  FAIL() << "no inverting_load case";
 }
 
 // Penalty springs of 1e9 N/m need about 2000 explicit sub-steps per 1/30 s
 // step: with a cap of 100 Create refuses, naming the field, the count and
 // the stable step; backward Euler takes the same scene.
 TEST(StabilityCasesTest, ExplicitStepsAboveTheCapAreRefusedWithTheReason) {
-  for (const Case& base : Cases()) {
-    if (base.name != "penalty_1e9") continue;
-    Case c = base;
-    c.h = 1.0 / 30;
-    RunOptions o;
-    o.steps = 3;
-    o.max_substeps = 100;
-    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
-    EXPECT_THAT(cd.create,
-                testing::StatusIs(absl::StatusCode::kInvalidArgument,
-                                  ::testing::AllOf(HasSubstr("solver.time_step"),
-                                                   HasSubstr("explicit sub-steps (stable step"),
-                                                   HasSubstr("max_substeps is 100"))));
-    EXPECT_EQ(cd.steps_done, 0);
-    const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
-    EXPECT_OK(be.create);
-    EXPECT_TRUE(be.completed());
-    EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
-    return;
-  }
-  FAIL() << "no penalty_1e9 case";
+  ASSERT_OK_AND_ASSIGN(Case c, CaseNamed("penalty_1e9"));
+  c.h = 1.0 / 30;
+  RunOptions o;
+  o.steps = 3;
+  o.max_substeps = 100;
+  const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+  EXPECT_THAT(cd.create,
+              testing::StatusIs(absl::StatusCode::kInvalidArgument,
+                                ::testing::AllOf(HasSubstr("solver.time_step"),
+                                                 HasSubstr("explicit sub-steps (stable step"),
+                                                 HasSubstr("max_substeps is 100"))));
+  EXPECT_EQ(cd.steps_done, 0);
+  const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
+  EXPECT_OK(be.create);
+  EXPECT_TRUE(be.completed());
+  EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
 }
 
 // The 180-degree twist: released with strain energy, no loads; backward
 // Euler only loses it; the central-difference run (sub-stepped) stays
 // finite and its energy does not keep growing.
 TEST(StabilityCasesTest, TwistReleasedFromHalfATurn) {
-  for (const Case& base : Cases()) {
-    if (base.name != "twist_180") continue;
-    Case c = base;
-    c.h = 1e-2;
-    RunOptions o;
-    o.steps = 50;
-    const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
-    ASSERT_OK(be.create);
-    EXPECT_GT(be.initial_energy, 0) << "the twisted state holds strain energy";
-    EXPECT_DOUBLE_EQ(be.peak_mechanical, be.initial_energy);
-    EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
-    EXPECT_LT(be.final_energy_ratio, 0.5) << "backward Euler damps the released twist";
-    const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
-    ASSERT_OK(cd.create);
-    EXPECT_TRUE(cd.always_finite);
-    EXPECT_OK(cd.final_status);
-    EXPECT_LE(cd.late_growth_ratio, 1 + kGrowthTolerance) << Describe(cd);
-    return;
-  }
-  FAIL() << "no twist_180 case";
+  ASSERT_OK_AND_ASSIGN(Case c, CaseNamed("twist_180"));
+  c.h = 1e-2;
+  RunOptions o;
+  o.steps = 50;
+  const Outcome be = RunCase(c, Integrator::kBackwardEuler, o);
+  ASSERT_OK(be.create);
+  EXPECT_GT(be.initial_energy, 0) << "the twisted state holds strain energy";
+  EXPECT_DOUBLE_EQ(be.peak_mechanical, be.initial_energy);
+  EXPECT_LE(be.energy_ratio, 1 + kEnergyTolerance);
+  EXPECT_LT(be.final_energy_ratio, 0.5) << "backward Euler damps the released twist";
+  const Outcome cd = RunCase(c, Integrator::kCentralDifference, o);
+  ASSERT_OK(cd.create);
+  EXPECT_TRUE(cd.always_finite);
+  EXPECT_OK(cd.final_status);
+  EXPECT_LE(cd.late_growth_ratio, 1 + kGrowthTolerance) << Describe(cd);
 }
 
 // Twisted() is a rotation of each cross section: distances to the axis

@@ -20,20 +20,18 @@
 Usage: client_loopback_test.py --server PATH --client PATH
 """
 
-import argparse
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 import xml.etree.ElementTree as ET
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
-from loopback import expect, expect_equal, fail, first_line  # noqa: E402
+from loopback import (binary_args, expect, expect_equal, fail, first_line,  # noqa: E402
+                      run_in_temp_dir)
 
 STARTUP_SECONDS = 60
 RUN_SECONDS = 120
@@ -149,16 +147,7 @@ def check_final_step(report, step):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--server", required=True)
-    parser.add_argument("--client", required=True)
-    args = parser.parse_args()
-    tmp = tempfile.mkdtemp(prefix="dynsolid_client_test_")
-    try:
-        run(args, tmp)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    print("PASS")
+    run_in_temp_dir(run, binary_args("server", "client"), "dynsolid_client_test_")
 
 
 def run(args, tmp):

@@ -18,22 +18,19 @@ On a block3 session that has been pulled out of shape:
 Usage: export_loopback_test.py --server PATH --client PATH
 """
 
-import argparse
 import json
 import math
 import os
-import shutil
 import struct
 import subprocess
 import sys
-import tempfile
 import xml.etree.ElementTree as ET
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "testing"))
 from client_loopback_test import Server, run_client  # noqa: E402
-from loopback import expect, expect_equal  # noqa: E402
+from loopback import binary_args, expect, expect_equal, run_in_temp_dir  # noqa: E402
 
 SOURCE = os.path.abspath(os.path.join(HERE, "..", ".."))
 
@@ -59,16 +56,7 @@ def stl_volume(data):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--server", required=True)
-    parser.add_argument("--client", required=True)
-    args = parser.parse_args()
-    tmp = tempfile.mkdtemp(prefix="dynsolid_export_test_")
-    try:
-        run(args, tmp)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    print("PASS")
+    run_in_temp_dir(run, binary_args("server", "client"), "dynsolid_export_test_")
 
 
 def run(args, tmp):

@@ -18,14 +18,11 @@ painted, pulled until it yields, released, baked, pinned and pulled again.
 Usage: keep_loopback_test.py --server PATH --client PATH --replay PATH
 """
 
-import argparse
 import json
 import os
-import shutil
 import struct
 import subprocess
 import sys
-import tempfile
 import xml.etree.ElementTree as ET
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -33,7 +30,7 @@ SOURCE = os.path.abspath(os.path.join(HERE, "..", ".."))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "testing"))
 from client_loopback_test import Server, run_client  # noqa: E402
-from loopback import expect, expect_equal  # noqa: E402
+from loopback import binary_args, expect, expect_equal, run_in_temp_dir  # noqa: E402
 
 PARTS = [
     # Step 0-300: a stiffer patch with a soft edge, a pull past yield, let
@@ -58,18 +55,8 @@ def body(path):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--server", required=True)
-    parser.add_argument("--client", required=True)
-    parser.add_argument("--replay", required=True)
-    args = parser.parse_args()
-    tmp = tempfile.mkdtemp(prefix="dynsolid_keep_test_")
-    try:
-        run(args, tmp)
-    finally:
-        if not os.environ.get("KEEP_TMP"):
-            shutil.rmtree(tmp, ignore_errors=True)
-    print("PASS")
+    run_in_temp_dir(run, binary_args("server", "client", "replay"), "dynsolid_keep_test_",
+                    keep=bool(os.environ.get("KEEP_TMP")))
 
 
 def run(args, tmp):

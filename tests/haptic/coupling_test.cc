@@ -180,12 +180,19 @@ TEST(CouplingTest, NoForceStepExceedsTheBoundAndForceIsClamped) {
   EXPECT_NEAR(f.back(), 40.0, 1e-12);
 }
 
-TEST(CouplingTest, SilentServerRampsToZeroWithinRampTimeAndStays) {
-  CouplingParams p;  // timeout 10 ms, ramp 10 ms
-  Coupling c(p);
+// Default params (timeout 10 ms, ramp 10 ms), their coupling at time 0, and
+// a device 1 mm into a stiff plane at z = 3 (the model the tests feed it).
+struct PressedOnPlane {
+  CouplingParams p;
+  Coupling c{p};
   double t = 0;
   const DeviceSample d = At(2.999);
   const LocalModel m = Plane(3.0, 2e4, 1);
+};
+
+TEST(CouplingTest, SilentServerRampsToZeroWithinRampTimeAndStays) {
+  PressedOnPlane s;
+  auto& [p, c, t, d, m] = s;
   // Models every tick for 50 ms.
   for (int i = 0; i < 50; ++i) Ticks(c, t, 1, d, &m);
   const double f0 = c.Compute(t, d).force.z();
@@ -215,11 +222,8 @@ TEST(CouplingTest, SilentServerRampsToZeroWithinRampTimeAndStays) {
 }
 
 TEST(CouplingTest, BrokenLinkRampsToZeroWithinRampTime) {
-  CouplingParams p;
-  Coupling c(p);
-  double t = 0;
-  const DeviceSample d = At(2.999);
-  const LocalModel m = Plane(3.0, 2e4, 1);
+  PressedOnPlane s;
+  auto& [p, c, t, d, m] = s;
   for (int i = 0; i < 20; ++i) Ticks(c, t, 1, d, &m);
   const double f0 = c.Compute(t, d).force.z();
   c.SetLinkUp(false, t);

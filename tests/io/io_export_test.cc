@@ -26,7 +26,7 @@ using testing::F32At;
 using testing::F64At;
 using ::testing::HasSubstr;
 using testing::ReadTextFile;
-using testing::RunMeshio;
+using testing::ExpectMeshioReads;
 using testing::ScopedTempDir;
 using testing::U16At;
 using testing::U32At;
@@ -137,8 +137,7 @@ TEST(StlWriterTest, CubeTrianglesNormalsAndVolume) {
     EXPECT_NEAR(tri.normal.cwiseAbs().maxCoeff(), 1.0, 1e-7)
         << "a cube's facet normal is an axis: " << tri.normal.transpose();
   }
-  const testing::CommandResult r = RunMeshio(path, "--points 8 --point-sum 24 --cells triangle=12");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
+  ExpectMeshioReads(path, "--points 8 --point-sum 24 --cells triangle=12");
 }
 
 TEST(StlWriterTest, SubdividedBlockIsClosedAndOutward) {
@@ -157,10 +156,8 @@ TEST(StlWriterTest, SubdividedBlockIsClosedAndOutward) {
   EXPECT_NEAR(volume, block.cell_volume, 1e-3 * block.cell_volume)
       << "the surface encloses the fine cells (their curved faces fanned otherwise)";
   EXPECT_LT(volume, 8.0) << "subdivision rounds the 2x2x2 block";
-  const testing::CommandResult r =
-      RunMeshio(path, "--points " + std::to_string(s.positions.rows()) +
+  ExpectMeshioReads(path, "--points " + std::to_string(s.positions.rows()) +
                           " --cells triangle=" + std::to_string(testing::FanTriangles(s)));
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
 }
 
 // A pyramid's boundary (a quad and four triangles) with fields of 1, 3 and
@@ -273,9 +270,8 @@ void CheckBinaryPly(const mesh::BoundarySurface& s, const std::string& name) {
 
   const std::string expect = tmp.path() + "/" + name + ".expect.json";
   testing::WriteTextFile(expect, ExpectedArraysJson(s));
-  const testing::CommandResult r = RunMeshio(
+  ExpectMeshioReads(
       path, "--points " + std::to_string(s.positions.rows()) + " --expect-arrays '" + expect + "'");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
 }
 
 TEST(PlyBinaryWriterTest, PyramidWithFieldsRoundTripsThroughMeshio) {
@@ -299,6 +295,22 @@ TEST(SurfaceWritersTest, BytesVariantsGiveTheFilesBytes) {
   ASSERT_OK(PlyBytes(s, &ply));
   EXPECT_EQ(obj, "x" + ReadTextFile(tmp.path() + "/a.obj"));
   EXPECT_EQ(ply, ReadTextFile(tmp.path() + "/a.ply"));
+}
+
+// `write` refuses case c's surface with its message after `path`, writing
+// no `format` file; `to_bytes` refuses it too, appending nothing.
+template <typename Case>
+void ExpectRefusedSurface(absl::Status (*write)(const std::string&, const mesh::BoundarySurface&),
+                          absl::Status (*to_bytes)(const mesh::BoundarySurface&, std::string*),
+                          const std::string& path, const char* format, const Case& c) {
+  std::string bytes = "kept";
+  EXPECT_THAT(write(path, c.surface),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(path + ": " + c.message)))
+      << c.what;
+  EXPECT_FALSE(std::filesystem::exists(path)) << c.what << ": no " << format << " file on error";
+  EXPECT_THAT(to_bytes(c.surface, &bytes),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(c.message)));
+  EXPECT_EQ(bytes, "kept") << c.what << ": nothing appended on error";
 }
 
 // Each binary writer refuses a bad surface with a message naming the vertex
@@ -353,26 +365,13 @@ TEST(SurfaceWritersTest, BinaryWritersRefuseBadSurfaces) {
   for (const Case& c : cases) {
     const std::string stl = tmp.path() + "/" + c.what + ".stl";
     const std::string ply = tmp.path() + "/" + c.what + ".ply";
-    std::string bytes = "kept";
     if (c.stl) {
-      EXPECT_THAT(WriteStlBinary(stl, c.surface),
-                  StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(stl + ": " + c.message)))
-          << c.what;
-      EXPECT_FALSE(std::filesystem::exists(stl)) << c.what << ": no STL file on error";
-      EXPECT_THAT(StlBinaryBytes(c.surface, &bytes),
-                  StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(c.message)));
-      EXPECT_EQ(bytes, "kept") << c.what << ": nothing appended on error";
+      ExpectRefusedSurface(WriteStlBinary, StlBinaryBytes, stl, "STL", c);
     } else {
       EXPECT_OK(WriteStlBinary(stl, c.surface)) << c.what;
     }
     if (c.ply) {
-      EXPECT_THAT(WritePlyBinary(ply, c.surface),
-                  StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(ply + ": " + c.message)))
-          << c.what;
-      EXPECT_FALSE(std::filesystem::exists(ply)) << c.what << ": no PLY file on error";
-      EXPECT_THAT(PlyBinaryBytes(c.surface, &bytes),
-                  StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(c.message)));
-      EXPECT_EQ(bytes, "kept") << c.what << ": nothing appended on error";
+      ExpectRefusedSurface(WritePlyBinary, PlyBinaryBytes, ply, "PLY", c);
     } else {
       EXPECT_OK(WritePlyBinary(ply, c.surface)) << c.what << ": PLY stores doubles, any count";
     }

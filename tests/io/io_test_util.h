@@ -98,6 +98,12 @@ inline CommandResult RunMeshio(const std::string& file, const std::string& expec
                     expectations);
 }
 
+// Expects meshio (RunMeshio) to read `file` as `expectations` say.
+inline void ExpectMeshioReads(const std::string& file, const std::string& expectations) {
+  const CommandResult r = RunMeshio(file, expectations);
+  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << file << ":\n" << r.output;
+}
+
 // Signed volume of cell `c` from its loops (divergence theorem, each loop
 // fanned from its centroid): positive when every loop is outward.
 inline double CellVolume(const mesh::MeshInput& in, size_t c) {

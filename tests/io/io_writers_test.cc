@@ -22,7 +22,7 @@ using ::dynsolid::testing::StatusIs;
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using testing::ReadTextFile;
-using testing::RunMeshio;
+using testing::ExpectMeshioReads;
 using testing::ScopedTempDir;
 
 std::vector<std::string> Lines(const std::string& text) {
@@ -60,8 +60,7 @@ TEST(ObjWriterTest, WritesVerticesAndOneBasedFaces) {
   }
   EXPECT_EQ(vertices, 5) << "'v' lines";
   EXPECT_THAT(faces, ElementsAre("f 1 4 3 2", "f 1 2 5", "f 2 3 5", "f 3 4 5", "f 4 1 5"));
-  const testing::CommandResult r = RunMeshio(path, "--points 5 --cells quad=1,triangle=4");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
+  ExpectMeshioReads(path, "--points 5 --cells quad=1,triangle=4");
 }
 
 TEST(PlyWriterTest, WritesHeaderFieldsAndPolygons) {
@@ -86,11 +85,9 @@ TEST(PlyWriterTest, WritesHeaderFieldsAndPolygons) {
   ASSERT_EQ(lines.size(), 16u + 5u + 5u) << "header + vertices + faces";
   EXPECT_EQ(lines[21], "4 0 3 2 1") << "first face";
   EXPECT_EQ(lines[25], "3 3 0 4") << "last face";
-  const testing::CommandResult r =
-      RunMeshio(path,
-                "--points 5 --cells quad=1,triangle=4 --point-data stiffness,displacement_x,uv_1 "
-                "--point-data-sum stiffness=15,displacement_z=1.25");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
+  ExpectMeshioReads(path,
+                    "--points 5 --cells quad=1,triangle=4 --point-data stiffness,displacement_x,uv_1 "
+                    "--point-data-sum stiffness=15,displacement_z=1.25");
 }
 
 TEST(SurfaceWritersTest, RejectInconsistentSurfaces) {
@@ -159,12 +156,10 @@ TEST(VtuWriterTest, MeshioReadsTheMixedMesh) {
   EXPECT_THAT(text, HasSubstr("<DataArray type=\"Int64\" Name=\"connectivity\""));
   EXPECT_THAT(text, HasSubstr("<DataArray type=\"UInt8\" Name=\"types\""));
   EXPECT_THAT(text, HasSubstr("<DataArray type=\"Int32\" Name=\"material\""));
-  const testing::CommandResult r = RunMeshio(
-      path,
+  ExpectMeshioReads(path,
       "--points 12 --point-sum 21.4 --cells hexahedron=1,pyramid=1,wedge=1,tetra=1 "
       "--cell-data material,volume,gradient --point-data temperature "
       "--cell-data-sum material=6,volume=1.68,gradient=6 --point-data-sum temperature=6.6");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
 }
 
 TEST(VtuWriterTest, RejectsInconsistentMeshes) {
@@ -306,12 +301,9 @@ TEST(ElementsToVolumeMeshTest, OneVtkCellPerElement) {
   ScopedTempDir tmp;
   const std::string path = tmp.path() + "/elements.vtu";
   ASSERT_OK(WriteVtu(path, m));
-  const testing::CommandResult r =
-      RunMeshio(path,
-                "--points 77 --cells hexahedron=2,pyramid=1 "
-                "--cell-data element_kind,cell,control_cell,level "
-                "--cell-data-sum element_kind=3,cell=15,control_cell=6,level=6");
-  EXPECT_EQ(r.exit_code, 0) << "meshio reading " << path << ":\n" << r.output;
+  ExpectMeshioReads(path, "--points 77 --cells hexahedron=2,pyramid=1 "
+                          "--cell-data element_kind,cell,control_cell,level "
+                          "--cell-data-sum element_kind=3,cell=15,control_cell=6,level=6");
 }
 
 }  // namespace

@@ -138,68 +138,49 @@ class JsonParser {
       }
       if (at_ >= s_.size()) break;
       const char e = s_[at_++];
-      switch (e) {
-        case '"':
-          out.push_back('"');
-          break;
-        case '\\':
-          out.push_back('\\');
-          break;
-        case '/':
-          out.push_back('/');
-          break;
-        case 'b':
-          out.push_back('\b');
-          break;
-        case 'f':
-          out.push_back('\f');
-          break;
-        case 'n':
-          out.push_back('\n');
-          break;
-        case 'r':
-          out.push_back('\r');
-          break;
-        case 't':
-          out.push_back('\t');
-          break;
-        case 'u': {
-          if (at_ + 4 > s_.size()) return Fail("short \\u escape"), false;
-          const long code = std::strtol(std::string(s_.substr(at_, 4)).c_str(), nullptr, 16);
-          if (code >= 0x80) return Fail("\\u escape beyond ASCII (not supported)"), false;
-          out.push_back(static_cast<char>(code));
-          at_ += 4;
-          break;
-        }
-        default:
-          return Fail("bad escape"), false;
+      // The one-letter escapes and what they stand for, at the same place.
+      constexpr std::string_view kEscapes = "\"\\/bfnrt";
+      constexpr std::string_view kEscaped = "\"\\/\b\f\n\r\t";
+      if (const size_t k = kEscapes.find(e); k != std::string_view::npos) {
+        out.push_back(kEscaped[k]);
+        continue;
       }
+      if (e != 'u') return Fail("bad escape"), false;
+      if (at_ + 4 > s_.size()) return Fail("short \\u escape"), false;
+      const long code = std::strtol(std::string(s_.substr(at_, 4)).c_str(), nullptr, 16);
+      if (code >= 0x80) return Fail("\\u escape beyond ASCII (not supported)"), false;
+      out.push_back(static_cast<char>(code));
+      at_ += 4;
     }
     return Fail("unterminated string"), false;
   }
-  bool Array(Json& v, int depth) {
-    v.type = Json::Type::kArray;
+  // Past a container's opening byte: whether `close` follows at once (an
+  // empty container, then closed).
+  bool OpensEmpty(char close) {
     ++at_;
     SkipSpace();
-    if (at_ < s_.size() && s_[at_] == ']') return ++at_, true;
+    return at_ < s_.size() && s_[at_] == close ? (++at_, true) : false;
+  }
+  // After an item of a container closed by `close`: 1 when a comma follows
+  // (another item), 0 when `close` does (closed), -1 otherwise (failed).
+  int AfterItem(char close) {
+    SkipSpace();
+    if (at_ < s_.size() && s_[at_] == ',') return ++at_, 1;
+    if (at_ < s_.size() && s_[at_] == close) return ++at_, 0;
+    return Fail(std::string("expected , or ") + close), -1;
+  }
+  bool Array(Json& v, int depth) {
+    v.type = Json::Type::kArray;
+    if (OpensEmpty(']')) return true;
     while (true) {
       v.items.emplace_back();
       if (!Value(v.items.back(), depth + 1)) return false;
-      SkipSpace();
-      if (at_ < s_.size() && s_[at_] == ',') {
-        ++at_;
-      } else if (at_ < s_.size() && s_[at_] == ']') {
-        return ++at_, true;
-      } else {
-        return Fail("expected , or ]"), false;
-      }
+      if (const int next = AfterItem(']'); next <= 0) return next == 0;
     }
   }
   bool Object(Json& v, int depth) {
     v.type = Json::Type::kObject;
-    ++at_;
-    SkipSpace();
-    if (at_ < s_.size() && s_[at_] == '}') return ++at_, true;
+    if (OpensEmpty('}')) return true;
     while (true) {
       SkipSpace();
       if (at_ >= s_.size() || s_[at_] != '"') return Fail("expected a key"), false;
@@ -211,14 +192,7 @@ class JsonParser {
       ++at_;
       v.members.emplace_back(std::move(key), Json());
       if (!Value(v.members.back().second, depth + 1)) return false;
-      SkipSpace();
-      if (at_ < s_.size() && s_[at_] == ',') {
-        ++at_;
-      } else if (at_ < s_.size() && s_[at_] == '}') {
-        return ++at_, true;
-      } else {
-        return Fail("expected , or }"), false;
-      }
+      if (const int next = AfterItem('}'); next <= 0) return next == 0;
     }
   }
 

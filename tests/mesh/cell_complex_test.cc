@@ -1,6 +1,7 @@
 #include "solver/mesh/cell_complex.h"
 
 #include <cmath>
+#include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -91,19 +92,22 @@ TEST(CellComplexTest, BoundaryExtractionIsOutward) {
 
 // ---- Every bad-mesh rule of docs/model.md section 1, with its message. ----
 
+// FromInput refuses `in` as InvalidArgument with `message` in its text.
+void ExpectRefused(const MeshInput& in, const std::string& message) {
+  EXPECT_THAT(CellComplex::FromInput(in),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)));
+}
+
 TEST(CellComplexValidationTest, NonFiniteCoordinate) {
   MeshInput in = Grid(1, 1, 1);
   in.vertices(5, 1) = NAN;
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("vertex 5 has a non-finite coordinate y")));
+  ExpectRefused(in, "vertex 5 has a non-finite coordinate y");
 }
 
 TEST(CellComplexValidationTest, Empty) {
   MeshInput in = Grid(1, 1, 1);
   in.cells.clear();
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("mesh has no cells")));
+  ExpectRefused(in, "mesh has no cells");
   MeshInput none;
   EXPECT_THAT(CellComplex::FromInput(none),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("no vertices")));
@@ -112,17 +116,13 @@ TEST(CellComplexValidationTest, Empty) {
 TEST(CellComplexValidationTest, IndexOutOfRange) {
   MeshInput in = Grid(1, 1, 1);
   in.cells[0][2][1] = 99;
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 face 2: vertex index 99 is out of range [0, 8)")));
+  ExpectRefused(in, "cell 0 face 2: vertex index 99 is out of range [0, 8)");
 }
 
 TEST(CellComplexValidationTest, RepeatedVertexInLoop) {
   MeshInput in = Grid(1, 1, 1);
   in.cells[0][1] = {4, 5, 6, 5};
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 face 1: vertex 5 is repeated in the face loop")));
+  ExpectRefused(in, "cell 0 face 1: vertex 5 is repeated in the face loop");
 }
 
 TEST(CellComplexValidationTest, FaceInThreeCells) {
@@ -133,67 +133,51 @@ TEST(CellComplexValidationTest, FaceInThreeCells) {
   in.vertices.conservativeResize(nv + 4, 3);
   in.vertices.bottomRows(4) << 1, 0, -2, 1, 1, -2, 1, 0, -1, 1, 1, -1;
   in.cells.push_back(::dynsolid::testing::HexFaces({1, nv, nv + 1, 4, 7, nv + 2, nv + 3, 10}));
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("is shared by cells 0, 1 and 2; a face belongs to at most two "
-                                 "cells")));
+  ExpectRefused(in, "is shared by cells 0, 1 and 2; a face belongs to at most two "
+                    "cells");
 }
 
 TEST(CellComplexValidationTest, OpenCell) {
   MeshInput in = Grid(1, 1, 1);
   in.cells[0].pop_back();
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 is not closed: edge")));
+  ExpectRefused(in, "cell 0 is not closed: edge");
 }
 
 TEST(CellComplexValidationTest, InconsistentOrientationInsideCell) {
   MeshInput in = Grid(1, 1, 1);
   std::reverse(in.cells[0][3].begin(), in.cells[0][3].end());
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("inconsistent orientation: cell 0 faces")));
+  ExpectRefused(in, "inconsistent orientation: cell 0 faces");
 }
 
 TEST(CellComplexValidationTest, InconsistentOrientationBetweenCells) {
   MeshInput in = Grid(2, 1, 1);
   for (auto& loop : in.cells[1]) std::reverse(loop.begin(), loop.end());
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("inconsistent orientation: cells 0 and 1 share face")));
+  ExpectRefused(in, "inconsistent orientation: cells 0 and 1 share face");
 }
 
 TEST(CellComplexValidationTest, NegativeVolume) {
   MeshInput in = Grid(1, 1, 1);
   for (auto& loop : in.cells[0]) std::reverse(loop.begin(), loop.end());
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 has negative volume")));
+  ExpectRefused(in, "cell 0 has negative volume");
 }
 
 TEST(CellComplexValidationTest, ZeroVolume) {
   MeshInput in = Grid(1, 1, 1);
   for (int v = 0; v < 8; ++v) in.vertices(v, 2) = 0.0;  // flattened
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 has zero volume")));
+  ExpectRefused(in, "cell 0 has zero volume");
 }
 
 TEST(CellComplexValidationTest, TooFewFacesOrVertices) {
   MeshInput in = Grid(1, 1, 1);
   in.cells[0][0] = {0, 3};
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("cell 0 face 0 has 2 vertices")));
+  ExpectRefused(in, "cell 0 face 0 has 2 vertices");
 }
 
 TEST(CellComplexValidationTest, UnusedVertex) {
   MeshInput in = Grid(1, 1, 1);
   in.vertices.conservativeResize(9, 3);
   in.vertices.row(8) << 5, 5, 5;
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("vertex 8 belongs to no cell")));
+  ExpectRefused(in, "vertex 8 belongs to no cell");
   // Dropping it renumbers nothing that is used here, and the mesh builds.
   EXPECT_EQ(DropUnusedVertices(in), 1);
   EXPECT_OK(CellComplex::FromInput(in));
@@ -219,9 +203,7 @@ TEST(CellComplexValidationTest, OriginPrefixesMessages) {
   MeshInput in = Grid(1, 1, 1);
   in.origin = "scenes/broken.vtk";
   in.cells[0].pop_back();
-  EXPECT_THAT(CellComplex::FromInput(in),
-              StatusIs(absl::StatusCode::kInvalidArgument,
-                       HasSubstr("scenes/broken.vtk: cell 0 is not closed")));
+  ExpectRefused(in, "scenes/broken.vtk: cell 0 is not closed");
 }
 
 }  // namespace

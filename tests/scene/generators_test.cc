@@ -135,6 +135,17 @@ TEST(GenerateBeamTest, CantileverBeam) {
   for (int v : {0, 11, 22, 33}) EXPECT_EQ(m->vertices(v, 0), 0.0) << "vertex " << v;
 }
 
+// Each case's text, parsed as a G, is refused by `generate` as
+// InvalidArgument with the case's message in its text.
+template <typename G, typename Generate, size_t N>
+void ExpectRefused(Generate generate, const std::pair<std::string, std::string> (&cases)[N]) {
+  for (const auto& [text, message] : cases) {
+    EXPECT_THAT(generate(Parse<G>(text)),
+                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
+        << text;
+  }
+}
+
 TEST(GenerateBeamTest, RejectsBadParameters) {
   const std::pair<std::string, std::string> cases[] = {
       {"width: 0.1 height: 0.1 cells_along: 10 cells_across: 1", "beam.length must be > 0, got 0"},
@@ -147,11 +158,7 @@ TEST(GenerateBeamTest, RejectsBadParameters) {
       {"length: 1 width: 1 height: 1 cells_along: 100000 cells_across: 100",
        "more than the limit"},
   };
-  for (const auto& [text, message] : cases) {
-    EXPECT_THAT(GenerateBeam(Parse<BeamGenerator>(text)),
-                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
-        << text;
-  }
+  ExpectRefused<BeamGenerator>(GenerateBeam, cases);
 }
 
 // ------------------------------------------------------------------ tube
@@ -213,11 +220,7 @@ TEST(GenerateTubeTest, RejectsBadParameters) {
       {"segments: 1000 layers: 1000 slices: 1000 inner_radius: 1 outer_radius: 2 length: 1",
        "more than the limit"},
   };
-  for (const auto& [text, message] : cases) {
-    EXPECT_THAT(GenerateTube(Parse<TubeGenerator>(text)),
-                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
-        << text;
-  }
+  ExpectRefused<TubeGenerator>(GenerateTube, cases);
 }
 
 // ----------------------------------------------------------------- torus
@@ -255,11 +258,7 @@ TEST(GenerateTorusTest, RejectsBadParameters) {
       {"major_radius: 1 tube_half_width: 0.5 segments: 100000 cross: 100",
        "more than the limit"},
   };
-  for (const auto& [text, message] : cases) {
-    EXPECT_THAT(GenerateTorus(Parse<TorusGenerator>(text)),
-                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
-        << text;
-  }
+  ExpectRefused<TorusGenerator>(GenerateTorus, cases);
 }
 
 // ---------------------------------------------------------------- voxels
@@ -364,11 +363,7 @@ TEST(GenerateVoxelsTest, RejectsBadParametersAndResults) {
        "boxes { x1: 400 y1: 400 z1: 400 }",
        "more than the limit of 256000000"},
   };
-  for (const auto& [text, message] : cases) {
-    EXPECT_THAT(GenerateVoxels(Parse<VoxelGenerator>(text)),
-                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
-        << text;
-  }
+  ExpectRefused<VoxelGenerator>(GenerateVoxels, cases);
 }
 
 TEST(ValidateTest, ValidateAgreesWithGenerate) {

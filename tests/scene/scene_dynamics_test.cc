@@ -24,26 +24,17 @@
 #include "absl/strings/str_cat.h"
 #include "solver/mesh/cell_complex.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/scene/scene_test_support.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::scene {
 namespace {
 
-namespace fs = std::filesystem;
-using ::dynsolid::testing::StatusIs;
 using ::google::protobuf::Descriptor;
 using ::google::protobuf::FieldDescriptor;
 using ::google::protobuf::Message;
 using ::google::protobuf::Reflection;
 using ::google::protobuf::TextFormat;
-using ::testing::AllOf;
-using ::testing::HasSubstr;
-using ::testing::StartsWith;
-
-fs::path SourceDir() {
-  const char* dir = std::getenv("DYNSOLID_SOURCE_DIR");
-  return dir != nullptr ? fs::path(dir) : fs::current_path();
-}
 
 std::string ReadText(const fs::path& path) {
   std::ifstream in(path);

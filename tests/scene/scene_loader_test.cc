@@ -16,21 +16,11 @@
 
 #include "solver/mesh/cell_complex.h"
 #include "tests/scene/mesh_input_checks.h"
+#include "tests/scene/scene_test_support.h"
 #include "tests/testing/status_matchers.h"
 
 namespace dynsolid::scene {
 namespace {
-
-namespace fs = std::filesystem;
-using ::dynsolid::testing::StatusIs;
-using ::testing::AllOf;
-using ::testing::HasSubstr;
-using ::testing::StartsWith;
-
-fs::path SourceDir() {
-  const char* dir = std::getenv("DYNSOLID_SOURCE_DIR");
-  return dir != nullptr ? fs::path(dir) : fs::current_path();
-}
 
 fs::path ScenesDir() { return SourceDir() / "scenes"; }
 

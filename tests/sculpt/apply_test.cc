@@ -14,6 +14,7 @@
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
+#include "tests/sculpt/voxel_mesh.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/text_proto.h"
 
@@ -152,12 +153,7 @@ TEST(ExtrudeBesideAPinTest, TheCopiesOfPinnedVerticesAreHeldWhereTheExtrusionPut
                        scene::BuildDiscretization(scene, "", std::nullopt));
   ASSERT_OK_AND_ASSIGN(std::unique_ptr<solid::Solid> s, solid::Solid::Create(scene, std::move(d), 2));
   const mesh::CellComplex& c0 = s->discretization().control();
-  int32_t top = -1;
-  for (int32_t f = 0; f < c0.num_faces(); ++f) {
-    if (c0.face_is_boundary(f) && (c0.FaceCentroid(f) - Eigen::Vector3d(0.5, 0.5, 1)).norm() < 1e-9) {
-      top = f;
-    }
-  }
+  const int32_t top = testing::BoundaryFaceAt(c0, Eigen::Vector3d(0.5, 0.5, 1));
   ASSERT_GE(top, 0);
   const int64_t before = s->control_positions().rows();
   ASSERT_OK_AND_ASSIGN(AppliedEdit a,
@@ -205,12 +201,7 @@ TEST_P(ClayEditTest, AnEditKeepsTheBentShapeOfTheCellsItLeftAlone) {
 
   // The top face over the fixed end's cell (0, 0, 1).
   const mesh::CellComplex& c0 = s->discretization().control();
-  int32_t top = -1;
-  for (int32_t f = 0; f < c0.num_faces(); ++f) {
-    if (c0.face_is_boundary(f) && (c0.FaceCentroid(f) - Eigen::Vector3d(0.5, 0.5, 2)).norm() < 1e-9) {
-      top = f;
-    }
-  }
+  const int32_t top = testing::BoundaryFaceAt(c0, Eigen::Vector3d(0.5, 0.5, 2));
   ASSERT_GE(top, 0);
   ASSERT_OK_AND_ASSIGN(AppliedEdit a,
                        ApplyEdit(scene, *s, Parse<TopologyEdit>("extrude_faces { faces: " +

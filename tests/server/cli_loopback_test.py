@@ -7,7 +7,6 @@ denied get), then stops the server with SIGTERM and checks that it exits 0.
 Usage: cli_loopback_test.py --server PATH --client PATH
 """
 
-import argparse
 import json
 import os
 import re
@@ -16,7 +15,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
-from loopback import expect_equal, fail, first_line  # noqa: E402
+from loopback import binary_args, expect_equal, fail, first_line  # noqa: E402
 
 STARTUP_SECONDS = 30
 CALL_SECONDS = 60
@@ -47,10 +46,7 @@ def client_json(args, server, *command):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--server", required=True)
-    parser.add_argument("--client", required=True)
-    args = parser.parse_args()
+    args = binary_args("server", "client")
 
     server = subprocess.Popen([args.server, "--listen", "127.0.0.1:0", "--max_sessions", "4"],
                               stdout=subprocess.PIPE, text=True)

@@ -20,11 +20,13 @@
 #include "server/journal.h"
 #include "clients/lib/surface.h"
 #include "server/surface_codec.h"
+#include "temp_dir.h"
 #include "solver/scene/scene_loader.h"
 
 namespace dynsolid::server {
 namespace {
 
+using ::dynsolid::testing::TempDir;
 using ::testing::HasSubstr;
 
 // A 20 x 20 grid of vertices on a 2 m square at z = 0, quads between.
@@ -68,6 +70,21 @@ double WorstRatio(const client::SurfaceDecoder& d, const SurfaceSnapshot& s) {
   return worst;
 }
 
+// The default grid through an encoder and the decoder of its frames.
+struct GridCodec {
+  std::shared_ptr<SurfaceTopology> topo = GridTopology();
+  SurfaceEncoder enc{FieldChoice{}};
+  client::SurfaceDecoder dec;
+  Frame frame;
+
+  // Encodes the grid at rest at step 0 into `frame` (a keyframe) and
+  // applies it; the decoder's status.
+  absl::Status EncodeRestAndApply() {
+    enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
+    return dec.Apply(frame);
+  }
+};
+
 TEST(SurfaceCodecTest, KeyframeThenDeltasReconstructWithinTheStatedBound) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
@@ -102,19 +119,15 @@ TEST(SurfaceCodecTest, TheBoundIsHalfAGridStepOfTheWidenedBox) {
 }
 
 TEST(SurfaceCodecTest, UnmovedSurfaceSendsAnEmptyDelta) {
-  auto topo = GridTopology();
-  SurfaceEncoder enc(FieldChoice{});
-  client::SurfaceDecoder dec;
-  Frame frame;
-  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
-  ASSERT_TRUE(dec.Apply(frame).ok());
-  enc.Encode(Wave(topo, 5, 0.2, 0), &frame);
-  ASSERT_TRUE(frame.has_delta());
-  EXPECT_EQ(frame.delta().moved(), 0);
-  EXPECT_EQ(frame.delta().runs_size(), 0);
-  EXPECT_EQ(frame.delta().base_step(), 0);
-  ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_EQ(dec.step(), 5);
+  GridCodec c;
+  ASSERT_TRUE(c.EncodeRestAndApply().ok());
+  c.enc.Encode(Wave(c.topo, 5, 0.2, 0), &c.frame);
+  ASSERT_TRUE(c.frame.has_delta());
+  EXPECT_EQ(c.frame.delta().moved(), 0);
+  EXPECT_EQ(c.frame.delta().runs_size(), 0);
+  EXPECT_EQ(c.frame.delta().base_step(), 0);
+  ASSERT_TRUE(c.dec.Apply(c.frame).ok());
+  EXPECT_EQ(c.dec.step(), 5);
 }
 
 TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
@@ -133,6 +146,18 @@ TEST(SurfaceCodecTest, SmallMotionDeltasAreUnderAQuarterOfRawFloat32Frames) {
   EXPECT_LE(worst * 4, raw) << "delta " << worst << " bytes, raw float32 " << raw;
 }
 
+// Encodes `snap` into `frame`: a delta with `rice_k_size` Rice parameters
+// and `bits` fixed-width bits, which `dec` applies within the bound.
+void ExpectDelta(SurfaceEncoder& enc, client::SurfaceDecoder& dec, Frame& frame,
+                 const std::shared_ptr<SurfaceSnapshot>& snap, int rice_k_size, uint32_t bits) {
+  enc.Encode(snap, &frame);
+  ASSERT_TRUE(frame.has_delta());
+  EXPECT_EQ(frame.delta().rice_k_size(), rice_k_size);
+  EXPECT_EQ(frame.delta().bits(), bits);
+  ASSERT_TRUE(dec.Apply(frame).ok());
+  EXPECT_LE(WorstRatio(dec, *snap), 1.0 + 1e-9);
+}
+
 TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
   auto topo = GridTopology();
   SurfaceEncoder enc(FieldChoice{});
@@ -146,12 +171,7 @@ TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
   mixed->step = 1;
   for (size_t i = 0; i < mixed->positions.size(); ++i) mixed->positions[i] += 1e-4 * (i % 7);
   mixed->positions[0] += 0.3;
-  enc.Encode(mixed, &frame);
-  ASSERT_TRUE(frame.has_delta());
-  EXPECT_EQ(frame.delta().rice_k_size(), 3);
-  EXPECT_EQ(frame.delta().bits(), 0u);
-  ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_LE(WorstRatio(dec, *mixed), 1.0 + 1e-9);
+  ASSERT_NO_FATAL_FAILURE(ExpectDelta(enc, dec, frame, mixed, /*rice_k_size=*/3, /*bits=*/0u));
   // Every vertex moved by the same 5 codes on every axis: fixed width
   // (4 bits each) is shorter than any Rice code.
   Frame key;
@@ -169,12 +189,7 @@ TEST(SurfaceCodecTest, DeltasUseRiceCodesOrFixedWidthWhicheverIsShorter) {
     shifted->positions[i + 1] = start[i + 1] + 5 * sy;
     shifted->positions[i + 2] = start[i + 2] + 5 * sz;
   }
-  enc2.Encode(shifted, &key);
-  ASSERT_TRUE(key.has_delta());
-  EXPECT_EQ(key.delta().rice_k_size(), 0);
-  EXPECT_EQ(key.delta().bits(), 4u);
-  ASSERT_TRUE(dec2.Apply(key).ok());
-  EXPECT_LE(WorstRatio(dec2, *shifted), 1.0 + 1e-9);
+  ASSERT_NO_FATAL_FAILURE(ExpectDelta(enc2, dec2, key, shifted, /*rice_k_size=*/0, /*bits=*/4u));
 }
 
 TEST(SurfaceCodecTest, LeavingTheGridOrChangingTopologyGivesAKeyframe) {
@@ -201,17 +216,13 @@ TEST(SurfaceCodecTest, LeavingTheGridOrChangingTopologyGivesAKeyframe) {
 TEST(SurfaceCodecTest, AWatcherThatSkippedManyFramesResumesConsistently) {
   // The encoder only ever sees the frames it sent; a big jump in between is
   // either a larger delta or, when that would be bigger, a fresh keyframe.
-  auto topo = GridTopology();
-  SurfaceEncoder enc(FieldChoice{});
-  client::SurfaceDecoder dec;
-  Frame frame;
-  enc.Encode(Wave(topo, 0, 0.2, 0), &frame);
-  ASSERT_TRUE(dec.Apply(frame).ok());
-  auto later = Wave(topo, 500, 0.2, 2.5);  // everything moved a lot
-  enc.Encode(later, &frame);
-  ASSERT_TRUE(dec.Apply(frame).ok());
-  EXPECT_LE(WorstRatio(dec, *later), 1.0 + 1e-9);
-  EXPECT_EQ(dec.step(), 500);
+  GridCodec c;
+  ASSERT_TRUE(c.EncodeRestAndApply().ok());
+  auto later = Wave(c.topo, 500, 0.2, 2.5);  // everything moved a lot
+  c.enc.Encode(later, &c.frame);
+  ASSERT_TRUE(c.dec.Apply(c.frame).ok());
+  EXPECT_LE(WorstRatio(c.dec, *later), 1.0 + 1e-9);
+  EXPECT_EQ(c.dec.step(), 500);
 }
 
 TEST(SurfaceCodecTest, FieldsTravelWithKeyframesAndMovedVertices) {
@@ -402,26 +413,13 @@ TEST(SurfaceCodecTest, DecoderRefusesADeltaAgainstAnotherBase) {
 
 // ---- Journal ----
 
-class TempDir {
- public:
-  TempDir() {
-    std::string t = ::testing::TempDir() + "dynsolid_journal_XXXXXX";
-    path_ = ::mkdtemp(t.data());
-  }
-  ~TempDir() { std::system(absl::StrCat("rm -rf '", path_, "'").c_str()); }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
-
 TEST(JournalTest, Crc32cMatchesTheStandardCheckValue) {
   EXPECT_EQ(Crc32c("123456789"), 0xE3069283u);
   EXPECT_EQ(Crc32c(""), 0u);
 }
 
 TEST(JournalTest, RecordsReadBackAndATornTailIsTruncated) {
-  TempDir dir;
+  TempDir dir("dynsolid_journal");
   const std::string path = dir.path() + "/journal";
   {
     auto w = JournalWriter::Open(path, 0);
@@ -460,7 +458,7 @@ TEST(JournalTest, RecordsReadBackAndATornTailIsTruncated) {
 }
 
 TEST(JournalTest, ACorruptedRecordEndsTheValidPrefix) {
-  TempDir dir;
+  TempDir dir("dynsolid_journal");
   const std::string path = dir.path() + "/journal";
   std::string bytes = FrameRecord("alpha") + FrameRecord("beta");
   bytes[8 + 5 + 8 + 1] ^= 0x20;  // flip a bit in "beta"
@@ -473,7 +471,7 @@ TEST(JournalTest, ACorruptedRecordEndsTheValidPrefix) {
 }
 
 TEST(JournalTest, AtomicFileReplacesContentsAndKeepsItsMode) {
-  TempDir dir;
+  TempDir dir("dynsolid_journal");
   ASSERT_TRUE(WriteFileAtomically(dir.path(), "f", "one").ok());
   ASSERT_TRUE(WriteFileAtomically(dir.path(), "f", "two, longer").ok());
   auto got = ReadWholeFile(dir.path() + "/f");

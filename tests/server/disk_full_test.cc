@@ -43,15 +43,18 @@
 #include "dynsolid/service.grpc.pb.h"
 #include "health.grpc.pb.h"
 #include "live_client.h"
+#include "server_process.h"
 
 namespace dynsolid {
 namespace {
 
 using ::testing::HasSubstr;
 using testing::CommandStream;
+using testing::CreatePausedBlock3;
 using testing::Deadline;
 using testing::ForceCommand;
 using testing::InspectAt;
+using testing::ServerProcess;
 using testing::StepCommand;
 
 // Why the namespace could not be entered (empty: it was).
@@ -83,62 +86,6 @@ std::string EnterUserAndMountNamespace() {
   }
   return "";
 }
-
-std::string ServerBinary() {
-  const char* dir = std::getenv("DYNSOLID_BINARY_DIR");
-  return absl::StrCat(dir != nullptr ? dir : "build/release", "/server/dynsolid-server");
-}
-
-// A dynsolid-server child process with `flags` (and --listen=127.0.0.1:0).
-class ServerProcess {
- public:
-  ServerProcess(const std::vector<std::string>& flags, const std::string& log) {
-    int out[2];
-    if (::pipe(out) != 0) return;
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::dup2(out[1], 1);
-      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
-      ::dup2(err, 2);
-      ::close(out[0]);
-      const std::string binary = ServerBinary();
-      std::vector<std::string> args = {binary, "--listen=127.0.0.1:0"};
-      args.insert(args.end(), flags.begin(), flags.end());
-      std::vector<char*> argv;
-      for (std::string& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      ::execv(binary.c_str(), argv.data());
-      ::_exit(127);
-    }
-    ::close(out[1]);
-    std::string line;
-    pollfd p{out[0], POLLIN, 0};
-    while (line.find('\n') == std::string::npos && ::poll(&p, 1, 120000) > 0) {
-      char c;
-      if (::read(out[0], &c, 1) != 1) break;
-      line.push_back(c);
-    }
-    ::close(out[0]);
-    if (absl::StartsWith(line, "listening on ")) address_ = line.substr(13, line.size() - 14);
-  }
-  ~ServerProcess() {
-    if (pid_ > 0) Signal(SIGTERM);
-  }
-  void Signal(int signal) {
-    ::kill(pid_, signal);
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-  }
-  const std::string& address() const { return address_; }
-  std::shared_ptr<grpc::Channel> Channel() const {
-    return grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
-  }
-
- private:
-  pid_t pid_ = -1;
-  std::string address_;
-};
 
 // A tmpfs of `bytes` mounted on a fresh directory (inside the namespace).
 class SmallDisk {
@@ -223,16 +170,6 @@ bool HealthBecomes(grpc::Channel& channel,
   return false;
 }
 
-grpc::Status Create(Sessions::Stub& stub, Session* out) {
-  CreateSessionRequest r;
-  r.set_builtin_scene("block3");
-  r.set_levels_override(1);
-  r.set_start_paused(true);
-  grpc::ClientContext context;
-  context.set_deadline(Deadline());
-  return stub.CreateSession(&context, r, out);
-}
-
 // Reads a Watch stream on a thread of its own: the highest step of any
 // frame it got.
 class Watcher {
@@ -298,7 +235,7 @@ TEST(DiskFullTest, UnjournaledCommandsAreRefusedNotAppliedAndARestartHasExactlyT
     ASSERT_FALSE(server.address().empty()) << "the server did not start; see " << disk.log();
     std::shared_ptr<grpc::Channel> channel = server.Channel();
     auto stub = Sessions::NewStub(channel);
-    ASSERT_TRUE(Create(*stub, &s).ok());
+    ASSERT_TRUE(CreatePausedBlock3(*stub, &s).ok());
     EXPECT_EQ(Health(*channel), grpc::health::v1::HealthCheckResponse::SERVING);
     Watcher watcher(*stub, s);
     CommandStream c(*stub, s, "disk", /*deadline_seconds=*/1200);
@@ -342,7 +279,7 @@ TEST(DiskFullTest, UnjournaledCommandsAreRefusedNotAppliedAndARestartHasExactlyT
     // While full: NOT_SERVING, no new session, and no stray directory.
     EXPECT_TRUE(HealthBecomes(*channel, grpc::health::v1::HealthCheckResponse::NOT_SERVING));
     Session other;
-    const grpc::Status created = Create(*stub, &other);
+    const grpc::Status created = CreatePausedBlock3(*stub, &other);
     EXPECT_EQ(created.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
     EXPECT_THAT(created.error_message(), HasSubstr("no space left on the data disk"));
     EXPECT_EQ(SessionDirs(data).size(), 1u);
@@ -361,7 +298,7 @@ TEST(DiskFullTest, UnjournaledCommandsAreRefusedNotAppliedAndARestartHasExactlyT
     EXPECT_LE(watcher.max_step(), expected_step);
     EXPECT_EQ(LoggedSeqs(*stub, s, "disk"), acknowledged);
     // A new session opens again.
-    EXPECT_TRUE(Create(*stub, &other).ok());
+    EXPECT_TRUE(CreatePausedBlock3(*stub, &other).ok());
     server.Signal(SIGKILL);
   }
   // Restarted on the same directory: exactly the acknowledged commands.
@@ -387,13 +324,13 @@ TEST(DiskFullTest, ACreationThatCannotWriteLeavesNoDirectory) {
   auto stub = Sessions::NewStub(server.Channel());
   ASSERT_GT(disk.Fill(), 0);
   Session s;
-  const grpc::Status created = Create(*stub, &s);
+  const grpc::Status created = CreatePausedBlock3(*stub, &s);
   EXPECT_EQ(created.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << created.error_message();
   EXPECT_THAT(created.error_message(), HasSubstr("no space left on the data disk"));
   EXPECT_THAT(SessionDirs(data), ::testing::IsEmpty());
   disk.Free();
   EXPECT_TRUE(HealthBecomes(*server.Channel(), grpc::health::v1::HealthCheckResponse::SERVING));
-  const grpc::Status again = Create(*stub, &s);
+  const grpc::Status again = CreatePausedBlock3(*stub, &s);
   EXPECT_TRUE(again.ok()) << again.error_message();
   EXPECT_EQ(SessionDirs(data).size(), 1u);
 }

@@ -18,15 +18,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-CommandReply Send(TestCore& s, const std::string& text) {
-  CommandRequest r;
-  r.set_client_id("sculptor");
-  r.set_seq(++s.seq);
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, r.mutable_command())) << text;
-  CommandReply reply;
-  s.core->Process(r, &reply);
-  return reply;
-}
+CommandReply Send(TestCore& s, const std::string& text) { return SendText(s, "sculptor", text); }
 
 // The diagonal of the control points' bounding box.
 double Extent(const TestCore& s) {

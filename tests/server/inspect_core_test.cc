@@ -34,18 +34,9 @@ Core Make(const std::string& builtin = "block3", int levels = 1) {
 }
 
 CommandReply Send(Core& c, const std::string& client, const std::string& text) {
-  CommandRequest r;
-  r.set_client_id(client);
-  r.set_seq(++c.seq);
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, r.mutable_command())) << text;
-  CommandReply reply;
-  c.core->Process(r, &reply);
+  const CommandReply reply = SendText(c, client, text);
   EXPECT_EQ(reply.code(), 0) << text << ": " << reply.message();
   return reply;
-}
-
-void Steps(Core& c, int n) {
-  for (int i = 0; i < n; ++i) ASSERT_OK(c.core->StepOnce());
 }
 
 InspectReply Loads(const Core& c) {

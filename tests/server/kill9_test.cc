@@ -26,6 +26,8 @@
 #include "absl/strings/str_cat.h"
 #include "dynsolid/service.grpc.pb.h"
 #include "live_client.h"
+#include "server_process.h"
+#include "temp_dir.h"
 
 namespace dynsolid {
 namespace {
@@ -35,91 +37,19 @@ using testing::CommandStream;
 using testing::Deadline;
 using testing::ForceCommand;
 using testing::InspectAt;
+using testing::ParseCommands;
+using testing::ServerProcess;
 using testing::StepCommand;
+using testing::TempDir;
 
-std::string ServerBinary() {
-  const char* dir = std::getenv("DYNSOLID_BINARY_DIR");
-  return absl::StrCat(dir != nullptr ? dir : "build/release", "/server/dynsolid-server");
+// dynsolid-server on `data_dir`, a periodic snapshot every `snapshot_every_steps`.
+std::vector<std::string> DataFlags(const std::string& data_dir, int snapshot_every_steps = 40) {
+  return {"--data_dir=" + data_dir, absl::StrCat("--snapshot_every_steps=", snapshot_every_steps)};
 }
 
-// A dynsolid-server child process.
-class ServerProcess {
- public:
-  ServerProcess(const std::string& data_dir, const std::string& log,
-                int snapshot_every_steps = 40) {
-    const std::string snapshot_flag =
-        absl::StrCat("--snapshot_every_steps=", snapshot_every_steps);
-    int out[2];
-    if (::pipe(out) != 0) return;
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      ::dup2(out[1], 1);
-      const int err = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
-      ::dup2(err, 2);
-      ::close(out[0]);
-      const std::string binary = ServerBinary();
-      const std::string dir_flag = "--data_dir=" + data_dir;
-      ::execl(binary.c_str(), binary.c_str(), "--listen=127.0.0.1:0", dir_flag.c_str(),
-              snapshot_flag.c_str(), static_cast<char*>(nullptr));
-      ::_exit(127);
-    }
-    ::close(out[1]);
-    // The first line: "listening on HOST:PORT".
-    std::string line;
-    pollfd p{out[0], POLLIN, 0};
-    while (line.find('\n') == std::string::npos && ::poll(&p, 1, 120000) > 0) {
-      char c;
-      if (::read(out[0], &c, 1) != 1) break;
-      line.push_back(c);
-    }
-    ::close(out[0]);
-    if (absl::StartsWith(line, "listening on ")) {
-      address_ = line.substr(13, line.size() - 14);
-    }
-  }
-  ~ServerProcess() {
-    if (pid_ > 0) Signal(SIGTERM);
-  }
-  // Sends `signal` and reaps the process; returns its wait status.
-  int Signal(int signal) {
-    ::kill(pid_, signal);
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return status;
-  }
-  const std::string& address() const { return address_; }
-  std::unique_ptr<Sessions::Stub> Stub() const {
-    return Sessions::NewStub(grpc::CreateChannel(address_, grpc::InsecureChannelCredentials()));
-  }
-
- private:
-  pid_t pid_ = -1;
-  std::string address_;
-};
-
-class TempDir {
- public:
-  TempDir() {
-    std::string t = ::testing::TempDir() + "dynsolid_kill9_XXXXXX";
-    path_ = ::mkdtemp(t.data());
-  }
-  ~TempDir() { std::system(absl::StrCat("rm -rf '", path_, "'").c_str()); }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
-
 Session CreatePaused(Sessions::Stub& stub) {
-  CreateSessionRequest r;
-  r.set_builtin_scene("block3");
-  r.set_levels_override(1);
-  r.set_start_paused(true);
-  grpc::ClientContext context;
-  context.set_deadline(Deadline());
   Session s;
-  const grpc::Status status = stub.CreateSession(&context, r, &s);
+  const grpc::Status status = testing::CreatePausedBlock3(stub, &s);
   EXPECT_TRUE(status.ok()) << status.error_message();
   return s;
 }
@@ -180,7 +110,7 @@ std::vector<std::pair<Command, int64_t>> Script() {
 constexpr int64_t kEnd = 1120;
 
 TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
-  TempDir dir;
+  TempDir dir("dynsolid_kill9");
   const std::string log = dir.path() + "/server.log";
   const auto script = Script();
 
@@ -188,7 +118,7 @@ TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
   std::string ref_control, ref_surface;
   InspectReply ref_end, ref_final;
   {
-    ServerProcess server(dir.path() + "/reference", log);
+    ServerProcess server(DataFlags(dir.path() + "/reference"), log);
     ASSERT_FALSE(server.address().empty()) << "the server did not start; see " << log;
     auto stub = server.Stub();
     const Session s = CreatePaused(*stub);
@@ -209,7 +139,7 @@ TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
   Session s;
   CommandReply last;
   {
-    ServerProcess server(data, log);
+    ServerProcess server(DataFlags(data), log);
     ASSERT_FALSE(server.address().empty());
     auto stub = server.Stub();
     s = CreatePaused(*stub);
@@ -234,7 +164,7 @@ TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
     ::close(fd);
   }
   {
-    ServerProcess server(data, log);
+    ServerProcess server(DataFlags(data), log);
     ASSERT_FALSE(server.address().empty()) << "the server did not restart; see " << log;
     auto stub = server.Stub();
     const InspectReply end = InspectAt(*stub, s, kEnd);
@@ -279,13 +209,13 @@ TEST(Kill9Test, ARestartedServerContinuesBitIdenticallyToAnUninterruptedOne) {
 // in: a server killed afterwards replays it, paint included, to the same
 // bits. Nothing is snapshotted after the start, so all of it is replayed.
 TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
-  TempDir dir;
+  TempDir dir("dynsolid_kill9");
   const std::string log = dir.path() + "/server.log";
   const std::string data = dir.path() + "/data";
   Session s;
   InspectReply live;
   {
-    ServerProcess server(data, log, /*snapshot_every_steps=*/1000000);
+    ServerProcess server(DataFlags(data, /*snapshot_every_steps=*/1000000), log);
     ASSERT_FALSE(server.address().empty()) << "the server did not start; see " << log;
     auto stub = server.Stub();
     CreateSessionRequest r;
@@ -300,16 +230,14 @@ TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
     // the other (0.1 s and more each), so that the other client's force
     // surely lands while one of them builds.
     Command paint, paint2, fix;
-    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
-        "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
-        "material { young_modulus: 3e5 } strength: 1 }",
-        &paint));
-    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
-        "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
-        "material { young_modulus: 2e5 } strength: 1 }",
-        &paint2));
-    ASSERT_TRUE(google::protobuf::TextFormat::ParseFromString(
-        "fix_region { box { min { x: 2.9 } max { x: 3.1 y: 3 z: 3 } } }", &fix));
+    ASSERT_TRUE(ParseCommands({
+        {&paint,
+         "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
+         "material { young_modulus: 3e5 } strength: 1 }"},
+        {&paint2,
+         "paint_material { region { sphere { center { x: 1.5 y: 1.5 z: 1.5 } radius: 3 } } "
+         "material { young_modulus: 2e5 } strength: 1 }"},
+        {&fix, "fix_region { box { min { x: 2.9 } max { x: 3.1 y: 3 z: 3 } } }"}}));
     ASSERT_TRUE(painter.Write(1, paint));
     ASSERT_TRUE(painter.Write(2, paint2));
     ASSERT_TRUE(painter.Write(3, ForceCommand(1.5, 1.5, 3, 0, 0, -2e4)));
@@ -354,7 +282,7 @@ TEST(Kill9Test, LoadsThatWentAheadOfAPaintReplayInTheOrderTheyWereApplied) {
     const int status = server.Signal(SIGKILL);
     ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
   }
-  ServerProcess server(data, log, /*snapshot_every_steps=*/1000000);
+  ServerProcess server(DataFlags(data, /*snapshot_every_steps=*/1000000), log);
   ASSERT_FALSE(server.address().empty()) << "the server did not restart; see " << log;
   auto stub = server.Stub();
   const InspectReply recovered = InspectAt(*stub, s, live.step());

@@ -5,14 +5,19 @@
 
 #include <chrono>
 #include <cstring>
+#include <initializer_list>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "google/protobuf/text_format.h"
+
 #include "dynsolid/service.grpc.pb.h"
+#include "tests/testing/vec3.h"
 
 namespace dynsolid::testing {
 
@@ -38,6 +43,20 @@ inline SessionRef RefOf(const Session& s) {
   r.set_id(s.id());
   r.set_token(s.token());
   return r;
+}
+
+// A paused session of the builtin block3 at one level.
+inline CreateSessionRequest PausedBlock3Request() {
+  CreateSessionRequest r;
+  r.set_builtin_scene("block3");
+  r.set_levels_override(1);
+  r.set_start_paused(true);
+  return r;
+}
+inline grpc::Status CreatePausedBlock3(Sessions::Stub& stub, Session* out) {
+  grpc::ClientContext context;
+  context.set_deadline(Deadline());
+  return stub.CreateSession(&context, PausedBlock3Request(), out);
 }
 
 // One Commands stream; Send writes a command and reads its reply.
@@ -106,13 +125,21 @@ inline Command StepCommand(int64_t n) {
 inline Command ForceCommand(double x, double y, double z, double fx, double fy, double fz) {
   Command c;
   PointForce* f = c.mutable_add_point_force();
-  f->mutable_position()->set_x(x);
-  f->mutable_position()->set_y(y);
-  f->mutable_position()->set_z(z);
-  f->mutable_force()->set_x(fx);
-  f->mutable_force()->set_y(fy);
-  f->mutable_force()->set_z(fz);
+  SetXyz(f->mutable_position(), x, y, z);
+  SetXyz(f->mutable_force(), fx, fy, fz);
   return c;
+}
+
+// Parses each text into the command it is paired with; fails naming the
+// first text that does not parse.
+inline ::testing::AssertionResult ParseCommands(
+    std::initializer_list<std::pair<Command*, const char*>> commands) {
+  for (const auto& [command, text] : commands) {
+    if (!google::protobuf::TextFormat::ParseFromString(text, command)) {
+      return ::testing::AssertionFailure() << "cannot parse " << text;
+    }
+  }
+  return ::testing::AssertionSuccess();
 }
 
 inline InspectReply InspectAt(Sessions::Stub& stub, const Session& s, int64_t step,

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
@@ -21,7 +22,8 @@
 
 namespace dynsolid::server {
 
-using ::dynsolid::testing::Deadline;
+// The live client's helpers (live_client.h), unqualified in the live tests.
+using namespace ::dynsolid::testing;  // NOLINT(build/namespaces)
 
 // An in-process server on a loopback port (127.0.0.1:0) and a stub to it;
 // Start again with other options replaces both.
@@ -38,6 +40,14 @@ class LoopbackServerTest : public ::testing::Test {
     stub_ = Sessions::NewStub(channel_);
   }
 
+  // Options for a server on 127.0.0.1:0 with room for `max_sessions`.
+  static ServerOptions LoopbackOptions(int max_sessions) {
+    ServerOptions o;
+    o.listen = "127.0.0.1:0";
+    o.max_sessions = max_sessions;
+    return o;
+  }
+
   std::unique_ptr<Server> server_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<Sessions::Stub> stub_;
@@ -47,10 +57,11 @@ class LiveTest : public LoopbackServerTest {
  protected:
   void SetUp() override { Start(Options()); }
 
-  static ServerOptions Options() {
-    ServerOptions o;
-    o.listen = "127.0.0.1:0";
-    o.max_sessions = 8;
+  static ServerOptions Options() { return LoopbackOptions(8); }
+  // Options() with `dir` as the data directory.
+  static ServerOptions DataDirOptions(const std::string& dir) {
+    ServerOptions o = Options();
+    o.data_dir = dir;
     return o;
   }
 
@@ -66,6 +77,20 @@ class LiveTest : public LoopbackServerTest {
     r.set_scene_text(text);
     r.set_start_paused(paused);
     return CreateFrom(r);
+  }
+  // A Watch of `s` (default rate, deadline a minute away) on `context`.
+  std::unique_ptr<grpc::ClientReader<Frame>> WatchOf(const Session& s,
+                                                     grpc::ClientContext* context) {
+    context->set_deadline(Deadline());
+    WatchRequest r;
+    *r.mutable_session() = RefOf(s);
+    return stub_->Watch(context, r);
+  }
+  // Inspect with `r`, a minute's deadline.
+  grpc::Status Inspect(const InspectRequest& r, InspectReply* reply) {
+    grpc::ClientContext context;
+    context.set_deadline(Deadline());
+    return stub_->Inspect(&context, r, reply);
   }
   // The status of a Watch the server refuses: it ends before any frame.
   grpc::Status RefusedWatch(const WatchRequest& r) {
@@ -99,6 +124,28 @@ inline ::testing::AssertionResult ReadUntilStep(grpc::ClientReader<Frame>& reade
     if (f.step() > step) return ::testing::AssertionFailure() << "passed step " << step;
   }
   return ::testing::AssertionSuccess();
+}
+
+// Whether `watch` gives a frame (its first).
+inline bool ReadsAFrame(grpc::ClientReader<Frame>& watch) {
+  Frame f;
+  return watch.Read(&f);
+}
+
+// Reads `watch` to its end; it and `commands` must finish UNAVAILABLE, the
+// watch saying `why`, and `commands` have no reply left.
+inline void ExpectStreamsEndUnavailable(grpc::ClientReader<Frame>& watch,
+                                        ::dynsolid::testing::CommandStream& commands,
+                                        const std::string& why) {
+  Frame f;
+  while (watch.Read(&f)) {
+  }
+  const grpc::Status ws = watch.Finish();
+  EXPECT_EQ(ws.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(ws.error_message(), ::testing::HasSubstr(why));
+  CommandReply reply;
+  EXPECT_FALSE(commands.Read(&reply));
+  EXPECT_EQ(commands.Finish().error_code(), grpc::StatusCode::UNAVAILABLE);
 }
 
 // Largest |decoded - server| / bound over every coordinate.

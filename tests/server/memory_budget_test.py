@@ -14,7 +14,6 @@ accepted. Then a server allowed 1 % of each estimate (--build_memory_factor
 leaving no session. Every client call has a timeout: a server that starts building
 fails the test instead of filling the machine (it is killed).
 """
-import argparse
 import os
 import re
 import subprocess
@@ -22,7 +21,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
-from loopback import fail, first_line  # noqa: E402
+from loopback import binary_args, fail, first_line  # noqa: E402
 
 HUGE = """
 name: "huge"
@@ -64,10 +63,7 @@ def start_server(args, *flags):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--server", required=True)
-    parser.add_argument("--client", required=True)
-    args = parser.parse_args()
+    args = binary_args("server", "client")
     server, client = start_server(args)
     try:
         # Warm the server's gRPC paths first, so that the measured growth is

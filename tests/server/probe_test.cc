@@ -15,6 +15,7 @@
 
 #include "dynsolid/service.grpc.pb.h"
 #include "server/server.h"
+#include "tests/testing/vec3.h"
 
 namespace dynsolid::server {
 namespace {
@@ -26,9 +27,7 @@ using CommandStream = grpc::ClientReaderWriter<CommandRequest, CommandReply>;
 
 Vec3 V3(double x, double y, double z) {
   Vec3 v;
-  v.set_x(x);
-  v.set_y(y);
-  v.set_z(z);
+  testing::SetXyz(&v, x, y, z);
   return v;
 }
 

@@ -31,17 +31,7 @@ Session Make(const std::string& builtin = "block3", int levels = 1) {
 }
 
 CommandReply Send(Session& s, const std::string& text, const std::string& client = "c") {
-  CommandRequest r;
-  r.set_client_id(client);
-  r.set_seq(++s.seq);
-  EXPECT_TRUE(google::protobuf::TextFormat::ParseFromString(text, r.mutable_command())) << text;
-  CommandReply reply;
-  s.core->Process(r, &reply);
-  return reply;
-}
-
-void Steps(Session& s, int n) {
-  for (int i = 0; i < n; ++i) ASSERT_OK(s.core->StepOnce());
+  return SendText(s, client, text);
 }
 
 int Cells(const Session& s) { return s.core->solid().discretization().control().num_cells(); }

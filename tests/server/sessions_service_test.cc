@@ -48,12 +48,7 @@ class SessionsServiceTest : public LoopbackServerTest {
  protected:
   void SetUp() override { Start(DefaultOptions()); }
 
-  static ServerOptions DefaultOptions() {
-    ServerOptions o;
-    o.listen = "127.0.0.1:0";
-    o.max_sessions = 4;
-    return o;
-  }
+  static ServerOptions DefaultOptions() { return LoopbackOptions(4); }
 
   grpc::Status Create(const CreateSessionRequest& request, Session* reply) {
     grpc::ClientContext context;

@@ -25,14 +25,6 @@
 namespace dynsolid::server {
 namespace {
 
-using ::dynsolid::testing::CommandStream;
-using ::dynsolid::testing::Deadline;
-using ::dynsolid::testing::ForceCommand;
-using ::dynsolid::testing::InspectAt;
-using ::dynsolid::testing::RefOf;
-using ::dynsolid::testing::SpinningSceneText;
-using ::dynsolid::testing::StatsOf;
-using ::dynsolid::testing::StepCommand;
 using ::testing::HasSubstr;
 
 TEST_F(LiveTest, KeyframeAndDeltasReconstructTheServerPositionsWithinTheStatedBound) {

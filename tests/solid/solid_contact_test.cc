@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "solver/scene/build.h"
@@ -174,15 +175,25 @@ TEST(SolidContactTest, ContactStiffnessBuiltOffTheLoopAnswersAsTheInlineOne) {
   }
 }
 
+// The surface point of `s` nearest `near` and its contact response over
+// 0.03 s.
+absl::StatusOr<std::pair<Solid::SurfacePoint, Solid::ContactResponse>> ContactNear(
+    Solid& s, const Eigen::Vector3d& near) {
+  absl::StatusOr<Solid::SurfacePoint> c = s.ClosestSurfacePoint(near);
+  if (!c.ok()) return c.status();
+  absl::StatusOr<Solid::ContactResponse> r = s.ContactResponseAt(*c, 0.03);
+  if (!r.ok()) return r.status();
+  return std::make_pair(*c, *r);
+}
+
 // The static stiffness is the solid's own: a point force at the material
 // point, solved statically (corotational: SolveStaticLinear with the same
 // A^T K A), moves the point by F / k_static along the normal.
 TEST(SolidContactTest, StaticStiffnessMatchesTheStaticSolution) {
   auto s = Block3Corotational(1);
   ASSERT_NE(s, nullptr);
-  ASSERT_OK_AND_ASSIGN(Solid::SurfacePoint c,
-                       s->ClosestSurfacePoint(Eigen::Vector3d(1.2, 1.9, 3.2)));
-  ASSERT_OK_AND_ASSIGN(Solid::ContactResponse r, s->ContactResponseAt(c, 0.03));
+  ASSERT_OK_AND_ASSIGN(const auto contact, ContactNear(*s, Eigen::Vector3d(1.2, 1.9, 3.2)));
+  const auto& [c, r] = contact;
   const double force = 10.0;  // N, into the solid
   PointForce pf;
   pf.mutable_position()->set_x(c.material_point.x());
@@ -299,9 +310,8 @@ TEST(SolidContactTest, BadContactLoadsChangeNothing) {
 TEST(SolidContactTest, LocalFrameStaticStiffnessPredictsTheSettledDent) {
   auto s = Block3(1);
   ASSERT_NE(s, nullptr);
-  ASSERT_OK_AND_ASSIGN(Solid::SurfacePoint c,
-                       s->ClosestSurfacePoint(Eigen::Vector3d(1.5, 1.5, 3.1)));
-  ASSERT_OK_AND_ASSIGN(Solid::ContactResponse r, s->ContactResponseAt(c, 0.03));
+  ASSERT_OK_AND_ASSIGN(const auto contact, ContactNear(*s, Eigen::Vector3d(1.5, 1.5, 3.1)));
+  const auto& [c, r] = contact;
   const double force = 20.0;
   ASSERT_OK(s->SetContactLoads({{c.quad, c.u, c.v, -force * c.normal}}));
   for (int i = 0; i < 4000; ++i) ASSERT_OK(s->Step());

@@ -11,34 +11,10 @@
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
 #include "solver/solid/solid.h"
-#include "tests/testing/make_solid.h"
-#include "tests/testing/status_matchers.h"
-#include "tests/testing/text_proto.h"
+#include "tests/solid/solid_support.h"
 
 namespace dynsolid::solid {
 namespace {
-
-using ::dynsolid::testing::StatusIs;
-using ::testing::HasSubstr;
-
-std::unique_ptr<Solid> Make(const std::string& text) { return testing::MakeSolid(text); }
-
-using ::dynsolid::testing::Parse;
-
-Eigen::Vector3d Centre(const Solid& s) {
-  const Points& p = s.control_positions();
-  const Points w = s.ApplyMass(Points::Ones(p.rows(), 3));
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (int64_t i = 0; i < p.rows(); ++i) c += w(i, 0) * p.row(i).transpose();
-  return c / s.total_mass();
-}
-
-const char* kFreeBlock = R"pb(
-  mesh { block { nx: 2 ny: 2 nz: 2 } }
-  subdivision { levels: 1 }
-  materials { base { young_modulus: 1e4 density: 100 } }
-  solver { time_step: 1e-3 cg_tolerance: 1e-13 }
-)pb";
 
 const char* kStandingBlock = R"pb(
   mesh { block { nx: 2 ny: 2 nz: 2 } }
@@ -138,10 +114,8 @@ TEST(SolidDragTest, BadDragsAreRefusedByNameAndChangeNothing) {
 }
 
 TEST(SolidDragTest, SavedDragsRestoreAndContinueBitForBit) {
-  auto a = Make(kStandingBlock);
-  auto b = Make(kStandingBlock);
-  ASSERT_NE(a, nullptr);
-  ASSERT_NE(b, nullptr);
+  std::unique_ptr<Solid> a, b;
+  ASSERT_NO_FATAL_FAILURE(MakeTwins(kStandingBlock, &a, &b));
   ASSERT_OK_AND_ASSIGN(int64_t id, a->AddDrag(Parse<Drag>(
       "material_point { x: 1.8 y: 1 z: 1.8 } target { x: 2.2 y: 1 z: 2.0 } stiffness: 2e4")));
   ASSERT_OK(a->AddCurveDrag(Parse<CurveDrag>(R"pb(

@@ -11,16 +11,10 @@
 
 #include "solver/scene/build.h"
 #include "solver/scene/scene_loader.h"
-#include "tests/testing/make_solid.h"
-#include "tests/testing/status_matchers.h"
+#include "tests/solid/solid_support.h"
 
 namespace dynsolid::solid {
 namespace {
-
-using ::dynsolid::testing::StatusIs;
-using ::testing::HasSubstr;
-
-std::unique_ptr<Solid> Make(const std::string& text) { return testing::MakeSolid(text); }
 
 const char* kBlock = R"pb(
   name: "block"
@@ -178,16 +172,8 @@ TEST(SolidTest, ConjugateGradientIterationsOnBlock3) {
 }
 
 TEST(SolidTest, LoadedCantileverStaysBoundedAndResultsDoNotDependOnThreads) {
-  const char* beam = R"pb(
-    mesh { beam { length: 1 width: 0.1 height: 0.1 cells_along: 10 cells_across: 1 } }
-    subdivision { levels: 1 }
-    sharp { crease_angle_degrees: 60 }
-    materials { base { young_modulus: 1e6 density: 1000 damping: 3000 } }
-    constraints { fixed { box { min { x: -0.01 y: -1 z: -1 } max { x: 0.01 y: 1 z: 1 } } } }
-    loads { point_forces { position { x: 1 y: 0 z: 0 } force { z: -1 } } }
-    traced { name: "tip" position { x: 1 y: 0 z: 0 } }
-    solver { time_step: 1e-3 }
-  )pb";
+  const std::string beam =
+      Cantilever(10, "point_forces { position { x: 1 y: 0 z: 0 } force { z: -1 } }");
   std::vector<Eigen::Vector3d> tips;
   for (const char* threads : {"1", "2", "3"}) {
     auto s = testing::WithThreadsEnv(threads, [&] { return Make(beam); });

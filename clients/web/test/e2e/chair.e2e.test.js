@@ -22,13 +22,10 @@ let page;
 let grpc;
 let ref;
 
-const { app, until } = pageHelpers(() => page);
-const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
-const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
+const { app, until, project, tool, canvasBox, pullUp } = pageHelpers(() => page);
 const stats = () => grpc.call('GetStats', ref);
 const log = async () => (await grpc.call('GetCommandLog', { session: ref })).entries;
 const surface = async () => (await grpc.call('Inspect', { session: ref, surface_positions: true })).surface_positions;
-const canvasBox = () => page.locator('#view canvas').boundingBox();
 // Parks the pointer in the canvas' corner (no brush disc over what is measured).
 const park = async () => {
   const box = await canvasBox();
@@ -98,18 +95,10 @@ test('the clay back pulled up keeps a bend after its release', async () => {
   const top0 = await backTop();
   await tool('drag');
   const a = await project(BACK_TOP);
-  await page.mouse.move(a.x, a.y + 3);
-  await page.mouse.down();
-  try {
-    for (let i = 1; i <= 10; ++i) {
-      await page.mouse.move(a.x, a.y + 3 - 10 * i);
-      await sleep(30);
-    }
+  await pullUp(a, 3, 10, async () => {
     await until(async () => (await backTop()) > top0 + 0.02, 'the back raised by 2 cm', 60000);
     await settle(300);
-  } finally {
-    await page.mouse.up();
-  }
+  });
   await until(async () => (await log()).some((e) => e.kind === 'remove_load'), 'the drag released');
   await settle(1500);
   const kept = (await backTop()) - top0;

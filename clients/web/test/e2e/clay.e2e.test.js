@@ -8,7 +8,6 @@
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import path from 'node:path';
 import { startViewer, outDir, pageHelpers, sleep } from './harness.js';
 
 const out = outDir('clay');
@@ -17,12 +16,8 @@ let page;
 let grpc;
 let ref;
 
-const { messages, until } = pageHelpers(() => page);
-const shot = (name) => page.screenshot({ path: path.join(out, `${name}.png`) });
-const project = (point) => page.evaluate((q) => window.__dynsolid.view.project(q), point);
-const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
-const banner = () => page.evaluate(() => (document.getElementById('banner').hidden ? ''
-  : document.getElementById('banner').textContent));
+const { messages, until, shotTo, project, tool, banner, pullUp } = pageHelpers(() => page);
+const shot = shotTo(out);
 const stats = () => grpc.call('GetStats', ref);
 const lastError = () => page.evaluate(() => window.__dynsolid.metrics.lastError);
 const setParam = async (key, value) => {
@@ -92,18 +87,10 @@ test('the Material brush paints clay; a pull then stays after its release', asyn
 async function pull(a) {
   const top0 = await surfaceTop();
   await tool('drag');
-  await page.mouse.move(a.x, a.y + 4);
-  await page.mouse.down();
-  try {
-    for (let i = 1; i <= 10; ++i) {
-      await page.mouse.move(a.x, a.y + 4 - 12 * i);
-      await sleep(30);
-    }
+  await pullUp(a, 4, 12, async () => {
     await until(async () => (await surfaceTop()) > top0 + 0.025, 'the top raised by 2.5 cm', 30000);
     await sleep(1000);
-  } finally {
-    await page.mouse.up();
-  }
+  });
   const lift = (await surfaceTop()) - top0;
   await until(async () => (await grpc.call('GetCommandLog', { session: ref })).entries
     .some((e) => e.kind === 'remove_load'), 'the drag released');

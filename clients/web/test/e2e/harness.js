@@ -204,13 +204,42 @@ export async function until(predicate, what, timeoutMs = 30000, everyMs = 100) {
 // the texts it said (its metrics); until(...) waits like `until` above and,
 // when it gives up, says the page's last six messages. `pageOf()` gives the
 // test's page at call time (tests open theirs in `before`).
+// Also: shotTo(dir)(name) saves a screenshot as dir/name.png; project(point)
+// the client point of a world point; tool(name) clicks a tool's button;
+// banner() and hud() their texts ('' when hidden); canvasBox() the canvas'
+// box; pullUp(a, from, step, hold) presses `from` px below client point
+// `a`, moves up `step` px ten times, 30 ms apart, awaits hold() and lets go
+// (whatever hold does).
 export function pageHelpers(pageOf) {
   const app = (fn, arg) => pageOf().evaluate(fn, arg);
   const messages = () => app(() => window.__dynsolid.metrics.messages.map((m) => m.text));
   const untilSaid = (predicate, what, ms) => until(predicate, what, ms).catch(async (e) => {
     throw new Error(`${e.message}; the page said ${JSON.stringify((await messages()).slice(-6))}`);
   });
-  return { app, messages, until: untilSaid };
+  const shotTo = (dir) => (name) => pageOf().screenshot({ path: path.join(dir, `${name}.png`) });
+  const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
+  const tool = (name) => pageOf().click(`#tool-buttons [data-tool=${name}]`);
+  const shown = (id) => app((i) => (document.getElementById(i).hidden ? ''
+    : document.getElementById(i).textContent), id);
+  const canvasBox = () => pageOf().locator('#view canvas').boundingBox();
+  const pullUp = async (a, from, step, hold) => {
+    const mouse = pageOf().mouse;
+    await mouse.move(a.x, a.y + from);
+    await mouse.down();
+    try {
+      for (let i = 1; i <= 10; ++i) {
+        await mouse.move(a.x, a.y + from - step * i);
+        await sleep(30);
+      }
+      await hold();
+    } finally {
+      await mouse.up();
+    }
+  };
+  return {
+    app, messages, until: untilSaid, shotTo, project, tool, canvasBox, pullUp,
+    banner: () => shown('banner'), hud: () => shown('hud'),
+  };
 }
 
 export async function startViewer(dir) {

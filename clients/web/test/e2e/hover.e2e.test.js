@@ -18,13 +18,9 @@ let page;
 let grpc;
 let ref;
 
-const { app, messages, until } = pageHelpers(() => page);
-const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
-const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
+const { app, messages, until, project, tool, canvasBox, hud } = pageHelpers(() => page);
 const stats = () => grpc.call('GetStats', ref);
 const hover = () => app(() => window.__dynsolid.faceHover.face);
-const canvasBox = () => page.locator('#view canvas').boundingBox();
-const hud = () => app(() => (document.getElementById('hud').hidden ? '' : document.getElementById('hud').textContent));
 // The highlight colours over the clay-coloured surface (view.js
 // FACE_COLORS at 55 %): green above red and blue, red well above green,
 // blue above red.

@@ -21,15 +21,11 @@ let page;
 let grpc;
 let ref;
 
-const { app, messages, until } = pageHelpers(() => page);
-const shot = (name) => page.screenshot({ path: path.join(out, `${name}.png`) });
-const project = (point) => app((q) => window.__dynsolid.view.project(q), point);
-const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
+const { app, messages, until, shotTo, project, tool, canvasBox, hud } = pageHelpers(() => page);
+const shot = shotTo(out);
 const stats = () => grpc.call('GetStats', ref);
 const camera = () => app(() => window.__dynsolid.view.camera.matrixWorld.toArray());
 const params = () => app(() => ({ ...window.__dynsolid.tools.params }));
-const hud = () => app(() => (document.getElementById('hud').hidden ? '' : document.getElementById('hud').textContent));
-const canvasBox = () => page.locator('#view canvas').boundingBox();
 // The seat's centre (the chair: x, y 0..0.5 m, seat top at z = 0.5 m).
 const SEAT = { x: 0.25, y: 0.2, z: 0.5 };
 

@@ -5,8 +5,7 @@
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import path from 'node:path';
-import { startViewer, outDir, until as waitFor, sleep } from './harness.js';
+import { startViewer, outDir, pageHelpers, until as waitFor, sleep } from './harness.js';
 
 const out = outDir('tools');
 let server;
@@ -23,11 +22,8 @@ const until = (predicate, what, ms) => waitFor(predicate, what, ms).catch(async 
   m.push(lastClick);
   throw new Error(`${e.message}; the page said ${JSON.stringify(m)}`);
 });
-const shot = (name) => page.screenshot({ path: path.join(out, `${name}.png`) });
-const project = (point) => page.evaluate((q) => window.__dynsolid.view.project(q), point);
-const tool = (name) => page.click(`#tool-buttons [data-tool=${name}]`);
-const banner = () => page.evaluate(() => (document.getElementById('banner').hidden ? ''
-  : document.getElementById('banner').textContent));
+const { shotTo, project, tool, banner } = pageHelpers(() => page);
+const shot = shotTo(out);
 const stats = () => grpc.call('GetStats', ref);
 const log = async () => (await grpc.call('GetCommandLog', { session: ref })).entries;
 // The log entries after the first `n`, once they include `kind`.

@@ -9,6 +9,7 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import path from 'node:path';
 import { startViewer, openViewer, outDir, until, sleep } from './harness.js';
+import { canvasShot, colourAt, purpleShare } from './pixels.js';
 
 const out = outDir('viewer');
 let server;
@@ -153,37 +154,14 @@ test('drag the top of block3: the server\'s solid moves up, and the drag is gone
 // pixels (the low end of the colour map: red and blue well above green) and
 // the colour at `at` (client coordinates), averaged over 5 x 5 pixels.
 async function readPixels(p, file, at) {
-  const canvas = p.locator('#view canvas');
-  const box = await canvas.boundingBox();
+  const box = await p.locator('#view canvas').boundingBox();
   // Over the canvas but off the solid (its bottom left corner): the tool
   // cursor hides (a move outside the canvas would leave it where the last
   // press was, on the surface).
   await p.mouse.move(box.x + 8, box.y + box.height - 8);
   await sleep(200);
-  const buf = await canvas.screenshot({ path: path.join(out, file) });
-  return p.evaluate(async ({ b64, x, y }) => {
-    const img = new Image();
-    img.src = `data:image/png;base64,${b64}`;
-    await img.decode();
-    const c = document.createElement('canvas');
-    c.width = img.width;
-    c.height = img.height;
-    const g = c.getContext('2d');
-    g.drawImage(img, 0, 0);
-    const d = g.getImageData(0, 0, c.width, c.height).data;
-    let purple = 0;
-    for (let i = 0; i < d.length; i += 4) {
-      if (d[i] > d[i + 1] + 30 && d[i + 2] > d[i + 1] + 30) purple++;
-    }
-    const sum = [0, 0, 0];
-    for (let dy = -2; dy <= 2; ++dy) {
-      for (let dx = -2; dx <= 2; ++dx) {
-        const i = 4 * ((Math.round(y) + dy) * c.width + Math.round(x) + dx);
-        for (let k = 0; k < 3; ++k) sum[k] += d[i + k] / 25;
-      }
-    }
-    return { purple: purple / (d.length / 4), at: sum.map(Math.round) };
-  }, { b64: buf.toString('base64'), x: at.x - box.x, y: at.y - box.y });
+  const s = await canvasShot(p, path.join(out, file));
+  return { purple: await purpleShare(p, s), at: await colourAt(p, s, at) };
 }
 
 test('paint stiffness: the field colouring changes on screen where the brush went', async () => {

@@ -8,19 +8,13 @@
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { fakeServer, fakeExportFile, startGateway, openPage, call } from './gatewayproc.js';
+import { fakeAndGateway, stopFakeAndGateway, fakeExportFile, startGateway, openPage, call } from './gatewayproc.js';
 import { exportPieceBytes } from '../../gateway/bridge.js';
 
 let fake;
 let gw;
-before(async () => {
-  fake = await fakeServer();
-  gw = await startGateway(fake.address);
-});
-after(async () => {
-  await gw.stop();
-  fake.stop();
-});
+before(async () => ({ fake, gw } = await fakeAndGateway()));
+after(() => stopFakeAndGateway({ fake, gw }));
 
 // A page with a session of its own: {page, session}.
 async function pageWithSession(url) {

@@ -8,18 +8,12 @@ import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { fakeServer, startGateway, openPage, call, get, rawHttp } from './gatewayproc.js';
+import { fakeAndGateway, stopFakeAndGateway, startGateway, openPage, call, get, rawHttp } from './gatewayproc.js';
 
 let fake;
 let gw;
-before(async () => {
-  fake = await fakeServer();
-  gw = await startGateway(fake.address);
-});
-after(async () => {
-  await gw.stop();
-  fake.stop();
-});
+before(async () => ({ fake, gw } = await fakeAndGateway()));
+after(() => stopFakeAndGateway({ fake, gw }));
 
 const host = () => `127.0.0.1:${gw.port}`;
 

@@ -134,6 +134,18 @@ export function startGateway(serverAddress, args = []) {
   });
 }
 
+// A fake server and a default gateway in front of it: {fake, gw}.
+export async function fakeAndGateway() {
+  const fake = await fakeServer();
+  return { fake, gw: await startGateway(fake.address) };
+}
+
+// Stops what fakeAndGateway started: the gateway, then the fake server.
+export async function stopFakeAndGateway({ fake, gw }) {
+  await gw.stop();
+  fake.stop();
+}
+
 // Raw HTTP on a fresh socket: resolves {status, text} or {closed: true} if
 // the connection ended without an answer.
 export function rawHttp(port, request) {

@@ -283,6 +283,230 @@ struct Phase {
   double rate() const { return seconds > 0 ? steps / seconds : 0; }
 };
 
+// Keeps the solid moving: swaps a sideways force on the top every
+// shake_ms, on a thread of its own until Stop.
+class Shaker {
+ public:
+  explicit Shaker(dc::CommandChannel& commands) : commands_(commands) {
+    thread_ = std::thread([this] { Run(); });
+  }
+  void Stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  ~Shaker() { Stop(); }
+
+ private:
+  void Run() {
+    const int ms = absl::GetFlag(FLAGS_shake_ms);
+    if (ms <= 0) return;
+    double sign = 1;
+    uint64_t previous = 0;
+    while (!stop_) {
+      dynsolid::Command add;
+      auto* f = add.mutable_add_point_force();
+      f->mutable_position()->set_x(1.5);
+      f->mutable_position()->set_y(1.5);
+      f->mutable_position()->set_z(3);
+      f->mutable_force()->set_x(sign * absl::GetFlag(FLAGS_shake_newtons));
+      auto seq = commands_.Send(add, "shake");
+      if (previous != 0) {
+        auto old = commands_.Wait(previous, absl::Seconds(10));
+        if (old.ok() && old->code() == 0) {
+          dynsolid::Command remove;
+          remove.mutable_remove_load()->set_load_id(old->load_id());
+          (void)commands_.Send(remove, "unshake");
+        }
+      }
+      previous = seq.ok() ? *seq : 0;
+      sign = -sign;
+      std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+    }
+  }
+  dc::CommandChannel& commands_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+// What a phase runs against: the server, its session and the watchers' rate.
+struct Target {
+  const ServerProcess* server;
+  dynsolid::Sessions::Stub* stub;
+  dynsolid::SessionRef ref;
+  double hz;
+  std::chrono::duration<double> length;
+};
+
+// `watchers` watchers for one phase: a second to settle, then the phase's
+// length measured (steps, CPU, frames).
+Phase RunPhase(const Target& t, int watchers) {
+  const ServerProcess& server = *t.server;
+  Phase p;
+  p.watchers = watchers;
+  std::vector<std::unique_ptr<BenchWatcher>> ws;
+  for (int i = 0; i < watchers; ++i) {
+    ws.push_back(std::make_unique<BenchWatcher>(server.address(), t.ref, t.hz,
+                                                absl::GetFlag(FLAGS_decode)));
+  }
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // settle: keyframes, connections
+  std::vector<WatcherResult> before;
+  for (auto& w : ws) before.push_back(w->Take());
+  const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
+  const double stream_cpu0 = StreamingCpuSeconds(server.pid());
+  const dynsolid::SessionStats s0 = Stats(*t.stub, t.ref);
+  const Clock::time_point t0 = Clock::now();
+  std::this_thread::sleep_for(t.length);
+  const dynsolid::SessionStats s1 = Stats(*t.stub, t.ref);
+  const Clock::time_point t1 = Clock::now();
+  p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
+  p.stream_cpu = StreamingCpuSeconds(server.pid()) - stream_cpu0;
+  p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
+  for (size_t i = 0; i < ws.size(); ++i) {
+    WatcherResult a = ws[i]->Take();
+    const WatcherResult& b = before[i];
+    a.frames -= b.frames;
+    a.keyframes -= b.keyframes;
+    a.skipped -= b.skipped;
+    a.delta_frames -= b.delta_frames;
+    a.delta_bytes -= b.delta_bytes;
+    a.delta_raw_bytes -= b.delta_raw_bytes;
+    a.moved -= b.moved;
+    a.key_bytes -= b.key_bytes;
+    a.key_raw_bytes -= b.key_raw_bytes;
+    p.results.push_back(a);
+  }
+  p.steps = s1.step() - s0.step();
+  p.seconds = std::chrono::duration<double>(t1 - t0).count();
+  p.step_ms_median = s1.step_ms_median();
+  p.step_ms_p99 = s1.step_ms_p99();
+  p.overruns = s1.overruns() - s0.overruns();
+  ws.clear();
+  return p;
+}
+
+// The phases' sums that the summary lines read.
+struct Totals {
+  double rate0 = 0, rate_n = 0;
+  int n0 = 0, nn = 0;
+  int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
+  int64_t frames_n = 0, skipped_n = 0;
+  double seconds_n = 0, bench_cpu_n = 0, stream_cpu_n = 0, stream_cpu0 = 0;
+};
+
+// The table, a row per phase; returns the sums (rates not yet averaged).
+Totals PrintPhases(const std::vector<Phase>& phases, double h) {
+  Totals t;
+  std::cout << "\n| phase | watchers | steps | seconds | steps/s | % of real time | step ms median "
+               "| step ms p99 | overruns | server CPU s | of which streaming | server CPU ms/step | bench CPU s "
+               "| frames/watcher (min..max) | frames/s/watcher | skipped/s/watcher "
+               "| keyframes | delta bytes / raw float32 | moved/delta |\n"
+               "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
+               "| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |\n";
+  for (size_t i = 0; i < phases.size(); ++i) {
+    const Phase& p = phases[i];
+    int64_t fmin = INT64_MAX, fmax = 0, frames = 0, skipped = 0, keys = 0, delta = 0, raw = 0,
+            moved = 0, deltas = 0;
+    for (const WatcherResult& w : p.results) {
+      fmin = std::min(fmin, w.frames);
+      fmax = std::max(fmax, w.frames);
+      frames += w.frames;
+      skipped += w.skipped;
+      keys += w.keyframes;
+      delta += w.delta_bytes;
+      raw += w.delta_raw_bytes;
+      moved += w.moved;
+      deltas += w.delta_frames;
+      t.all_key += w.key_bytes;
+      t.all_key_raw += w.key_raw_bytes;
+      t.errors += w.decode_errors;
+      if (!w.error.empty()) std::cerr << "watcher error: " << w.error << "\n";
+    }
+    t.all_delta += delta;
+    t.all_raw += raw;
+    const double nw = std::max<size_t>(p.results.size(), 1);
+    if (p.watchers == 0) {
+      t.rate0 += p.rate();
+      ++t.n0;
+      t.stream_cpu0 += p.stream_cpu;
+    } else {
+      t.rate_n += p.rate();
+      ++t.nn;
+      t.frames_n += frames;
+      t.skipped_n += skipped;
+      t.seconds_n += p.seconds;
+      t.bench_cpu_n += p.bench_cpu;
+      t.stream_cpu_n += p.stream_cpu;
+    }
+    std::cout << absl::StrFormat(
+        "| %d | %d | %d | %.2f | %.1f | %.1f %% | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %.2f "
+        "| %s | %s | %s | %d | %s | %s |\n",
+        i + 1, p.watchers, p.steps, p.seconds, p.rate(), 100 * p.rate() * h, p.step_ms_median,
+        p.step_ms_p99, p.overruns, p.server_cpu, p.stream_cpu,
+        p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0,
+        p.bench_cpu, p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
+        p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
+        p.watchers ? absl::StrFormat("%.1f", skipped / nw / p.seconds) : "-", keys,
+        raw > 0 ? absl::StrFormat("%.1f %%", 100.0 * delta / raw) : "-",
+        deltas > 0 ? absl::StrFormat("%.0f", double(moved) / deltas) : "-");
+  }
+  return t;
+}
+
+// The summary lines under the table: step rates with and without
+// watchers (paired per round), CPU per step and per frame, frame sizes.
+void PrintSummary(const std::vector<Phase>& phases, Totals t, double h, int n_watchers, double hz,
+                  const std::string& load_before) {
+  t.rate0 /= std::max(t.n0, 1);
+  t.rate_n /= std::max(t.nn, 1);
+  // Paired: each watched phase against the mean of the unwatched phases
+  // just before and after it (slow changes of the machine's load cancel).
+  std::vector<double> paired;
+  for (size_t i = 1; i + 1 < phases.size(); i += 2) {
+    const double base = (phases[i - 1].rate() + phases[i + 1].rate()) / 2;
+    if (base > 0) paired.push_back(100.0 * (phases[i].rate() - base) / base);
+  }
+  std::sort(paired.begin(), paired.end());
+  std::string paired_text;
+  for (double x : paired) paired_text += absl::StrFormat(" %+.1f", x);
+  const double paired_median =
+      paired.empty() ? 0.0
+                     : (paired[(paired.size() - 1) / 2] + paired[paired.size() / 2]) / 2;
+  double cpu0 = 0, cpu_n = 0;
+  int64_t steps0 = 0, steps_n = 0;
+  for (const Phase& p : phases) {
+    (p.watchers == 0 ? cpu0 : cpu_n) += p.server_cpu;
+    (p.watchers == 0 ? steps0 : steps_n) += p.steps;
+  }
+  const double per_step0 = steps0 ? cpu0 / steps0 : 0.0;
+  const double frame_cpu = cpu_n - per_step0 * static_cast<double>(steps_n);
+  std::cout << absl::StrFormat(
+      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers; server CPU "
+      "for frames: %.1f us per frame received by difference (%.3f cores), %.1f us measured on "
+      "the streaming threads (%.3f cores; %.3f s in the unwatched phases); bench CPU %.3f "
+      "cores; %d cores online; load average %s before, %s after\n",
+      1000 * per_step0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
+      t.frames_n ? 1e6 * frame_cpu / t.frames_n : 0.0, t.seconds_n > 0 ? frame_cpu / t.seconds_n : 0.0,
+      t.frames_n ? 1e6 * t.stream_cpu_n / t.frames_n : 0.0,
+      t.seconds_n > 0 ? t.stream_cpu_n / t.seconds_n : 0.0, t.stream_cpu0,
+      t.seconds_n > 0 ? t.bench_cpu_n / t.seconds_n : 0.0, ::sysconf(_SC_NPROCESSORS_ONLN), load_before,
+      LoadAverage());
+  const double nwatch = std::max(n_watchers, 1);
+  std::cout << absl::StrFormat(
+      "\nsim step rate: %.1f steps/s without watchers (%.1f %% of real time), %.1f with %d "
+      "watchers at %g Hz: %+.2f %% (target: within 5 %%); paired per round (%%, sorted):%s, "
+      "median %+.1f %%; each watcher received %.1f frames/s and missed %.1f (skipped by the "
+      "server)\n",
+      t.rate0, 100 * t.rate0 * h, t.rate_n, n_watchers, hz,
+      t.rate0 > 0 ? 100.0 * (t.rate_n - t.rate0) / t.rate0 : 0.0, paired_text, paired_median,
+      t.seconds_n > 0 ? t.frames_n / nwatch / t.seconds_n : 0.0,
+      t.seconds_n > 0 ? t.skipped_n / nwatch / t.seconds_n : 0.0);
+  std::cout << absl::StrFormat(
+      "delta frames: %d bytes for frames worth %d bytes as raw float32 positions: %.2f %% "
+      "(target: <= 25 %%); keyframes: %.1f %% of raw; decode errors: %d\n",
+      t.all_delta, t.all_raw, t.all_raw > 0 ? 100.0 * t.all_delta / t.all_raw : 0.0,
+      t.all_key_raw > 0 ? 100.0 * t.all_key / t.all_key_raw : 0.0, t.errors);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -346,79 +570,11 @@ int main(int argc, char** argv) {
       session.scene_name(), solid.cells(), solid.boundary_vertices(), solid.boundary_faces(),
       session.time_step(), 1 / session.time_step());
 
-  // Keep the solid moving: swap a sideways force on the top every shake_ms.
-  std::atomic<bool> stop_shaking{false};
   dc::CommandChannel commands(channels, ref, "watch_bench");
-  std::thread shaker([&] {
-    const int ms = absl::GetFlag(FLAGS_shake_ms);
-    if (ms <= 0) return;
-    double sign = 1;
-    uint64_t previous = 0;
-    while (!stop_shaking) {
-      dynsolid::Command add;
-      auto* f = add.mutable_add_point_force();
-      f->mutable_position()->set_x(1.5);
-      f->mutable_position()->set_y(1.5);
-      f->mutable_position()->set_z(3);
-      f->mutable_force()->set_x(sign * absl::GetFlag(FLAGS_shake_newtons));
-      auto seq = commands.Send(add, "shake");
-      if (previous != 0) {
-        auto old = commands.Wait(previous, absl::Seconds(10));
-        if (old.ok() && old->code() == 0) {
-          dynsolid::Command remove;
-          remove.mutable_remove_load()->set_load_id(old->load_id());
-          (void)commands.Send(remove, "unshake");
-        }
-      }
-      previous = seq.ok() ? *seq : 0;
-      sign = -sign;
-      std::this_thread::sleep_for(std::chrono::milliseconds(ms));
-    }
-  });
+  Shaker shaker(commands);
 
-  auto run_phase = [&](int watchers) {
-    Phase p;
-    p.watchers = watchers;
-    std::vector<std::unique_ptr<BenchWatcher>> ws;
-    for (int i = 0; i < watchers; ++i) {
-      ws.push_back(std::make_unique<BenchWatcher>(server.address(), ref, hz,
-                                                  absl::GetFlag(FLAGS_decode)));
-    }
-    std::this_thread::sleep_for(std::chrono::seconds(1));  // settle: keyframes, connections
-    std::vector<WatcherResult> before;
-    for (auto& w : ws) before.push_back(w->Take());
-    const double server_cpu0 = CpuSeconds(server.pid()), bench_cpu0 = CpuSeconds(::getpid());
-    const double stream_cpu0 = StreamingCpuSeconds(server.pid());
-    const dynsolid::SessionStats s0 = Stats(*stub, ref);
-    const Clock::time_point t0 = Clock::now();
-    std::this_thread::sleep_for(phase_length);
-    const dynsolid::SessionStats s1 = Stats(*stub, ref);
-    const Clock::time_point t1 = Clock::now();
-    p.server_cpu = CpuSeconds(server.pid()) - server_cpu0;
-    p.stream_cpu = StreamingCpuSeconds(server.pid()) - stream_cpu0;
-    p.bench_cpu = CpuSeconds(::getpid()) - bench_cpu0;
-    for (size_t i = 0; i < ws.size(); ++i) {
-      WatcherResult a = ws[i]->Take();
-      const WatcherResult& b = before[i];
-      a.frames -= b.frames;
-      a.keyframes -= b.keyframes;
-      a.skipped -= b.skipped;
-      a.delta_frames -= b.delta_frames;
-      a.delta_bytes -= b.delta_bytes;
-      a.delta_raw_bytes -= b.delta_raw_bytes;
-      a.moved -= b.moved;
-      a.key_bytes -= b.key_bytes;
-      a.key_raw_bytes -= b.key_raw_bytes;
-      p.results.push_back(a);
-    }
-    p.steps = s1.step() - s0.step();
-    p.seconds = std::chrono::duration<double>(t1 - t0).count();
-    p.step_ms_median = s1.step_ms_median();
-    p.step_ms_p99 = s1.step_ms_p99();
-    p.overruns = s1.overruns() - s0.overruns();
-    ws.clear();
-    return p;
-  };
+  const Target target{&server, stub.get(), ref, hz, phase_length};
+  auto run_phase = [&](int watchers) { return RunPhase(target, watchers); };
 
   std::vector<Phase> phases;
   for (int r = 0; r < absl::GetFlag(FLAGS_rounds); ++r) {
@@ -426,117 +582,11 @@ int main(int argc, char** argv) {
     phases.push_back(run_phase(n_watchers));
   }
   phases.push_back(run_phase(0));  // every watched phase between two unwatched ones
-  stop_shaking = true;
-  shaker.join();
+  shaker.Stop();
   (void)commands.Close(absl::Seconds(10));
 
   const double h = session.time_step();
-  std::cout << "\n| phase | watchers | steps | seconds | steps/s | % of real time | step ms median "
-               "| step ms p99 | overruns | server CPU s | of which streaming | server CPU ms/step | bench CPU s "
-               "| frames/watcher (min..max) | frames/s/watcher | skipped/s/watcher "
-               "| keyframes | delta bytes / raw float32 | moved/delta |\n"
-               "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: "
-               "| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |\n";
-  double rate0 = 0, rate_n = 0;
-  int n0 = 0, nn = 0;
-  int64_t all_delta = 0, all_raw = 0, all_key = 0, all_key_raw = 0, errors = 0;
-  int64_t frames_n = 0, skipped_n = 0;
-  double seconds_n = 0, bench_cpu_n = 0, stream_cpu_n = 0, stream_cpu0 = 0;
-  for (size_t i = 0; i < phases.size(); ++i) {
-    const Phase& p = phases[i];
-    int64_t fmin = INT64_MAX, fmax = 0, frames = 0, skipped = 0, keys = 0, delta = 0, raw = 0,
-            moved = 0, deltas = 0;
-    for (const WatcherResult& w : p.results) {
-      fmin = std::min(fmin, w.frames);
-      fmax = std::max(fmax, w.frames);
-      frames += w.frames;
-      skipped += w.skipped;
-      keys += w.keyframes;
-      delta += w.delta_bytes;
-      raw += w.delta_raw_bytes;
-      moved += w.moved;
-      deltas += w.delta_frames;
-      all_key += w.key_bytes;
-      all_key_raw += w.key_raw_bytes;
-      errors += w.decode_errors;
-      if (!w.error.empty()) std::cerr << "watcher error: " << w.error << "\n";
-    }
-    all_delta += delta;
-    all_raw += raw;
-    const double nw = std::max<size_t>(p.results.size(), 1);
-    if (p.watchers == 0) {
-      rate0 += p.rate();
-      ++n0;
-      stream_cpu0 += p.stream_cpu;
-    } else {
-      rate_n += p.rate();
-      ++nn;
-      frames_n += frames;
-      skipped_n += skipped;
-      seconds_n += p.seconds;
-      bench_cpu_n += p.bench_cpu;
-      stream_cpu_n += p.stream_cpu;
-    }
-    std::cout << absl::StrFormat(
-        "| %d | %d | %d | %.2f | %.1f | %.1f %% | %.3f | %.3f | %d | %.2f | %.2f | %.2f | %.2f "
-        "| %s | %s | %s | %d | %s | %s |\n",
-        i + 1, p.watchers, p.steps, p.seconds, p.rate(), 100 * p.rate() * h, p.step_ms_median,
-        p.step_ms_p99, p.overruns, p.server_cpu, p.stream_cpu,
-        p.steps > 0 ? 1000 * p.server_cpu / p.steps : 0.0,
-        p.bench_cpu, p.watchers ? absl::StrFormat("%.1f (%d..%d)", frames / nw, fmin, fmax) : "-",
-        p.watchers ? absl::StrFormat("%.1f", frames / nw / p.seconds) : "-",
-        p.watchers ? absl::StrFormat("%.1f", skipped / nw / p.seconds) : "-", keys,
-        raw > 0 ? absl::StrFormat("%.1f %%", 100.0 * delta / raw) : "-",
-        deltas > 0 ? absl::StrFormat("%.0f", double(moved) / deltas) : "-");
-  }
-  rate0 /= std::max(n0, 1);
-  rate_n /= std::max(nn, 1);
-  // Paired: each watched phase against the mean of the unwatched phases
-  // just before and after it (slow changes of the machine's load cancel).
-  std::vector<double> paired;
-  for (size_t i = 1; i + 1 < phases.size(); i += 2) {
-    const double base = (phases[i - 1].rate() + phases[i + 1].rate()) / 2;
-    if (base > 0) paired.push_back(100.0 * (phases[i].rate() - base) / base);
-  }
-  std::sort(paired.begin(), paired.end());
-  std::string paired_text;
-  for (double x : paired) paired_text += absl::StrFormat(" %+.1f", x);
-  const double paired_median =
-      paired.empty() ? 0.0
-                     : (paired[(paired.size() - 1) / 2] + paired[paired.size() / 2]) / 2;
-  double cpu0 = 0, cpu_n = 0;
-  int64_t steps0 = 0, steps_n = 0;
-  for (const Phase& p : phases) {
-    (p.watchers == 0 ? cpu0 : cpu_n) += p.server_cpu;
-    (p.watchers == 0 ? steps0 : steps_n) += p.steps;
-  }
-  const double per_step0 = steps0 ? cpu0 / steps0 : 0.0;
-  const double frame_cpu = cpu_n - per_step0 * static_cast<double>(steps_n);
-  std::cout << absl::StrFormat(
-      "server CPU per sim step: %.2f ms without watchers, %.2f ms with %d watchers; server CPU "
-      "for frames: %.1f us per frame received by difference (%.3f cores), %.1f us measured on "
-      "the streaming threads (%.3f cores; %.3f s in the unwatched phases); bench CPU %.3f "
-      "cores; %d cores online; load average %s before, %s after\n",
-      1000 * per_step0, steps_n ? 1000 * cpu_n / steps_n : 0.0, n_watchers,
-      frames_n ? 1e6 * frame_cpu / frames_n : 0.0, seconds_n > 0 ? frame_cpu / seconds_n : 0.0,
-      frames_n ? 1e6 * stream_cpu_n / frames_n : 0.0,
-      seconds_n > 0 ? stream_cpu_n / seconds_n : 0.0, stream_cpu0,
-      seconds_n > 0 ? bench_cpu_n / seconds_n : 0.0, ::sysconf(_SC_NPROCESSORS_ONLN), load_before,
-      LoadAverage());
-  const double nwatch = std::max(n_watchers, 1);
-  std::cout << absl::StrFormat(
-      "\nsim step rate: %.1f steps/s without watchers (%.1f %% of real time), %.1f with %d "
-      "watchers at %g Hz: %+.2f %% (target: within 5 %%); paired per round (%%, sorted):%s, "
-      "median %+.1f %%; each watcher received %.1f frames/s and missed %.1f (skipped by the "
-      "server)\n",
-      rate0, 100 * rate0 * h, rate_n, n_watchers, hz,
-      rate0 > 0 ? 100.0 * (rate_n - rate0) / rate0 : 0.0, paired_text, paired_median,
-      seconds_n > 0 ? frames_n / nwatch / seconds_n : 0.0,
-      seconds_n > 0 ? skipped_n / nwatch / seconds_n : 0.0);
-  std::cout << absl::StrFormat(
-      "delta frames: %d bytes for frames worth %d bytes as raw float32 positions: %.2f %% "
-      "(target: <= 25 %%); keyframes: %.1f %% of raw; decode errors: %d\n",
-      all_delta, all_raw, all_raw > 0 ? 100.0 * all_delta / all_raw : 0.0,
-      all_key_raw > 0 ? 100.0 * all_key / all_key_raw : 0.0, errors);
+  const Totals totals = PrintPhases(phases, h);
+  PrintSummary(phases, totals, h, n_watchers, hz, load_before);
   return 0;
 }

@@ -68,7 +68,7 @@ std::shared_ptr<BackwardEuler::Flat> BackwardEuler::Factor(const SparseMatrix& m
     if (fixed[i]) fixed_dofs[3 * i] = fixed_dofs[3 * i + 1] = fixed_dofs[3 * i + 2] = 1;
   }
   auto flat = std::make_shared<Flat>();
-  if (!flat->factor.Factor(p, fixed_dofs)) return nullptr;
+  if (!flat->factor.Factor(p, fixed_dofs, ReducedCholesky::Solves::kSupernodal)) return nullptr;
   return flat;
 }
 

@@ -12,7 +12,7 @@
 // Mt + h Dt + h^2 K0 on the free DOFs with K0 the rest stiffness (the
 // system itself at small rotations: a handful of iterations whatever the
 // stiffness), made by CHOLMOD (ReducedCholesky: METIS or AMD order,
-// supernodal factorization, simplicial solves; it replaced Eigen's
+// supernodal factorization and solves; it replaced Eigen's
 // SimplicialLDLT, whose solve was most of a step on large meshes).
 //
 // Warm start. CG starts from dv0 extrapolated linearly from the last two

@@ -64,7 +64,8 @@ int64_t ReducedCholesky::factor_nonzeros() const {
   return nz;
 }
 
-bool ReducedCholesky::Factor(const SparseMatrix& s, const std::vector<uint8_t>& fixed) {
+bool ReducedCholesky::Factor(const SparseMatrix& s, const std::vector<uint8_t>& fixed,
+                             Solves solves) {
   if (impl_ == nullptr) impl_ = std::make_unique<Impl>();
   Impl& im = *impl_;
   im.Clear();
@@ -110,10 +111,9 @@ bool ReducedCholesky::Factor(const SparseMatrix& s, const std::vector<uint8_t>& 
   bool ok = im.l != nullptr && cholmod_factorize(a, im.l, &im.c) != 0 &&
             im.c.status == CHOLMOD_OK && im.l->minor == nf;
   cholmod_free_sparse(&a, &im.c);
-  // Simplicial LL^T for the solves: CHOLMOD's own loops for 3 columns beat
-  // the supernodal solve's BLAS calls on a few right-hand sides.
-  ok = ok && cholmod_change_factor(CHOLMOD_REAL, /*to_ll=*/1, /*to_super=*/0, /*to_packed=*/1,
-                                   /*to_monotonic=*/1, im.l, &im.c) != 0;
+  // Simplicial LL^T for the solves (see Solves in the header).
+  ok = ok && (solves == Solves::kSupernodal || cholmod_change_factor(CHOLMOD_REAL, /*to_ll=*/1, /*to_super=*/0, /*to_packed=*/1,
+                                   /*to_monotonic=*/1, im.l, &im.c) != 0);
   if (ok) {
     im.work[0].b = cholmod_allocate_dense(nf, 1, nf, CHOLMOD_REAL, &im.c);
     im.work[1].b = cholmod_allocate_dense(nf, 3, nf, CHOLMOD_REAL, &im.c);

@@ -112,8 +112,10 @@ bool ReducedCholesky::Factor(const SparseMatrix& s, const std::vector<uint8_t>& 
             im.c.status == CHOLMOD_OK && im.l->minor == nf;
   cholmod_free_sparse(&a, &im.c);
   // Simplicial LL^T for the solves (see Solves in the header).
-  ok = ok && (solves == Solves::kSupernodal || cholmod_change_factor(CHOLMOD_REAL, /*to_ll=*/1, /*to_super=*/0, /*to_packed=*/1,
-                                   /*to_monotonic=*/1, im.l, &im.c) != 0);
+  if (ok && solves == Solves::kSimplicial) {
+    ok = cholmod_change_factor(CHOLMOD_REAL, /*to_ll=*/1, /*to_super=*/0, /*to_packed=*/1,
+                               /*to_monotonic=*/1, im.l, &im.c) != 0;
+  }
   if (ok) {
     im.work[0].b = cholmod_allocate_dense(nf, 1, nf, CHOLMOD_REAL, &im.c);
     im.work[1].b = cholmod_allocate_dense(nf, 3, nf, CHOLMOD_REAL, &im.c);

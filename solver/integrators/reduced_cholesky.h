@@ -30,8 +30,8 @@ class ReducedCholesky {
 
   // Factors S on the rows with fixed[i] == 0 (fixed may be empty: none).
   // S is symmetric and only its upper triangle (row i's entries j >= i) is
-  // read: a caller may leave the rest out. False, with the factor cleared, where S is not positive definite there
-  // (or CHOLMOD runs out of memory).
+  // read: a caller may leave the rest out. False, with the factor cleared,
+  // where S is not positive definite there (or CHOLMOD runs out of memory).
   //
   // How the solves run. kSimplicial (the default): the supernodal factor is
   // turned into a simplicial LL^T, whose loops CHOLMOD specializes for a

@@ -385,25 +385,26 @@ SparseMatrix SumSparse(
       }
     }
   });
-  std::vector<int32_t> outer(static_cast<size_t>(d) * nc + 1, 0);
-  std::vector<int32_t> inner;
-  std::vector<double> values;
+  // The parts' rows, in point order, straight into the matrix's arrays.
   size_t nnz = 0;
   for (const Rows& r : parts) nnz += r.inner.size();
-  inner.reserve(nnz);
-  values.reserve(nnz);
+  SparseMatrix m(static_cast<int32_t>(d) * nc, static_cast<int32_t>(d) * nc);
+  m.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  int32_t* outer = m.outerIndexPtr();
+  outer[0] = 0;
   int64_t row = 0;
+  size_t at = 0;
   for (Rows& r : parts) {
     for (int32_t n : r.length) {
       outer[row + 1] = outer[row] + n;
       ++row;
     }
-    inner.insert(inner.end(), r.inner.begin(), r.inner.end());
-    values.insert(values.end(), r.values.begin(), r.values.end());
+    std::copy(r.inner.begin(), r.inner.end(), m.innerIndexPtr() + at);
+    std::copy(r.values.begin(), r.values.end(), m.valuePtr() + at);
+    at += r.inner.size();
     r = Rows();
   }
-  return subdivision::FromCsr(static_cast<int32_t>(d) * nc, static_cast<int32_t>(d) * nc, outer,
-                              inner, values);
+  return m;
 }
 
 // Each job's partials installed in its `made`, and its sums: per cell
